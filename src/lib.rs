@@ -1,0 +1,5 @@
+//! mipray: a CPU ray tracer for animated scenes with ray-length MIP-map level selection
+//! (Park & Kim 2010). See `README.md` for the frame loop and the LOD derivation.
+
+pub mod scene;
+pub mod texture;

@@ -1,0 +1,240 @@
+//! Load-time scene description: the plain data a file loader produces.
+//!
+//! Nothing here knows a file format: `gltf.rs` fills a [`SceneDesc`] and the rest of the
+//! renderer (animation, geometry, BVH, LOD, integrator) only ever reads these types.
+//! Invariants every loader guarantees (and `SceneDesc::validate` re-checks):
+//! - all positions, normals, UVs, transforms and key values are finite;
+//! - every index (vertex, node, mesh, material, texture, camera, light) is in range;
+//! - a primitive's `indices.len()` is a multiple of 3.
+
+pub mod gltf;
+
+use std::path::PathBuf;
+
+use glam::{Mat4, Quat, Vec2, Vec3};
+
+use crate::texture::Texture;
+
+/// Everything needed to render any frame of an animated scene.
+#[derive(Debug, Default)]
+pub struct SceneDesc {
+    /// Where the scene came from (used in messages and output folder names).
+    pub source: PathBuf,
+    pub meshes: Vec<MeshDesc>,
+    pub nodes: Vec<NodeDesc>,
+    /// Nodes of the rendered scene with no parent.
+    pub roots: Vec<usize>,
+    pub materials: Vec<MaterialDesc>,
+    pub textures: Vec<Texture>,
+    pub cameras: Vec<CameraDesc>,
+    pub lights: Vec<LightDesc>,
+    pub animations: Vec<AnimationDesc>,
+    /// Radiance of rays that leave the scene (linear RGB).
+    pub background: Vec3,
+    /// Features the file uses that this version renders only approximately (e.g. skins in
+    /// rest pose). Printed by `info` and at the start of `render`.
+    pub notes: Vec<String>,
+}
+
+/// A mesh: one or more primitives, each with its own material.
+#[derive(Debug, Default, Clone)]
+pub struct MeshDesc {
+    pub name: String,
+    pub primitives: Vec<PrimitiveDesc>,
+}
+
+/// An indexed triangle list in object space.
+#[derive(Debug, Default, Clone)]
+pub struct PrimitiveDesc {
+    pub positions: Vec<Vec3>,
+    /// Per-vertex normals; `None` means flat shading from the geometric normal.
+    pub normals: Option<Vec<Vec3>>,
+    /// The texture coordinates the material's base-colour texture reads (its `texCoord` set,
+    /// with `KHR_texture_transform` already applied). `None` when untextured.
+    pub uvs: Option<Vec<Vec2>>,
+    /// Triangle list, three indices per triangle, each `< positions.len()`.
+    pub indices: Vec<u32>,
+    /// Index into `SceneDesc::materials`; `None` uses [`MaterialDesc::default`].
+    pub material: Option<usize>,
+}
+
+impl PrimitiveDesc {
+    pub fn triangle_count(&self) -> usize {
+        self.indices.len() / 3
+    }
+}
+
+/// A node's local transform.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Trs {
+    pub translation: Vec3,
+    pub rotation: Quat,
+    pub scale: Vec3,
+}
+
+impl Default for Trs {
+    fn default() -> Self {
+        Trs { translation: Vec3::ZERO, rotation: Quat::IDENTITY, scale: Vec3::ONE }
+    }
+}
+
+impl Trs {
+    pub fn to_mat4(&self) -> Mat4 {
+        Mat4::from_scale_rotation_translation(self.scale, self.rotation, self.translation)
+    }
+}
+
+/// A node of the scene hierarchy.
+#[derive(Debug, Default, Clone)]
+pub struct NodeDesc {
+    pub name: String,
+    /// Local transform at rest; animation channels override its components.
+    pub local: Trs,
+    /// A node given by a matrix keeps the exact matrix here (animation never targets such
+    /// a node, as the glTF spec requires); `local` then holds its decomposition.
+    pub matrix: Option<Mat4>,
+    pub children: Vec<usize>,
+    pub mesh: Option<usize>,
+    pub camera: Option<usize>,
+    pub light: Option<usize>,
+}
+
+/// A surface's appearance, mapped to the Whitted model.
+#[derive(Debug, Clone)]
+pub struct MaterialDesc {
+    pub name: String,
+    /// Linear RGB base colour factor (multiplies the texture).
+    pub base_color: Vec3,
+    /// Index into `SceneDesc::textures`.
+    pub base_color_texture: Option<usize>,
+    /// Mirror reflectance in [0, 1] (see `README.md` for the metallic/roughness mapping).
+    pub reflectance: f32,
+    /// Specular transmission in [0, 1] (`KHR_materials_transmission`).
+    pub transmission: f32,
+    /// Index of refraction (`KHR_materials_ior`, default 1.5).
+    pub ior: f32,
+    /// Phong exponent for the highlight of direct light.
+    pub shininess: f32,
+    /// Phong highlight strength.
+    pub specular: f32,
+    pub double_sided: bool,
+}
+
+impl Default for MaterialDesc {
+    fn default() -> Self {
+        MaterialDesc {
+            name: "default".into(),
+            base_color: Vec3::splat(0.8),
+            base_color_texture: None,
+            reflectance: 0.0,
+            transmission: 0.0,
+            ior: 1.5,
+            shininess: 32.0,
+            specular: 0.0,
+            double_sided: false,
+        }
+    }
+}
+
+/// A perspective camera; it looks down its node's -Z with +Y up (glTF convention).
+#[derive(Debug, Clone, Copy)]
+pub struct CameraDesc {
+    /// Vertical field of view in radians, in (0, pi).
+    pub yfov: f32,
+    pub znear: f32,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum LightKind {
+    /// Radiates from the node's origin; intensity in candela.
+    Point,
+    /// Shines along the node's -Z; intensity in lux.
+    Directional,
+    /// Point light restricted to a cone along -Z (angles in radians).
+    Spot { inner_cone: f32, outer_cone: f32 },
+}
+
+#[derive(Debug, Clone, Copy)]
+pub struct LightDesc {
+    pub kind: LightKind,
+    /// Linear RGB colour.
+    pub color: Vec3,
+    pub intensity: f32,
+    /// Distance past which the light has no effect (`None`: unlimited).
+    pub range: Option<f32>,
+}
+
+/// What an animation channel drives.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ChannelTarget {
+    Translation,
+    Rotation,
+    Scale,
+    /// Morph target weights (sampled, applied by the frame-loop issue).
+    Weights,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Interpolation {
+    Step,
+    Linear,
+    CubicSpline,
+}
+
+/// One keyframe track of one node property.
+#[derive(Debug, Clone)]
+pub struct ChannelDesc {
+    pub node: usize,
+    pub target: ChannelTarget,
+    pub interpolation: Interpolation,
+    /// Strictly non-decreasing key times in seconds.
+    pub times: Vec<f32>,
+    /// Flat key values: `times.len() * components` numbers, or three times that for
+    /// CUBICSPLINE (in-tangent, value, out-tangent per key, as glTF stores them).
+    /// Components: 3 (translation, scale), 4 (rotation quaternion x, y, z, w), or the
+    /// morph target count (weights).
+    pub values: Vec<f32>,
+    pub components: usize,
+}
+
+#[derive(Debug, Clone, Default)]
+pub struct AnimationDesc {
+    pub name: String,
+    pub channels: Vec<ChannelDesc>,
+}
+
+impl AnimationDesc {
+    /// Time of the last key over all channels (0 for an empty animation).
+    pub fn duration(&self) -> f32 {
+        self.channels.iter().filter_map(|c| c.times.last().copied()).fold(0.0, f32::max)
+    }
+}
+
+impl SceneDesc {
+    /// Number of triangles drawn by the scene's node hierarchy (a mesh instanced twice counts
+    /// twice), which is what the renderer traces.
+    pub fn instanced_triangle_count(&self) -> usize {
+        let mut count = 0;
+        self.visit_nodes(|node| {
+            if let Some(mesh) = node.mesh {
+                count += self.meshes[mesh].primitives.iter().map(|p| p.triangle_count()).sum::<usize>();
+            }
+        });
+        count
+    }
+
+    /// Calls `f` on every node reachable from the roots, parents before children.
+    pub fn visit_nodes(&self, mut f: impl FnMut(&NodeDesc)) {
+        let mut stack: Vec<usize> = self.roots.iter().rev().copied().collect();
+        while let Some(i) = stack.pop() {
+            let node = &self.nodes[i];
+            f(node);
+            stack.extend(node.children.iter().rev().copied());
+        }
+    }
+
+    /// The longest animation's duration in seconds (0 for a static scene).
+    pub fn duration(&self) -> f32 {
+        self.animations.iter().map(|a| a.duration()).fold(0.0, f32::max)
+    }
+}
