@@ -3,3 +3,4 @@
 
 pub mod scene;
 pub mod texture;
+pub mod authoring;

@@ -1,0 +1,1 @@
+//! Authoring of the project's own animations (stub until the generator lands).
