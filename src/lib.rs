@@ -4,3 +4,8 @@
 pub mod scene;
 pub mod texture;
 pub mod authoring;
+pub mod accel;
+pub mod anim;
+pub mod geometry;
+pub mod lod;
+pub mod render;

@@ -1,0 +1,201 @@
+//! Keyframe sampling: STEP, LINEAR (slerp for rotations) and CUBICSPLINE (glTF 2.0 Appendix C).
+//!
+//! Times outside the key range clamp to the first / last key. Duplicate key times are
+//! allowed: the later key wins from its time on (a jump), never a division by zero.
+
+use glam::{Quat, Vec3, Vec4};
+
+use crate::scene::{ChannelDesc, Interpolation};
+
+/// Where `t` falls among the keys: the interval start index and the fraction in it.
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct KeySpan {
+    index: usize,
+    /// In [0, 1]; 0 when clamped before the first key or at a duplicate time.
+    fraction: f32,
+    /// Interval length in seconds (0 when clamped).
+    dt: f32,
+}
+
+fn locate(times: &[f32], t: f32) -> KeySpan {
+    let last = times.len().saturating_sub(1);
+    if times.is_empty() || !(t > times[0]) {
+        return KeySpan { index: 0, fraction: 0.0, dt: 0.0 };
+    }
+    if t >= times[last] {
+        return KeySpan { index: last, fraction: 0.0, dt: 0.0 };
+    }
+    // First key strictly after t; the interval is [next - 1, next].
+    let next = times.partition_point(|&k| k <= t);
+    let index = next - 1;
+    let dt = times[next] - times[index];
+    let fraction = if dt > 0.0 { ((t - times[index]) / dt).clamp(0.0, 1.0) } else { 0.0 };
+    KeySpan { index, fraction, dt }
+}
+
+/// Samples a channel into `out` (`channel.components` numbers) at time `t`.
+pub fn sample_channel(channel: &ChannelDesc, t: f32, out: &mut [f32]) {
+    let n = channel.components;
+    debug_assert_eq!(out.len(), n);
+    if channel.times.is_empty() || n == 0 {
+        return;
+    }
+    let span = locate(&channel.times, t);
+    let keys = channel.times.len();
+    match channel.interpolation {
+        Interpolation::CubicSpline => {
+            // Per key: in-tangent, value, out-tangent, each `n` numbers.
+            let value = |k: usize, j: usize| channel.values[(3 * k + 1) * n + j];
+            let in_tangent = |k: usize, j: usize| channel.values[3 * k * n + j];
+            let out_tangent = |k: usize, j: usize| channel.values[(3 * k + 2) * n + j];
+            if span.dt == 0.0 || span.index + 1 >= keys {
+                for (j, o) in out.iter_mut().enumerate() {
+                    *o = value(span.index, j);
+                }
+                return;
+            }
+            let (s, dt, k) = (span.fraction, span.dt, span.index);
+            let s2 = s * s;
+            let s3 = s2 * s;
+            let h00 = 2.0 * s3 - 3.0 * s2 + 1.0;
+            let h10 = s3 - 2.0 * s2 + s;
+            let h01 = -2.0 * s3 + 3.0 * s2;
+            let h11 = s3 - s2;
+            for (j, o) in out.iter_mut().enumerate() {
+                *o = h00 * value(k, j)
+                    + h10 * dt * out_tangent(k, j)
+                    + h01 * value(k + 1, j)
+                    + h11 * dt * in_tangent(k + 1, j);
+            }
+        }
+        Interpolation::Step | Interpolation::Linear => {
+            let a = &channel.values[span.index * n..(span.index + 1) * n];
+            let linear = channel.interpolation == Interpolation::Linear;
+            if !linear || span.fraction == 0.0 || span.index + 1 >= keys {
+                out.copy_from_slice(a);
+                return;
+            }
+            let b = &channel.values[(span.index + 1) * n..(span.index + 2) * n];
+            for ((o, &x), &y) in out.iter_mut().zip(a).zip(b) {
+                *o = x + (y - x) * span.fraction;
+            }
+        }
+    }
+}
+
+/// Samples a translation or scale channel.
+pub fn sample_vec3(channel: &ChannelDesc, t: f32) -> Vec3 {
+    let mut v = [0.0; 3];
+    sample_channel(channel, t, &mut v);
+    Vec3::from(v)
+}
+
+/// Samples a rotation channel: slerp between keys for LINEAR (the glTF rule), the
+/// normalised Hermite spline for CUBICSPLINE.
+pub fn sample_rotation(channel: &ChannelDesc, t: f32) -> Quat {
+    let quat_at = |k: usize| {
+        let stride = if channel.interpolation == Interpolation::CubicSpline { 3 } else { 1 };
+        let base = (k * stride + stride / 2) * 4;
+        Quat::from_vec4(Vec4::from_slice(&channel.values[base..base + 4]))
+    };
+    let q = if channel.interpolation == Interpolation::Linear && !channel.times.is_empty() {
+        let span = locate(&channel.times, t);
+        let a = quat_at(span.index).normalize();
+        if span.fraction == 0.0 || span.index + 1 >= channel.times.len() {
+            a
+        } else {
+            a.slerp(quat_at(span.index + 1).normalize(), span.fraction)
+        }
+    } else {
+        let mut v = [0.0; 4];
+        sample_channel(channel, t, &mut v);
+        Quat::from_array(v)
+    };
+    let q = q.normalize();
+    if q.is_finite() { q } else { Quat::IDENTITY }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::scene::ChannelTarget;
+
+    fn channel(interpolation: Interpolation, times: &[f32], values: &[f32], n: usize) -> ChannelDesc {
+        ChannelDesc {
+            node: 0,
+            target: ChannelTarget::Translation,
+            interpolation,
+            times: times.to_vec(),
+            values: values.to_vec(),
+            components: n,
+        }
+    }
+
+    #[test]
+    fn linear_equals_keys_at_key_times_and_clamps_outside() {
+        let c = channel(Interpolation::Linear, &[1.0, 2.0, 4.0], &[0.0, 10.0, 30.0], 1);
+        let at = |t| {
+            let mut v = [0.0];
+            sample_channel(&c, t, &mut v);
+            v[0]
+        };
+        assert_eq!(at(1.0), 0.0);
+        assert_eq!(at(2.0), 10.0);
+        assert_eq!(at(4.0), 30.0);
+        assert_eq!(at(3.0), 20.0);
+        assert_eq!(at(-5.0), 0.0);
+        assert_eq!(at(99.0), 30.0);
+        assert_eq!(at(f32::NAN), 0.0);
+    }
+
+    #[test]
+    fn step_holds_previous_key() {
+        let c = channel(Interpolation::Step, &[0.0, 1.0], &[5.0, 7.0], 1);
+        let mut v = [0.0];
+        sample_channel(&c, 0.999, &mut v);
+        assert_eq!(v[0], 5.0);
+        sample_channel(&c, 1.0, &mut v);
+        assert_eq!(v[0], 7.0);
+    }
+
+    #[test]
+    fn duplicate_key_times_jump_without_nan() {
+        let c = channel(Interpolation::Linear, &[0.0, 1.0, 1.0, 2.0], &[0.0, 1.0, 5.0, 6.0], 1);
+        let mut v = [0.0];
+        sample_channel(&c, 1.0, &mut v);
+        assert_eq!(v[0], 5.0);
+        sample_channel(&c, 0.5, &mut v);
+        assert_eq!(v[0], 0.5);
+        sample_channel(&c, 1.5, &mut v);
+        assert_eq!(v[0], 5.5);
+    }
+
+    #[test]
+    fn cubic_spline_hits_values_and_follows_tangents() {
+        // Keys at 0 and 2 with values 0 and 1, zero tangents: smoothstep in between.
+        let c = channel(Interpolation::CubicSpline, &[0.0, 2.0], &[9.0, 0.0, 0.0, 0.0, 1.0, 9.0], 1);
+        let mut v = [0.0];
+        sample_channel(&c, 0.0, &mut v);
+        assert_eq!(v[0], 0.0);
+        sample_channel(&c, 2.0, &mut v);
+        assert_eq!(v[0], 1.0);
+        sample_channel(&c, 1.0, &mut v);
+        assert!((v[0] - 0.5).abs() < 1e-6);
+        // Out-tangent 1 per second at key 0, value 0 at both ends: positive bump.
+        let c = channel(Interpolation::CubicSpline, &[0.0, 1.0], &[0.0, 0.0, 1.0, 0.0, 0.0, 0.0], 1);
+        sample_channel(&c, 0.5, &mut v);
+        assert!((v[0] - 0.125).abs() < 1e-6, "{}", v[0]);
+    }
+
+    #[test]
+    fn rotation_slerps_shortest_arc() {
+        let a = Quat::IDENTITY;
+        let b = Quat::from_rotation_y(std::f32::consts::FRAC_PI_2);
+        let values: Vec<f32> = a.to_array().into_iter().chain(b.to_array()).collect();
+        let mut c = channel(Interpolation::Linear, &[0.0, 1.0], &values, 4);
+        c.target = ChannelTarget::Rotation;
+        let q = sample_rotation(&c, 0.5);
+        let expected = Quat::from_rotation_y(std::f32::consts::FRAC_PI_4);
+        assert!(q.angle_between(expected) < 1e-5);
+    }
+}

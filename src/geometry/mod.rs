@@ -1,0 +1,240 @@
+//! World-space triangles of one frame, as flat arrays the integrator reads.
+//!
+//! `SceneGeometry` is built once per scene: it flattens every (node, mesh primitive) pair into
+//! an instance and every triangle into a source record, with texture coordinates rebased per
+//! triangle. `FrameTriangles` is refilled each frame from the node world transforms; its
+//! arrays are permuted into BVH order by `accel`, so traversal reads them directly.
+//!
+//! Invariants: all arrays of a `FrameTriangles` have the same length; triangles are wound
+//! counter-clockwise about their geometric normal in world space (a node with a negative
+//! determinant has its winding flipped, as glTF requires).
+
+use glam::{Mat3, Mat4, Vec2, Vec3, Vec3A};
+
+use crate::scene::{MaterialDesc, SceneDesc};
+use crate::texture::WrapMode;
+
+/// One drawn primitive: a mesh primitive placed by a node.
+#[derive(Debug, Clone, Copy)]
+pub struct Instance {
+    pub node: u32,
+    pub mesh: u32,
+    pub primitive: u32,
+    /// Index into `SceneGeometry::materials`.
+    pub material: u32,
+}
+
+/// Load-time flattening of the scene's drawn triangles.
+#[derive(Debug, Default)]
+pub struct SceneGeometry {
+    pub instances: Vec<Instance>,
+    /// Per source triangle: its instance.
+    pub triangle_instance: Vec<u32>,
+    /// Per source triangle: vertex indices into the instance's primitive.
+    pub triangle_vertices: Vec<[u32; 3]>,
+    /// Per source triangle: texture coordinates, rebased by whole periods of the texture's
+    /// wrap mode so they stay near [0, 1] (f32 precision of `u * width` for large u).
+    pub triangle_uvs: Vec<[Vec2; 3]>,
+    /// The scene's materials plus a default one at the end (for primitives without one).
+    pub materials: Vec<MaterialDesc>,
+}
+
+/// One frame's world-space triangles, in BVH order once `accel` has permuted them.
+#[derive(Debug, Default, Clone)]
+pub struct FrameTriangles {
+    pub positions: Vec<[Vec3A; 3]>,
+    /// World-space shading normals (unit length; the geometric normal where the mesh has none).
+    pub normals: Vec<[Vec3; 3]>,
+    pub uvs: Vec<[Vec2; 3]>,
+    pub material: Vec<u32>,
+    /// Park & Kim's per-triangle constant (0 where the material is untextured).
+    pub log2_pb: Vec<f32>,
+    /// For each slot, the source triangle index it holds.
+    pub source: Vec<u32>,
+}
+
+impl FrameTriangles {
+    pub fn len(&self) -> usize {
+        self.positions.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.positions.is_empty()
+    }
+
+    /// Reorders every per-triangle array so slot `i` holds what slot `order[i]` held.
+    pub fn permute(&mut self, order: &[u32]) {
+        fn apply<T: Copy>(v: &mut Vec<T>, order: &[u32]) {
+            let permuted: Vec<T> = order.iter().map(|&i| v[i as usize]).collect();
+            *v = permuted;
+        }
+        apply(&mut self.positions, order);
+        apply(&mut self.normals, order);
+        apply(&mut self.uvs, order);
+        apply(&mut self.material, order);
+        apply(&mut self.log2_pb, order);
+        apply(&mut self.source, order);
+    }
+}
+
+impl SceneGeometry {
+    /// Flattens the scene's node hierarchy into instances and source triangles.
+    pub fn new(scene: &SceneDesc) -> Self {
+        let mut geometry = SceneGeometry {
+            materials: scene.materials.clone(),
+            ..Default::default()
+        };
+        let default_material = geometry.materials.len() as u32;
+        geometry.materials.push(MaterialDesc::default());
+        let mut nodes = Vec::new();
+        collect_mesh_nodes(scene, &mut nodes);
+        for node in nodes {
+            let mesh = scene.nodes[node].mesh.expect("collected nodes have meshes");
+            for (p, primitive) in scene.meshes[mesh].primitives.iter().enumerate() {
+                let material = primitive.material.map_or(default_material, |m| m as u32);
+                let instance = geometry.instances.len() as u32;
+                geometry.instances.push(Instance { node: node as u32, mesh: mesh as u32, primitive: p as u32, material });
+                let wrap = wrap_modes(scene, &geometry.materials[material as usize]);
+                for tri in primitive.indices.chunks_exact(3) {
+                    let vertices = [tri[0], tri[1], tri[2]];
+                    let uvs = match &primitive.uvs {
+                        Some(uv) => rebase_uvs(vertices.map(|v| uv[v as usize]), wrap),
+                        None => [Vec2::ZERO; 3],
+                    };
+                    geometry.triangle_instance.push(instance);
+                    geometry.triangle_vertices.push(vertices);
+                    geometry.triangle_uvs.push(uvs);
+                }
+            }
+        }
+        geometry
+    }
+
+    pub fn triangle_count(&self) -> usize {
+        self.triangle_vertices.len()
+    }
+
+    /// Fills `out` (source order) with the world-space triangles for the given node world
+    /// transforms. Reuses `out`'s allocations.
+    pub fn world_triangles(&self, scene: &SceneDesc, world_from_node: &[Mat4], out: &mut FrameTriangles) {
+        let n = self.triangle_count();
+        out.positions.clear();
+        out.normals.clear();
+        out.uvs.clear();
+        out.material.clear();
+        out.log2_pb.clear();
+        out.source.clear();
+        out.positions.reserve(n);
+        out.normals.reserve(n);
+        out.uvs.reserve(n);
+        let placements: Vec<Placement> = self
+            .instances
+            .iter()
+            .map(|inst| Placement::new(world_from_node[inst.node as usize]))
+            .collect();
+        for t in 0..n {
+            let instance = self.instances[self.triangle_instance[t] as usize];
+            let placement = &placements[self.triangle_instance[t] as usize];
+            let primitive = &scene.meshes[instance.mesh as usize].primitives[instance.primitive as usize];
+            let mut v = self.triangle_vertices[t];
+            let mut uv = self.triangle_uvs[t];
+            if placement.flips_winding {
+                v.swap(1, 2);
+                uv.swap(1, 2);
+            }
+            let p = v.map(|i| Vec3A::from(placement.world_from_object.transform_point3(primitive.positions[i as usize])));
+            let geometric = (p[1] - p[0]).cross(p[2] - p[0]).normalize_or_zero();
+            let normals = match &primitive.normals {
+                Some(normals) => v.map(|i| {
+                    let n = (placement.normal_from_object * normals[i as usize]).normalize_or_zero();
+                    if n == Vec3::ZERO { Vec3::from(geometric) } else { n }
+                }),
+                None => [Vec3::from(geometric); 3],
+            };
+            out.positions.push(p);
+            out.normals.push(normals);
+            out.uvs.push(uv);
+            out.material.push(instance.material);
+            out.log2_pb.push(0.0);
+            out.source.push(t as u32);
+        }
+    }
+}
+
+/// A node's world transform with what shading needs derived once per instance.
+struct Placement {
+    world_from_object: Mat4,
+    /// Inverse transpose of the upper 3x3 (normals transform covariantly).
+    normal_from_object: Mat3,
+    flips_winding: bool,
+}
+
+impl Placement {
+    fn new(world_from_object: Mat4) -> Self {
+        let linear = Mat3::from_mat4(world_from_object);
+        let det = linear.determinant();
+        let normal_from_object = if det.abs() > f32::MIN_POSITIVE && det.is_finite() {
+            linear.inverse().transpose()
+        } else {
+            Mat3::ZERO // collapsed node: every normal falls back to the geometric one
+        };
+        Placement { world_from_object, normal_from_object, flips_winding: det < 0.0 }
+    }
+}
+
+/// Nodes with a mesh, in the scene's traversal order (parents before children).
+fn collect_mesh_nodes(scene: &SceneDesc, out: &mut Vec<usize>) {
+    let mut stack: Vec<usize> = scene.roots.iter().rev().copied().collect();
+    while let Some(i) = stack.pop() {
+        if scene.nodes[i].mesh.is_some() {
+            out.push(i);
+        }
+        stack.extend(scene.nodes[i].children.iter().rev().copied());
+    }
+}
+
+fn wrap_modes(scene: &SceneDesc, material: &MaterialDesc) -> [WrapMode; 2] {
+    match material.base_color_texture.and_then(|t| scene.textures.get(t)) {
+        Some(texture) => [texture.sampler.wrap_s, texture.sampler.wrap_t],
+        None => [WrapMode::ClampToEdge; 2],
+    }
+}
+
+/// Shifts a triangle's UVs by whole wrap periods (1 for repeat, 2 for mirrored repeat) so
+/// the smallest coordinate lies in [0, period): the texture lookup is unchanged but large
+/// coordinates no longer eat f32 precision. Clamped axes are left as they are.
+fn rebase_uvs(uv: [Vec2; 3], wrap: [WrapMode; 2]) -> [Vec2; 3] {
+    let mut out = uv;
+    for axis in 0..2 {
+        let period = match wrap[axis] {
+            WrapMode::Repeat => 1.0,
+            WrapMode::MirroredRepeat => 2.0,
+            WrapMode::ClampToEdge => continue,
+        };
+        let min = uv.iter().map(|t| t[axis] as f64).fold(f64::INFINITY, f64::min);
+        if !min.is_finite() {
+            continue;
+        }
+        let shift = (min / period).floor() * period;
+        for (o, t) in out.iter_mut().zip(uv) {
+            o[axis] = (t[axis] as f64 - shift) as f32;
+        }
+    }
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn rebasing_keeps_differences_and_period() {
+        let uv = [Vec2::new(1000.25, -7.5), Vec2::new(1001.0, -7.0), Vec2::new(1000.5, -6.25)];
+        let r = rebase_uvs(uv, [WrapMode::Repeat, WrapMode::MirroredRepeat]);
+        assert_eq!(r[0], Vec2::new(0.25, 0.5));
+        assert_eq!(r[1], Vec2::new(1.0, 1.0));
+        assert_eq!(r[2], Vec2::new(0.5, 1.75));
+        let c = rebase_uvs(uv, [WrapMode::ClampToEdge; 2]);
+        assert_eq!(c, uv);
+    }
+}

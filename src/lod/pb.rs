@@ -1,0 +1,155 @@
+//! The per-triangle constant `log2 P_b` of Park & Kim (2010), in the corrected form derived in
+//! `../shared/METHOD.md` (not the paper's eq. 7 as printed, which inverts the dependence on
+//! world area and omits the field of view).
+//!
+//! Pinhole camera, vertical field of view `fov`, image height `H` pixels: a pixel at distance
+//! `z` is `k z` wide with `k = 2 tan(fov/2) / H`. A triangle of world area `A` and UV area
+//! `a` carrying a `W x Ht` texture has texels `sqrt(A / (a W Ht))` wide, so one texel covers
+//! one pixel at `P_b = sqrt(A / (a W Ht)) / k`:
+//!
+//! ```text
+//! log2 P_b = 0.5 log2(A / (a W Ht)) - log2 k
+//! ```
+//!
+//! Both areas are true areas (half the cross product), so their factors of 1/2 cancel.
+//! Computed in f64 from f32 vertices: edge differences are then exact, which keeps huge
+//! world coordinates from destroying the area.
+//!
+//! Degenerate triangles get a finite constant, never NaN (documented in README):
+//! - zero world area (`A = 0`, hit only edge-on, if at all): `-LOG2_PB_LIMIT`, so the level
+//!   clamps to the coarsest MIP level;
+//! - zero UV area with `A > 0` (the texture is constant along the triangle or a line): the
+//!   finest level is correct, so `+LOG2_PB_LIMIT`, which clamps the level to 0;
+//! - non-finite inputs: `+LOG2_PB_LIMIT` (level 0).
+
+use glam::{DVec2, DVec3, Vec2, Vec3A};
+
+/// Magnitude of the finite stand-in for `log2 P_b = ±inf`. Larger than any `log2` of an f32
+/// (at most 128 in magnitude) so the level still clamps to the right end, small enough that
+/// `log2(P_l) - log2 P_b` stays finite.
+pub const LOG2_PB_LIMIT: f32 = 1024.0;
+
+/// The camera quantity `log2 P_b` depends on: the width of a pixel at unit distance.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PixelFootprint {
+    /// `log2(2 tan(fov/2) / H)`.
+    pub log2_k: f64,
+}
+
+impl PixelFootprint {
+    /// `yfov` in radians, `image_height` in pixels (both > 0).
+    pub fn new(yfov: f32, image_height: u32) -> Self {
+        let k = 2.0 * (yfov as f64 / 2.0).tan() / image_height.max(1) as f64;
+        PixelFootprint { log2_k: k.log2() }
+    }
+}
+
+/// `log2 P_b` of one triangle: world vertices `p`, texture coordinates `uv`, level-0 texture
+/// size `texture_size` (width, height), camera `footprint`.
+pub fn log2_pb(p: [Vec3A; 3], uv: [Vec2; 3], texture_size: (u32, u32), footprint: PixelFootprint) -> f32 {
+    let [p0, p1, p2] = p.map(|v| DVec3::new(v.x as f64, v.y as f64, v.z as f64));
+    let world_area = 0.5 * (p1 - p0).cross(p2 - p0).length();
+    let [t0, t1, t2] = uv.map(|t| DVec2::new(t.x as f64, t.y as f64));
+    let uv_area = 0.5 * (t1 - t0).perp_dot(t2 - t0).abs();
+    let texels = texture_size.0 as f64 * texture_size.1 as f64;
+    if !(world_area.is_finite() && uv_area.is_finite()) {
+        return LOG2_PB_LIMIT;
+    }
+    if world_area <= 0.0 {
+        return -LOG2_PB_LIMIT;
+    }
+    if uv_area <= 0.0 || texels <= 0.0 {
+        return LOG2_PB_LIMIT;
+    }
+    let value = 0.5 * (world_area / (uv_area * texels)).log2() - footprint.log2_k;
+    (value as f32).clamp(-LOG2_PB_LIMIT, LOG2_PB_LIMIT)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use glam::{Mat3, Vec3};
+
+    const FOV: f32 = std::f32::consts::FRAC_PI_3;
+
+    fn quad_triangle(size: f32, z: f32) -> [Vec3A; 3] {
+        let h = size / 2.0;
+        [Vec3A::new(-h, -h, z), Vec3A::new(h, -h, z), Vec3A::new(h, h, z)]
+    }
+    const UV: [Vec2; 3] = [Vec2::new(0.0, 1.0), Vec2::new(1.0, 1.0), Vec2::new(1.0, 0.0)];
+
+    #[test]
+    fn matches_closed_form_for_facing_quad() {
+        // A 2 m quad with one 256^2 texture: texel = 2/256 m. At 480 px and 60 degrees,
+        // k = 2 tan(30deg) / 480; P_b = (2/256) / k.
+        let fp = PixelFootprint::new(FOV, 480);
+        let got = log2_pb(quad_triangle(2.0, 0.0), UV, (256, 256), fp) as f64;
+        let k = 2.0 * (FOV as f64 / 2.0).tan() / 480.0;
+        let expected = ((2.0 / 256.0) / k).log2();
+        assert!((got - expected).abs() < 1e-6, "{got} vs {expected}");
+    }
+
+    #[test]
+    fn scales_as_derived() {
+        let fp = PixelFootprint::new(FOV, 480);
+        let base = log2_pb(quad_triangle(2.0, 0.0), UV, (256, 256), fp);
+        // World area x2 -> P_b x sqrt2 -> +0.5.
+        let s = 2f32.sqrt();
+        let bigger = log2_pb(quad_triangle(2.0 * s, 0.0), UV, (256, 256), fp);
+        assert!((bigger - base - 0.5).abs() < 1e-5);
+        // Texture doubled per side -> -1.
+        let denser = log2_pb(quad_triangle(2.0, 0.0), UV, (512, 512), fp);
+        assert!((denser - base + 1.0).abs() < 1e-6);
+        // Image height doubled -> +1.
+        let taller = log2_pb(quad_triangle(2.0, 0.0), UV, (256, 256), PixelFootprint::new(FOV, 960));
+        assert!((taller - base - 1.0).abs() < 1e-6);
+        // UV area halved -> +0.5.
+        let half_uv = UV.map(|t| Vec2::new(t.x * 0.5, t.y));
+        let sparser = log2_pb(quad_triangle(2.0, 0.0), half_uv, (256, 256), fp);
+        assert!((sparser - base - 0.5).abs() < 1e-6);
+        // tan(fov/2) halved -> +1.
+        let narrow = PixelFootprint::new(2.0 * 0.5f32.atan(), 480);
+        let wide = PixelFootprint::new(std::f32::consts::FRAC_PI_2, 480);
+        let d = log2_pb(quad_triangle(2.0, 0.0), UV, (256, 256), narrow)
+            - log2_pb(quad_triangle(2.0, 0.0), UV, (256, 256), wide);
+        assert!((d - 1.0).abs() < 1e-6);
+    }
+
+    #[test]
+    fn rigid_motion_leaves_it_unchanged() {
+        let fp = PixelFootprint::new(FOV, 480);
+        let tri = [Vec3A::new(0.3, -1.2, 0.5), Vec3A::new(2.0, 0.1, -0.7), Vec3A::new(-0.4, 1.5, 1.1)];
+        let uv = [Vec2::new(0.1, 0.2), Vec2::new(0.9, 0.35), Vec2::new(0.4, 0.8)];
+        let base = log2_pb(tri, uv, (300, 200), fp);
+        let r = Mat3::from_euler(glam::EulerRot::XYZ, 0.7, -1.3, 2.1);
+        let t = Vec3::new(150.0, -42.0, 7.5);
+        let moved = tri.map(|p| Vec3A::from(r * Vec3::from(p) + t));
+        let after = log2_pb(moved, uv, (300, 200), fp);
+        assert!((after - base).abs() < 1e-6, "{base} -> {after}");
+        // Winding reversed (mirror image UVs) changes nothing: areas are absolute.
+        let flipped = log2_pb([tri[0], tri[2], tri[1]], [uv[0], uv[2], uv[1]], (300, 200), fp);
+        assert!((flipped - base).abs() < 1e-6);
+    }
+
+    #[test]
+    fn huge_coordinates_keep_precision() {
+        let fp = PixelFootprint::new(FOV, 480);
+        let near = log2_pb(quad_triangle(2.0, 0.0), UV, (256, 256), fp);
+        let offset = Vec3A::new(1.0e6, 0.0, 0.0);
+        let far = log2_pb(quad_triangle(2.0, 0.0).map(|p| p + offset), UV, (256, 256), fp);
+        assert!((far - near).abs() < 1e-6);
+    }
+
+    #[test]
+    fn degenerate_triangles_are_finite() {
+        let fp = PixelFootprint::new(FOV, 480);
+        let line = [Vec3A::ZERO, Vec3A::X, Vec3A::X * 2.0];
+        assert_eq!(log2_pb(line, UV, (256, 256), fp), -LOG2_PB_LIMIT);
+        let flat_uv = [Vec2::ZERO, Vec2::X, Vec2::X * 2.0];
+        assert_eq!(log2_pb(quad_triangle(1.0, 0.0), flat_uv, (256, 256), fp), LOG2_PB_LIMIT);
+        assert_eq!(log2_pb(line, flat_uv, (256, 256), fp), -LOG2_PB_LIMIT);
+        let nan = [Vec3A::NAN, Vec3A::X, Vec3A::Y];
+        assert_eq!(log2_pb(nan, UV, (256, 256), fp), LOG2_PB_LIMIT);
+        assert_eq!(log2_pb(quad_triangle(1.0, 0.0), UV, (0, 0), fp), LOG2_PB_LIMIT);
+    }
+}

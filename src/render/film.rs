@@ -1,0 +1,135 @@
+//! The film: pixels rendered in 16x16 tiles in parallel, stratified supersampling, and the
+//! conversion of linear radiance to output pixels.
+//!
+//! Determinism: every pixel is a pure function of its coordinates (jitter comes from a hash
+//! of pixel and sample index, not from a shared random state) and tiles are reassembled in
+//! a fixed order, so the image is byte-identical whatever the thread count.
+
+use glam::{Vec3, Vec3A};
+use rayon::prelude::*;
+
+use crate::render::camera::Camera;
+use crate::render::integrator::{FrameScene, TraceCounters};
+
+pub const TILE: u32 = 16;
+
+/// A rendered frame in linear RGB, row-major, row 0 at the top.
+#[derive(Debug, Clone, PartialEq)]
+pub struct LinearImage {
+    pub width: u32,
+    pub height: u32,
+    pub pixels: Vec<Vec3>,
+}
+
+impl LinearImage {
+    /// 8-bit sRGB RGB bytes (clamped to [0, 1], rounded).
+    pub fn to_srgb8(&self) -> Vec<u8> {
+        self.pixels.iter().flat_map(|p| p.to_array().map(encode_srgb8)).collect()
+    }
+}
+
+/// Renders all pixels of `camera` with `spp` samples each.
+pub fn render_image(scene: &FrameScene, camera: &Camera, spp: u32) -> (LinearImage, TraceCounters) {
+    let (width, height) = (camera.width, camera.height);
+    let tiles_x = width.div_ceil(TILE);
+    let tiles_y = height.div_ceil(TILE);
+    let tiles: Vec<(Vec<Vec3>, TraceCounters)> = (0..tiles_x * tiles_y)
+        .into_par_iter()
+        .map(|tile| render_tile(scene, camera, spp, (tile % tiles_x) * TILE, (tile / tiles_x) * TILE))
+        .collect();
+    let mut image = LinearImage { width, height, pixels: vec![Vec3::ZERO; (width * height) as usize] };
+    let mut counters = TraceCounters::default();
+    for (tile, (pixels, tile_counters)) in tiles.iter().enumerate() {
+        let (x0, y0) = ((tile as u32 % tiles_x) * TILE, (tile as u32 / tiles_x) * TILE);
+        let w = TILE.min(width - x0);
+        for (row, chunk) in pixels.chunks_exact(w as usize).enumerate() {
+            let start = ((y0 + row as u32) * width + x0) as usize;
+            image.pixels[start..start + w as usize].copy_from_slice(chunk);
+        }
+        counters.add(tile_counters);
+    }
+    (image, counters)
+}
+
+fn render_tile(scene: &FrameScene, camera: &Camera, spp: u32, x0: u32, y0: u32) -> (Vec<Vec3>, TraceCounters) {
+    let x1 = (x0 + TILE).min(camera.width);
+    let y1 = (y0 + TILE).min(camera.height);
+    let mut counters = TraceCounters::default();
+    let mut pixels = Vec::with_capacity(((x1 - x0) * (y1 - y0)) as usize);
+    for y in y0..y1 {
+        for x in x0..x1 {
+            let mut sum = Vec3A::ZERO;
+            for sample in 0..spp {
+                let (sx, sy) = sample_offset(x, y, sample, spp);
+                let direction = camera.primary_direction(x as f32 + sx, y as f32 + sy);
+                let radiance = scene.radiance(camera.eye, direction, 0.0, 0, &mut counters);
+                if radiance.is_finite() {
+                    sum += radiance.max(Vec3A::ZERO);
+                } else {
+                    counters.nonfinite_samples += 1;
+                }
+            }
+            pixels.push(Vec3::from(sum / spp as f32));
+        }
+    }
+    (pixels, counters)
+}
+
+/// Sub-pixel position of sample `i` of `spp`: the pixel centre for one sample, otherwise a
+/// jittered point in stratum `i` of an `n x n` grid, `n = ceil(sqrt(spp))` (a square `spp`
+/// fills the grid exactly; others use its first `spp` strata, row by row).
+pub fn sample_offset(x: u32, y: u32, i: u32, spp: u32) -> (f32, f32) {
+    if spp <= 1 {
+        return (0.5, 0.5);
+    }
+    let n = (spp as f64).sqrt().ceil() as u32;
+    let h = hash3(x, y, i);
+    let jx = (h & 0xffff) as f32 / 65536.0;
+    let jy = (h >> 16) as f32 / 65536.0;
+    (((i % n) as f32 + jx) / n as f32, ((i / n) as f32 + jy) / n as f32)
+}
+
+/// A 32-bit integer hash (lowbias32 by Chris Wellons) of three integers.
+fn hash3(x: u32, y: u32, z: u32) -> u32 {
+    let mut h = x.wrapping_mul(0x9e37_79b9) ^ y.wrapping_mul(0x85eb_ca6b) ^ z.wrapping_mul(0xc2b2_ae35);
+    h ^= h >> 16;
+    h = h.wrapping_mul(0x7feb_352d);
+    h ^= h >> 15;
+    h = h.wrapping_mul(0x846c_a68b);
+    h ^ (h >> 16)
+}
+
+/// Linear [0, 1] to an 8-bit sRGB code value.
+pub fn encode_srgb8(linear: f32) -> u8 {
+    let c = if linear.is_finite() { linear.clamp(0.0, 1.0) } else { 0.0 };
+    let encoded = if c <= 0.003_130_8 { 12.92 * c } else { 1.055 * c.powf(1.0 / 2.4) - 0.055 };
+    (encoded * 255.0 + 0.5) as u8
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn srgb_encoding_endpoints_and_midpoint() {
+        assert_eq!(encode_srgb8(0.0), 0);
+        assert_eq!(encode_srgb8(1.0), 255);
+        assert_eq!(encode_srgb8(0.214_041_14), 128);
+        assert_eq!(encode_srgb8(f32::NAN), 0);
+        assert_eq!(encode_srgb8(7.0), 255);
+    }
+
+    #[test]
+    fn samples_are_stratified_and_inside_the_pixel() {
+        let spp = 16;
+        let mut seen = vec![false; 16];
+        for i in 0..spp {
+            let (sx, sy) = sample_offset(5, 9, i, spp);
+            assert!((0.0..1.0).contains(&sx) && (0.0..1.0).contains(&sy));
+            let stratum = (sy * 4.0) as usize * 4 + (sx * 4.0) as usize;
+            assert!(!seen[stratum], "two samples in stratum {stratum}");
+            seen[stratum] = true;
+        }
+        assert_eq!(sample_offset(1, 2, 0, 1), (0.5, 0.5));
+    }
+}

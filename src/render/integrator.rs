@@ -1,0 +1,322 @@
+//! Whitted ray tracing: ambient + Lambert / Blinn-Phong direct light from every light with
+//! shadow rays, mirror reflection, refraction with Fresnel and total internal reflection.
+//!
+//! Every ray carries the path length from the eye; at a textured hit the LOD method turns it
+//! into a MIP level (`lod::LodMethod::level`). No allocation per ray: recursion lives on the
+//! stack and per-tile counters are plain arrays.
+
+use glam::{Vec2, Vec3A};
+
+use crate::accel::{Accel, Hit};
+use crate::geometry::FrameTriangles;
+use crate::lod::LodMethod;
+use crate::render::light::Light;
+use crate::scene::MaterialDesc;
+use crate::texture::Texture;
+
+/// Histogram bins for texture lookups per integer MIP level (textures up to 32768^2).
+pub const MIP_LEVELS: usize = 16;
+
+/// Secondary rays whose contribution weight falls below this are not traced.
+const MIN_WEIGHT: f32 = 1e-3;
+
+/// Ambient radiance (linear RGB) reflected by every diffuse surface.
+const AMBIENT: Vec3A = Vec3A::splat(0.03);
+
+/// Counters gathered while tracing; summed per tile, then per frame.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct TraceCounters {
+    /// Every ray traced: primary, shadow, reflection, refraction.
+    pub rays: u64,
+    /// Texture lookups per integer level (floor of the clamped level).
+    pub mip_histogram: [u64; MIP_LEVELS],
+    /// Samples whose radiance came out non-finite and were replaced by black.
+    pub nonfinite_samples: u64,
+}
+
+impl Default for TraceCounters {
+    fn default() -> Self {
+        TraceCounters { rays: 0, mip_histogram: [0; MIP_LEVELS], nonfinite_samples: 0 }
+    }
+}
+
+impl TraceCounters {
+    pub fn add(&mut self, other: &TraceCounters) {
+        self.rays += other.rays;
+        self.nonfinite_samples += other.nonfinite_samples;
+        for (a, b) in self.mip_histogram.iter_mut().zip(other.mip_histogram) {
+            *a += b;
+        }
+    }
+}
+
+/// Everything the integrator reads for one frame.
+pub struct FrameScene<'a> {
+    pub triangles: &'a FrameTriangles,
+    pub accel: &'a Accel,
+    pub materials: &'a [MaterialDesc],
+    pub textures: &'a [Texture],
+    pub lights: &'a [Light],
+    pub background: Vec3A,
+    pub lod: LodMethod,
+    pub max_depth: u32,
+}
+
+/// Surface data at a hit, oriented towards the incoming ray.
+#[derive(Clone, Copy)]
+struct SurfacePoint {
+    position: Vec3A,
+    /// Geometric normal on the side the ray came from.
+    face_normal: Vec3A,
+    /// Interpolated normal, flipped to the same side as `face_normal`.
+    shading_normal: Vec3A,
+    /// Whether the ray arrived on the front (counter-clockwise) side.
+    entering: bool,
+    /// Offset that lifts spawned rays off the surface.
+    epsilon: f32,
+}
+
+impl FrameScene<'_> {
+    /// Radiance arriving at `origin` from `direction`; `path_length` is the distance already
+    /// travelled from the eye, `depth` the number of bounces so far.
+    pub fn radiance(&self, origin: Vec3A, direction: Vec3A, path_length: f32, depth: u32, counters: &mut TraceCounters) -> Vec3A {
+        counters.rays += 1;
+        let Some(hit) = self.accel.closest_hit(self.triangles, origin, direction, f32::INFINITY) else {
+            return self.background;
+        };
+        let slot = hit.triangle as usize;
+        let surface = self.surface_point(&hit, origin, direction);
+        let material = &self.materials[self.triangles.material[slot] as usize];
+        let path_length = path_length + hit.t;
+        let albedo = self.albedo(slot, hit.bary, material, path_length, counters);
+
+        let opaque = 1.0 - material.transmission;
+        let mut color = Vec3A::ZERO;
+        if opaque > 0.0 {
+            let diffuse = albedo * (opaque * (1.0 - material.reflectance));
+            color += self.direct_light(&surface, direction, diffuse, material, opaque, counters);
+            color += AMBIENT * diffuse;
+        }
+        if depth >= self.max_depth {
+            return color;
+        }
+        let mirror = opaque * material.reflectance;
+        if mirror > MIN_WEIGHT {
+            let reflected = reflect(direction, surface.shading_normal, surface.face_normal);
+            color += albedo * mirror * self.spawn(&surface, reflected, path_length, depth, counters);
+        }
+        if material.transmission > MIN_WEIGHT {
+            color += self.transmit(&surface, direction, albedo, material, path_length, depth, counters);
+        }
+        color
+    }
+
+    fn surface_point(&self, hit: &Hit, origin: Vec3A, direction: Vec3A) -> SurfacePoint {
+        let slot = hit.triangle as usize;
+        let [p0, p1, p2] = self.triangles.positions[slot];
+        let geometric = (p1 - p0).cross(p2 - p0).normalize_or_zero();
+        let [n0, n1, n2] = self.triangles.normals[slot];
+        let (b1, b2) = (hit.bary.x, hit.bary.y);
+        let interpolated = Vec3A::from(n0 * (1.0 - b1 - b2) + n1 * b1 + n2 * b2).normalize_or_zero();
+        let entering = geometric.dot(direction) <= 0.0;
+        let face_normal = if entering { geometric } else { -geometric };
+        let shading_normal = match interpolated.dot(face_normal) {
+            d if d > 0.0 => interpolated,
+            d if d < 0.0 => -interpolated,
+            _ => face_normal,
+        };
+        let position = origin + direction * hit.t;
+        let magnitude = position.abs().max_element().max(origin.abs().max_element());
+        SurfacePoint { position, face_normal, shading_normal, entering, epsilon: 1e-5 + magnitude * 2f32.powi(-17) }
+    }
+
+    /// Base colour at a hit: factor times the filtered texture at the method's level.
+    fn albedo(&self, slot: usize, bary: Vec2, material: &MaterialDesc, path_length: f32, counters: &mut TraceCounters) -> Vec3A {
+        let base = Vec3A::from(material.base_color);
+        let Some(texture) = material.base_color_texture.and_then(|t| self.textures.get(t)) else {
+            return base;
+        };
+        let [t0, t1, t2] = self.triangles.uvs[slot];
+        let uv = t0 * (1.0 - bary.x - bary.y) + t1 * bary.x + t2 * bary.y;
+        let pyramid = &texture.pyramid;
+        let texel = match self.lod {
+            LodMethod::None => {
+                counters.mip_histogram[0] += 1;
+                pyramid.sample_bilinear(0, uv, texture.sampler)
+            }
+            method => {
+                let level = pyramid.clamp_level(method.level(path_length, self.triangles.log2_pb[slot]));
+                counters.mip_histogram[(level as usize).min(MIP_LEVELS - 1)] += 1;
+                pyramid.sample_trilinear(uv, level, texture.sampler)
+            }
+        };
+        base * Vec3A::new(texel.x, texel.y, texel.z)
+    }
+
+    /// Lambert + Blinn-Phong from every light, each through a shadow ray.
+    fn direct_light(
+        &self,
+        surface: &SurfacePoint,
+        direction: Vec3A,
+        diffuse: Vec3A,
+        material: &MaterialDesc,
+        opaque: f32,
+        counters: &mut TraceCounters,
+    ) -> Vec3A {
+        let mut color = Vec3A::ZERO;
+        for light in self.lights {
+            let Some(incident) = light.incident(surface.position) else { continue };
+            let cos = surface.shading_normal.dot(incident.to_light);
+            if cos <= 0.0 || surface.face_normal.dot(incident.to_light) <= 0.0 {
+                continue;
+            }
+            let transmittance = self.shadow_transmittance(surface, incident.to_light, incident.distance, counters);
+            if transmittance == Vec3A::ZERO {
+                continue;
+            }
+            let irradiance = incident.irradiance * transmittance * cos;
+            color += diffuse * irradiance * std::f32::consts::FRAC_1_PI;
+            if material.specular > 0.0 {
+                let half = (incident.to_light - direction).normalize_or_zero();
+                let highlight = surface.shading_normal.dot(half).max(0.0).powf(material.shininess);
+                let normalization = (material.shininess + 8.0) / (8.0 * std::f32::consts::PI);
+                color += irradiance * (opaque * material.specular * normalization * highlight);
+            }
+        }
+        color
+    }
+
+    /// Fraction of light that reaches the surface: 0 behind anything opaque, the product of
+    /// transmission times untextured base colour through glass.
+    fn shadow_transmittance(&self, surface: &SurfacePoint, to_light: Vec3A, distance: f32, counters: &mut TraceCounters) -> Vec3A {
+        counters.rays += 1;
+        let origin = surface.position + surface.face_normal * surface.epsilon;
+        let t_max = if distance.is_finite() { distance * (1.0 - 1e-4) - surface.epsilon } else { f32::INFINITY };
+        if !(t_max > 0.0) {
+            return Vec3A::ONE;
+        }
+        let mut transmittance = Vec3A::ONE;
+        self.accel.visit_hits(self.triangles, origin, to_light, t_max, |slot| {
+            let material = &self.materials[self.triangles.material[slot as usize] as usize];
+            transmittance *= Vec3A::from(material.base_color) * material.transmission;
+            transmittance.max_element() > MIN_WEIGHT
+        });
+        if transmittance.max_element() > MIN_WEIGHT { transmittance } else { Vec3A::ZERO }
+    }
+
+    /// Glass: Fresnel-weighted reflection plus refraction tinted by the albedo; total
+    /// internal reflection sends everything to the reflection.
+    #[allow(clippy::too_many_arguments)]
+    fn transmit(
+        &self,
+        surface: &SurfacePoint,
+        direction: Vec3A,
+        albedo: Vec3A,
+        material: &MaterialDesc,
+        path_length: f32,
+        depth: u32,
+        counters: &mut TraceCounters,
+    ) -> Vec3A {
+        let eta = if surface.entering { 1.0 / material.ior } else { material.ior };
+        let n = surface.shading_normal;
+        let cos_i = (-direction.dot(n)).clamp(0.0, 1.0);
+        let reflected = reflect(direction, n, surface.face_normal);
+        let weight = material.transmission;
+        match refract(direction, n, cos_i, eta) {
+            None => weight * self.spawn(surface, reflected, path_length, depth, counters),
+            Some((refracted, cos_t)) => {
+                let fresnel = dielectric_fresnel(cos_i, cos_t, eta);
+                let mut color = Vec3A::ZERO;
+                if weight * fresnel > MIN_WEIGHT {
+                    color += weight * fresnel * self.spawn(surface, reflected, path_length, depth, counters);
+                }
+                if weight * (1.0 - fresnel) > MIN_WEIGHT {
+                    let below = SurfacePoint { face_normal: -surface.face_normal, ..*surface };
+                    color += albedo * (weight * (1.0 - fresnel)) * self.spawn(&below, refracted, path_length, depth, counters);
+                }
+                color
+            }
+        }
+    }
+
+    /// Traces a secondary ray leaving the surface on the side `face_normal` points to.
+    fn spawn(&self, surface: &SurfacePoint, direction: Vec3A, path_length: f32, depth: u32, counters: &mut TraceCounters) -> Vec3A {
+        let origin = surface.position + surface.face_normal * surface.epsilon;
+        self.radiance(origin, direction, path_length, depth + 1, counters)
+    }
+}
+
+/// Mirror direction about the shading normal; if that points into the surface (possible
+/// with interpolated normals at grazing angles) the geometric normal is used instead.
+#[inline]
+fn reflect(direction: Vec3A, shading_normal: Vec3A, face_normal: Vec3A) -> Vec3A {
+    let r = direction - 2.0 * direction.dot(shading_normal) * shading_normal;
+    if r.dot(face_normal) > 0.0 {
+        r.normalize()
+    } else {
+        (direction - 2.0 * direction.dot(face_normal) * face_normal).normalize()
+    }
+}
+
+/// Snell refraction of unit `direction` through a surface with normal `n` (facing the
+/// incoming ray), relative index `eta = n_incident / n_transmitted`. `None` on total
+/// internal reflection. Returns the direction and the cosine of the transmitted angle.
+#[inline]
+fn refract(direction: Vec3A, n: Vec3A, cos_i: f32, eta: f32) -> Option<(Vec3A, f32)> {
+    let sin2_t = eta * eta * (1.0 - cos_i * cos_i);
+    if sin2_t >= 1.0 {
+        return None;
+    }
+    let cos_t = (1.0 - sin2_t).sqrt();
+    let t = eta * direction + (eta * cos_i - cos_t) * n;
+    Some((t.normalize(), cos_t))
+}
+
+/// Unpolarised Fresnel reflectance of a dielectric boundary.
+#[inline]
+fn dielectric_fresnel(cos_i: f32, cos_t: f32, eta: f32) -> f32 {
+    // With eta = n1/n2: r_s = (n1 cos_i - n2 cos_t)/(n1 cos_i + n2 cos_t), divided by n2.
+    let rs = (eta * cos_i - cos_t) / (eta * cos_i + cos_t);
+    let rp = (cos_i - eta * cos_t) / (cos_i + eta * cos_t);
+    let f = 0.5 * (rs * rs + rp * rp);
+    if f.is_finite() { f.clamp(0.0, 1.0) } else { 1.0 }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn fresnel_at_normal_incidence_is_schlick_r0() {
+        let eta = 1.0 / 1.5;
+        let f = dielectric_fresnel(1.0, 1.0, eta);
+        assert!((f - 0.04).abs() < 1e-6, "{f}");
+        // Grazing incidence reflects everything.
+        assert!(dielectric_fresnel(0.0, 0.7, eta) > 0.999);
+    }
+
+    #[test]
+    fn refraction_obeys_snell_and_total_internal_reflection() {
+        let n = Vec3A::Y;
+        let angle = 40f32.to_radians();
+        let d = Vec3A::new(angle.sin(), -angle.cos(), 0.0);
+        let (t, cos_t) = refract(d, n, angle.cos(), 1.0 / 1.5).unwrap();
+        let sin_t = (1.0 - cos_t * cos_t).sqrt();
+        assert!((angle.sin() - 1.5 * sin_t).abs() < 1e-5);
+        assert!((t.x - sin_t).abs() < 1e-5 && t.y < 0.0);
+        // From glass to air past the critical angle (41.8 degrees): TIR.
+        let steep = 60f32.to_radians();
+        let d = Vec3A::new(steep.sin(), -steep.cos(), 0.0);
+        assert!(refract(d, n, steep.cos(), 1.5).is_none());
+    }
+
+    #[test]
+    fn reflection_never_enters_the_surface() {
+        let face = Vec3A::Y;
+        let bent = Vec3A::new(0.9, 0.1, 0.0).normalize();
+        let d = Vec3A::new(1.0, -0.05, 0.0).normalize();
+        let r = reflect(d, bent, face);
+        assert!(r.dot(face) > 0.0);
+        assert!((r.length() - 1.0).abs() < 1e-6);
+    }
+}

@@ -1,0 +1,11 @@
+//! Rendering one frame: camera, lights, the Whitted integrator and the tiled film.
+
+pub mod camera;
+pub mod film;
+pub mod integrator;
+pub mod light;
+
+pub use camera::Camera;
+pub use film::{LinearImage, render_image};
+pub use integrator::{FrameScene, MIP_LEVELS, TraceCounters};
+pub use light::Light;
