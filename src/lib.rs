@@ -9,3 +9,6 @@ pub mod anim;
 pub mod geometry;
 pub mod lod;
 pub mod render;
+pub mod frame;
+pub mod output;
+pub mod cli;

@@ -86,10 +86,8 @@ impl SceneGeometry {
         };
         let default_material = geometry.materials.len() as u32;
         geometry.materials.push(MaterialDesc::default());
-        let mut nodes = Vec::new();
-        collect_mesh_nodes(scene, &mut nodes);
-        for node in nodes {
-            let mesh = scene.nodes[node].mesh.expect("collected nodes have meshes");
+        for node in scene.traversal_order() {
+            let Some(mesh) = scene.nodes[node].mesh else { continue };
             for (p, primitive) in scene.meshes[mesh].primitives.iter().enumerate() {
                 let material = primitive.material.map_or(default_material, |m| m as u32);
                 let instance = geometry.instances.len() as u32;
@@ -179,17 +177,6 @@ impl Placement {
             Mat3::ZERO // collapsed node: every normal falls back to the geometric one
         };
         Placement { world_from_object, normal_from_object, flips_winding: det < 0.0 }
-    }
-}
-
-/// Nodes with a mesh, in the scene's traversal order (parents before children).
-fn collect_mesh_nodes(scene: &SceneDesc, out: &mut Vec<usize>) {
-    let mut stack: Vec<usize> = scene.roots.iter().rev().copied().collect();
-    while let Some(i) = stack.pop() {
-        if scene.nodes[i].mesh.is_some() {
-            out.push(i);
-        }
-        stack.extend(scene.nodes[i].children.iter().rev().copied());
     }
 }
 

@@ -225,12 +225,21 @@ impl SceneDesc {
 
     /// Calls `f` on every node reachable from the roots, parents before children.
     pub fn visit_nodes(&self, mut f: impl FnMut(&NodeDesc)) {
+        for i in self.traversal_order() {
+            f(&self.nodes[i]);
+        }
+    }
+
+    /// Indices of the nodes reachable from the roots, depth first, parents before children,
+    /// children in file order. "The first camera" and "the first N lights" follow this order.
+    pub fn traversal_order(&self) -> Vec<usize> {
+        let mut order = Vec::with_capacity(self.nodes.len());
         let mut stack: Vec<usize> = self.roots.iter().rev().copied().collect();
         while let Some(i) = stack.pop() {
-            let node = &self.nodes[i];
-            f(node);
-            stack.extend(node.children.iter().rev().copied());
+            order.push(i);
+            stack.extend(self.nodes[i].children.iter().rev().copied());
         }
+        order
     }
 
     /// The longest animation's duration in seconds (0 for a static scene).

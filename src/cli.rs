@@ -1,0 +1,313 @@
+//! The command line: `mipray render`, `mipray info`, and no arguments = render the default
+//! animation. Parses options into `RenderSettings`, then runs the frame loop.
+
+use std::io::IsTerminal;
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use anyhow::{Context, Result, bail};
+use clap::{Args, Parser, Subcommand};
+use indicatif::{ProgressBar, ProgressStyle};
+
+use crate::frame::{FrameRecord, RenderSettings, Renderer};
+use crate::lod::LodMethod;
+use crate::output::{FrameFormat, OutputDir};
+use crate::scene::SceneDesc;
+
+#[derive(Parser, Debug)]
+#[command(name = "mipray", version, about = "Ray-traced animations with ray-length MIP-map level selection")]
+pub struct Cli {
+    #[command(subcommand)]
+    pub command: Option<Command>,
+}
+
+#[derive(Subcommand, Debug)]
+pub enum Command {
+    /// Render an animation to an image sequence with per-frame stats.
+    Render(RenderArgs),
+    /// Print what a scene contains.
+    Info {
+        /// A .gltf/.glb path, or the name of a scene in animations/ (e.g. `default`).
+        scene: String,
+    },
+}
+
+#[derive(Args, Debug, Clone)]
+pub struct RenderArgs {
+    /// A .gltf/.glb path, or the name of a scene in animations/ (e.g. `default`).
+    #[arg(default_value = "default")]
+    pub scene: String,
+    /// Output folder [default: out/<scene>/<lod>/].
+    #[arg(long)]
+    pub out: Option<PathBuf>,
+    /// Half-open frame range `A..B` (or a single frame `A`) [default: the animation's length].
+    #[arg(long)]
+    pub frames: Option<String>,
+    /// Frames per second: frame i is at time i / fps.
+    #[arg(long, default_value_t = 30.0)]
+    pub fps: f64,
+    /// Image size `WxH`.
+    #[arg(long, default_value = "640x360")]
+    pub size: String,
+    /// Texture LOD selection method.
+    #[arg(long, default_value = "paper")]
+    pub lod: LodMethod,
+    /// Number of lights: the scene's first N, plus point lights around the scene if it has fewer
+    /// [default: all of the scene's lights, at least 1].
+    #[arg(long)]
+    pub lights: Option<usize>,
+    /// Samples per pixel (stratified; a square number fills the strata grid exactly).
+    #[arg(long, default_value_t = 1)]
+    pub spp: u32,
+    /// Maximum reflection/refraction depth.
+    #[arg(long, default_value_t = 5)]
+    pub max_depth: u32,
+    /// Worker threads [default: all cores].
+    #[arg(long)]
+    pub threads: Option<usize>,
+    /// Frame file format.
+    #[arg(long, value_enum, default_value_t = FrameFormat::Png)]
+    pub format: FrameFormat,
+}
+
+impl Default for RenderArgs {
+    fn default() -> Self {
+        match Cli::parse_from(["mipray", "render"]).command {
+            Some(Command::Render(args)) => args,
+            _ => unreachable!("`mipray render` parses to the render command"),
+        }
+    }
+}
+
+/// Upper bounds that keep a typo from allocating the machine away.
+const MAX_PIXELS: u64 = 16384 * 16384;
+const MAX_SPP: u32 = 65536;
+const MAX_DEPTH: u32 = 64;
+const MAX_LIGHTS: usize = 1024;
+
+/// Runs the parsed command line.
+pub fn run(cli: Cli) -> Result<()> {
+    match cli.command {
+        None => render(&RenderArgs::default()),
+        Some(Command::Render(args)) => render(&args),
+        Some(Command::Info { scene }) => {
+            let path = resolve_scene(&scene)?;
+            let desc = load_scene(&path)?;
+            print!("{}", describe(&desc));
+            Ok(())
+        }
+    }
+}
+
+/// Finds a scene: an existing file path, or `NAME` in `animations/` (as `.gltf` or `.glb`),
+/// looked up in the current folder and then in the crate's own `animations/`.
+pub fn resolve_scene(scene: &str) -> Result<PathBuf> {
+    let direct = PathBuf::from(scene);
+    if direct.is_file() {
+        return Ok(direct);
+    }
+    let folders = [PathBuf::from("animations"), Path::new(env!("CARGO_MANIFEST_DIR")).join("animations")];
+    for folder in &folders {
+        for ext in ["gltf", "glb"] {
+            let candidate = folder.join(format!("{scene}.{ext}"));
+            if candidate.is_file() {
+                return Ok(candidate);
+            }
+        }
+    }
+    bail!("{scene}: no such file, and no scene of that name in animations/ (looked in {})", folders.iter().map(|f| f.display().to_string()).collect::<Vec<_>>().join(", "))
+}
+
+/// Loads a scene file by its extension.
+pub fn load_scene(path: &Path) -> Result<SceneDesc> {
+    let ext = path.extension().and_then(|e| e.to_str()).map(str::to_ascii_lowercase);
+    match ext.as_deref() {
+        Some("gltf") | Some("glb") => Ok(crate::scene::gltf::load(path)?),
+        _ => bail!("{}: unsupported scene format (expected .gltf or .glb)", path.display()),
+    }
+}
+
+/// Parses `WxH`.
+pub fn parse_size(s: &str) -> Result<(u32, u32)> {
+    let (w, h) = s.split_once(['x', 'X']).with_context(|| format!("--size {s}: expected WxH, e.g. 640x360"))?;
+    let w: u32 = w.trim().parse().with_context(|| format!("--size {s}: bad width"))?;
+    let h: u32 = h.trim().parse().with_context(|| format!("--size {s}: bad height"))?;
+    if w == 0 || h == 0 || w as u64 * h as u64 > MAX_PIXELS {
+        bail!("--size {s}: width and height must be at least 1 and at most {MAX_PIXELS} pixels in all");
+    }
+    Ok((w, h))
+}
+
+/// Parses a half-open frame range `A..B`, or a single frame `A`.
+pub fn parse_frames(s: &str) -> Result<std::ops::Range<u32>> {
+    let range = match s.split_once("..") {
+        Some((a, b)) => {
+            let a: u32 = a.trim().parse().with_context(|| format!("--frames {s}: bad start"))?;
+            let b: u32 = b.trim().parse().with_context(|| format!("--frames {s}: bad end"))?;
+            a..b
+        }
+        None => {
+            let a: u32 = s.trim().parse().with_context(|| format!("--frames {s}: expected A..B or A"))?;
+            a..a.saturating_add(1)
+        }
+    };
+    if range.is_empty() {
+        bail!("--frames {s}: empty range (the end is exclusive)");
+    }
+    Ok(range)
+}
+
+/// Frames covering the animation once at `fps` (frame i at i / fps; the end time itself is
+/// left out so a loop does not repeat its first pose). A static scene has one frame.
+pub fn default_frames(duration_s: f32, fps: f64) -> std::ops::Range<u32> {
+    let n = (duration_s as f64 * fps).round();
+    0..(n.clamp(1.0, 1e6) as u32)
+}
+
+fn scene_name(path: &Path) -> String {
+    path.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_else(|| "scene".into())
+}
+
+fn validated_settings(args: &RenderArgs) -> Result<RenderSettings> {
+    let (width, height) = parse_size(&args.size)?;
+    if args.spp == 0 || args.spp > MAX_SPP {
+        bail!("--spp {}: must be 1 to {MAX_SPP}", args.spp);
+    }
+    if args.max_depth > MAX_DEPTH {
+        bail!("--max-depth {}: at most {MAX_DEPTH}", args.max_depth);
+    }
+    if args.lights.is_some_and(|n| n > MAX_LIGHTS) {
+        bail!("--lights: at most {MAX_LIGHTS}");
+    }
+    if !(args.fps.is_finite() && args.fps > 0.0) {
+        bail!("--fps {}: must be a positive number", args.fps);
+    }
+    Ok(RenderSettings { width, height, lod: args.lod, spp: args.spp, max_depth: args.max_depth, lights: args.lights })
+}
+
+/// `mipray render`.
+pub fn render(args: &RenderArgs) -> Result<()> {
+    let settings = validated_settings(args)?;
+    let path = resolve_scene(&args.scene)?;
+    let scene = load_scene(&path)?;
+    for note in &scene.notes {
+        eprintln!("note: {}: {note}", path.display());
+    }
+    let frames = match &args.frames {
+        Some(f) => parse_frames(f)?,
+        None => default_frames(scene.duration(), args.fps),
+    };
+    let out = args.out.clone().unwrap_or_else(|| PathBuf::from("out").join(scene_name(&path)).join(args.lod.to_string()));
+    let mut threads = rayon::ThreadPoolBuilder::new();
+    if let Some(n) = args.threads {
+        if n == 0 {
+            bail!("--threads must be at least 1");
+        }
+        threads = threads.num_threads(n);
+    }
+    let pool = threads.build().context("cannot start worker threads")?;
+    let mut renderer = Renderer::new(scene, settings);
+    pool.install(|| render_sequence(&mut renderer, frames, args.fps, &out, args.format))
+}
+
+/// Renders `frames` into `out`, one record per frame, then the summary.
+pub fn render_sequence(renderer: &mut Renderer, frames: std::ops::Range<u32>, fps: f64, out: &Path, format: FrameFormat) -> Result<()> {
+    let mut output = OutputDir::create(out, format)?;
+    let progress = progress_bar(frames.len() as u64);
+    let start = Instant::now();
+    let mut records: Vec<FrameRecord> = Vec::with_capacity(frames.len());
+    for frame in frames {
+        let time_s = (frame as f64 / fps) as f32;
+        let (image, record) = renderer.render_frame(frame, time_s)?;
+        let path = output.write_frame(frame, &image)?;
+        output.append_record(&record)?;
+        let line = format!(
+            "frame {frame:04}  t={time_s:.3}s  {:>8.1} ms  {:>6.2} Mrays  lod={}  -> {}",
+            record.total_ms,
+            record.rays as f64 / 1e6,
+            record.lod_method,
+            path.display()
+        );
+        progress.suspend(|| println!("{line}"));
+        progress.inc(1);
+        records.push(record);
+    }
+    progress.finish_and_clear();
+    let summary = output.write_summary(&records)?;
+    println!(
+        "rendered {} frame(s) in {:.1} s into {} (stats.jsonl, {})",
+        records.len(),
+        start.elapsed().as_secs_f64(),
+        output.path().display(),
+        summary.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default()
+    );
+    Ok(())
+}
+
+fn progress_bar(len: u64) -> ProgressBar {
+    if !std::io::stderr().is_terminal() {
+        return ProgressBar::hidden();
+    }
+    let bar = ProgressBar::new(len);
+    if let Ok(style) = ProgressStyle::with_template("{bar:40} {pos}/{len} frames  elapsed {elapsed}  eta {eta}") {
+        bar.set_style(style);
+    }
+    bar
+}
+
+/// The text `mipray info` prints.
+pub fn describe(scene: &SceneDesc) -> String {
+    use std::fmt::Write;
+    let mut s = String::new();
+    let primitives: usize = scene.meshes.iter().map(|m| m.primitives.len()).sum();
+    let _ = writeln!(s, "scene: {}", scene.source.display());
+    let _ = writeln!(s, "triangles: {}", scene.instanced_triangle_count());
+    let _ = writeln!(s, "meshes: {} ({primitives} primitives)", scene.meshes.len());
+    let _ = writeln!(s, "nodes: {}", scene.nodes.len());
+    let _ = writeln!(s, "materials: {}", scene.materials.len());
+    let _ = writeln!(s, "textures: {}", scene.textures.len());
+    for t in &scene.textures {
+        let (w, h) = t.pyramid.base_size();
+        let _ = writeln!(s, "  {}: {w}x{h}, {} MIP levels, wrap {:?}/{:?}", t.name, t.pyramid.level_count(), t.sampler.wrap_s, t.sampler.wrap_t);
+    }
+    let _ = writeln!(s, "animations: {}", scene.animations.len());
+    for (i, a) in scene.animations.iter().enumerate() {
+        let name = if a.name.is_empty() { format!("#{i}") } else { a.name.clone() };
+        let _ = writeln!(s, "  {name}: {:.3} s, {} channels", a.duration(), a.channels.len());
+    }
+    let _ = writeln!(s, "cameras: {}", scene.cameras.len());
+    for c in &scene.cameras {
+        let _ = writeln!(s, "  perspective, yfov {:.2} deg", c.yfov.to_degrees());
+    }
+    let _ = writeln!(s, "lights: {}", scene.lights.len());
+    for l in &scene.lights {
+        let _ = writeln!(s, "  {:?}, intensity {}, colour {:?}", l.kind, l.intensity, l.color.to_array());
+    }
+    for note in &scene.notes {
+        let _ = writeln!(s, "note: {note}");
+    }
+    s
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn parses_sizes_and_ranges() {
+        assert_eq!(parse_size("640x360").unwrap(), (640, 360));
+        assert!(parse_size("0x10").is_err());
+        assert!(parse_size("100000x100000").is_err());
+        assert!(parse_size("abc").is_err());
+        assert_eq!(parse_frames("3..7").unwrap(), 3..7);
+        assert_eq!(parse_frames("5").unwrap(), 5..6);
+        assert!(parse_frames("7..3").is_err());
+        assert!(parse_frames("x..3").is_err());
+    }
+
+    #[test]
+    fn default_frames_cover_the_animation_once() {
+        assert_eq!(default_frames(1.6, 30.0), 0..48);
+        assert_eq!(default_frames(0.0, 30.0), 0..1);
+    }
+}
