@@ -77,6 +77,17 @@ pub enum FrameError {
     Accel { frame: u32, time_s: f32, source: AccelError },
 }
 
+/// One frame after its update: the BVH, camera and lights, and what the update cost.
+pub struct PreparedFrame {
+    pub accel: Accel,
+    pub camera: Camera,
+    pub lights: Vec<Light>,
+    pub animate_ms: f64,
+    pub build_ms: f64,
+    pub lod_update_ms: f64,
+    pub lod_recomputed: usize,
+}
+
 /// Renders frames of one scene; owns the per-frame scratch buffers.
 pub struct Renderer {
     scene: SceneDesc,
@@ -126,6 +137,23 @@ impl Renderer {
     /// Animation produced a non-finite vertex.
     pub fn render_frame(&mut self, frame: u32, time_s: f32) -> Result<(LinearImage, FrameRecord), FrameError> {
         let start = Instant::now();
+        let prepared = self.prepare(frame, time_s)?;
+        let t = Instant::now();
+        let (image, counters) = render_image(&self.frame_scene(&prepared), &prepared.camera, self.settings.spp.max(1));
+        let render_ms = ms_since(t);
+        let p = &prepared;
+        let ms = [p.animate_ms, p.build_ms, p.lod_update_ms, render_ms, ms_since(start)];
+        let record = self.record(frame, time_s, p.lights.len(), counters, ms, p.lod_recomputed);
+        Ok((image, record))
+    }
+
+    /// The per-frame update without the render: animate, build the BVH, update `log2 P_b`,
+    /// place camera and lights.
+    ///
+    /// # Errors
+    /// Animation produced a non-finite vertex.
+    pub fn prepare(&mut self, frame: u32, time_s: f32) -> Result<PreparedFrame, FrameError> {
+        let start = Instant::now();
         let world = node_world_transforms(&self.scene, time_s);
         self.geometry.world_triangles(&self.scene, &world, &mut self.triangles);
         let animate_ms = ms_since(start);
@@ -138,23 +166,29 @@ impl Renderer {
         let lod_recomputed = if self.settings.lod.needs_log2_pb() { self.update_log2_pb() } else { 0 };
         let lod_update_ms = ms_since(t);
 
-        let camera = self.camera(&world);
-        let lights = self.lights(&world);
-        let t = Instant::now();
-        let frame_scene = FrameScene {
+        Ok(PreparedFrame {
+            accel,
+            camera: self.camera(&world),
+            lights: self.lights(&world),
+            animate_ms,
+            build_ms,
+            lod_update_ms,
+            lod_recomputed,
+        })
+    }
+
+    /// What the integrator reads for a prepared frame (valid until the next `prepare`).
+    pub fn frame_scene<'a>(&'a self, prepared: &'a PreparedFrame) -> FrameScene<'a> {
+        FrameScene {
             triangles: &self.triangles,
-            accel: &accel,
+            accel: &prepared.accel,
             materials: &self.geometry.materials,
             textures: &self.scene.textures,
-            lights: &lights,
+            lights: &prepared.lights,
             background: Vec3A::from(self.scene.background),
             lod: self.settings.lod,
             max_depth: self.settings.max_depth,
-        };
-        let (image, counters) = render_image(&frame_scene, &camera, self.settings.spp.max(1));
-        let render_ms = ms_since(t);
-        let record = self.record(frame, time_s, lights.len(), counters, [animate_ms, build_ms, lod_update_ms, render_ms, ms_since(start)], lod_recomputed);
-        Ok((image, record))
+        }
     }
 
     #[allow(clippy::too_many_arguments)]

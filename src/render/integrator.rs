@@ -50,6 +50,17 @@ impl TraceCounters {
     }
 }
 
+/// The LOD selected at the first textured surface along a specular chain.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct LodProbe {
+    /// Triangle slot (BVH order) of the textured hit.
+    pub triangle: u32,
+    /// Total distance from the ray's origin over every bounce.
+    pub path_length: f32,
+    /// The method's level, before clamping to the texture's pyramid.
+    pub level: f32,
+}
+
 /// Everything the integrator reads for one frame.
 pub struct FrameScene<'a> {
     pub triangles: &'a FrameTriangles,
@@ -109,6 +120,39 @@ impl FrameScene<'_> {
             color += self.transmit(&surface, direction, albedo, material, path_length, depth, counters);
         }
         color
+    }
+
+    /// Follows a ray through perfect mirrors and glass (the dominant specular branch) to its
+    /// first textured surface and reports the LOD the method selects there. Used by tests
+    /// and diagnostics; the integrator computes the same quantities inline.
+    pub fn probe_lod(&self, origin: Vec3A, direction: Vec3A) -> Option<LodProbe> {
+        let (mut origin, mut direction, mut path_length) = (origin, direction, 0.0f32);
+        for _ in 0..=self.max_depth {
+            let hit = self.accel.closest_hit(self.triangles, origin, direction, f32::INFINITY)?;
+            let slot = hit.triangle as usize;
+            let surface = self.surface_point(&hit, origin, direction);
+            let material = &self.materials[self.triangles.material[slot] as usize];
+            path_length += hit.t;
+            if material.base_color_texture.is_some() {
+                let level = self.lod.level(path_length, self.triangles.log2_pb[slot]);
+                return Some(LodProbe { triangle: hit.triangle, path_length, level });
+            }
+            let next = if material.transmission >= 0.5 {
+                let eta = if surface.entering { 1.0 / material.ior } else { material.ior };
+                let cos_i = (-direction.dot(surface.shading_normal)).clamp(0.0, 1.0);
+                match refract(direction, surface.shading_normal, cos_i, eta) {
+                    Some((refracted, _)) => (refracted, -surface.face_normal),
+                    None => (reflect(direction, surface.shading_normal, surface.face_normal), surface.face_normal),
+                }
+            } else if material.reflectance >= 0.5 {
+                (reflect(direction, surface.shading_normal, surface.face_normal), surface.face_normal)
+            } else {
+                return None;
+            };
+            direction = next.0;
+            origin = surface.position + next.1 * surface.epsilon;
+        }
+        None
     }
 
     fn surface_point(&self, hit: &Hit, origin: Vec3A, direction: Vec3A) -> SurfacePoint {

@@ -7,5 +7,5 @@ pub mod light;
 
 pub use camera::Camera;
 pub use film::{LinearImage, render_image};
-pub use integrator::{FrameScene, MIP_LEVELS, TraceCounters};
+pub use integrator::{FrameScene, LodProbe, MIP_LEVELS, TraceCounters};
 pub use light::Light;
