@@ -14,8 +14,9 @@
 //! - sizes are 1..=[`MAX_SIZE`] per side.
 
 mod pyramid;
+mod sample;
 
-use glam::{Vec2, Vec4};
+use glam::Vec4;
 
 /// Largest accepted texture side, in texels. Anything larger is treated as corrupt or
 /// hostile input rather than allocated (16384² RGBA f32 is already 4 GiB).
@@ -108,18 +109,6 @@ impl MipPyramid {
     pub fn clamp_level(&self, lod: f32) -> f32 {
         // `f32::max` returns the non-NaN operand, so NaN becomes 0 here.
         lod.max(0.0).min((self.levels.len() - 1) as f32)
-    }
-
-    /// Bilinear lookup in one level.
-    pub fn sample_bilinear(&self, level: usize, uv: Vec2, sampler: Sampler) -> Vec4 {
-        let _ = (level, uv, sampler);
-        todo!("texture module")
-    }
-
-    /// Trilinear lookup at a fractional level (clamped with [`Self::clamp_level`]).
-    pub fn sample_trilinear(&self, uv: Vec2, lod: f32, sampler: Sampler) -> Vec4 {
-        let _ = (uv, lod, sampler);
-        todo!("texture module")
     }
 }
 
