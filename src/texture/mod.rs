@@ -13,8 +13,11 @@
 //!   `width * height` (guaranteed by [`MipPyramid::from_linear_rgba`], relied on by lookup);
 //! - sizes are 1..=[`MAX_SIZE`] per side.
 
+mod decode;
 mod pyramid;
 mod sample;
+
+pub use decode::{decode_image, srgb_to_linear};
 
 use glam::Vec4;
 
@@ -110,10 +113,4 @@ impl MipPyramid {
         // `f32::max` returns the non-NaN operand, so NaN becomes 0 here.
         lod.max(0.0).min((self.levels.len() - 1) as f32)
     }
-}
-
-/// Decodes an encoded image (PNG, JPEG, PPM, ...) into linear RGBA texels.
-pub fn decode_image(bytes: &[u8], srgb: bool) -> Result<(u32, u32, Vec<Vec4>), TextureError> {
-    let _ = (bytes, srgb);
-    todo!("texture module")
 }
