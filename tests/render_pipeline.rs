@@ -123,3 +123,4 @@ fn degenerate_and_grazing_geometry_give_finite_pixels() {
         assert!(!probe.level.is_nan());
     }
 }
+
