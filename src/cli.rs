@@ -25,6 +25,8 @@ pub struct Cli {
 pub enum Command {
     /// Render an animation to an image sequence with per-frame stats.
     Render(RenderArgs),
+    /// Time LOD methods and thread counts side by side (interleaved, repeated, median).
+    Bench(BenchArgs),
     /// Print what a scene contains.
     Info {
         /// A .gltf/.glb path, or the name of a scene in animations/ (e.g. `default`).
@@ -70,6 +72,35 @@ pub struct RenderArgs {
     pub format: FrameFormat,
 }
 
+#[derive(Args, Debug, Clone)]
+pub struct BenchArgs {
+    /// A .gltf/.glb path, or the name of a scene in animations/.
+    #[arg(default_value = "default")]
+    pub scene: String,
+    /// Half-open frame range `A..B` rendered per repeat [default: the animation's length].
+    #[arg(long)]
+    pub frames: Option<String>,
+    #[arg(long, default_value_t = 30.0)]
+    pub fps: f64,
+    #[arg(long, default_value = "640x360")]
+    pub size: String,
+    /// LOD methods, comma separated; ratios are against the first.
+    #[arg(long, value_delimiter = ',', default_value = "none,paper")]
+    pub methods: Vec<LodMethod>,
+    /// Thread counts, comma separated [default: 1 and all cores].
+    #[arg(long, value_delimiter = ',')]
+    pub threads: Vec<usize>,
+    #[arg(long)]
+    pub lights: Option<usize>,
+    #[arg(long, default_value_t = 1)]
+    pub spp: u32,
+    #[arg(long, default_value_t = 5)]
+    pub max_depth: u32,
+    /// How many times every configuration renders the frames.
+    #[arg(long, default_value_t = 5)]
+    pub repeats: usize,
+}
+
 impl Default for RenderArgs {
     fn default() -> Self {
         match Cli::parse_from(["mipray", "render"]).command {
@@ -90,6 +121,7 @@ pub fn run(cli: Cli) -> Result<()> {
     match cli.command {
         None => render(&RenderArgs::default()),
         Some(Command::Render(args)) => render(&args),
+        Some(Command::Bench(args)) => bench(&args),
         Some(Command::Info { scene }) => {
             let path = resolve_scene(&scene)?;
             let desc = load_scene(&path)?;
@@ -208,6 +240,50 @@ pub fn render(args: &RenderArgs) -> Result<()> {
     let pool = threads.build().context("cannot start worker threads")?;
     let mut renderer = Renderer::new(scene, settings);
     pool.install(|| render_sequence(&mut renderer, frames, args.fps, &out, args.format))
+}
+
+/// `mipray bench`.
+pub fn bench(args: &BenchArgs) -> Result<()> {
+    let render_args = RenderArgs {
+        scene: args.scene.clone(),
+        size: args.size.clone(),
+        fps: args.fps,
+        lights: args.lights,
+        spp: args.spp,
+        max_depth: args.max_depth,
+        ..RenderArgs::default()
+    };
+    let settings = validated_settings(&render_args)?;
+    if args.repeats == 0 || args.methods.is_empty() {
+        bail!("bench needs at least one repeat and one method");
+    }
+    let path = resolve_scene(&args.scene)?;
+    let duration = load_scene(&path)?.duration();
+    let frames = match &args.frames {
+        Some(f) => parse_frames(f)?,
+        None => default_frames(duration, args.fps),
+    };
+    let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
+    let mut threads = if args.threads.is_empty() { vec![1, cores] } else { args.threads.clone() };
+    threads.dedup();
+    if threads.contains(&0) {
+        bail!("--threads: counts must be at least 1");
+    }
+    let configs: Vec<crate::bench::BenchConfig> =
+        threads.iter().flat_map(|&t| args.methods.iter().map(move |&lod| crate::bench::BenchConfig { lod, threads: t })).collect();
+    eprintln!(
+        "bench: {} frames {}..{} at {}x{}, {} configurations x {} repeats",
+        path.display(),
+        frames.start,
+        frames.end,
+        settings.width,
+        settings.height,
+        configs.len(),
+        args.repeats
+    );
+    let results = crate::bench::run_bench(|| load_scene(&path), settings, frames, args.fps, &configs, args.repeats)?;
+    print!("{}", crate::bench::bench_table(&results));
+    Ok(())
 }
 
 /// Renders `frames` into `out`, one record per frame, then the summary.

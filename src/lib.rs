@@ -12,3 +12,4 @@ pub mod render;
 pub mod frame;
 pub mod output;
 pub mod cli;
+pub mod bench;

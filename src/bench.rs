@@ -1,0 +1,107 @@
+//! `mipray bench`: times LOD methods and thread counts side by side in one run.
+//!
+//! Configurations are interleaved within each repeat (and their order rotated between
+//! repeats) so that drift in machine load hits all of them alike; the report gives the median
+//! over repeats and the median of the per-repeat ratios against the first method, which is
+//! what `BENCHMARKS.md` records.
+
+use std::fmt::Write;
+
+use anyhow::Result;
+
+use crate::frame::{RenderSettings, Renderer};
+use crate::lod::LodMethod;
+use crate::output::Spread;
+use crate::scene::SceneDesc;
+
+/// One timed configuration.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct BenchConfig {
+    pub lod: LodMethod,
+    pub threads: usize,
+}
+
+/// Medians over repeats for one configuration.
+#[derive(Debug, Clone)]
+pub struct BenchResult {
+    pub config: BenchConfig,
+    /// Render time per frame (ms), over repeats.
+    pub render_ms_per_frame: Spread,
+    /// Whole-frame time (update + render) per frame (ms), over repeats.
+    pub total_ms_per_frame: Spread,
+    /// Rays per second of render time, over repeats.
+    pub rays_per_second: Spread,
+    /// Per-repeat ratio of this configuration's render time to the first configuration with
+    /// the same thread count.
+    pub render_ratio: Spread,
+}
+
+/// Renders `frames` for every configuration, `repeats` times, interleaved.
+pub fn run_bench(
+    load: impl Fn() -> Result<SceneDesc>,
+    settings: RenderSettings,
+    frames: std::ops::Range<u32>,
+    fps: f64,
+    configs: &[BenchConfig],
+    repeats: usize,
+) -> Result<Vec<BenchResult>> {
+    let pools = configs
+        .iter()
+        .map(|c| rayon::ThreadPoolBuilder::new().num_threads(c.threads).build())
+        .collect::<Result<Vec<_>, _>>()?;
+    let mut renderers = configs
+        .iter()
+        .map(|c| Ok(Renderer::new(load()?, RenderSettings { lod: c.lod, ..settings })))
+        .collect::<Result<Vec<_>>>()?;
+    let n = configs.len();
+    // samples[config][repeat] = (render ms, total ms, rays), summed over frames
+    let mut samples = vec![vec![(0.0f64, 0.0f64, 0u64); repeats]; n];
+    for repeat in 0..repeats {
+        for k in 0..n {
+            let c = (k + repeat) % n;
+            for frame in frames.clone() {
+                let time_s = (frame as f64 / fps) as f32;
+                let (_, record) = pools[c].install(|| renderers[c].render_frame(frame, time_s))?;
+                let s = &mut samples[c][repeat];
+                s.0 += record.render_ms;
+                s.1 += record.total_ms;
+                s.2 += record.rays;
+            }
+        }
+    }
+    let frame_count = frames.len().max(1) as f64;
+    Ok((0..n)
+        .map(|c| {
+            let baseline = (0..n).find(|&b| configs[b].threads == configs[c].threads).unwrap_or(c);
+            BenchResult {
+                config: configs[c],
+                render_ms_per_frame: Spread::of(samples[c].iter().map(|s| s.0 / frame_count)),
+                total_ms_per_frame: Spread::of(samples[c].iter().map(|s| s.1 / frame_count)),
+                rays_per_second: Spread::of(samples[c].iter().map(|s| s.2 as f64 / (s.0 / 1e3))),
+                render_ratio: Spread::of((0..repeats).map(|r| samples[c][r].0 / samples[baseline][r].0)),
+            }
+        })
+        .collect())
+}
+
+/// A Markdown table of bench results.
+pub fn bench_table(results: &[BenchResult]) -> String {
+    let mut s = String::new();
+    let _ = writeln!(s, "| lod | threads | render ms/frame (median) | min..max | frame ms (median) | Mrays/s (median) | render ratio vs first (median) |");
+    let _ = writeln!(s, "|---|---:|---:|---:|---:|---:|---:|");
+    for r in results {
+        let _ = writeln!(
+            s,
+            "| {} | {} | {:.2} | {:.2}..{:.2} | {:.2} | {:.3} | {:.4} |",
+            r.config.lod,
+            r.config.threads,
+            r.render_ms_per_frame.median,
+            r.render_ms_per_frame.min,
+            r.render_ms_per_frame.max,
+            r.total_ms_per_frame.median,
+            r.rays_per_second.median / 1e6,
+            r.render_ratio.median
+        );
+    }
+    s
+}

@@ -1,0 +1,127 @@
+//! The binary's contract: renders and reports, and bad input exits non-zero with an error
+//! that names the file, never a panic.
+
+use std::path::Path;
+use std::process::{Command, Output};
+
+fn mipray(args: &[&str], cwd: &Path) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_mipray")).args(args).current_dir(cwd).output().expect("run mipray")
+}
+
+fn stderr(o: &Output) -> String {
+    String::from_utf8_lossy(&o.stderr).into_owned()
+}
+
+/// A one-triangle glTF with an external texture `tex.png`, written into `dir`.
+fn write_textured_triangle(dir: &Path, with_texture: bool) -> std::path::PathBuf {
+    use base64::Engine;
+    let mut bin = Vec::new();
+    for v in [0.0f32, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0, 0.0] {
+        bin.extend_from_slice(&v.to_le_bytes());
+    }
+    for v in [0.0f32, 0.0, 1.0, 0.0, 0.0, 1.0] {
+        bin.extend_from_slice(&v.to_le_bytes());
+    }
+    let uri = format!("data:application/octet-stream;base64,{}", base64::engine::general_purpose::STANDARD.encode(&bin));
+    let json = serde_json::json!({
+        "asset": {"version": "2.0"},
+        "scene": 0,
+        "scenes": [{"nodes": [0]}],
+        "nodes": [{"mesh": 0}],
+        "meshes": [{"primitives": [{"attributes": {"POSITION": 0, "TEXCOORD_0": 1}, "material": 0}]}],
+        "materials": [{"pbrMetallicRoughness": {"baseColorTexture": {"index": 0}}}],
+        "textures": [{"source": 0}],
+        "images": [{"uri": "tex.png"}],
+        "buffers": [{"byteLength": bin.len(), "uri": uri}],
+        "bufferViews": [
+            {"buffer": 0, "byteOffset": 0, "byteLength": 36},
+            {"buffer": 0, "byteOffset": 36, "byteLength": 24}
+        ],
+        "accessors": [
+            {"bufferView": 0, "componentType": 5126, "count": 3, "type": "VEC3", "min": [0.0, 0.0, 0.0], "max": [1.0, 1.0, 0.0]},
+            {"bufferView": 1, "componentType": 5126, "count": 3, "type": "VEC2"}
+        ]
+    });
+    if with_texture {
+        image::RgbImage::from_fn(4, 4, |x, y| image::Rgb([(x * 60) as u8, (y * 60) as u8, 128])).save(dir.join("tex.png")).unwrap();
+    }
+    let path = dir.join("tri.gltf");
+    std::fs::write(&path, serde_json::to_vec_pretty(&json).unwrap()).unwrap();
+    path
+}
+
+#[test]
+fn renders_a_scene_and_writes_frames_and_stats() {
+    let dir = tempfile::tempdir().unwrap();
+    write_textured_triangle(dir.path(), true);
+    let out = mipray(&["render", "tri.gltf", "--size", "32x24", "--frames", "0..2", "--out", "o"], dir.path());
+    assert!(out.status.success(), "{}", stderr(&out));
+    for f in ["o/frame_0000.png", "o/frame_0001.png", "o/stats.jsonl", "o/summary.json"] {
+        assert!(dir.path().join(f).is_file(), "missing {f}");
+    }
+    let stats = std::fs::read_to_string(dir.path().join("o/stats.jsonl")).unwrap();
+    let lines: Vec<serde_json::Value> = stats.lines().map(|l| serde_json::from_str(l).unwrap()).collect();
+    assert_eq!(lines.len(), 2);
+    for key in ["frame", "time_s", "width", "height", "lod_method", "triangles", "build_ms", "render_ms", "rays", "mip_histogram"] {
+        assert!(lines[0].get(key).is_some(), "stats line lacks {key}");
+    }
+    assert_eq!(lines[1]["frame"], 1);
+    assert_eq!(lines[0]["triangles"], 1);
+    assert!(lines[0]["rays"].as_u64().unwrap() >= 32 * 24);
+    let leftovers: Vec<_> = std::fs::read_dir(dir.path().join("o")).unwrap().filter_map(|e| e.ok()).filter(|e| e.file_name().to_string_lossy().ends_with(".tmp")).collect();
+    assert!(leftovers.is_empty(), "temporary files left behind");
+}
+
+#[test]
+fn info_reports_counts() {
+    let dir = tempfile::tempdir().unwrap();
+    write_textured_triangle(dir.path(), true);
+    let out = mipray(&["info", "tri.gltf"], dir.path());
+    assert!(out.status.success(), "{}", stderr(&out));
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(text.contains("triangles: 1\n"), "{text}");
+    assert!(text.contains("4x4, 3 MIP levels"), "{text}");
+}
+
+#[test]
+fn missing_texture_names_the_file() {
+    let dir = tempfile::tempdir().unwrap();
+    write_textured_triangle(dir.path(), false);
+    let out = mipray(&["render", "tri.gltf", "--size", "8x8", "--out", "o"], dir.path());
+    let err = stderr(&out);
+    assert_eq!(out.status.code(), Some(1), "{err}");
+    assert!(err.contains("tri.gltf") && err.contains("tex.png"), "{err}");
+    assert!(!err.contains("panicked"), "{err}");
+}
+
+#[test]
+fn truncated_file_names_the_file() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = write_textured_triangle(dir.path(), true);
+    let bytes = std::fs::read(&path).unwrap();
+    std::fs::write(&path, &bytes[..bytes.len() / 2]).unwrap();
+    for command in ["render", "info"] {
+        let out = mipray(&[command, "tri.gltf"], dir.path());
+        let err = stderr(&out);
+        assert_eq!(out.status.code(), Some(1), "{command}: {err}");
+        assert!(err.contains("tri.gltf"), "{command}: {err}");
+        assert!(!err.contains("panicked"), "{command}: {err}");
+    }
+}
+
+#[test]
+fn bad_options_are_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    write_textured_triangle(dir.path(), true);
+    for args in [
+        &["render", "tri.gltf", "--size", "0x5"][..],
+        &["render", "tri.gltf", "--frames", "5..2"],
+        &["render", "tri.gltf", "--spp", "0"],
+        &["render", "tri.gltf", "--lod", "bogus"],
+        &["render", "no-such-scene"],
+    ] {
+        let out = mipray(args, dir.path());
+        assert!(!out.status.success(), "{args:?} succeeded");
+        assert!(!stderr(&out).contains("panicked"), "{args:?}: {}", stderr(&out));
+    }
+}
