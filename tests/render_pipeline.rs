@@ -2,7 +2,7 @@
 
 mod common;
 
-use common::*;
+use common::scenes::*;
 use glam::{Vec2, Vec3, Vec3A};
 use mipray::frame::{RenderSettings, Renderer};
 use mipray::lod::LodMethod;

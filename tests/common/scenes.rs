@@ -1,5 +1,5 @@
 //! Scenes built in code for the end-to-end tests: no files, no ../shared.
-#![allow(dead_code)]
+
 
 use glam::{Quat, Vec2, Vec3, Vec4};
 use mipray::scene::{
