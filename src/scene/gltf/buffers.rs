@@ -64,10 +64,10 @@ impl Buffers {
             .filter(|range| range.end <= buffer.length());
         range.and_then(|range| data.get(range)).ok_or_else(|| {
             format!(
-                "buffer view {} (bytes {}..+{}) does not fit buffer {} of {} bytes",
+                "buffer view {} (bytes {}..{}) does not fit buffer {} of {} bytes",
                 view.index(),
                 view.offset(),
-                view.length(),
+                view.offset().saturating_add(view.length()),
                 buffer.index(),
                 buffer.length()
             )

@@ -85,15 +85,111 @@ fn load_scene(path: &Path) -> Result<SceneDesc, String> {
     })
 }
 
-/// Parses and validates the JSON (and GLB container). gltf's validation indexes arrays
-/// with unchecked indices in a few hooks (e.g. a POSITION accessor index out of range),
-/// so a panic there is caught and reported like any other malformed file.
+/// Parses and validates the JSON (and GLB container).
+///
+/// gltf's validation misses a few references (see [`check_unvalidated_references`]), so
+/// those are checked first on the unvalidated document; a panic anywhere else in parsing
+/// is still caught and reported like any other malformed file.
 fn parse(bytes: &[u8]) -> Result<gltf::Gltf, String> {
-    match catch_unwind(AssertUnwindSafe(|| gltf::Gltf::from_slice(bytes))) {
-        Ok(Ok(gltf)) => Ok(gltf),
+    check_glb_header(bytes)?;
+    let parsed = catch_unwind(AssertUnwindSafe(|| {
+        let gltf::Gltf { document, blob } = gltf::Gltf::from_slice_without_validation(bytes)?;
+        Ok::<_, gltf::Error>(check_unvalidated_references(&document).map(|()| (document, blob)))
+    }));
+    let (document, blob) = match parsed {
+        Ok(Ok(checked)) => checked?,
+        Ok(Err(e)) => return Err(format!("not a valid glTF/GLB file: {e}")),
+        Err(_) => return Err("not a valid glTF/GLB file: the parser failed on it".into()),
+    };
+    match catch_unwind(AssertUnwindSafe(|| {
+        gltf::Document::from_json(document.into_json())
+    })) {
+        Ok(Ok(document)) => Ok(gltf::Gltf { document, blob }),
         Ok(Err(e)) => Err(format!("not a valid glTF/GLB file: {e}")),
-        Err(_) => Err("not a valid glTF/GLB file: it references elements that do not exist".into()),
+        Err(_) => Err("not a valid glTF/GLB file: validation failed on it".into()),
     }
+}
+
+/// Size of the GLB file header (magic, version, total length).
+const GLB_HEADER_SIZE: usize = 12;
+
+/// For a GLB, checks the header's version and total length against the file's size, so a
+/// truncated file is reported as such.
+fn check_glb_header(bytes: &[u8]) -> Result<(), String> {
+    if !bytes.starts_with(b"glTF") {
+        return Ok(());
+    }
+    let word = |at: usize| {
+        bytes
+            .get(at..at + 4)
+            .map(|w| u32::from_le_bytes([w[0], w[1], w[2], w[3]]))
+    };
+    let (Some(version), Some(length)) = (word(4), word(8)) else {
+        return Err(format!(
+            "GLB file is truncated inside its {GLB_HEADER_SIZE}-byte header"
+        ));
+    };
+    if version != 2 {
+        return Err(format!("GLB version {version} is not supported (only 2)"));
+    }
+    if (length as usize) < GLB_HEADER_SIZE || length as usize > bytes.len() {
+        return Err(format!(
+            "GLB header declares {length} bytes but the file has {}; it is truncated or corrupt",
+            bytes.len()
+        ));
+    }
+    Ok(())
+}
+
+/// Checks the references gltf's validation does not (it would index or unwrap them
+/// unchecked later): each primitive's POSITION accessor, each animation channel's target
+/// node and path, and each image's source.
+fn check_unvalidated_references(document: &gltf::Document) -> Result<(), String> {
+    use gltf::json::{mesh::Semantic, validation::Checked};
+    let json = document.as_json();
+    for (m, mesh) in json.meshes.iter().enumerate() {
+        for (p, primitive) in mesh.primitives.iter().enumerate() {
+            let Some(index) = primitive
+                .attributes
+                .get(&Checked::Valid(Semantic::Positions))
+            else {
+                continue;
+            };
+            if index.value() >= json.accessors.len() {
+                return Err(format!(
+                    "mesh {m} primitive {p}: POSITION refers to accessor {}, but there are {} accessors",
+                    index.value(),
+                    json.accessors.len()
+                ));
+            }
+        }
+    }
+    for (a, animation) in json.animations.iter().enumerate() {
+        for (c, channel) in animation.channels.iter().enumerate() {
+            let node = channel.target.node.value();
+            if node >= json.nodes.len() {
+                return Err(format!(
+                    "animation {a} channel {c} targets node {node}, but there are {} nodes",
+                    json.nodes.len()
+                ));
+            }
+            if let Checked::Invalid = channel.target.path {
+                return Err(format!(
+                    "animation {a} channel {c} has an unknown target path"
+                ));
+            }
+        }
+    }
+    for (i, image) in json.images.iter().enumerate() {
+        match (&image.uri, &image.buffer_view, &image.mime_type) {
+            (Some(_), None, _) | (None, Some(_), Some(_)) => {}
+            (None, Some(_), None) => {
+                return Err(format!("image {i} has a bufferView but no mimeType"));
+            }
+            _ => return Err(format!("image {i} needs exactly one of uri and bufferView")),
+        }
+    }
+    Ok(())
 }
 
 /// Notes for geometry shown in its rest pose until skinning and morphing land.
