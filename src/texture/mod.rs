@@ -1,14 +1,39 @@
 //! Textures: decoded images, box-filtered MIP pyramids built once at load, filtered lookup.
-//! (API stub: the implementation lands with the texture module.)
+//!
+//! The module is split by concept:
+//! - [`decode`](decode_image): encoded bytes (PNG, JPEG, PNM) -> linear RGBA texels;
+//! - `pyramid`: level 0 -> the full box-filtered pyramid ([`MipPyramid::from_linear_rgba`]);
+//! - `sample`: wrap modes, bilinear and trilinear lookup (the renderer's hot path).
+//!
+//! Conventions shared by all three:
+//! - texels are linear RGBA `Vec4`, row-major, row 0 is the image's top row and sits at
+//!   v = 0 (glTF convention: no flip anywhere);
+//! - texel `(i, j)` of a `w x h` level has its centre at `((i + 0.5) / w, (j + 0.5) / h)`;
+//! - a pyramid always has at least one level, and every level's `texels.len()` is
+//!   `width * height` (guaranteed by [`MipPyramid::from_linear_rgba`], relied on by lookup);
+//! - sizes are 1..=[`MAX_SIZE`] per side.
 
-use glam::{Vec2, Vec4};
+mod decode;
+mod pyramid;
+mod sample;
+
+pub use decode::{decode_image, srgb_to_linear};
+
+use glam::Vec4;
+
+/// Largest accepted texture side, in texels. Anything larger is treated as corrupt or
+/// hostile input rather than allocated (16384² RGBA f32 is already 4 GiB).
+pub const MAX_SIZE: u32 = 16384;
 
 /// How texture coordinates outside [0, 1] are mapped back (glTF sampler wrap modes).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub enum WrapMode {
+    /// Tile: texel index taken modulo the size (glTF `REPEAT`, the default).
     #[default]
     Repeat,
+    /// Indices outside the image use the nearest edge texel (glTF `CLAMP_TO_EDGE`).
     ClampToEdge,
+    /// Tile with every other copy mirrored, period two sizes (glTF `MIRRORED_REPEAT`).
     MirroredRepeat,
 }
 
@@ -24,6 +49,7 @@ pub struct Sampler {
 pub struct MipLevel {
     pub width: u32,
     pub height: u32,
+    /// `width * height` texels; texel `(x, y)` is at `y * width + x`.
     pub texels: Vec<Vec4>,
 }
 
@@ -31,6 +57,7 @@ pub struct MipLevel {
 /// at least 1) until 1x1.
 #[derive(Debug, Clone)]
 pub struct MipPyramid {
+    /// Never empty; `levels[k + 1]` is the box-filtered reduction of `levels[k]`.
     pub levels: Vec<MipLevel>,
 }
 
@@ -43,6 +70,7 @@ pub struct Texture {
     pub sampler: Sampler,
 }
 
+/// Why an image could not become a texture.
 #[derive(Debug, thiserror::Error)]
 pub enum TextureError {
     #[error("image has zero size ({width}x{height})")]
@@ -55,13 +83,22 @@ pub enum TextureError {
     Decode(String),
 }
 
-impl MipPyramid {
-    /// Builds the pyramid from linear RGBA level-0 texels.
-    pub fn from_linear_rgba(width: u32, height: u32, texels: Vec<Vec4>) -> Result<Self, TextureError> {
-        let _ = (width, height, texels);
-        todo!("texture module")
+/// Checks a texture size against the accepted range (1..=[`MAX_SIZE`] per side).
+pub fn check_size(width: u32, height: u32) -> Result<(), TextureError> {
+    if width == 0 || height == 0 {
+        return Err(TextureError::Empty { width, height });
     }
+    if width > MAX_SIZE || height > MAX_SIZE {
+        return Err(TextureError::TooLarge {
+            width,
+            height,
+            max: MAX_SIZE,
+        });
+    }
+    Ok(())
+}
 
+impl MipPyramid {
     pub fn level_count(&self) -> usize {
         self.levels.len()
     }
@@ -73,26 +110,7 @@ impl MipPyramid {
 
     /// Maps any level to [0, last]: NaN -> 0, +inf -> last, negative -> 0.
     pub fn clamp_level(&self, lod: f32) -> f32 {
+        // `f32::max` returns the non-NaN operand, so NaN becomes 0 here.
         lod.max(0.0).min((self.levels.len() - 1) as f32)
     }
-
-    /// Bilinear lookup in one level.
-    pub fn sample_bilinear(&self, level: usize, uv: Vec2, sampler: Sampler) -> Vec4 {
-        let _ = (level, uv, sampler);
-        todo!("texture module")
-    }
-
-    /// Trilinear lookup at a fractional level (clamped with [`Self::clamp_level`]).
-    pub fn sample_trilinear(&self, uv: Vec2, lod: f32, sampler: Sampler) -> Vec4 {
-        let _ = (uv, lod, sampler);
-        todo!("texture module")
-    }
-}
-
-/// Decodes an encoded image (PNG, JPEG, PPM, ...) into linear RGBA texels.
-/// `srgb`: colour channels are sRGB-encoded (base colour) and are decoded to linear;
-/// alpha is always linear.
-pub fn decode_image(bytes: &[u8], srgb: bool) -> Result<(u32, u32, Vec<Vec4>), TextureError> {
-    let _ = (bytes, srgb);
-    todo!("texture module")
 }

@@ -1,0 +1,351 @@
+//! Image decoding: encoded bytes (PNG, JPEG, PPM/PNM; format guessed from the content) ->
+//! linear RGBA `Vec4` texels.
+//!
+//! Invariant: the output is `width * height` texels, row-major, row 0 = the image's top
+//! row = v = 0 (glTF convention, no flip), with `width` and `height` in 1..=`MAX_SIZE`.
+//! Gray is replicated to RGB; a missing alpha is 1. With `srgb`, the colour channels go
+//! through the exact sRGB EOTF (IEC 61966-2-1) and alpha stays linear; without it every
+//! channel is just normalised to [0, 1] (integer formats) or passed through (float).
+
+use std::io::Cursor;
+use std::sync::LazyLock;
+
+use glam::Vec4;
+use image::{DynamicImage, ImageReader, Limits};
+
+use super::{MAX_SIZE, TextureError, check_size};
+
+/// Upper bound on what the decoder may allocate for one image. Guards against files whose
+/// header claims a huge size; a real 16384² RGBA8 texture still fits.
+const MAX_DECODE_ALLOC: u64 = 1 << 30;
+
+/// The exact sRGB EOTF (encoded value in [0, 1] -> linear), evaluated in f64.
+fn srgb_eotf(c: f64) -> f64 {
+    if c <= 0.04045 {
+        c / 12.92
+    } else {
+        ((c + 0.055) / 1.055).powf(2.4)
+    }
+}
+
+/// Converts one sRGB-encoded channel value in [0, 1] to linear (exact EOTF). Values below
+/// 0 use the linear segment; values above 1 continue the power curve.
+pub fn srgb_to_linear(c: f32) -> f32 {
+    srgb_eotf(f64::from(c)) as f32
+}
+
+/// 8-bit sRGB -> linear, built once: 256 entries cover every input exactly.
+static SRGB8_LUT: LazyLock<[f32; 256]> =
+    LazyLock::new(|| std::array::from_fn(|i| srgb_eotf(i as f64 / 255.0) as f32));
+
+/// Expands interleaved 1..=4-channel pixels to RGBA with separate colour and alpha maps.
+fn expand<T: Copy>(
+    raw: &[T],
+    channels: usize,
+    colour: impl Fn(T) -> f32,
+    alpha: impl Fn(T) -> f32,
+) -> Vec<Vec4> {
+    raw.chunks_exact(channels)
+        .map(|p| match channels {
+            1 => Vec4::new(colour(p[0]), colour(p[0]), colour(p[0]), 1.0),
+            2 => {
+                let g = colour(p[0]);
+                Vec4::new(g, g, g, alpha(p[1]))
+            }
+            3 => Vec4::new(colour(p[0]), colour(p[1]), colour(p[2]), 1.0),
+            _ => Vec4::new(colour(p[0]), colour(p[1]), colour(p[2]), alpha(p[3])),
+        })
+        .collect()
+}
+
+fn expand_u8(raw: &[u8], channels: usize, srgb: bool) -> Vec<Vec4> {
+    let unorm = |v: u8| f32::from(v) / 255.0;
+    if srgb {
+        let lut = &*SRGB8_LUT;
+        expand(raw, channels, |v| lut[v as usize], unorm)
+    } else {
+        expand(raw, channels, unorm, unorm)
+    }
+}
+
+fn expand_u16(raw: &[u16], channels: usize, srgb: bool) -> Vec<Vec4> {
+    let unorm = |v: u16| f32::from(v) / 65535.0;
+    if srgb {
+        // Exact formula: a 65536-entry table would cost more than it saves here.
+        expand(
+            raw,
+            channels,
+            |v| srgb_eotf(f64::from(v) / 65535.0) as f32,
+            unorm,
+        )
+    } else {
+        expand(raw, channels, unorm, unorm)
+    }
+}
+
+fn expand_f32(raw: &[f32], channels: usize, srgb: bool) -> Vec<Vec4> {
+    let same = |v: f32| v;
+    if srgb {
+        expand(raw, channels, srgb_to_linear, same)
+    } else {
+        expand(raw, channels, same, same)
+    }
+}
+
+fn decode_error(e: impl std::fmt::Display) -> TextureError {
+    TextureError::Decode(e.to_string())
+}
+
+/// Decodes an encoded image (PNG, JPEG, PPM, ...) into linear RGBA texels.
+/// `srgb`: colour channels are sRGB-encoded (base colour) and are decoded to linear;
+/// alpha is always linear.
+///
+/// Returns `(width, height, texels)` with row 0 = top row = v = 0. Any decoder failure
+/// (unknown format, truncated or corrupt data) is [`TextureError::Decode`] with the
+/// decoder's message; a zero or over-[`MAX_SIZE`] side is rejected from the header, before
+/// the pixel buffer is allocated.
+pub fn decode_image(bytes: &[u8], srgb: bool) -> Result<(u32, u32, Vec<Vec4>), TextureError> {
+    let mut limits = Limits::default();
+    limits.max_alloc = Some(MAX_DECODE_ALLOC);
+    let reader = |limits: Limits| {
+        let mut r = ImageReader::new(Cursor::new(bytes))
+            .with_guessed_format()
+            .map_err(decode_error)?;
+        r.limits(limits);
+        Ok::<_, TextureError>(r)
+    };
+    // Header first, so an absurd size gets its own error and nothing is allocated for it.
+    // (Without side limits here: the decoder would reject it with a less precise message.)
+    let (width, height) = reader(limits.clone())?
+        .into_dimensions()
+        .map_err(decode_error)?;
+    check_size(width, height)?;
+
+    // The side limits again inside the decoder, for formats whose header could disagree
+    // with what they then decode.
+    limits.max_image_width = Some(MAX_SIZE);
+    limits.max_image_height = Some(MAX_SIZE);
+    let img = reader(limits)?.decode().map_err(decode_error)?;
+    let (width, height) = (img.width(), img.height());
+    check_size(width, height)?;
+    let texels = match img {
+        DynamicImage::ImageLuma8(b) => expand_u8(b.as_raw(), 1, srgb),
+        DynamicImage::ImageLumaA8(b) => expand_u8(b.as_raw(), 2, srgb),
+        DynamicImage::ImageRgb8(b) => expand_u8(b.as_raw(), 3, srgb),
+        DynamicImage::ImageRgba8(b) => expand_u8(b.as_raw(), 4, srgb),
+        DynamicImage::ImageLuma16(b) => expand_u16(b.as_raw(), 1, srgb),
+        DynamicImage::ImageLumaA16(b) => expand_u16(b.as_raw(), 2, srgb),
+        DynamicImage::ImageRgb16(b) => expand_u16(b.as_raw(), 3, srgb),
+        DynamicImage::ImageRgba16(b) => expand_u16(b.as_raw(), 4, srgb),
+        DynamicImage::ImageRgb32F(b) => expand_f32(b.as_raw(), 3, srgb),
+        DynamicImage::ImageRgba32F(b) => expand_f32(b.as_raw(), 4, srgb),
+        // `DynamicImage` is non-exhaustive: anything newer goes through image's own
+        // conversion to f32 RGBA.
+        other => expand_f32(other.to_rgba32f().as_raw(), 4, srgb),
+    };
+    let expected = width as usize * height as usize;
+    if texels.len() != expected {
+        return Err(TextureError::WrongLength {
+            got: texels.len(),
+            expected,
+        });
+    }
+    Ok((width, height, texels))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use image::{ImageBuffer, ImageFormat, Luma, LumaA, Rgb, Rgba};
+
+    fn encode<P, C>(buf: &ImageBuffer<P, C>, format: ImageFormat) -> Vec<u8>
+    where
+        P: image::Pixel + image::PixelWithColorType,
+        [P::Subpixel]: image::EncodableLayout,
+        C: std::ops::Deref<Target = [P::Subpixel]>,
+    {
+        let mut out = Cursor::new(Vec::new());
+        buf.write_to(&mut out, format).unwrap();
+        out.into_inner()
+    }
+
+    fn close(a: Vec4, b: Vec4, tol: f32) -> bool {
+        (a - b).abs().max_element() <= tol
+    }
+
+    #[test]
+    fn srgb_eotf_reference_values() {
+        let lut = &*SRGB8_LUT;
+        assert!((lut[128] - 0.2158605).abs() < 1e-6, "{}", lut[128]);
+        assert_eq!(lut[255], 1.0);
+        assert_eq!(lut[0], 0.0);
+        // Linear segment: 10/255 = 0.0392 <= 0.04045.
+        assert!((lut[10] - 10.0 / 255.0 / 12.92).abs() < 1e-9);
+        assert!(
+            lut.windows(2).all(|w| w[0] < w[1]),
+            "LUT must be increasing"
+        );
+        assert!((srgb_to_linear(0.5) - 0.21404114).abs() < 1e-6);
+        assert_eq!(srgb_to_linear(1.0), 1.0);
+    }
+
+    #[test]
+    fn png_rgba8_orientation_values_and_srgb() {
+        // 3x2: row 0 = red, green, blue; row 1 = (128,128,128,64), black, white half alpha.
+        let px: [[u8; 4]; 6] = [
+            [255, 0, 0, 255],
+            [0, 255, 0, 255],
+            [0, 0, 255, 255],
+            [128, 128, 128, 64],
+            [0, 0, 0, 0],
+            [255, 255, 255, 128],
+        ];
+        let buf = ImageBuffer::from_fn(3, 2, |x, y| Rgba(px[(y * 3 + x) as usize]));
+        let png = encode(&buf, ImageFormat::Png);
+
+        let (w, h, t) = decode_image(&png, true).unwrap();
+        assert_eq!((w, h, t.len()), (3, 2, 6));
+        assert_eq!(t[0], Vec4::new(1.0, 0.0, 0.0, 1.0));
+        assert_eq!(t[1], Vec4::new(0.0, 1.0, 0.0, 1.0));
+        assert_eq!(t[2], Vec4::new(0.0, 0.0, 1.0, 1.0));
+        let g = 0.2158605;
+        assert!(
+            close(t[3], Vec4::new(g, g, g, 64.0 / 255.0), 1e-6),
+            "{}",
+            t[3]
+        );
+        assert_eq!(t[4], Vec4::ZERO);
+        // Alpha stays linear even with srgb.
+        assert!(close(t[5], Vec4::new(1.0, 1.0, 1.0, 128.0 / 255.0), 1e-7));
+
+        let (_, _, lin) = decode_image(&png, false).unwrap();
+        let half = 128.0 / 255.0;
+        assert!(close(
+            lin[3],
+            Vec4::new(half, half, half, 64.0 / 255.0),
+            1e-7
+        ));
+        assert_eq!(lin[0], t[0]);
+    }
+
+    #[test]
+    fn png_gray_and_gray_alpha() {
+        let buf = ImageBuffer::from_fn(2, 2, |x, y| Luma([(x * 255 + y * 10) as u8]));
+        let (w, h, t) = decode_image(&encode(&buf, ImageFormat::Png), true).unwrap();
+        assert_eq!((w, h), (2, 2));
+        assert_eq!(t[0], Vec4::new(0.0, 0.0, 0.0, 1.0));
+        assert_eq!(t[1], Vec4::ONE);
+        let g = SRGB8_LUT[10];
+        assert_eq!(t[2], Vec4::new(g, g, g, 1.0));
+
+        let buf = ImageBuffer::from_fn(2, 1, |x, _| LumaA([128u8, 51 * x as u8]));
+        let (_, _, t) = decode_image(&encode(&buf, ImageFormat::Png), true).unwrap();
+        assert!(close(
+            t[1],
+            Vec4::new(0.2158605, 0.2158605, 0.2158605, 0.2),
+            1e-6
+        ));
+        assert_eq!(t[0].w, 0.0);
+    }
+
+    #[test]
+    fn png_16bit_rgb_and_rgba() {
+        // 1x2 RGB16: row 0 = (65535, 0, 32768), row 1 = (1000, 2000, 3000).
+        let rows = [[65535u16, 0, 32768], [1000, 2000, 3000]];
+        let buf = ImageBuffer::from_fn(1, 2, |_, y| Rgb(rows[y as usize]));
+        let png = encode(&buf, ImageFormat::Png);
+        let (w, h, t) = decode_image(&png, false).unwrap();
+        assert_eq!((w, h), (1, 2));
+        assert!(close(
+            t[0],
+            Vec4::new(1.0, 0.0, 32768.0 / 65535.0, 1.0),
+            1e-7
+        ));
+        assert!(close(
+            t[1],
+            Vec4::new(1000.0, 2000.0, 3000.0, 65535.0) / 65535.0,
+            1e-7
+        ));
+        let (_, _, s) = decode_image(&png, true).unwrap();
+        let exact = |v: u16| srgb_eotf(f64::from(v) / 65535.0) as f32;
+        assert_eq!(s[0], Vec4::new(1.0, 0.0, exact(32768), 1.0));
+        // 32768/65535 is just above 0.5: its linear value is just above 0.2140411.
+        assert!((s[0].z - 0.2140411).abs() < 1e-5);
+        assert_eq!(s[1], Vec4::new(exact(1000), exact(2000), exact(3000), 1.0));
+
+        let buf = ImageBuffer::from_fn(1, 1, |_, _| Rgba([65535u16, 65535, 65535, 13107]));
+        let (_, _, t) = decode_image(&encode(&buf, ImageFormat::Png), true).unwrap();
+        assert!(close(t[0], Vec4::new(1.0, 1.0, 1.0, 0.2), 1e-7), "{}", t[0]);
+    }
+
+    #[test]
+    fn ppm_and_pgm_decode() {
+        // Binary PPM, 2x1: (255, 0, 128), (0, 64, 255).
+        let mut ppm = b"P6\n2 1\n255\n".to_vec();
+        ppm.extend_from_slice(&[255, 0, 128, 0, 64, 255]);
+        let (w, h, t) = decode_image(&ppm, false).unwrap();
+        assert_eq!((w, h), (2, 1));
+        assert!(close(t[0], Vec4::new(1.0, 0.0, 128.0 / 255.0, 1.0), 1e-7));
+        assert!(close(t[1], Vec4::new(0.0, 64.0 / 255.0, 1.0, 1.0), 1e-7));
+        // ASCII PGM, 1x2, gray rows 0 then 255: row order is top first.
+        let (w, h, t) = decode_image(b"P2\n1 2\n255\n0\n255\n", true).unwrap();
+        assert_eq!((w, h), (1, 2));
+        assert_eq!(t, [Vec4::new(0.0, 0.0, 0.0, 1.0), Vec4::ONE]);
+    }
+
+    #[test]
+    fn jpeg_decodes_roughly() {
+        let buf = ImageBuffer::from_fn(8, 8, |_, _| Rgb([200u8, 100, 50]));
+        let jpg = encode(&buf, ImageFormat::Jpeg);
+        let (w, h, t) = decode_image(&jpg, false).unwrap();
+        assert_eq!((w, h, t.len()), (8, 8, 64));
+        let want = Vec4::new(200.0, 100.0, 50.0, 255.0) / 255.0;
+        assert!(t.iter().all(|&p| close(p, want, 0.03)), "{}", t[0]);
+    }
+
+    #[test]
+    fn truncated_png_is_decode_error() {
+        let buf = ImageBuffer::from_fn(16, 16, |x, y| Rgba([x as u8 * 16, y as u8 * 16, 7, 255]));
+        let png = encode(&buf, ImageFormat::Png);
+        for cut in [png.len() / 2, png.len() - 20, 40, 8] {
+            match decode_image(&png[..cut], false) {
+                Err(TextureError::Decode(msg)) => assert!(!msg.is_empty()),
+                other => panic!("cut at {cut}: expected Decode error, got {other:?}"),
+            }
+        }
+        assert!(matches!(
+            decode_image(b"not an image at all", false),
+            Err(TextureError::Decode(_))
+        ));
+        assert!(matches!(
+            decode_image(&[], false),
+            Err(TextureError::Decode(_))
+        ));
+    }
+
+    #[test]
+    fn zero_and_absurd_sizes_are_rejected() {
+        // PNM headers allow any size; none of these may panic or allocate.
+        for header in [&b"P6\n0 0\n255\n"[..], b"P6\n0 5\n255\n", b"P5\n4 0\n255\n"] {
+            assert!(decode_image(header, false).is_err());
+        }
+        let huge = b"P6\n100000 100000\n255\n";
+        assert!(matches!(
+            decode_image(huge, false),
+            Err(TextureError::TooLarge {
+                width: 100000,
+                height: 100000,
+                max: MAX_SIZE
+            })
+        ));
+        let wide = b"P5\n20000 1\n255\n";
+        assert!(matches!(
+            decode_image(wide, false),
+            Err(TextureError::TooLarge {
+                width: 20000,
+                height: 1,
+                ..
+            })
+        ));
+    }
+}

@@ -1,0 +1,389 @@
+//! Filtered lookup: wrap modes, bilinear within a level, trilinear across levels.
+//!
+//! Invariant: a lookup never allocates, never panics on a pyramid built by
+//! [`MipPyramid::from_linear_rgba`], and never returns NaN for finite texels, whatever the
+//! inputs: non-finite u or v is replaced by 0, a level past the last is clamped to the last,
+//! and the LOD goes through [`MipPyramid::clamp_level`].
+//!
+//! Texel centres sit at `(i + 0.5) / w`. The continuous texel coordinate `u * w - 0.5` and
+//! its floor are computed in f64: f32 has only 24 mantissa bits, so for `|u|` around 1e5 on
+//! a 1024-wide level the product would lose the texel index and all of the fraction. Wrap
+//! modes act on integer texel indices, per axis, after an exact f64 reduction to one period
+//! so even huge coordinates never overflow the integer conversion.
+
+use glam::{Vec2, Vec4};
+
+use super::{MipLevel, MipPyramid, Sampler, WrapMode};
+
+/// The two texel indices (already wrapped into `0..n`) and the weight of the second one,
+/// for a lookup at texture coordinate `t` along an axis of `n` texels.
+#[inline]
+fn axis(t: f32, n: u32, mode: WrapMode) -> (usize, usize, f32) {
+    // Non-finite coordinates would poison the weights; 0 is an arbitrary but valid point.
+    let t = if t.is_finite() { f64::from(t) } else { 0.0 };
+    let n_f = f64::from(n);
+    let x = t * n_f - 0.5;
+    let x0 = x.floor();
+    let frac = (x - x0) as f32;
+    // Reduce x0 to a small range with the same wrapped result before converting to an
+    // integer: `rem_euclid` on f64 is exact, and the bounds keep `i0 + 1` in range too.
+    let i0 = match mode {
+        WrapMode::Repeat => x0.rem_euclid(n_f),
+        WrapMode::MirroredRepeat => x0.rem_euclid(2.0 * n_f),
+        WrapMode::ClampToEdge => x0.clamp(-1.0, n_f),
+    } as i64;
+    let n = i64::from(n);
+    (wrap(i0, n, mode), wrap(i0 + 1, n, mode), frac)
+}
+
+/// Maps an integer texel index to `0..n` (glTF / OpenGL wrap semantics).
+#[inline]
+fn wrap(i: i64, n: i64, mode: WrapMode) -> usize {
+    (match mode {
+        WrapMode::Repeat => i.rem_euclid(n),
+        WrapMode::ClampToEdge => i.clamp(0, n - 1),
+        WrapMode::MirroredRepeat => {
+            // Period 2n: 0..n forwards, then n..2n backwards (texel n-1 repeated at the seam).
+            let m = i.rem_euclid(2 * n);
+            if m < n { m } else { 2 * n - 1 - m }
+        }
+    }) as usize
+}
+
+#[inline]
+fn bilinear(level: &MipLevel, uv: Vec2, sampler: Sampler) -> Vec4 {
+    let (x0, x1, fx) = axis(uv.x, level.width, sampler.wrap_s);
+    let (y0, y1, fy) = axis(uv.y, level.height, sampler.wrap_t);
+    let w = level.width as usize;
+    let t = &level.texels;
+    // Weighted form (not a + (b - a) f) so a zero weight returns the texel bit-exactly.
+    let row0 = t[y0 * w + x0] * (1.0 - fx) + t[y0 * w + x1] * fx;
+    let row1 = t[y1 * w + x0] * (1.0 - fx) + t[y1 * w + x1] * fx;
+    row0 * (1.0 - fy) + row1 * fy
+}
+
+impl MipPyramid {
+    /// Bilinear lookup in one level; `level` past the last is clamped to the last.
+    ///
+    /// Wrap modes apply per axis to integer texel indices. Non-finite u or v reads as 0.
+    pub fn sample_bilinear(&self, level: usize, uv: Vec2, sampler: Sampler) -> Vec4 {
+        let level = &self.levels[level.min(self.levels.len() - 1)];
+        bilinear(level, uv, sampler)
+    }
+
+    /// Trilinear lookup at a fractional level (clamped with [`Self::clamp_level`]).
+    ///
+    /// Level 0 or below is magnification: plain bilinear at level 0. Otherwise the bilinear
+    /// results of `floor(lod)` and `floor(lod) + 1` are blended by the fraction; at the last
+    /// level it is bilinear there.
+    pub fn sample_trilinear(&self, uv: Vec2, lod: f32, sampler: Sampler) -> Vec4 {
+        let lod = self.clamp_level(lod);
+        let lower = lod.floor();
+        let k = lower as usize;
+        let frac = lod - lower;
+        if frac == 0.0 || k + 1 >= self.levels.len() {
+            // Integer level (including 0, magnification, and the last level): no blend, so
+            // integer LODs agree exactly with `sample_bilinear`.
+            return bilinear(&self.levels[k], uv, sampler);
+        }
+        let a = bilinear(&self.levels[k], uv, sampler);
+        let b = bilinear(&self.levels[k + 1], uv, sampler);
+        a * (1.0 - frac) + b * frac
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const CLAMP: WrapMode = WrapMode::ClampToEdge;
+    const REPEAT: WrapMode = WrapMode::Repeat;
+    const MIRROR: WrapMode = WrapMode::MirroredRepeat;
+
+    fn sampler(s: WrapMode, t: WrapMode) -> Sampler {
+        Sampler {
+            wrap_s: s,
+            wrap_t: t,
+        }
+    }
+
+    /// A w x h pyramid whose level-0 texel (x, y) is distinct: (x, y, x + 100 y, 1).
+    fn grid(w: u32, h: u32) -> MipPyramid {
+        let texels = (0..h)
+            .flat_map(|y| {
+                (0..w).map(move |x| Vec4::new(x as f32, y as f32, (x + 100 * y) as f32, 1.0))
+            })
+            .collect();
+        MipPyramid::from_linear_rgba(w, h, texels).unwrap()
+    }
+
+    fn texel(p: &MipPyramid, level: usize, x: u32, y: u32) -> Vec4 {
+        let l = &p.levels[level];
+        l.texels[(y * l.width + x) as usize]
+    }
+
+    fn centre(p: &MipPyramid, level: usize, x: u32, y: u32) -> Vec2 {
+        let l = &p.levels[level];
+        Vec2::new(
+            (x as f32 + 0.5) / l.width as f32,
+            (y as f32 + 0.5) / l.height as f32,
+        )
+    }
+
+    fn close(a: Vec4, b: Vec4, tol: f32) -> bool {
+        (a - b).abs().max_element() <= tol
+    }
+
+    #[test]
+    fn bilinear_at_texel_centre_is_exact() {
+        // Power-of-two sides: every centre (i + 0.5) / w is an exact f32, so the weights are
+        // exactly 1 and 0 and the texel comes back bit-for-bit.
+        let p = grid(8, 4);
+        for level in 0..p.level_count() {
+            let l = &p.levels[level];
+            for y in 0..l.height {
+                for x in 0..l.width {
+                    for s in [REPEAT, CLAMP, MIRROR] {
+                        let got = p.sample_bilinear(level, centre(&p, level, x, y), sampler(s, s));
+                        assert_eq!(got, texel(&p, level, x, y), "level {level} ({x}, {y})");
+                    }
+                }
+            }
+        }
+        // Other sides: the centre itself is rounded to f32 (0.5 / 5 is not exact), so the
+        // result is the texel up to that rounding.
+        let p = grid(5, 3);
+        for y in 0..3 {
+            for x in 0..5 {
+                let got = p.sample_bilinear(0, centre(&p, 0, x, y), Sampler::default());
+                let want = texel(&p, 0, x, y);
+                assert!(close(got, want, 1e-4), "({x}, {y}): {got} vs {want}");
+            }
+        }
+    }
+
+    #[test]
+    fn bilinear_halfway_is_average() {
+        let p = grid(4, 4);
+        let s = Sampler::default();
+        // Between texels (1, 2) and (2, 2) horizontally.
+        let got = p.sample_bilinear(0, Vec2::new(2.0 / 4.0, 2.5 / 4.0), s);
+        let want = (texel(&p, 0, 1, 2) + texel(&p, 0, 2, 2)) * 0.5;
+        assert!(close(got, want, 1e-6), "{got} vs {want}");
+        // Between (3, 1) and (3, 2) vertically.
+        let got = p.sample_bilinear(0, Vec2::new(3.5 / 4.0, 2.0 / 4.0), s);
+        let want = (texel(&p, 0, 3, 1) + texel(&p, 0, 3, 2)) * 0.5;
+        assert!(close(got, want, 1e-6), "{got} vs {want}");
+        // Centre of four texels.
+        let got = p.sample_bilinear(0, Vec2::new(1.0 / 4.0, 1.0 / 4.0), s);
+        let want =
+            (texel(&p, 0, 0, 0) + texel(&p, 0, 1, 0) + texel(&p, 0, 0, 1) + texel(&p, 0, 1, 1))
+                * 0.25;
+        assert!(close(got, want, 1e-6), "{got} vs {want}");
+        // Repeat across the seam: u = 0 lies halfway between the last and first texel.
+        let got = p.sample_bilinear(0, Vec2::new(0.0, 0.5 / 4.0), s);
+        let want = (texel(&p, 0, 3, 0) + texel(&p, 0, 0, 0)) * 0.5;
+        assert!(close(got, want, 1e-6), "{got} vs {want}");
+    }
+
+    #[test]
+    fn wrap_repeat() {
+        let p = grid(8, 8);
+        let s = sampler(REPEAT, REPEAT);
+        for v in [0.1, 0.3, 0.77] {
+            let base = p.sample_bilinear(0, Vec2::new(0.25, v), s);
+            assert_eq!(p.sample_bilinear(0, Vec2::new(1.25, v), s), base);
+            assert_eq!(p.sample_bilinear(0, Vec2::new(-0.75, v), s), base);
+            assert_eq!(p.sample_bilinear(0, Vec2::new(3.25, v), s), base);
+        }
+    }
+
+    #[test]
+    fn wrap_mirrored_repeat() {
+        let p = grid(8, 8);
+        let s = sampler(MIRROR, MIRROR);
+        let v = 0.3;
+        let at = |u: f32| p.sample_bilinear(0, Vec2::new(u, v), s);
+        assert_eq!(at(1.25), at(0.75));
+        assert_eq!(at(-0.25), at(0.25));
+        assert_eq!(at(2.25), at(0.25));
+        assert_eq!(at(-1.25), at(0.75));
+        // At the seam u = 1 the last texel is mirrored onto itself.
+        let edge = p.sample_bilinear(0, Vec2::new(1.0, 0.5 / 8.0), s);
+        assert_eq!(edge, texel(&p, 0, 7, 0));
+        // Mirroring differs from repeating.
+        assert_ne!(at(1.25), at(0.25));
+    }
+
+    #[test]
+    fn wrap_clamp_to_edge() {
+        let p = grid(8, 4);
+        let s = sampler(CLAMP, CLAMP);
+        let row = 1;
+        let v = (row as f32 + 0.5) / 4.0;
+        assert_eq!(
+            p.sample_bilinear(0, Vec2::new(5.0, v), s),
+            texel(&p, 0, 7, row)
+        );
+        assert_eq!(
+            p.sample_bilinear(0, Vec2::new(-3.0, v), s),
+            texel(&p, 0, 0, row)
+        );
+        // Within half a texel of the edge there is nothing to blend with.
+        assert_eq!(
+            p.sample_bilinear(0, Vec2::new(1.0, v), s),
+            texel(&p, 0, 7, row)
+        );
+        assert_eq!(
+            p.sample_bilinear(0, Vec2::new(0.0, v), s),
+            texel(&p, 0, 0, row)
+        );
+        assert_eq!(
+            p.sample_bilinear(0, Vec2::new(-1e30, 1e30), s),
+            texel(&p, 0, 0, 3)
+        );
+    }
+
+    #[test]
+    fn wrap_modes_are_per_axis() {
+        let p = grid(8, 4);
+        // s repeats, t clamps.
+        let s = sampler(REPEAT, CLAMP);
+        let got = p.sample_bilinear(0, Vec2::new(1.25, 5.0), s);
+        let want = p.sample_bilinear(0, Vec2::new(0.25, 3.5 / 4.0), s);
+        assert_eq!(got, want);
+        assert_ne!(got, p.sample_bilinear(0, Vec2::new(0.25, 0.25), s));
+        // s clamps, t mirrors.
+        let s = sampler(CLAMP, MIRROR);
+        let got = p.sample_bilinear(0, Vec2::new(-3.0, 1.25), s);
+        let want = p.sample_bilinear(0, Vec2::new(0.5 / 8.0, 0.75), s);
+        assert_eq!(got, want);
+        // s mirrors, t repeats.
+        let s = sampler(MIRROR, REPEAT);
+        let got = p.sample_bilinear(0, Vec2::new(-0.25, 1.3125), s);
+        let want = p.sample_bilinear(0, Vec2::new(0.25, 0.3125), s);
+        assert_eq!(got, want);
+    }
+
+    #[test]
+    fn level_past_last_is_clamped() {
+        let p = grid(8, 8);
+        let last = p.level_count() - 1;
+        let uv = Vec2::new(0.3, 0.6);
+        let s = Sampler::default();
+        assert_eq!(p.sample_bilinear(99, uv, s), p.sample_bilinear(last, uv, s));
+        assert_eq!(p.sample_bilinear(usize::MAX, uv, s), texel(&p, last, 0, 0));
+    }
+
+    #[test]
+    fn non_finite_uv_reads_as_zero() {
+        let p = grid(8, 8);
+        for mode in [REPEAT, CLAMP, MIRROR] {
+            let s = sampler(mode, mode);
+            let zero = p.sample_bilinear(0, Vec2::ZERO, s);
+            for bad in [f32::NAN, f32::INFINITY, f32::NEG_INFINITY] {
+                let got = p.sample_bilinear(0, Vec2::new(bad, bad), s);
+                assert!(!got.is_nan());
+                assert_eq!(got, zero);
+                let got = p.sample_trilinear(Vec2::new(0.0, bad), 1.5, s);
+                assert!(!got.is_nan());
+            }
+            // Huge but finite coordinates stay finite too.
+            for big in [f32::MAX, f32::MIN, 1e20, -1e20] {
+                let got = p.sample_bilinear(0, Vec2::new(big, -big), s);
+                assert!(got.is_finite(), "{mode:?} {big}: {got}");
+            }
+        }
+    }
+
+    #[test]
+    fn large_u_keeps_precision() {
+        // 1024 x 2 with distinct texels along u; Repeat.
+        let w = 1024;
+        let texels = (0..2 * w)
+            .map(|i| Vec4::new((i % w) as f32, (i / w) as f32, 0.0, 1.0))
+            .collect();
+        let p = MipPyramid::from_linear_rgba(w, 2, texels).unwrap();
+        let s = Sampler::default();
+        // 100000.37 is not an f32: the nearest is 100000.3671875, whose fractional part
+        // 0.3671875 is exact. In f32, u * 1024 - 0.5 would round to an integer and read a
+        // single texel; in f64 it is 375.5, halfway between texels 375 and 376.
+        let big: f32 = 100000.37;
+        let frac = (f64::from(big) - 100000.0) as f32;
+        assert_eq!(frac, 0.3671875);
+        let v = 0.25;
+        let far = p.sample_bilinear(0, Vec2::new(big, v), s);
+        let near = p.sample_bilinear(0, Vec2::new(frac, v), s);
+        assert!(close(far, near, 1e-4), "{far} vs {near}");
+        assert!((far.x - 375.5).abs() < 1e-4, "{far}");
+        // Negative side: -100000 + 0.3671875 (exact in f32) is the same point mod 1.
+        let far = p.sample_bilinear(0, Vec2::new(-100_000.0 + 0.367_187_5, v), s);
+        assert!(close(far, near, 1e-4), "{far} vs {near}");
+        // A fraction that is not one half: 1000.3 is 1000 + 4915/16384 in f32, so
+        // u * 1024 - 0.5 = 306.6875 (weights 0.3125 / 0.6875).
+        let big: f32 = 1000.3;
+        let frac = (f64::from(big) - 1000.0) as f32;
+        let far = p.sample_bilinear(0, Vec2::new(big, v), s);
+        let near = p.sample_bilinear(0, Vec2::new(frac, v), s);
+        assert!(close(far, near, 1e-4), "{far} vs {near}");
+        assert!((far.x - 306.6875).abs() < 1e-4, "{far}");
+    }
+
+    #[test]
+    fn trilinear_integer_levels_match_bilinear() {
+        let p = grid(16, 12);
+        let s = sampler(REPEAT, MIRROR);
+        for uv in [
+            Vec2::new(0.3, 0.7),
+            Vec2::new(-1.2, 2.45),
+            Vec2::new(0.01, 0.99),
+        ] {
+            for k in 0..p.level_count() {
+                assert_eq!(
+                    p.sample_trilinear(uv, k as f32, s),
+                    p.sample_bilinear(k, uv, s),
+                    "level {k}"
+                );
+            }
+        }
+    }
+
+    #[test]
+    fn trilinear_lod_clamping() {
+        let p = grid(16, 12);
+        let s = Sampler::default();
+        let uv = Vec2::new(0.37, 0.61);
+        let last = p.level_count() - 1;
+        let level0 = p.sample_bilinear(0, uv, s);
+        assert_eq!(p.sample_trilinear(uv, f32::NAN, s), level0);
+        assert_eq!(p.sample_trilinear(uv, -5.0, s), level0);
+        assert_eq!(p.sample_trilinear(uv, f32::NEG_INFINITY, s), level0);
+        assert_eq!(p.sample_trilinear(uv, 0.0, s), level0);
+        let top = p.sample_bilinear(last, uv, s);
+        assert_eq!(p.sample_trilinear(uv, f32::INFINITY, s), top);
+        assert_eq!(p.sample_trilinear(uv, 1e9, s), top);
+        assert_eq!(p.sample_trilinear(uv, last as f32 + 0.5, s), top);
+        assert_eq!(p.clamp_level(f32::NAN), 0.0);
+        assert_eq!(p.clamp_level(f32::INFINITY), last as f32);
+        assert_eq!(p.clamp_level(-3.0), 0.0);
+        assert_eq!(p.clamp_level(1.25), 1.25);
+    }
+
+    #[test]
+    fn trilinear_blends_adjacent_levels() {
+        let p = grid(16, 12);
+        let s = Sampler::default();
+        let uv = Vec2::new(0.37, 0.61);
+        let l1 = p.sample_bilinear(1, uv, s);
+        let l2 = p.sample_bilinear(2, uv, s);
+        assert_ne!(l1, l2);
+        let got = p.sample_trilinear(uv, 1.5, s);
+        assert!(close(got, (l1 + l2) * 0.5, 1e-5), "{got}");
+        let got = p.sample_trilinear(uv, 1.25, s);
+        assert!(close(got, l1 * 0.75 + l2 * 0.25, 1e-5), "{got}");
+        // Between level 0 and 1 it blends too (only lod <= 0 is pure magnification).
+        let l0 = p.sample_bilinear(0, uv, s);
+        let got = p.sample_trilinear(uv, 0.5, s);
+        assert!(close(got, (l0 + l1) * 0.5, 1e-5), "{got}");
+    }
+}
