@@ -470,6 +470,48 @@ fn strips_fans_and_non_indexed_primitives_become_triangle_lists() {
     assert_eq!(scene.instanced_triangle_count(), 4);
 }
 
+#[test]
+fn default_morph_weights_shape_the_rest_pose() {
+    let mut b = BufferBuilder::default();
+    let positions = b.positions(&[[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]]);
+    let normals = b.floats(&[[0.0, 0.0, 1.0]; 3], "VEC3");
+    let position_deltas = b.floats(&[[0.0, 0.0, 2.0], [0.0, 0.0, 0.0], [4.0, 0.0, 0.0]], "VEC3");
+    let normal_deltas = b.floats(
+        &[[2.0, 0.0, -1.0], [0.0, 0.0, 0.0], [0.0, 0.0, 0.0]],
+        "VEC3",
+    );
+    let unused_deltas = b.floats(&[[9.0, 9.0, 9.0]; 3], "VEC3");
+    let json = json!({
+        "asset": { "version": "2.0" },
+        "nodes": [{ "mesh": 0 }],
+        "meshes": [{ "weights": [0.5, 0.0], "primitives": [{
+            "attributes": { "POSITION": positions, "NORMAL": normals },
+            "targets": [{ "POSITION": position_deltas, "NORMAL": normal_deltas }, { "POSITION": unused_deltas }],
+        }] }],
+    });
+    let dir = tempfile::tempdir().unwrap();
+    let path = write(
+        dir.path(),
+        "morph.gltf",
+        &serde_json::to_vec(&common::with_embedded_buffer(json, &b)).unwrap(),
+    );
+    let scene = load(&path).unwrap_or_else(|e| panic!("{e}"));
+    let primitive = &scene.meshes[0].primitives[0];
+    assert_eq!(
+        primitive.positions,
+        vec![Vec3::new(0.0, 0.0, 1.0), Vec3::X, Vec3::new(2.0, 1.0, 0.0)]
+    );
+    // Normal 0: (0, 0, 1) + 0.5 * (2, 0, -1) = (1, 0, 0.5), renormalised.
+    let normals = primitive.normals.as_ref().unwrap();
+    assert!(normals[0].abs_diff_eq(Vec3::new(1.0, 0.0, 0.5).normalize(), 1e-6));
+    assert_eq!(normals[1], Vec3::Z);
+    assert!(
+        scene.notes.iter().any(|n| n.contains("morph targets")),
+        "{:?}",
+        scene.notes
+    );
+}
+
 // ---------------------------------------------------------------------------------------
 // Shared sample models
 // ---------------------------------------------------------------------------------------

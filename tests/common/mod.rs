@@ -25,7 +25,7 @@ pub struct BufferBuilder {
 impl BufferBuilder {
     /// Appends `bytes` (4-byte aligned) as a new buffer view of buffer 0; returns its index.
     pub fn view(&mut self, bytes: &[u8]) -> usize {
-        while self.bin.len() % 4 != 0 {
+        while !self.bin.len().is_multiple_of(4) {
             self.bin.push(0);
         }
         self.views
@@ -125,11 +125,11 @@ pub fn merge(target: &mut Value, extra: Value) {
 /// A GLB container: 12-byte header, JSON chunk (space padded), BIN chunk (zero padded).
 pub fn glb(json: &Value, bin: &[u8]) -> Vec<u8> {
     let mut json_bytes = serde_json::to_vec(json).expect("serialize JSON");
-    while json_bytes.len() % 4 != 0 {
+    while !json_bytes.len().is_multiple_of(4) {
         json_bytes.push(b' ');
     }
     let mut bin = bin.to_vec();
-    while bin.len() % 4 != 0 {
+    while !bin.len().is_multiple_of(4) {
         bin.push(0);
     }
     let total = 12 + 8 + json_bytes.len() + 8 + bin.len();

@@ -151,11 +151,15 @@ fn read_items<T: Item>(
             std::mem::size_of::<T>()
         ));
     }
-    check_layout(accessor, buffers, what)?;
     let count = accessor.count();
     if count == 0 {
-        return Ok(Vec::new());
+        // Also keeps gltf's iterator from computing `count - 1`.
+        return Err(format!(
+            "{} has count 0; glTF requires at least 1",
+            label(accessor, what)
+        ));
     }
+    check_layout(accessor, buffers, what)?;
     let buffer_data = |buffer: gltf::Buffer| buffers.bytes(buffer.index());
     let items: Vec<T> = match Iter::<T>::new(accessor.clone(), buffer_data) {
         Some(iter) => iter.collect(),
