@@ -3,6 +3,9 @@
 
 #![allow(dead_code)]
 
+pub mod invariants;
+pub mod round_trip;
+
 use std::io::Cursor;
 
 use base64::Engine as _;
