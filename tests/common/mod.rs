@@ -5,6 +5,7 @@
 
 pub mod invariants;
 pub mod round_trip;
+pub mod scenes;
 
 use std::io::Cursor;
 

@@ -1,10 +1,9 @@
 //! Scenes built in code for the end-to-end tests: no files, no ../shared.
 
-
 use glam::{Quat, Vec2, Vec3, Vec4};
 use mipray::scene::{
-    AnimationDesc, CameraDesc, ChannelDesc, ChannelTarget, Interpolation, LightDesc, LightKind, MaterialDesc, MeshDesc, NodeDesc,
-    PrimitiveDesc, SceneDesc, Trs,
+    AnimationDesc, CameraDesc, ChannelDesc, ChannelTarget, Interpolation, LightDesc, LightKind,
+    MaterialDesc, MeshDesc, NodeDesc, PrimitiveDesc, SceneDesc, Trs,
 };
 use mipray::texture::{MipPyramid, Sampler, Texture, WrapMode};
 
@@ -14,13 +13,20 @@ pub fn checker(size: u32, squares: u32) -> Texture {
     let texels = (0..size * size)
         .map(|i| {
             let (x, y) = (i % size, i / size);
-            if ((x / cell) + (y / cell)) % 2 == 0 { Vec4::new(0.9, 0.9, 0.9, 1.0) } else { Vec4::new(0.05, 0.1, 0.4, 1.0) }
+            if ((x / cell) + (y / cell)) % 2 == 0 {
+                Vec4::new(0.9, 0.9, 0.9, 1.0)
+            } else {
+                Vec4::new(0.05, 0.1, 0.4, 1.0)
+            }
         })
         .collect();
     Texture {
         name: format!("checker{size}"),
         pyramid: MipPyramid::from_linear_rgba(size, size, texels).expect("valid checker"),
-        sampler: Sampler { wrap_s: WrapMode::Repeat, wrap_t: WrapMode::Repeat },
+        sampler: Sampler {
+            wrap_s: WrapMode::Repeat,
+            wrap_t: WrapMode::Repeat,
+        },
     }
 }
 
@@ -28,7 +34,12 @@ pub fn checker(size: u32, squares: u32) -> Texture {
 pub fn quad(size: f32, uv_repeat: f32, material: usize) -> PrimitiveDesc {
     let h = size / 2.0;
     PrimitiveDesc {
-        positions: vec![Vec3::new(-h, -h, 0.0), Vec3::new(h, -h, 0.0), Vec3::new(h, h, 0.0), Vec3::new(-h, h, 0.0)],
+        positions: vec![
+            Vec3::new(-h, -h, 0.0),
+            Vec3::new(h, -h, 0.0),
+            Vec3::new(h, h, 0.0),
+            Vec3::new(-h, h, 0.0),
+        ],
         normals: Some(vec![Vec3::Z; 4]),
         uvs: Some(vec![
             Vec2::new(0.0, uv_repeat),
@@ -43,8 +54,17 @@ pub fn quad(size: f32, uv_repeat: f32, material: usize) -> PrimitiveDesc {
 
 /// An octahedron-subdivided sphere (radius 1) with smooth normals.
 pub fn sphere(material: usize, subdivisions: u32) -> PrimitiveDesc {
-    let mut positions = vec![Vec3::X, Vec3::NEG_X, Vec3::Y, Vec3::NEG_Y, Vec3::Z, Vec3::NEG_Z];
-    let mut indices: Vec<u32> = vec![0, 2, 4, 4, 2, 1, 1, 2, 5, 5, 2, 0, 4, 3, 0, 1, 3, 4, 5, 3, 1, 0, 3, 5];
+    let mut positions = vec![
+        Vec3::X,
+        Vec3::NEG_X,
+        Vec3::Y,
+        Vec3::NEG_Y,
+        Vec3::Z,
+        Vec3::NEG_Z,
+    ];
+    let mut indices: Vec<u32> = vec![
+        0, 2, 4, 4, 2, 1, 1, 2, 5, 5, 2, 0, 4, 3, 0, 1, 3, 4, 5, 3, 1, 0, 3, 5,
+    ];
     for _ in 0..subdivisions {
         let mut next = Vec::new();
         for t in indices.chunks_exact(3) {
@@ -58,33 +78,68 @@ pub fn sphere(material: usize, subdivisions: u32) -> PrimitiveDesc {
         }
         indices = next;
     }
-    PrimitiveDesc { normals: Some(positions.clone()), positions, uvs: None, indices, material: Some(material) }
+    PrimitiveDesc {
+        normals: Some(positions.clone()),
+        positions,
+        uvs: None,
+        indices,
+        material: Some(material),
+    }
 }
 
 pub fn node(name: &str, local: Trs, mesh: Option<usize>) -> NodeDesc {
-    NodeDesc { name: name.into(), local, mesh, ..Default::default() }
+    NodeDesc {
+        name: name.into(),
+        local,
+        mesh,
+        ..Default::default()
+    }
 }
 
 pub fn at(translation: Vec3) -> Trs {
-    Trs { translation, ..Default::default() }
+    Trs {
+        translation,
+        ..Default::default()
+    }
 }
 
 pub fn textured(texture: usize) -> MaterialDesc {
-    MaterialDesc { name: "textured".into(), base_color: Vec3::ONE, base_color_texture: Some(texture), ..Default::default() }
+    MaterialDesc {
+        name: "textured".into(),
+        base_color: Vec3::ONE,
+        base_color_texture: Some(texture),
+        ..Default::default()
+    }
 }
 
 pub fn mirror() -> MaterialDesc {
-    MaterialDesc { name: "mirror".into(), base_color: Vec3::ONE, reflectance: 1.0, ..Default::default() }
+    MaterialDesc {
+        name: "mirror".into(),
+        base_color: Vec3::ONE,
+        reflectance: 1.0,
+        ..Default::default()
+    }
 }
 
 pub fn glass() -> MaterialDesc {
-    MaterialDesc { name: "glass".into(), base_color: Vec3::ONE, transmission: 1.0, ior: 1.5, ..Default::default() }
+    MaterialDesc {
+        name: "glass".into(),
+        base_color: Vec3::ONE,
+        transmission: 1.0,
+        ior: 1.5,
+        ..Default::default()
+    }
 }
 
 /// A camera node at `eye` looking down -Z (no rotation).
 pub fn camera_node(eye: Vec3, scene: &mut SceneDesc, yfov: f32) -> usize {
     scene.cameras.push(CameraDesc { yfov, znear: 0.01 });
-    scene.nodes.push(NodeDesc { name: "camera".into(), local: at(eye), camera: Some(scene.cameras.len() - 1), ..Default::default() });
+    scene.nodes.push(NodeDesc {
+        name: "camera".into(),
+        local: at(eye),
+        camera: Some(scene.cameras.len() - 1),
+        ..Default::default()
+    });
     scene.nodes.len() - 1
 }
 
@@ -99,11 +154,20 @@ pub fn add_root(scene: &mut SceneDesc, node: NodeDesc) -> usize {
 /// A textured quad of `size` facing a camera `distance` away (camera at the origin looking
 /// down -Z), with a `texture_size`^2 checker mapped once.
 pub fn facing_quad_scene(distance: f32, size: f32, texture_size: u32, yfov: f32) -> SceneDesc {
-    let mut scene = SceneDesc { background: Vec3::splat(0.1), ..Default::default() };
+    let mut scene = SceneDesc {
+        background: Vec3::splat(0.1),
+        ..Default::default()
+    };
     scene.textures.push(checker(texture_size, 8));
     scene.materials.push(textured(0));
-    scene.meshes.push(MeshDesc { name: "quad".into(), primitives: vec![quad(size, 1.0, 0)] });
-    add_root(&mut scene, node("quad", at(Vec3::new(0.0, 0.0, -distance)), Some(0)));
+    scene.meshes.push(MeshDesc {
+        name: "quad".into(),
+        primitives: vec![quad(size, 1.0, 0)],
+    });
+    add_root(
+        &mut scene,
+        node("quad", at(Vec3::new(0.0, 0.0, -distance)), Some(0)),
+    );
     let cam = camera_node(Vec3::ZERO, &mut scene, yfov);
     scene.roots.push(cam);
     scene
@@ -112,23 +176,81 @@ pub fn facing_quad_scene(distance: f32, size: f32, texture_size: u32, yfov: f32)
 /// A small "everything" scene: receding checker floor, moving textured box stand-in (a quad),
 /// a mirror, a glass sphere, two lights, a camera; animated over 1 s.
 pub fn showcase_scene() -> SceneDesc {
-    let mut scene = SceneDesc { background: Vec3::new(0.3, 0.4, 0.6), ..Default::default() };
+    let mut scene = SceneDesc {
+        background: Vec3::new(0.3, 0.4, 0.6),
+        ..Default::default()
+    };
     scene.textures.push(checker(128, 8));
     scene.materials.extend([textured(0), mirror(), glass()]);
     let floor_rotation = Quat::from_rotation_x(-std::f32::consts::FRAC_PI_2);
-    scene.meshes.push(MeshDesc { name: "floor".into(), primitives: vec![quad(200.0, 100.0, 0)] });
-    scene.meshes.push(MeshDesc { name: "mirror".into(), primitives: vec![quad(3.0, 1.0, 1)] });
-    scene.meshes.push(MeshDesc { name: "ball".into(), primitives: vec![sphere(2, 3)] });
-    scene.meshes.push(MeshDesc { name: "card".into(), primitives: vec![quad(1.0, 1.0, 0)] });
-    add_root(&mut scene, node("floor", Trs { rotation: floor_rotation, ..Default::default() }, Some(0)));
-    add_root(&mut scene, node("mirror", Trs { translation: Vec3::new(2.5, 1.5, -8.0), rotation: Quat::from_rotation_y(-0.5), ..Default::default() }, Some(1)));
-    add_root(&mut scene, node("ball", at(Vec3::new(-1.0, 1.0, -5.0)), Some(2)));
-    let card = add_root(&mut scene, node("card", at(Vec3::new(0.5, 0.8, -4.0)), Some(3)));
+    scene.meshes.push(MeshDesc {
+        name: "floor".into(),
+        primitives: vec![quad(200.0, 100.0, 0)],
+    });
+    scene.meshes.push(MeshDesc {
+        name: "mirror".into(),
+        primitives: vec![quad(3.0, 1.0, 1)],
+    });
+    scene.meshes.push(MeshDesc {
+        name: "ball".into(),
+        primitives: vec![sphere(2, 3)],
+    });
+    scene.meshes.push(MeshDesc {
+        name: "card".into(),
+        primitives: vec![quad(1.0, 1.0, 0)],
+    });
+    add_root(
+        &mut scene,
+        node(
+            "floor",
+            Trs {
+                rotation: floor_rotation,
+                ..Default::default()
+            },
+            Some(0),
+        ),
+    );
+    add_root(
+        &mut scene,
+        node(
+            "mirror",
+            Trs {
+                translation: Vec3::new(2.5, 1.5, -8.0),
+                rotation: Quat::from_rotation_y(-0.5),
+                ..Default::default()
+            },
+            Some(1),
+        ),
+    );
+    add_root(
+        &mut scene,
+        node("ball", at(Vec3::new(-1.0, 1.0, -5.0)), Some(2)),
+    );
+    let card = add_root(
+        &mut scene,
+        node("card", at(Vec3::new(0.5, 0.8, -4.0)), Some(3)),
+    );
     let cam = camera_node(Vec3::new(0.0, 1.6, 0.0), &mut scene, 0.9);
     scene.roots.push(cam);
-    for (i, p) in [Vec3::new(-3.0, 5.0, -2.0), Vec3::new(4.0, 4.0, -6.0)].into_iter().enumerate() {
-        scene.lights.push(LightDesc { kind: LightKind::Point, color: Vec3::ONE, intensity: 60.0, range: None });
-        let n = add_root(&mut scene, NodeDesc { name: format!("light{i}"), local: at(p), light: Some(i), ..Default::default() });
+    for (i, p) in [Vec3::new(-3.0, 5.0, -2.0), Vec3::new(4.0, 4.0, -6.0)]
+        .into_iter()
+        .enumerate()
+    {
+        scene.lights.push(LightDesc {
+            kind: LightKind::Point,
+            color: Vec3::ONE,
+            intensity: 60.0,
+            range: None,
+        });
+        let n = add_root(
+            &mut scene,
+            NodeDesc {
+                name: format!("light{i}"),
+                local: at(p),
+                light: Some(i),
+                ..Default::default()
+            },
+        );
         let _ = n;
     }
     scene.animations.push(AnimationDesc {
