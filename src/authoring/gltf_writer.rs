@@ -399,3 +399,244 @@ fn encode_animation(animation: &Animation, buffer: &mut BinaryBuffer) -> json::A
         samplers,
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use glam::{Quat, Vec2, Vec3};
+    use serde_json::Value;
+
+    use super::*;
+    use crate::authoring::animation::Channel;
+    use crate::authoring::handles::{MeshId, NodeId};
+    use crate::authoring::node::{Node, PointLight, Primitive};
+    use crate::authoring::shapes::{cuboid, quad};
+    use crate::authoring::textures::checkerboard;
+
+    /// A scene using every feature: a geometry shared by two meshes, a mesh instanced by
+    /// two nodes, a child node, one image behind two wrap modes, and STEP, LINEAR and
+    /// CUBICSPLINE channels (two sharing their key times).
+    fn feature_scene() -> GltfBuilder {
+        let mut b = GltfBuilder::new();
+        let image = b.add_image("tiles", checkerboard(8, 2, [255; 4], [0, 0, 0, 255]));
+        let repeat = b.add_material(Material::textured(
+            "Repeat",
+            TextureBinding::new(image, WrapMode::Repeat),
+        ));
+        let clamp = b.add_material(Material::textured(
+            "Clamp",
+            TextureBinding {
+                image,
+                wrap_s: WrapMode::ClampToEdge,
+                wrap_t: WrapMode::MirroredRepeat,
+            },
+        ));
+        let also_repeat = b.add_material(Material::textured(
+            "AlsoRepeat",
+            TextureBinding::new(image, WrapMode::Repeat),
+        ));
+        let cube = b.add_geometry("Cube", cuboid(Vec3::ONE));
+        let mesh_a = b.add_mesh(
+            "A",
+            vec![Primitive {
+                geometry: cube,
+                material: Some(repeat),
+            }],
+        );
+        let mesh_b = b.add_mesh(
+            "B",
+            vec![
+                Primitive {
+                    geometry: cube,
+                    material: Some(clamp),
+                },
+                Primitive {
+                    geometry: cube,
+                    material: None,
+                },
+            ],
+        );
+        let card = b.add_simple_mesh("Card", quad(1.0, 1.0, Vec2::ONE), also_repeat);
+        let light = b.add_point_light(PointLight {
+            name: "Lamp".into(),
+            color: Vec3::ONE,
+            intensity: 10.0,
+            range: Some(20.0),
+        });
+        let child = b.add_node(Node::new("Child").with_mesh(mesh_a).with_light(light));
+        let parent = b.add_node(
+            Node::new("Parent")
+                .with_mesh(mesh_a)
+                .with_translation(Vec3::new(1.0, 2.0, 3.0))
+                .with_children([child]),
+        );
+        let other = b.add_node(Node::new("Other").with_mesh(mesh_b));
+        let card_node = b.add_node(Node::new("Card").with_mesh(card));
+        b.add_child(parent, card_node);
+        let times = vec![0.0, 0.5, 1.0];
+        b.add_animation(Animation {
+            name: "Everything".into(),
+            channels: vec![
+                Channel::scale(
+                    parent,
+                    Interpolation::Step,
+                    times.clone(),
+                    &[Vec3::ONE, Vec3::splat(2.0), Vec3::ONE],
+                ),
+                Channel::rotation(
+                    child,
+                    Interpolation::Linear,
+                    times.clone(),
+                    &[Quat::IDENTITY, Quat::from_rotation_y(1.0), Quat::IDENTITY],
+                ),
+                Channel::translation(
+                    other,
+                    Interpolation::CubicSpline,
+                    vec![0.0, 2.0],
+                    &[
+                        Vec3::ZERO,
+                        Vec3::ZERO,
+                        Vec3::X,
+                        Vec3::Y,
+                        Vec3::Z,
+                        Vec3::ZERO,
+                    ],
+                ),
+            ],
+        });
+        b
+    }
+
+    fn parse(files: &[EncodedFile]) -> Value {
+        serde_json::from_slice(&files[0].bytes).unwrap()
+    }
+
+    #[test]
+    fn encodes_hierarchy_instancing_textures_and_interpolations() {
+        let files = feature_scene().encode("features").unwrap();
+        let names: Vec<&str> = files.iter().map(|f| f.name.as_str()).collect();
+        assert_eq!(
+            names,
+            ["features.gltf", "features.bin", "features_tiles.png"]
+        );
+        let doc = parse(&files);
+        // Parent (1) and Other (2) are the roots; Child (0) and Card (3) hang under Parent.
+        assert_eq!(doc["scenes"][0]["nodes"], serde_json::json!([1, 2]));
+        assert_eq!(doc["nodes"][1]["children"], serde_json::json!([0, 3]));
+        assert_eq!(doc["nodes"][0]["mesh"], 0);
+        assert_eq!(doc["nodes"][1]["mesh"], 0);
+        assert_eq!(
+            doc["nodes"][0]["extensions"]["KHR_lights_punctual"]["light"],
+            0
+        );
+        // The cube's accessors are written once and shared by all three primitives.
+        let cube = &doc["meshes"][0]["primitives"][0];
+        for p in doc["meshes"][1]["primitives"].as_array().unwrap() {
+            assert_eq!(p["attributes"], cube["attributes"]);
+            assert_eq!(p["indices"], cube["indices"]);
+        }
+        assert!(doc["meshes"][1]["primitives"][1].get("material").is_none());
+        // Two textures (Repeat and AlsoRepeat share one), two samplers, one image.
+        assert_eq!(doc["textures"].as_array().unwrap().len(), 2);
+        assert_eq!(doc["samplers"][0]["wrapS"], 10497);
+        assert_eq!(doc["samplers"][1]["wrapS"], 33071);
+        assert_eq!(doc["samplers"][1]["wrapT"], 33648);
+        assert_eq!(
+            doc["materials"][2]["pbrMetallicRoughness"]["baseColorTexture"]["index"],
+            0
+        );
+        assert_eq!(doc["images"][0]["uri"], "features_tiles.png");
+        // Samplers: STEP and LINEAR share the input; CUBICSPLINE stores 3 values per key.
+        let samplers = doc["animations"][0]["samplers"].as_array().unwrap();
+        let interpolations: Vec<&str> = samplers
+            .iter()
+            .map(|s| s["interpolation"].as_str().unwrap())
+            .collect();
+        assert_eq!(interpolations, ["STEP", "LINEAR", "CUBICSPLINE"]);
+        assert_eq!(samplers[0]["input"], samplers[1]["input"]);
+        assert_ne!(samplers[0]["input"], samplers[2]["input"]);
+        let accessor = |i: &Value| &doc["accessors"][i.as_u64().unwrap() as usize];
+        assert_eq!(
+            accessor(&samplers[0]["input"])["max"],
+            serde_json::json!([1.0])
+        );
+        assert_eq!(accessor(&samplers[2]["input"])["count"], 2);
+        assert_eq!(accessor(&samplers[2]["output"])["count"], 6);
+        assert_eq!(accessor(&samplers[1]["output"])["type"], "VEC4");
+        assert_eq!(
+            accessor(&cube["attributes"]["POSITION"])["min"],
+            serde_json::json!([-0.5, -0.5, -0.5])
+        );
+        // Buffer: declared length matches the .bin; every view starts 4-byte aligned.
+        assert_eq!(doc["buffers"][0]["byteLength"], files[1].bytes.len());
+        for view in doc["bufferViews"].as_array().unwrap() {
+            assert_eq!(view["byteOffset"].as_u64().unwrap() % 4, 0);
+        }
+        assert_eq!(
+            doc["extensionsUsed"],
+            serde_json::json!(["KHR_lights_punctual"])
+        );
+    }
+
+    #[test]
+    fn encoding_is_deterministic() {
+        assert_eq!(
+            feature_scene().encode("x").unwrap(),
+            feature_scene().encode("x").unwrap()
+        );
+    }
+
+    #[test]
+    fn write_puts_every_file_in_the_directory() {
+        let dir = tempfile::tempdir().unwrap();
+        let paths = feature_scene()
+            .write(&dir.path().join("sub"), "features")
+            .unwrap();
+        assert_eq!(paths.len(), 3);
+        let encoded = feature_scene().encode("features").unwrap();
+        for (path, file) in paths.iter().zip(&encoded) {
+            assert_eq!(path.file_name().unwrap().to_str().unwrap(), file.name);
+            assert_eq!(std::fs::read(path).unwrap(), file.bytes);
+        }
+    }
+
+    #[test]
+    fn rejects_scenes_that_break_gltf_rules() {
+        let expect_invalid = |b: &GltfBuilder, what: &str| match b.encode("bad") {
+            Err(AuthoringError::Invalid(message)) => {
+                assert!(
+                    message.contains(what),
+                    "{message:?} should mention {what:?}"
+                )
+            }
+            other => panic!("expected an invalid-scene error about {what}, got {other:?}"),
+        };
+        let mut two_parents = feature_scene();
+        two_parents.add_node(Node::new("Thief").with_children([NodeId(0)]));
+        expect_invalid(&two_parents, "more than one parent");
+
+        let mut cycle = feature_scene();
+        cycle.add_child(NodeId(0), NodeId(1));
+        expect_invalid(&cycle, "cycle");
+
+        let mut unsorted = feature_scene();
+        unsorted.animations[0].channels[0].times = vec![0.0, 1.0, 0.5];
+        expect_invalid(&unsorted, "strictly increasing");
+
+        let mut short = feature_scene();
+        short.animations[0].channels[2].values.pop();
+        expect_invalid(&short, "wrong number of key values");
+
+        let mut foreign = feature_scene();
+        foreign.add_node(Node::new("Dangling").with_mesh(MeshId(99)));
+        expect_invalid(&foreign, "refers to mesh 99");
+
+        let mut bad_image = feature_scene();
+        bad_image.images[0].0 = "../escape".into();
+        expect_invalid(&bad_image, "bad file name");
+
+        assert!(matches!(
+            feature_scene().encode("a/b"),
+            Err(AuthoringError::Invalid(_))
+        ));
+    }
+}
