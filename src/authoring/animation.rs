@@ -13,8 +13,11 @@ use super::handles::NodeId;
 /// The node property an animation channel drives.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
 pub enum AnimatedProperty {
+    /// The node's `translation` (3 numbers per key).
     Translation,
+    /// The node's `rotation`, a unit quaternion x, y, z, w (4 numbers per key).
     Rotation,
+    /// The node's `scale` (3 numbers per key).
     Scale,
 }
 
@@ -31,7 +34,9 @@ impl AnimatedProperty {
 /// How values between keys are computed (glTF sampler interpolation).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
 pub enum Interpolation {
+    /// Linear for translation and scale, spherical linear (slerp) for rotation.
     Linear,
+    /// The previous key's value until the next key.
     Step,
     /// Cubic Hermite; each key stores in-tangent, value, out-tangent.
     CubicSpline,
@@ -40,8 +45,11 @@ pub enum Interpolation {
 /// One keyframe track of one node property.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Channel {
+    /// The node whose property is driven.
     pub node: NodeId,
+    /// Which of its properties.
     pub property: AnimatedProperty,
+    /// How values between keys are computed.
     pub interpolation: Interpolation,
     /// Key times in seconds: non-negative, strictly increasing.
     pub times: Vec<f32>,
@@ -124,7 +132,9 @@ impl Channel {
 /// A named set of channels played together.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Animation {
+    /// Shown by viewers; need not be unique.
     pub name: String,
+    /// The tracks, at most one per node property.
     pub channels: Vec<Channel>,
 }
 

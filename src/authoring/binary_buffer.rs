@@ -69,7 +69,7 @@ impl BinaryBuffer {
     }
 
     fn push_view(&mut self, data: impl Iterator<Item = u8>, target: Option<u32>) -> usize {
-        while self.bytes.len() % 4 != 0 {
+        while !self.bytes.len().is_multiple_of(4) {
             self.bytes.push(0);
         }
         let byte_offset = self.bytes.len();

@@ -74,16 +74,19 @@ impl GltfBuilder {
         ImageId(self.images.len() - 1)
     }
 
+    /// Adds a material that mesh primitives can use.
     pub fn add_material(&mut self, material: Material) -> MaterialId {
         self.materials.push(material);
         MaterialId(self.materials.len() - 1)
     }
 
+    /// Adds a camera; a node carrying it places it in the scene.
     pub fn add_camera(&mut self, camera: PerspectiveCamera) -> CameraId {
         self.cameras.push(camera);
         CameraId(self.cameras.len() - 1)
     }
 
+    /// Adds a point light (`KHR_lights_punctual`); a node carrying it places it.
     pub fn add_point_light(&mut self, light: PointLight) -> LightId {
         self.lights.push(light);
         LightId(self.lights.len() - 1)
@@ -103,6 +106,7 @@ impl GltfBuilder {
         self.nodes[parent.0].children.push(child);
     }
 
+    /// Adds an animation; its channels refer to nodes of this builder.
     pub fn add_animation(&mut self, animation: Animation) -> AnimationId {
         self.animations.push(animation);
         AnimationId(self.animations.len() - 1)

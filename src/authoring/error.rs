@@ -12,13 +12,17 @@ pub enum AuthoringError {
     /// A file or folder could not be created or written.
     #[error("{path}: {source}")]
     Io {
+        /// The file or folder.
         path: PathBuf,
+        /// What the system said.
         source: std::io::Error,
     },
     /// An image could not be encoded as PNG.
     #[error("image {name:?}: cannot encode PNG: {source}")]
     Png {
+        /// The image's name in the builder.
         name: String,
+        /// What the encoder said.
         source: image::ImageError,
     },
     /// The glTF JSON could not be serialized.

@@ -23,7 +23,9 @@ pub const GENERATOR: &str = "mipray authoring";
 /// One file of an encoded scene: its name (relative to the `.gltf`) and its bytes.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct EncodedFile {
+    /// File name, a sibling of the `.gltf` (also the URI the `.gltf` uses).
     pub name: String,
+    /// The file's complete content.
     pub bytes: Vec<u8>,
 }
 

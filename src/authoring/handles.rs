@@ -2,8 +2,8 @@
 //!
 //! Invariant: a handle is the index of its element in the builder that returned it, which
 //! is also the element's index in the written glTF array; a handle is only meaningful for
-//! that builder ([`GltfBuilder::validate`](super::GltfBuilder::validate) re-checks every
-//! reference).
+//! that builder ([`GltfBuilder::validate`](super::GltfBuilder::validate) re-checks
+//! every reference).
 
 macro_rules! handle {
     ($(#[$doc:meta])* $name:ident) => {
@@ -21,34 +21,34 @@ macro_rules! handle {
 }
 
 handle!(
-    /// A geometry added with [`GltfBuilder::add_geometry`] (written once as accessors).
+    /// A geometry added with [`add_geometry`](super::GltfBuilder::add_geometry), written once.
     GeometryId
 );
 handle!(
-    /// A mesh added with [`GltfBuilder::add_mesh`].
+    /// A mesh added with [`add_mesh`](super::GltfBuilder::add_mesh).
     MeshId
 );
 handle!(
-    /// An image added with [`GltfBuilder::add_image`].
+    /// An image added with [`add_image`](super::GltfBuilder::add_image).
     ImageId
 );
 handle!(
-    /// A material added with [`GltfBuilder::add_material`].
+    /// A material added with [`add_material`](super::GltfBuilder::add_material).
     MaterialId
 );
 handle!(
-    /// A node added with [`GltfBuilder::add_node`].
+    /// A node added with [`add_node`](super::GltfBuilder::add_node).
     NodeId
 );
 handle!(
-    /// A camera added with [`GltfBuilder::add_camera`].
+    /// A camera added with [`add_camera`](super::GltfBuilder::add_camera).
     CameraId
 );
 handle!(
-    /// A light added with [`GltfBuilder::add_point_light`].
+    /// A light added with [`add_point_light`](super::GltfBuilder::add_point_light).
     LightId
 );
 handle!(
-    /// An animation added with [`GltfBuilder::add_animation`].
+    /// An animation added with [`add_animation`](super::GltfBuilder::add_animation).
     AnimationId
 );

@@ -10,17 +10,23 @@ use super::handles::ImageId;
 /// How texture coordinates outside [0, 1] map back into the image (glTF sampler wrap).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default)]
 pub enum WrapMode {
+    /// Tile the image (glTF `REPEAT`, the default).
     #[default]
     Repeat,
+    /// Use the edge texel (glTF `CLAMP_TO_EDGE`).
     ClampToEdge,
+    /// Tile, flipping every other copy (glTF `MIRRORED_REPEAT`).
     MirroredRepeat,
 }
 
 /// A material's use of an image: which image, and how it wraps along U (s) and V (t).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
 pub struct TextureBinding {
+    /// The image sampled.
     pub image: ImageId,
+    /// Wrap along U.
     pub wrap_s: WrapMode,
+    /// Wrap along V.
     pub wrap_t: WrapMode,
 }
 
@@ -38,9 +44,11 @@ impl TextureBinding {
 /// A metallic-roughness material, with optional specular transmission.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Material {
+    /// Shown by viewers; need not be unique.
     pub name: String,
     /// Linear RGBA base colour factor (multiplies the texture).
     pub base_color: Vec4,
+    /// sRGB base-colour image, read with the primitive's `TEXCOORD_0`.
     pub base_color_texture: Option<TextureBinding>,
     /// In [0, 1].
     pub metallic: f32,
@@ -50,6 +58,7 @@ pub struct Material {
     pub transmission: Option<f32>,
     /// `KHR_materials_ior` index of refraction (>= 1); `None` leaves the extension out.
     pub ior: Option<f32>,
+    /// Whether back faces are shaded too (glTF `doubleSided`).
     pub double_sided: bool,
 }
 

@@ -13,6 +13,8 @@
 //! document and buffer); `shapes.rs` and `textures.rs` (generators); `default_scene.rs`
 //! (the default animation).
 
+#![warn(missing_docs)]
+
 mod animation;
 mod binary_buffer;
 mod builder;

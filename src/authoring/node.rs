@@ -11,6 +11,7 @@ use super::handles::{CameraId, GeometryId, LightId, MaterialId, MeshId, NodeId};
 /// One primitive of a mesh: a geometry drawn with a material.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct Primitive {
+    /// The triangles drawn.
     pub geometry: GeometryId,
     /// `None` uses the glTF default material.
     pub material: Option<MaterialId>,
@@ -19,13 +20,16 @@ pub struct Primitive {
 /// A mesh: primitives that several nodes may instance.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Mesh {
+    /// Shown by viewers; need not be unique.
     pub name: String,
+    /// At least one.
     pub primitives: Vec<Primitive>,
 }
 
 /// A perspective camera; it looks down its node's -Z with +Y up.
 #[derive(Debug, Clone, PartialEq)]
 pub struct PerspectiveCamera {
+    /// Shown by viewers; need not be unique.
     pub name: String,
     /// Vertical field of view in radians, in (0, pi).
     pub yfov: f32,
@@ -40,6 +44,7 @@ pub struct PerspectiveCamera {
 /// A `KHR_lights_punctual` point light at its node's origin.
 #[derive(Debug, Clone, PartialEq)]
 pub struct PointLight {
+    /// Shown by viewers; need not be unique.
     pub name: String,
     /// Linear RGB colour.
     pub color: Vec3,
@@ -52,15 +57,21 @@ pub struct PointLight {
 /// A node of the scene hierarchy: a local TRS transform and what it carries.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Node {
+    /// Shown by viewers and used to find nodes in tests; need not be unique.
     pub name: String,
+    /// Local translation, relative to the parent.
     pub translation: Vec3,
     /// Unit quaternion.
     pub rotation: Quat,
+    /// Local scale along the node's axes.
     pub scale: Vec3,
     /// Nodes whose transforms are relative to this one; each node has at most one parent.
     pub children: Vec<NodeId>,
+    /// A mesh drawn with this node's world transform.
     pub mesh: Option<MeshId>,
+    /// A camera placed at this node's origin.
     pub camera: Option<CameraId>,
+    /// A light placed at this node's origin.
     pub light: Option<LightId>,
 }
 
@@ -79,36 +90,43 @@ impl Node {
         }
     }
 
+    /// Sets the local translation.
     pub fn with_translation(mut self, translation: Vec3) -> Self {
         self.translation = translation;
         self
     }
 
+    /// Sets the local rotation (a unit quaternion).
     pub fn with_rotation(mut self, rotation: Quat) -> Self {
         self.rotation = rotation;
         self
     }
 
+    /// Sets the local scale.
     pub fn with_scale(mut self, scale: Vec3) -> Self {
         self.scale = scale;
         self
     }
 
+    /// Attaches a mesh.
     pub fn with_mesh(mut self, mesh: MeshId) -> Self {
         self.mesh = Some(mesh);
         self
     }
 
+    /// Attaches a camera.
     pub fn with_camera(mut self, camera: CameraId) -> Self {
         self.camera = Some(camera);
         self
     }
 
+    /// Attaches a light.
     pub fn with_light(mut self, light: LightId) -> Self {
         self.light = Some(light);
         self
     }
 
+    /// Appends children (each must have no other parent).
     pub fn with_children(mut self, children: impl IntoIterator<Item = NodeId>) -> Self {
         self.children.extend(children);
         self

@@ -15,6 +15,7 @@ use glam::{Vec2, Vec3};
 /// `< positions.len()`; all numbers are finite.
 #[derive(Debug, Clone, Default, PartialEq)]
 pub struct MeshData {
+    /// Vertex positions in object space (metres).
     pub positions: Vec<Vec3>,
     /// Unit-length vertex normals.
     pub normals: Option<Vec<Vec3>>,
@@ -77,7 +78,7 @@ impl MeshData {
                 return Err("non-finite uv".into());
             }
         }
-        if self.indices.is_empty() || self.indices.len() % 3 != 0 {
+        if self.indices.is_empty() || !self.indices.len().is_multiple_of(3) {
             return Err(format!(
                 "{} indices (not a positive multiple of 3)",
                 self.indices.len()

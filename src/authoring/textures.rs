@@ -11,7 +11,9 @@ use image::codecs::png::{CompressionType, FilterType, PngEncoder};
 /// An 8-bit RGBA image in memory, row-major, row 0 at the top.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct RgbaImage {
+    /// Columns, > 0.
     pub width: u32,
+    /// Rows, > 0.
     pub height: u32,
     /// `width * height * 4` bytes: sRGB-encoded red, green, blue, then linear alpha.
     pub pixels: Vec<u8>,
@@ -98,7 +100,9 @@ pub struct BrickPattern {
     pub bricks_per_row: u32,
     /// Mortar line width in pixels.
     pub mortar_px: u32,
+    /// Base colour of a brick (sRGB RGBA).
     pub brick: [u8; 4],
+    /// Colour of the joints (sRGB RGBA).
     pub mortar: [u8; 4],
     /// Largest brightness change of one brick, in 8-bit steps (each brick gets a fixed,
     /// hashed shade in `[-variation, variation]`).
