@@ -129,7 +129,7 @@ fn default_has_one_16_by_9_camera_at_eye_height() {
     assert_eq!(camera_nodes[0]["camera"], 0);
     assert_eq!(
         camera_nodes[0]["translation"],
-        serde_json::json!([0.0, 1.6, 6.0])
+        serde_json::json!([0.0, 1.6, 4.0])
     );
     // Pitched down 6 degrees about +X: quaternion (-sin 3deg, 0, 0, cos 3deg).
     let rotation = &camera_nodes[0]["rotation"];
@@ -152,14 +152,14 @@ fn default_has_two_punctual_point_lights_on_nodes() {
         .unwrap();
     assert_eq!(lights.len(), 2);
     assert!(lights.iter().all(|l| l["type"] == "point"));
-    assert_eq!(lights[0]["intensity"], 400.0);
+    assert_eq!(lights[0]["intensity"], 150.0);
     assert_eq!(lights[1]["intensity"], 200000.0);
     let (_, key) = node_named(&doc, "KeyLight");
     let (_, sky) = node_named(&doc, "SkyLight");
     assert_eq!(key["extensions"]["KHR_lights_punctual"]["light"], 0);
     assert_eq!(sky["extensions"]["KHR_lights_punctual"]["light"], 1);
-    assert_eq!(key["translation"], serde_json::json!([-3.0, 6.0, 3.0]));
-    assert_eq!(sky["translation"], serde_json::json!([0.0, 150.0, -120.0]));
+    assert_eq!(key["translation"], serde_json::json!([-3.0, 5.0, 2.0]));
+    assert_eq!(sky["translation"], serde_json::json!([0.0, 300.0, -150.0]));
 }
 
 #[test]
@@ -227,7 +227,10 @@ fn default_has_one_glass_and_one_mirror_material() {
             .unwrap()
             .contains(&glass_index.into())
     );
-    assert!(approx(&mirror["rotation"][1], -(18f64.to_radians().sin())));
+    assert!(approx(
+        &mirror["rotation"][1],
+        -(18.5f64.to_radians().sin())
+    ));
 }
 
 #[test]

@@ -4,22 +4,25 @@
 //! and the box, a glass sphere that refracts them, two point lights and one camera.
 //!
 //! Layout (metres; +Y up, the camera looks toward -Z):
-//! - camera at (0, 1.6, 6), pitched 6 degrees down, yfov 50 degrees, aspect 16:9;
+//! - camera at (0, 1.6, 4), pitched 6 degrees down, yfov 50 degrees, aspect 16:9: the
+//!   horizon sits 6 degrees above the image centre and the floor reaches up to it;
 //! - floor: 400 m x 400 m at y = 0 spanning z in [-390, 10], a 512 px checker of 8 x 8
 //!   squares repeated 50 times per side (1 m squares), REPEAT wrap;
 //! - `TexturedBox`: a 1 m brick cube tilted 20 degrees, orbiting (0, 1, -3.5) on a 2 m x
 //!   1.2 m ellipse with a small bob while turning once about +Y: node animation of
 //!   translation and rotation, LINEAR, 17 keys over exactly 1.6 s, last key = first key
 //!   (rotation negated, the same orientation), so 48 frames at 30 fps loop seamlessly;
-//! - `Mirror`: a 2.4 m x 1.6 m mirror (metallic 1, roughness 0) in a wooden frame at
-//!   (3.6, 0, -6), turned -36 degrees about +Y so it faces halfway between the camera and
-//!   the box's orbit;
-//! - `GlassSphere`: radius 0.7 m resting on the floor at (-1.2, 0.7, 0.5), transmission 1,
-//!   ior 1.5; the box passes behind it as seen from the camera;
-//! - lights (illuminance `E = I cos(theta) / d^2`): `KeyLight`, 400 cd at (-3, 6, 3), gives
-//!   about 3-6 lux on the objects and the near floor; `SkyLight`, 200 000 cd high above the
-//!   far floor at (0, 150, -120), gives 4-9 lux over the first 250 m and still about 1 lux
-//!   at the far edge, so the distant checker (where aliasing shows) stays visible.
+//! - `Mirror`: a 2.4 m x 1.6 m mirror (metallic 1, roughness 0) in a wooden frame standing
+//!   at (3.6, 0, -6), turned -37 degrees about +Y so it faces halfway between the camera
+//!   and the box's orbit: it shows the floor and the box at every key;
+//! - `GlassSphere`: radius 0.7 m resting on the floor at (-1.2, 0.7, -0.2), transmission 1,
+//!   ior 1.5; around t = 1.2 s the box passes behind it as seen from the camera;
+//! - lights (illuminance `E = I cos(theta) / d^2`, no range): `KeyLight`, 150 cd at
+//!   (-3, 5, 2), 5-8 m from the objects, gives them and the near floor 1.5-3.7 lux;
+//!   `SkyLight`, 200 000 cd high above the floor at (0, 300, -150), gives the whole floor
+//!   1.1-2.2 lux (1.6 near the camera, 1.1 at the far edge), so the distant checker,
+//!   where aliasing shows, is lit about as well as the near one. With a Lambertian
+//!   `albedo / pi` BRDF the near light squares leave about 0.5-1 radiance units.
 
 use std::f32::consts::TAU;
 use std::path::{Path, PathBuf};
@@ -44,6 +47,23 @@ pub const DEFAULT_DURATION_SECONDS: f32 = 1.6;
 /// Keyframe intervals of the box animation over [`DEFAULT_DURATION_SECONDS`].
 const KEY_INTERVALS: u32 = 16;
 
+/// The camera's position: eye height 1.6 m.
+const CAMERA_EYE: Vec3 = Vec3::new(0.0, 1.6, 4.0);
+/// Downward tilt of the camera.
+const CAMERA_PITCH_DEGREES: f32 = 6.0;
+/// Centre of the box's orbit.
+const ORBIT_CENTRE: Vec3 = Vec3::new(0.0, 1.0, -3.5);
+/// Radius of the glass sphere.
+const SPHERE_RADIUS: f32 = 0.7;
+/// Centre of the glass sphere, which rests on the floor.
+const SPHERE_CENTRE: Vec3 = Vec3::new(-1.2, SPHERE_RADIUS, -0.2);
+/// Foot of the mirror stand (the mirror's node origin).
+const MIRROR_POSITION: Vec3 = Vec3::new(3.6, 0.0, -6.0);
+/// Turn of the mirror about +Y, so it faces between the camera and the orbit.
+const MIRROR_YAW_DEGREES: f32 = -37.0;
+/// Height of the mirror glass's centre above its foot.
+const MIRROR_CENTRE_Y: f32 = 1.1;
+
 /// The default animation as a builder (see the module documentation for its layout).
 pub fn default_scene() -> GltfBuilder {
     let mut scene = GltfBuilder::new();
@@ -65,13 +85,13 @@ pub fn write_default(dir: &Path) -> Result<Vec<PathBuf>, AuthoringError> {
     default_scene().write(dir, DEFAULT_SCENE_NAME)
 }
 
-/// The 400 m checkered floor, its far edge 396 m from the camera.
+/// The 400 m checkered floor, its far edge 394 m from the camera.
 fn add_floor(scene: &mut GltfBuilder) {
     const SIZE: f32 = 400.0;
     const TILE_METRES: f32 = 8.0; // one texture repeat = 8 x 8 squares of 1 m
     let checker = scene.add_image(
         "floor_checker",
-        checkerboard(512, 8, [235, 235, 235, 255], [30, 30, 30, 255]),
+        checkerboard(512, 8, [210, 210, 210, 255], [30, 30, 30, 255]),
     );
     let material = scene.add_material(Material::textured(
         "Floor",
@@ -105,15 +125,16 @@ fn add_textured_box(scene: &mut GltfBuilder) -> NodeId {
     )
 }
 
-/// Box position at key `i`: an ellipse around (0, 1, -3.5), nearest the camera at i = 0,
-/// bobbing 0.2 m twice per loop.
+/// Box position at key `i`: a 2 m x 1.2 m ellipse around [`ORBIT_CENTRE`], nearest the
+/// camera at i = 0, bobbing 0.2 m twice per loop.
 fn box_translation(i: u32) -> Vec3 {
     let angle = TAU * (i % KEY_INTERVALS) as f32 / KEY_INTERVALS as f32;
-    Vec3::new(
-        2.0 * angle.sin(),
-        1.0 + 0.2 * (2.0 * angle).sin(),
-        -3.5 + 1.2 * angle.cos(),
-    )
+    ORBIT_CENTRE
+        + Vec3::new(
+            2.0 * angle.sin(),
+            0.2 * (2.0 * angle).sin(),
+            1.2 * angle.cos(),
+        )
 }
 
 /// Box orientation at key `i`: tilted 20 degrees about X, turned `i / 16` of a full turn
@@ -151,7 +172,6 @@ fn box_animation(node: NodeId) -> Animation {
 fn add_mirror(scene: &mut GltfBuilder) {
     const WIDTH: f32 = 2.4;
     const HEIGHT: f32 = 1.6;
-    const CENTRE_Y: f32 = 1.1;
     const BAR: f32 = 0.08;
     const DEPTH: f32 = 0.06;
     let glass = scene.add_material(Material::mirror("Mirror", Vec3::splat(0.95)));
@@ -168,9 +188,9 @@ fn add_mirror(scene: &mut GltfBuilder) {
     let glass_node = scene.add_node(
         Node::new("MirrorGlass")
             .with_mesh(glass_mesh)
-            .with_translation(Vec3::new(0.0, CENTRE_Y, 0.0)),
+            .with_translation(Vec3::new(0.0, MIRROR_CENTRE_Y, 0.0)),
     );
-    let post_height = CENTRE_Y + HEIGHT / 2.0 + BAR;
+    let post_height = MIRROR_CENTRE_Y + HEIGHT / 2.0 + BAR;
     let bar_x = WIDTH / 2.0 + BAR / 2.0;
     let bars = [
         (
@@ -180,7 +200,7 @@ fn add_mirror(scene: &mut GltfBuilder) {
         ),
         (
             "MirrorFrameBottom",
-            Vec3::new(0.0, CENTRE_Y - HEIGHT / 2.0 - BAR / 2.0, 0.0),
+            Vec3::new(0.0, MIRROR_CENTRE_Y - HEIGHT / 2.0 - BAR / 2.0, 0.0),
             Vec3::new(WIDTH + 2.0 * BAR, BAR, DEPTH),
         ),
         (
@@ -195,7 +215,7 @@ fn add_mirror(scene: &mut GltfBuilder) {
         ),
         (
             "MirrorBack",
-            Vec3::new(0.0, CENTRE_Y, -0.015),
+            Vec3::new(0.0, MIRROR_CENTRE_Y, -0.015),
             Vec3::new(WIDTH, HEIGHT, 0.02),
         ),
     ];
@@ -212,25 +232,24 @@ fn add_mirror(scene: &mut GltfBuilder) {
     }
     scene.add_node(
         Node::new("Mirror")
-            .with_translation(Vec3::new(3.6, 0.0, -6.0))
-            .with_rotation(Quat::from_rotation_y(-36f32.to_radians()))
+            .with_translation(MIRROR_POSITION)
+            .with_rotation(Quat::from_rotation_y(MIRROR_YAW_DEGREES.to_radians()))
             .with_children(children),
     );
 }
 
 /// A clear glass ball resting on the floor between the camera and the box's orbit.
 fn add_glass_sphere(scene: &mut GltfBuilder) {
-    const RADIUS: f32 = 0.7;
     let glass = scene.add_material(Material::glass("Glass", 1.5));
     let mesh = scene.add_simple_mesh(
         "GlassSphere",
-        uv_sphere(RADIUS, 32, 16).without_uvs(),
+        uv_sphere(SPHERE_RADIUS, 32, 16).without_uvs(),
         glass,
     );
     scene.add_node(
         Node::new("GlassSphere")
             .with_mesh(mesh)
-            .with_translation(Vec3::new(-1.2, RADIUS, 0.5)),
+            .with_translation(SPHERE_CENTRE),
     );
 }
 
@@ -239,7 +258,7 @@ fn add_lights(scene: &mut GltfBuilder) {
     let key = scene.add_point_light(PointLight {
         name: "KeyLight".into(),
         color: Vec3::new(1.0, 0.95, 0.88),
-        intensity: 400.0,
+        intensity: 150.0,
         range: None,
     });
     let sky = scene.add_point_light(PointLight {
@@ -251,12 +270,12 @@ fn add_lights(scene: &mut GltfBuilder) {
     scene.add_node(
         Node::new("KeyLight")
             .with_light(key)
-            .with_translation(Vec3::new(-3.0, 6.0, 3.0)),
+            .with_translation(Vec3::new(-3.0, 5.0, 2.0)),
     );
     scene.add_node(
         Node::new("SkyLight")
             .with_light(sky)
-            .with_translation(Vec3::new(0.0, 150.0, -120.0)),
+            .with_translation(Vec3::new(0.0, 300.0, -150.0)),
     );
 }
 
@@ -272,8 +291,8 @@ fn add_camera(scene: &mut GltfBuilder) {
     scene.add_node(
         Node::new("Camera")
             .with_camera(camera)
-            .with_translation(Vec3::new(0.0, 1.6, 6.0))
-            .with_rotation(Quat::from_rotation_x(-6f32.to_radians())),
+            .with_translation(CAMERA_EYE)
+            .with_rotation(Quat::from_rotation_x(-CAMERA_PITCH_DEGREES.to_radians())),
     );
 }
 
@@ -307,8 +326,8 @@ mod tests {
             // Half the height of a unit cube tilted 20 degrees about X.
             let half_height = 0.5 * (20f32.to_radians().cos() + 20f32.to_radians().sin());
             assert!(p.y - half_height > 0.1, "key {i} at {p}");
-            let to_sphere = p - Vec3::new(-1.2, 0.7, 0.5);
-            assert!(to_sphere.length() > 0.7 + 0.87 + 0.5, "key {i}");
+            let to_sphere = p - SPHERE_CENTRE;
+            assert!(to_sphere.length() > SPHERE_RADIUS + 0.87 + 0.5, "key {i}");
         }
     }
 
@@ -337,8 +356,11 @@ mod tests {
         for i in 0..=KEY_INTERVALS {
             assert!(in_view(box_translation(i)), "box key {i}");
         }
-        assert!(in_view(Vec3::new(-1.2, 0.7, 0.5)), "sphere");
-        assert!(in_view(Vec3::new(3.6, 1.1, -6.0)), "mirror");
+        assert!(in_view(SPHERE_CENTRE), "sphere");
+        assert!(
+            in_view(MIRROR_POSITION + MIRROR_CENTRE_Y * Vec3::Y),
+            "mirror"
+        );
         // The horizon (a far point at eye height) is above the centre, the floor below.
         let horizon = project(&scene, Vec3::new(0.0, 1.6, -1.0e5));
         assert!(horizon.y > 0.1 && horizon.y < 0.5, "horizon at {horizon}");
@@ -353,7 +375,7 @@ mod tests {
     fn mirror_shows_the_box_to_the_camera() {
         let scene = default_scene();
         let mirror = scene.nodes.iter().find(|n| n.name == "Mirror").unwrap();
-        let centre = mirror.translation + Vec3::new(0.0, 1.1, 0.0);
+        let centre = mirror.translation + MIRROR_CENTRE_Y * Vec3::Y;
         let normal = mirror.rotation * Vec3::Z;
         let (world_from_camera, _) = camera(&scene);
         let eye = world_from_camera.transform_point3(Vec3::ZERO);
