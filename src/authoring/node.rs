@@ -146,3 +146,25 @@ impl Node {
         self.with_translation(eye).with_rotation(rotation)
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn looking_at_points_minus_z_at_the_target_with_y_up() {
+        let eye = Vec3::new(1.0, 2.0, 3.0);
+        let target = Vec3::new(4.0, 0.0, -3.0);
+        let node = Node::new("Camera").looking_at(eye, target, Vec3::Y);
+        assert_eq!(node.translation, eye);
+        let forward = node.rotation * Vec3::NEG_Z;
+        assert!(
+            forward.abs_diff_eq((target - eye).normalize(), 1e-6),
+            "{forward}"
+        );
+        let up = node.rotation * Vec3::Y;
+        assert!(up.y > 0.0 && up.dot(forward).abs() < 1e-6);
+        let right = node.rotation * Vec3::X;
+        assert!(right.y.abs() < 1e-6, "no roll: right stays horizontal");
+    }
+}
