@@ -125,3 +125,26 @@ fn bad_options_are_refused() {
         assert!(!stderr(&out).contains("panicked"), "{args:?}: {}", stderr(&out));
     }
 }
+
+#[test]
+fn default_animation_renders_by_name_identically_with_one_or_two_threads() {
+    let dir = tempfile::tempdir().unwrap();
+    let common = ["render", "default", "--size", "96x54", "--frames", "10..12", "--spp", "2"];
+    for threads in ["1", "2"] {
+        let out_dir = format!("t{threads}");
+        let mut args = common.to_vec();
+        args.extend(["--threads", threads, "--out", &out_dir]);
+        let out = mipray(&args, dir.path());
+        assert!(out.status.success(), "{}", stderr(&out));
+    }
+    for frame in ["frame_0010.png", "frame_0011.png"] {
+        let a = std::fs::read(dir.path().join("t1").join(frame)).unwrap();
+        let b = std::fs::read(dir.path().join("t2").join(frame)).unwrap();
+        assert!(a == b, "{frame} differs between 1 and 2 threads");
+    }
+    // Frame 11 rendered alone is the same file as frame 11 of the sequence.
+    let out = mipray(&["render", "default", "--size", "96x54", "--frames", "11", "--spp", "2", "--out", "alone"], dir.path());
+    assert!(out.status.success(), "{}", stderr(&out));
+    let alone = std::fs::read(dir.path().join("alone/frame_0011.png")).unwrap();
+    assert!(alone == std::fs::read(dir.path().join("t1/frame_0011.png")).unwrap(), "frame 11 alone differs");
+}
