@@ -25,6 +25,12 @@ fn axis(t: f32, n: u32, mode: WrapMode) -> (usize, usize, f32) {
     let x = t * n_f - 0.5;
     let x0 = x.floor();
     let frac = (x - x0) as f32;
+    // Fast path: both texels inside the level (the common case, since UVs are rebased per
+    // triangle near [0, 1]): no wrapping needed, and the result equals the wrapped one.
+    if x0 >= 0.0 && x0 + 1.0 < n_f {
+        let i0 = x0 as usize;
+        return (i0, i0 + 1, frac);
+    }
     // Reduce x0 to a small range with the same wrapped result before converting to an
     // integer: `rem_euclid` on f64 is exact, and the bounds keep `i0 + 1` in range too.
     let i0 = match mode {
