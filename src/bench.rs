@@ -47,11 +47,23 @@ pub fn run_bench(
 ) -> Result<Vec<BenchResult>> {
     let pools = configs
         .iter()
-        .map(|c| rayon::ThreadPoolBuilder::new().num_threads(c.threads).build())
+        .map(|c| {
+            rayon::ThreadPoolBuilder::new()
+                .num_threads(c.threads)
+                .build()
+        })
         .collect::<Result<Vec<_>, _>>()?;
     let mut renderers = configs
         .iter()
-        .map(|c| Ok(Renderer::new(load()?, RenderSettings { lod: c.lod, ..settings })))
+        .map(|c| {
+            Ok(Renderer::new(
+                load()?,
+                RenderSettings {
+                    lod: c.lod,
+                    ..settings
+                },
+            ))
+        })
         .collect::<Result<Vec<_>>>()?;
     let n = configs.len();
     // samples[config][repeat] = (render ms, total ms, rays), summed over frames
@@ -72,13 +84,17 @@ pub fn run_bench(
     let frame_count = frames.len().max(1) as f64;
     Ok((0..n)
         .map(|c| {
-            let baseline = (0..n).find(|&b| configs[b].threads == configs[c].threads).unwrap_or(c);
+            let baseline = (0..n)
+                .find(|&b| configs[b].threads == configs[c].threads)
+                .unwrap_or(c);
             BenchResult {
                 config: configs[c],
                 render_ms_per_frame: Spread::of(samples[c].iter().map(|s| s.0 / frame_count)),
                 total_ms_per_frame: Spread::of(samples[c].iter().map(|s| s.1 / frame_count)),
                 rays_per_second: Spread::of(samples[c].iter().map(|s| s.2 as f64 / (s.0 / 1e3))),
-                render_ratio: Spread::of((0..repeats).map(|r| samples[c][r].0 / samples[baseline][r].0)),
+                render_ratio: Spread::of(
+                    (0..repeats).map(|r| samples[c][r].0 / samples[baseline][r].0),
+                ),
             }
         })
         .collect())
@@ -87,7 +103,10 @@ pub fn run_bench(
 /// A Markdown table of bench results.
 pub fn bench_table(results: &[BenchResult]) -> String {
     let mut s = String::new();
-    let _ = writeln!(s, "| lod | threads | render ms/frame (median) | min..max | frame ms (median) | Mrays/s (median) | render ratio vs first (median) |");
+    let _ = writeln!(
+        s,
+        "| lod | threads | render ms/frame (median) | min..max | frame ms (median) | Mrays/s (median) | render ratio vs first (median) |"
+    );
     let _ = writeln!(s, "|---|---:|---:|---:|---:|---:|---:|");
     for r in results {
         let _ = writeln!(

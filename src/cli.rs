@@ -15,7 +15,11 @@ use crate::output::{FrameFormat, OutputDir};
 use crate::scene::SceneDesc;
 
 #[derive(Parser, Debug)]
-#[command(name = "mipray", version, about = "Ray-traced animations with ray-length MIP-map level selection")]
+#[command(
+    name = "mipray",
+    version,
+    about = "Ray-traced animations with ray-length MIP-map level selection"
+)]
 pub struct Cli {
     #[command(subcommand)]
     pub command: Option<Command>,
@@ -138,7 +142,10 @@ pub fn resolve_scene(scene: &str) -> Result<PathBuf> {
     if direct.is_file() {
         return Ok(direct);
     }
-    let folders = [PathBuf::from("animations"), Path::new(env!("CARGO_MANIFEST_DIR")).join("animations")];
+    let folders = [
+        PathBuf::from("animations"),
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("animations"),
+    ];
     for folder in &folders {
         for ext in ["gltf", "glb"] {
             let candidate = folder.join(format!("{scene}.{ext}"));
@@ -147,25 +154,48 @@ pub fn resolve_scene(scene: &str) -> Result<PathBuf> {
             }
         }
     }
-    bail!("{scene}: no such file, and no scene of that name in animations/ (looked in {})", folders.iter().map(|f| f.display().to_string()).collect::<Vec<_>>().join(", "))
+    bail!(
+        "{scene}: no such file, and no scene of that name in animations/ (looked in {})",
+        folders
+            .iter()
+            .map(|f| f.display().to_string())
+            .collect::<Vec<_>>()
+            .join(", ")
+    )
 }
 
 /// Loads a scene file by its extension.
 pub fn load_scene(path: &Path) -> Result<SceneDesc> {
-    let ext = path.extension().and_then(|e| e.to_str()).map(str::to_ascii_lowercase);
+    let ext = path
+        .extension()
+        .and_then(|e| e.to_str())
+        .map(str::to_ascii_lowercase);
     match ext.as_deref() {
         Some("gltf") | Some("glb") => Ok(crate::scene::gltf::load(path)?),
-        _ => bail!("{}: unsupported scene format (expected .gltf or .glb)", path.display()),
+        _ => bail!(
+            "{}: unsupported scene format (expected .gltf or .glb)",
+            path.display()
+        ),
     }
 }
 
 /// Parses `WxH`.
 pub fn parse_size(s: &str) -> Result<(u32, u32)> {
-    let (w, h) = s.split_once(['x', 'X']).with_context(|| format!("--size {s}: expected WxH, e.g. 640x360"))?;
-    let w: u32 = w.trim().parse().with_context(|| format!("--size {s}: bad width"))?;
-    let h: u32 = h.trim().parse().with_context(|| format!("--size {s}: bad height"))?;
+    let (w, h) = s
+        .split_once(['x', 'X'])
+        .with_context(|| format!("--size {s}: expected WxH, e.g. 640x360"))?;
+    let w: u32 = w
+        .trim()
+        .parse()
+        .with_context(|| format!("--size {s}: bad width"))?;
+    let h: u32 = h
+        .trim()
+        .parse()
+        .with_context(|| format!("--size {s}: bad height"))?;
     if w == 0 || h == 0 || w as u64 * h as u64 > MAX_PIXELS {
-        bail!("--size {s}: width and height must be at least 1 and at most {MAX_PIXELS} pixels in all");
+        bail!(
+            "--size {s}: width and height must be at least 1 and at most {MAX_PIXELS} pixels in all"
+        );
     }
     Ok((w, h))
 }
@@ -174,12 +204,21 @@ pub fn parse_size(s: &str) -> Result<(u32, u32)> {
 pub fn parse_frames(s: &str) -> Result<std::ops::Range<u32>> {
     let range = match s.split_once("..") {
         Some((a, b)) => {
-            let a: u32 = a.trim().parse().with_context(|| format!("--frames {s}: bad start"))?;
-            let b: u32 = b.trim().parse().with_context(|| format!("--frames {s}: bad end"))?;
+            let a: u32 = a
+                .trim()
+                .parse()
+                .with_context(|| format!("--frames {s}: bad start"))?;
+            let b: u32 = b
+                .trim()
+                .parse()
+                .with_context(|| format!("--frames {s}: bad end"))?;
             a..b
         }
         None => {
-            let a: u32 = s.trim().parse().with_context(|| format!("--frames {s}: expected A..B or A"))?;
+            let a: u32 = s
+                .trim()
+                .parse()
+                .with_context(|| format!("--frames {s}: expected A..B or A"))?;
             a..a.saturating_add(1)
         }
     };
@@ -197,7 +236,9 @@ pub fn default_frames(duration_s: f32, fps: f64) -> std::ops::Range<u32> {
 }
 
 fn scene_name(path: &Path) -> String {
-    path.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_else(|| "scene".into())
+    path.file_stem()
+        .map(|s| s.to_string_lossy().into_owned())
+        .unwrap_or_else(|| "scene".into())
 }
 
 fn validated_settings(args: &RenderArgs) -> Result<RenderSettings> {
@@ -214,7 +255,14 @@ fn validated_settings(args: &RenderArgs) -> Result<RenderSettings> {
     if !(args.fps.is_finite() && args.fps > 0.0) {
         bail!("--fps {}: must be a positive number", args.fps);
     }
-    Ok(RenderSettings { width, height, lod: args.lod, spp: args.spp, max_depth: args.max_depth, lights: args.lights })
+    Ok(RenderSettings {
+        width,
+        height,
+        lod: args.lod,
+        spp: args.spp,
+        max_depth: args.max_depth,
+        lights: args.lights,
+    })
 }
 
 /// `mipray render`.
@@ -229,7 +277,11 @@ pub fn render(args: &RenderArgs) -> Result<()> {
         Some(f) => parse_frames(f)?,
         None => default_frames(scene.duration(), args.fps),
     };
-    let out = args.out.clone().unwrap_or_else(|| PathBuf::from("out").join(scene_name(&path)).join(args.lod.to_string()));
+    let out = args.out.clone().unwrap_or_else(|| {
+        PathBuf::from("out")
+            .join(scene_name(&path))
+            .join(args.lod.to_string())
+    });
     let mut threads = rayon::ThreadPoolBuilder::new();
     if let Some(n) = args.threads {
         if n == 0 {
@@ -264,13 +316,23 @@ pub fn bench(args: &BenchArgs) -> Result<()> {
         None => default_frames(duration, args.fps),
     };
     let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
-    let mut threads = if args.threads.is_empty() { vec![1, cores] } else { args.threads.clone() };
+    let mut threads = if args.threads.is_empty() {
+        vec![1, cores]
+    } else {
+        args.threads.clone()
+    };
     threads.dedup();
     if threads.contains(&0) {
         bail!("--threads: counts must be at least 1");
     }
-    let configs: Vec<crate::bench::BenchConfig> =
-        threads.iter().flat_map(|&t| args.methods.iter().map(move |&lod| crate::bench::BenchConfig { lod, threads: t })).collect();
+    let configs: Vec<crate::bench::BenchConfig> = threads
+        .iter()
+        .flat_map(|&t| {
+            args.methods
+                .iter()
+                .map(move |&lod| crate::bench::BenchConfig { lod, threads: t })
+        })
+        .collect();
     eprintln!(
         "bench: {} frames {}..{} at {}x{}, {} configurations x {} repeats",
         path.display(),
@@ -281,13 +343,26 @@ pub fn bench(args: &BenchArgs) -> Result<()> {
         configs.len(),
         args.repeats
     );
-    let results = crate::bench::run_bench(|| load_scene(&path), settings, frames, args.fps, &configs, args.repeats)?;
+    let results = crate::bench::run_bench(
+        || load_scene(&path),
+        settings,
+        frames,
+        args.fps,
+        &configs,
+        args.repeats,
+    )?;
     print!("{}", crate::bench::bench_table(&results));
     Ok(())
 }
 
 /// Renders `frames` into `out`, one record per frame, then the summary.
-pub fn render_sequence(renderer: &mut Renderer, frames: std::ops::Range<u32>, fps: f64, out: &Path, format: FrameFormat) -> Result<()> {
+pub fn render_sequence(
+    renderer: &mut Renderer,
+    frames: std::ops::Range<u32>,
+    fps: f64,
+    out: &Path,
+    format: FrameFormat,
+) -> Result<()> {
     let mut output = OutputDir::create(out, format)?;
     let progress = progress_bar(frames.len() as u64);
     let start = Instant::now();
@@ -315,7 +390,10 @@ pub fn render_sequence(renderer: &mut Renderer, frames: std::ops::Range<u32>, fp
         records.len(),
         start.elapsed().as_secs_f64(),
         output.path().display(),
-        summary.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default()
+        summary
+            .file_name()
+            .map(|n| n.to_string_lossy().into_owned())
+            .unwrap_or_default()
     );
     Ok(())
 }
@@ -325,7 +403,9 @@ fn progress_bar(len: u64) -> ProgressBar {
         return ProgressBar::hidden();
     }
     let bar = ProgressBar::new(len);
-    if let Ok(style) = ProgressStyle::with_template("{bar:40} {pos}/{len} frames  elapsed {elapsed}  eta {eta}") {
+    if let Ok(style) =
+        ProgressStyle::with_template("{bar:40} {pos}/{len} frames  elapsed {elapsed}  eta {eta}")
+    {
         bar.set_style(style);
     }
     bar
@@ -338,18 +418,38 @@ pub fn describe(scene: &SceneDesc) -> String {
     let primitives: usize = scene.meshes.iter().map(|m| m.primitives.len()).sum();
     let _ = writeln!(s, "scene: {}", scene.source.display());
     let _ = writeln!(s, "triangles: {}", scene.instanced_triangle_count());
-    let _ = writeln!(s, "meshes: {} ({primitives} primitives)", scene.meshes.len());
+    let _ = writeln!(
+        s,
+        "meshes: {} ({primitives} primitives)",
+        scene.meshes.len()
+    );
     let _ = writeln!(s, "nodes: {}", scene.nodes.len());
     let _ = writeln!(s, "materials: {}", scene.materials.len());
     let _ = writeln!(s, "textures: {}", scene.textures.len());
     for t in &scene.textures {
         let (w, h) = t.pyramid.base_size();
-        let _ = writeln!(s, "  {}: {w}x{h}, {} MIP levels, wrap {:?}/{:?}", t.name, t.pyramid.level_count(), t.sampler.wrap_s, t.sampler.wrap_t);
+        let _ = writeln!(
+            s,
+            "  {}: {w}x{h}, {} MIP levels, wrap {:?}/{:?}",
+            t.name,
+            t.pyramid.level_count(),
+            t.sampler.wrap_s,
+            t.sampler.wrap_t
+        );
     }
     let _ = writeln!(s, "animations: {}", scene.animations.len());
     for (i, a) in scene.animations.iter().enumerate() {
-        let name = if a.name.is_empty() { format!("#{i}") } else { a.name.clone() };
-        let _ = writeln!(s, "  {name}: {:.3} s, {} channels", a.duration(), a.channels.len());
+        let name = if a.name.is_empty() {
+            format!("#{i}")
+        } else {
+            a.name.clone()
+        };
+        let _ = writeln!(
+            s,
+            "  {name}: {:.3} s, {} channels",
+            a.duration(),
+            a.channels.len()
+        );
     }
     let _ = writeln!(s, "cameras: {}", scene.cameras.len());
     for c in &scene.cameras {
@@ -357,7 +457,13 @@ pub fn describe(scene: &SceneDesc) -> String {
     }
     let _ = writeln!(s, "lights: {}", scene.lights.len());
     for l in &scene.lights {
-        let _ = writeln!(s, "  {:?}, intensity {}, colour {:?}", l.kind, l.intensity, l.color.to_array());
+        let _ = writeln!(
+            s,
+            "  {:?}, intensity {}, colour {:?}",
+            l.kind,
+            l.intensity,
+            l.color.to_array()
+        );
     }
     for note in &scene.notes {
         let _ = writeln!(s, "note: {note}");

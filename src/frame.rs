@@ -16,7 +16,7 @@ use crate::anim::node_world_transforms;
 use crate::geometry::{FrameTriangles, SceneGeometry};
 use crate::lod::{LodMethod, PixelFootprint, log2_pb};
 use crate::render::light::ring_lights;
-use crate::render::{Camera, FrameScene, LinearImage, Light, TraceCounters, render_image};
+use crate::render::{Camera, FrameScene, Light, LinearImage, TraceCounters, render_image};
 use crate::scene::SceneDesc;
 
 /// How frames are rendered (the CLI's render options).
@@ -36,7 +36,14 @@ pub struct RenderSettings {
 
 impl Default for RenderSettings {
     fn default() -> Self {
-        RenderSettings { width: 640, height: 360, lod: LodMethod::Paper, spp: 1, max_depth: 5, lights: None }
+        RenderSettings {
+            width: 640,
+            height: 360,
+            lod: LodMethod::Paper,
+            spp: 1,
+            max_depth: 5,
+            lights: None,
+        }
     }
 }
 
@@ -74,7 +81,11 @@ pub struct FrameRecord {
 #[derive(Debug, thiserror::Error)]
 pub enum FrameError {
     #[error("frame {frame} (t = {time_s} s): {source}")]
-    Accel { frame: u32, time_s: f32, source: AccelError },
+    Accel {
+        frame: u32,
+        time_s: f32,
+        source: AccelError,
+    },
 }
 
 /// One frame after its update: the BVH, camera and lights, and what the update cost.
@@ -111,10 +122,26 @@ impl Renderer {
         let camera_node = first_node_with(&scene, |n| n.camera.is_some());
         let yfov = match camera_node {
             Some(node) => scene.cameras[scene.nodes[node].camera.unwrap_or(0)].yfov,
-            None => Camera::framing(rest_bounds.0, rest_bounds.1, settings.width, settings.height).yfov,
+            None => {
+                Camera::framing(
+                    rest_bounds.0,
+                    rest_bounds.1,
+                    settings.width,
+                    settings.height,
+                )
+                .yfov
+            }
         };
         let footprint = PixelFootprint::new(yfov, settings.height);
-        Renderer { scene, geometry, settings, camera_node, rest_bounds, footprint, triangles }
+        Renderer {
+            scene,
+            geometry,
+            settings,
+            camera_node,
+            rest_bounds,
+            footprint,
+            triangles,
+        }
     }
 
     pub fn scene(&self) -> &SceneDesc {
@@ -135,15 +162,36 @@ impl Renderer {
     ///
     /// # Errors
     /// Animation produced a non-finite vertex.
-    pub fn render_frame(&mut self, frame: u32, time_s: f32) -> Result<(LinearImage, FrameRecord), FrameError> {
+    pub fn render_frame(
+        &mut self,
+        frame: u32,
+        time_s: f32,
+    ) -> Result<(LinearImage, FrameRecord), FrameError> {
         let start = Instant::now();
         let prepared = self.prepare(frame, time_s)?;
         let t = Instant::now();
-        let (image, counters) = render_image(&self.frame_scene(&prepared), &prepared.camera, self.settings.spp.max(1));
+        let (image, counters) = render_image(
+            &self.frame_scene(&prepared),
+            &prepared.camera,
+            self.settings.spp.max(1),
+        );
         let render_ms = ms_since(t);
         let p = &prepared;
-        let ms = [p.animate_ms, p.build_ms, p.lod_update_ms, render_ms, ms_since(start)];
-        let record = self.record(frame, time_s, p.lights.len(), counters, ms, p.lod_recomputed);
+        let ms = [
+            p.animate_ms,
+            p.build_ms,
+            p.lod_update_ms,
+            render_ms,
+            ms_since(start),
+        ];
+        let record = self.record(
+            frame,
+            time_s,
+            p.lights.len(),
+            counters,
+            ms,
+            p.lod_recomputed,
+        );
         Ok((image, record))
     }
 
@@ -155,15 +203,24 @@ impl Renderer {
     pub fn prepare(&mut self, frame: u32, time_s: f32) -> Result<PreparedFrame, FrameError> {
         let start = Instant::now();
         let world = node_world_transforms(&self.scene, time_s);
-        self.geometry.world_triangles(&self.scene, &world, &mut self.triangles);
+        self.geometry
+            .world_triangles(&self.scene, &world, &mut self.triangles);
         let animate_ms = ms_since(start);
 
         let t = Instant::now();
-        let accel = Accel::build(&mut self.triangles).map_err(|source| FrameError::Accel { frame, time_s, source })?;
+        let accel = Accel::build(&mut self.triangles).map_err(|source| FrameError::Accel {
+            frame,
+            time_s,
+            source,
+        })?;
         let build_ms = ms_since(t);
 
         let t = Instant::now();
-        let lod_recomputed = if self.settings.lod.needs_log2_pb() { self.update_log2_pb() } else { 0 };
+        let lod_recomputed = if self.settings.lod.needs_log2_pb() {
+            self.update_log2_pb()
+        } else {
+            0
+        };
         let lod_update_ms = ms_since(t);
 
         Ok(PreparedFrame {
@@ -192,7 +249,15 @@ impl Renderer {
     }
 
     #[allow(clippy::too_many_arguments)]
-    fn record(&self, frame: u32, time_s: f32, lights: usize, counters: TraceCounters, ms: [f64; 5], lod_recomputed: usize) -> FrameRecord {
+    fn record(
+        &self,
+        frame: u32,
+        time_s: f32,
+        lights: usize,
+        counters: TraceCounters,
+        ms: [f64; 5],
+        lod_recomputed: usize,
+    ) -> FrameRecord {
         let [animate_ms, build_ms, lod_update_ms, render_ms, total_ms] = ms;
         FrameRecord {
             frame,
@@ -221,10 +286,18 @@ impl Renderer {
         let tris = &mut self.triangles;
         for slot in 0..tris.positions.len() {
             let material = &self.geometry.materials[tris.material[slot] as usize];
-            let Some(texture) = material.base_color_texture.and_then(|t| self.scene.textures.get(t)) else {
+            let Some(texture) = material
+                .base_color_texture
+                .and_then(|t| self.scene.textures.get(t))
+            else {
                 continue;
             };
-            tris.log2_pb[slot] = log2_pb(tris.positions[slot], tris.uvs[slot], texture.pyramid.base_size(), self.footprint);
+            tris.log2_pb[slot] = log2_pb(
+                tris.positions[slot],
+                tris.uvs[slot],
+                texture.pyramid.base_size(),
+                self.footprint,
+            );
             computed += 1;
         }
         computed
@@ -242,7 +315,11 @@ impl Renderer {
     }
 
     fn scene_light_nodes(&self) -> Vec<usize> {
-        self.scene.traversal_order().into_iter().filter(|&i| self.scene.nodes[i].light.is_some()).collect()
+        self.scene
+            .traversal_order()
+            .into_iter()
+            .filter(|&i| self.scene.nodes[i].light.is_some())
+            .collect()
     }
 
     fn lights(&self, world: &[glam::Mat4]) -> Vec<Light> {
@@ -251,7 +328,12 @@ impl Renderer {
             .scene_light_nodes()
             .into_iter()
             .take(wanted)
-            .map(|node| Light::placed(&self.scene.lights[self.scene.nodes[node].light.unwrap_or(0)], world[node]))
+            .map(|node| {
+                Light::placed(
+                    &self.scene.lights[self.scene.nodes[node].light.unwrap_or(0)],
+                    world[node],
+                )
+            })
             .collect();
         if lights.len() < wanted {
             let (min, max) = self.rest_bounds;
@@ -261,19 +343,34 @@ impl Renderer {
     }
 }
 
-fn first_node_with(scene: &SceneDesc, predicate: impl Fn(&crate::scene::NodeDesc) -> bool) -> Option<usize> {
-    scene.traversal_order().into_iter().find(|&i| predicate(&scene.nodes[i]))
+fn first_node_with(
+    scene: &SceneDesc,
+    predicate: impl Fn(&crate::scene::NodeDesc) -> bool,
+) -> Option<usize> {
+    scene
+        .traversal_order()
+        .into_iter()
+        .find(|&i| predicate(&scene.nodes[i]))
 }
 
 /// Axis-aligned bounds of the finite vertices (a unit box when there are none).
 fn bounds(triangles: &FrameTriangles) -> (Vec3, Vec3) {
     let mut min = Vec3::splat(f32::INFINITY);
     let mut max = Vec3::splat(f32::NEG_INFINITY);
-    for p in triangles.positions.iter().flatten().filter(|p| p.is_finite()) {
+    for p in triangles
+        .positions
+        .iter()
+        .flatten()
+        .filter(|p| p.is_finite())
+    {
         min = min.min(Vec3::from(*p));
         max = max.max(Vec3::from(*p));
     }
-    if min.cmple(max).all() { (min, max) } else { (Vec3::splat(-1.0), Vec3::splat(1.0)) }
+    if min.cmple(max).all() {
+        (min, max)
+    } else {
+        (Vec3::splat(-1.0), Vec3::splat(1.0))
+    }
 }
 
 fn ms_since(t: Instant) -> f64 {

@@ -37,13 +37,22 @@ impl FrameFormat {
 #[derive(Debug, thiserror::Error)]
 pub enum OutputError {
     #[error("{path}: {source}")]
-    Io { path: PathBuf, source: std::io::Error },
+    Io {
+        path: PathBuf,
+        source: std::io::Error,
+    },
     #[error("{path}: cannot encode image: {source}")]
-    Encode { path: PathBuf, source: image::ImageError },
+    Encode {
+        path: PathBuf,
+        source: image::ImageError,
+    },
 }
 
 fn io_error(path: &Path) -> impl FnOnce(std::io::Error) -> OutputError + '_ {
-    move |source| OutputError::Io { path: path.to_path_buf(), source }
+    move |source| OutputError::Io {
+        path: path.to_path_buf(),
+        source,
+    }
 }
 
 /// A render's output folder.
@@ -63,8 +72,17 @@ impl OutputDir {
     pub fn create(dir: &Path, format: FrameFormat) -> Result<OutputDir, OutputError> {
         fs::create_dir_all(dir).map_err(io_error(dir))?;
         let stats_path = dir.join("stats.jsonl");
-        let stats = OpenOptions::new().create(true).write(true).truncate(true).open(&stats_path).map_err(io_error(&stats_path))?;
-        Ok(OutputDir { dir: dir.to_path_buf(), format, stats })
+        let stats = OpenOptions::new()
+            .create(true)
+            .write(true)
+            .truncate(true)
+            .open(&stats_path)
+            .map_err(io_error(&stats_path))?;
+        Ok(OutputDir {
+            dir: dir.to_path_buf(),
+            format,
+            stats,
+        })
     }
 
     pub fn path(&self) -> &Path {
@@ -85,39 +103,62 @@ impl OutputDir {
     /// Appends one record to `stats.jsonl`.
     pub fn append_record(&mut self, record: &FrameRecord) -> Result<(), OutputError> {
         let path = self.dir.join("stats.jsonl");
-        let mut line = serde_json::to_string(record).map_err(|e| OutputError::Io { path: path.clone(), source: e.into() })?;
+        let mut line = serde_json::to_string(record).map_err(|e| OutputError::Io {
+            path: path.clone(),
+            source: e.into(),
+        })?;
         line.push('\n');
-        self.stats.write_all(line.as_bytes()).and_then(|_| self.stats.flush()).map_err(io_error(&path))
+        self.stats
+            .write_all(line.as_bytes())
+            .and_then(|_| self.stats.flush())
+            .map_err(io_error(&path))
     }
 
     /// Writes `summary.json` for the given records.
     pub fn write_summary(&self, records: &[FrameRecord]) -> Result<PathBuf, OutputError> {
         let path = self.dir.join("summary.json");
-        let text = serde_json::to_string_pretty(&Summary::of(records)).map_err(|e| OutputError::Io { path: path.clone(), source: e.into() })?;
+        let text =
+            serde_json::to_string_pretty(&Summary::of(records)).map_err(|e| OutputError::Io {
+                path: path.clone(),
+                source: e.into(),
+            })?;
         write_bytes_atomically(&path, text.as_bytes())?;
         Ok(path)
     }
 }
 
 /// Writes `image` to `path` in `format` through a temporary file in the same folder.
-pub fn write_image_atomically(path: &Path, image: &LinearImage, format: FrameFormat) -> Result<(), OutputError> {
+pub fn write_image_atomically(
+    path: &Path,
+    image: &LinearImage,
+    format: FrameFormat,
+) -> Result<(), OutputError> {
     let tmp = temporary_sibling(path);
     let encoded = match format {
         FrameFormat::Png => {
-            let buffer: ImageBuffer<Rgb<u8>, Vec<u8>> = ImageBuffer::from_raw(image.width, image.height, image.to_srgb8())
-                .expect("buffer length matches the image size");
+            let buffer: ImageBuffer<Rgb<u8>, Vec<u8>> =
+                ImageBuffer::from_raw(image.width, image.height, image.to_srgb8())
+                    .expect("buffer length matches the image size");
             buffer.save_with_format(&tmp, ImageFormat::Png)
         }
         FrameFormat::Exr => {
-            let data: Vec<f32> = image.pixels.iter().flat_map(|p| p.to_array().map(|c| if c.is_finite() { c } else { 0.0 })).collect();
+            let data: Vec<f32> = image
+                .pixels
+                .iter()
+                .flat_map(|p| p.to_array().map(|c| if c.is_finite() { c } else { 0.0 }))
+                .collect();
             let buffer: ImageBuffer<Rgb<f32>, Vec<f32>> =
-                ImageBuffer::from_raw(image.width, image.height, data).expect("buffer length matches the image size");
+                ImageBuffer::from_raw(image.width, image.height, data)
+                    .expect("buffer length matches the image size");
             buffer.save_with_format(&tmp, ImageFormat::OpenExr)
         }
     };
     if let Err(source) = encoded {
         let _ = fs::remove_file(&tmp);
-        return Err(OutputError::Encode { path: path.to_path_buf(), source });
+        return Err(OutputError::Encode {
+            path: path.to_path_buf(),
+            source,
+        });
     }
     fs::rename(&tmp, path).map_err(io_error(path))
 }
@@ -130,7 +171,10 @@ fn write_bytes_atomically(path: &Path, bytes: &[u8]) -> Result<(), OutputError> 
 
 /// `dir/.name.tmp`: hidden, same folder (so the rename stays on one file system).
 fn temporary_sibling(path: &Path) -> PathBuf {
-    let name = path.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
+    let name = path
+        .file_name()
+        .map(|n| n.to_string_lossy().into_owned())
+        .unwrap_or_default();
     path.with_file_name(format!(".{name}.tmp"))
 }
 
@@ -146,12 +190,24 @@ impl Spread {
     pub fn of(values: impl IntoIterator<Item = f64>) -> Spread {
         let mut v: Vec<f64> = values.into_iter().filter(|x| x.is_finite()).collect();
         if v.is_empty() {
-            return Spread { min: 0.0, median: 0.0, max: 0.0 };
+            return Spread {
+                min: 0.0,
+                median: 0.0,
+                max: 0.0,
+            };
         }
         v.sort_by(f64::total_cmp);
         let mid = v.len() / 2;
-        let median = if v.len() % 2 == 1 { v[mid] } else { 0.5 * (v[mid - 1] + v[mid]) };
-        Spread { min: v[0], median, max: v[v.len() - 1] }
+        let median = if v.len() % 2 == 1 {
+            v[mid]
+        } else {
+            0.5 * (v[mid - 1] + v[mid])
+        };
+        Spread {
+            min: v[0],
+            median,
+            max: v[v.len() - 1],
+        }
     }
 }
 
@@ -211,7 +267,11 @@ impl Summary {
             render_ms: spread(|r| r.render_ms),
             frame_total_ms: spread(|r| r.total_ms),
             rays: spread(|r| r.rays as f64),
-            rays_per_second: if total_render_ms > 0.0 { total_rays as f64 / (total_render_ms / 1e3) } else { 0.0 },
+            rays_per_second: if total_render_ms > 0.0 {
+                total_rays as f64 / (total_render_ms / 1e3)
+            } else {
+                0.0
+            },
         }
     }
 }

@@ -5,7 +5,11 @@ use std::path::Path;
 use std::process::{Command, Output};
 
 fn mipray(args: &[&str], cwd: &Path) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_mipray")).args(args).current_dir(cwd).output().expect("run mipray")
+    Command::new(env!("CARGO_BIN_EXE_mipray"))
+        .args(args)
+        .current_dir(cwd)
+        .output()
+        .expect("run mipray")
 }
 
 fn stderr(o: &Output) -> String {
@@ -22,7 +26,10 @@ fn write_textured_triangle(dir: &Path, with_texture: bool) -> std::path::PathBuf
     for v in [0.0f32, 0.0, 1.0, 0.0, 0.0, 1.0] {
         bin.extend_from_slice(&v.to_le_bytes());
     }
-    let uri = format!("data:application/octet-stream;base64,{}", base64::engine::general_purpose::STANDARD.encode(&bin));
+    let uri = format!(
+        "data:application/octet-stream;base64,{}",
+        base64::engine::general_purpose::STANDARD.encode(&bin)
+    );
     let json = serde_json::json!({
         "asset": {"version": "2.0"},
         "scene": 0,
@@ -43,7 +50,11 @@ fn write_textured_triangle(dir: &Path, with_texture: bool) -> std::path::PathBuf
         ]
     });
     if with_texture {
-        image::RgbImage::from_fn(4, 4, |x, y| image::Rgb([(x * 60) as u8, (y * 60) as u8, 128])).save(dir.join("tex.png")).unwrap();
+        image::RgbImage::from_fn(4, 4, |x, y| {
+            image::Rgb([(x * 60) as u8, (y * 60) as u8, 128])
+        })
+        .save(dir.join("tex.png"))
+        .unwrap();
     }
     let path = dir.join("tri.gltf");
     std::fs::write(&path, serde_json::to_vec_pretty(&json).unwrap()).unwrap();
@@ -54,21 +65,49 @@ fn write_textured_triangle(dir: &Path, with_texture: bool) -> std::path::PathBuf
 fn renders_a_scene_and_writes_frames_and_stats() {
     let dir = tempfile::tempdir().unwrap();
     write_textured_triangle(dir.path(), true);
-    let out = mipray(&["render", "tri.gltf", "--size", "32x24", "--frames", "0..2", "--out", "o"], dir.path());
+    let out = mipray(
+        &[
+            "render", "tri.gltf", "--size", "32x24", "--frames", "0..2", "--out", "o",
+        ],
+        dir.path(),
+    );
     assert!(out.status.success(), "{}", stderr(&out));
-    for f in ["o/frame_0000.png", "o/frame_0001.png", "o/stats.jsonl", "o/summary.json"] {
+    for f in [
+        "o/frame_0000.png",
+        "o/frame_0001.png",
+        "o/stats.jsonl",
+        "o/summary.json",
+    ] {
         assert!(dir.path().join(f).is_file(), "missing {f}");
     }
     let stats = std::fs::read_to_string(dir.path().join("o/stats.jsonl")).unwrap();
-    let lines: Vec<serde_json::Value> = stats.lines().map(|l| serde_json::from_str(l).unwrap()).collect();
+    let lines: Vec<serde_json::Value> = stats
+        .lines()
+        .map(|l| serde_json::from_str(l).unwrap())
+        .collect();
     assert_eq!(lines.len(), 2);
-    for key in ["frame", "time_s", "width", "height", "lod_method", "triangles", "build_ms", "render_ms", "rays", "mip_histogram"] {
+    for key in [
+        "frame",
+        "time_s",
+        "width",
+        "height",
+        "lod_method",
+        "triangles",
+        "build_ms",
+        "render_ms",
+        "rays",
+        "mip_histogram",
+    ] {
         assert!(lines[0].get(key).is_some(), "stats line lacks {key}");
     }
     assert_eq!(lines[1]["frame"], 1);
     assert_eq!(lines[0]["triangles"], 1);
     assert!(lines[0]["rays"].as_u64().unwrap() >= 32 * 24);
-    let leftovers: Vec<_> = std::fs::read_dir(dir.path().join("o")).unwrap().filter_map(|e| e.ok()).filter(|e| e.file_name().to_string_lossy().ends_with(".tmp")).collect();
+    let leftovers: Vec<_> = std::fs::read_dir(dir.path().join("o"))
+        .unwrap()
+        .filter_map(|e| e.ok())
+        .filter(|e| e.file_name().to_string_lossy().ends_with(".tmp"))
+        .collect();
     assert!(leftovers.is_empty(), "temporary files left behind");
 }
 
@@ -87,7 +126,10 @@ fn info_reports_counts() {
 fn missing_texture_names_the_file() {
     let dir = tempfile::tempdir().unwrap();
     write_textured_triangle(dir.path(), false);
-    let out = mipray(&["render", "tri.gltf", "--size", "8x8", "--out", "o"], dir.path());
+    let out = mipray(
+        &["render", "tri.gltf", "--size", "8x8", "--out", "o"],
+        dir.path(),
+    );
     let err = stderr(&out);
     assert_eq!(out.status.code(), Some(1), "{err}");
     assert!(err.contains("tri.gltf") && err.contains("tex.png"), "{err}");
@@ -122,14 +164,20 @@ fn bad_options_are_refused() {
     ] {
         let out = mipray(args, dir.path());
         assert!(!out.status.success(), "{args:?} succeeded");
-        assert!(!stderr(&out).contains("panicked"), "{args:?}: {}", stderr(&out));
+        assert!(
+            !stderr(&out).contains("panicked"),
+            "{args:?}: {}",
+            stderr(&out)
+        );
     }
 }
 
 #[test]
 fn default_animation_renders_by_name_identically_with_one_or_two_threads() {
     let dir = tempfile::tempdir().unwrap();
-    let common = ["render", "default", "--size", "96x54", "--frames", "10..12", "--spp", "2"];
+    let common = [
+        "render", "default", "--size", "96x54", "--frames", "10..12", "--spp", "2",
+    ];
     for threads in ["1", "2"] {
         let out_dir = format!("t{threads}");
         let mut args = common.to_vec();
@@ -143,8 +191,42 @@ fn default_animation_renders_by_name_identically_with_one_or_two_threads() {
         assert!(a == b, "{frame} differs between 1 and 2 threads");
     }
     // Frame 11 rendered alone is the same file as frame 11 of the sequence.
-    let out = mipray(&["render", "default", "--size", "96x54", "--frames", "11", "--spp", "2", "--out", "alone"], dir.path());
+    let out = mipray(
+        &[
+            "render", "default", "--size", "96x54", "--frames", "11", "--spp", "2", "--out",
+            "alone",
+        ],
+        dir.path(),
+    );
     assert!(out.status.success(), "{}", stderr(&out));
     let alone = std::fs::read(dir.path().join("alone/frame_0011.png")).unwrap();
-    assert!(alone == std::fs::read(dir.path().join("t1/frame_0011.png")).unwrap(), "frame 11 alone differs");
+    assert!(
+        alone == std::fs::read(dir.path().join("t1/frame_0011.png")).unwrap(),
+        "frame 11 alone differs"
+    );
+}
+
+#[test]
+fn exr_frames_hold_linear_floats() {
+    let dir = tempfile::tempdir().unwrap();
+    write_textured_triangle(dir.path(), true);
+    let out = mipray(
+        &[
+            "render", "tri.gltf", "--size", "16x12", "--format", "exr", "--out", "e",
+        ],
+        dir.path(),
+    );
+    assert!(out.status.success(), "{}", stderr(&out));
+    let image = image::open(dir.path().join("e/frame_0000.exr"))
+        .expect("readable EXR")
+        .to_rgb32f();
+    assert_eq!(image.dimensions(), (16, 12));
+    assert!(
+        image
+            .pixels()
+            .all(|p| p.0.iter().all(|c| c.is_finite() && *c >= 0.0))
+    );
+    // Linear, not sRGB-encoded: the dark background (0.05 linear) stays below 0.1.
+    let corner = image.get_pixel(0, 0).0;
+    assert!(corner[0] < 0.1 && corner[0] > 0.0, "{corner:?}");
 }

@@ -9,7 +9,14 @@ use mipray::lod::LodMethod;
 use mipray::scene::{MeshDesc, PrimitiveDesc, SceneDesc};
 
 fn settings(width: u32, height: u32, lod: LodMethod) -> RenderSettings {
-    RenderSettings { width, height, lod, spp: 1, max_depth: 5, lights: None }
+    RenderSettings {
+        width,
+        height,
+        lod,
+        spp: 1,
+        max_depth: 5,
+        lights: None,
+    }
 }
 
 /// Level the renderer selects at the image centre of frame 0.
@@ -18,7 +25,11 @@ fn centre_level(scene: SceneDesc, height: u32) -> f32 {
     let prepared = renderer.prepare(0, 0.0).unwrap();
     let camera = prepared.camera;
     let dir = camera.primary_direction(height as f32 / 2.0, height as f32 / 2.0);
-    renderer.frame_scene(&prepared).probe_lod(camera.eye, dir).expect("centre ray hits the quad").level
+    renderer
+        .frame_scene(&prepared)
+        .probe_lod(camera.eye, dir)
+        .expect("centre ray hits the quad")
+        .level
 }
 
 #[test]
@@ -30,12 +41,21 @@ fn facing_quad_level_matches_closed_form() {
     let k = 2.0 * (yfov as f64 / 2.0).tan() / height as f64;
     let p_b = (size as f64 / tex as f64) / k;
     let expected = (4.0f64).log2() - p_b.log2();
-    assert!((level as f64 - expected).abs() < 1e-4, "level {level}, closed form {expected}");
+    assert!(
+        (level as f64 - expected).abs() < 1e-4,
+        "level {level}, closed form {expected}"
+    );
 
     let doubled_distance = centre_level(facing_quad_scene(8.0, size, tex, yfov), height);
-    assert!((doubled_distance - level - 1.0).abs() < 1e-4, "doubling d: {level} -> {doubled_distance}");
+    assert!(
+        (doubled_distance - level - 1.0).abs() < 1e-4,
+        "doubling d: {level} -> {doubled_distance}"
+    );
     let doubled_texture = centre_level(facing_quad_scene(4.0, size, 2 * tex, yfov), height);
-    assert!((doubled_texture - level - 1.0).abs() < 1e-4, "doubling texture: {level} -> {doubled_texture}");
+    assert!(
+        (doubled_texture - level - 1.0).abs() < 1e-4,
+        "doubling texture: {level} -> {doubled_texture}"
+    );
 }
 
 #[test]
@@ -47,20 +67,40 @@ fn mirror_uses_total_path_length() {
     scene.nodes[0].local.translation = Vec3::new(0.0, 0.0, 2.0);
     scene.nodes[0].local.rotation = glam::Quat::from_rotation_y(std::f32::consts::PI);
     scene.materials.push(mirror());
-    scene.meshes.push(MeshDesc { name: "mirror".into(), primitives: vec![quad(4.0, 1.0, 1)] });
-    add_root(&mut scene, node("mirror", at(Vec3::new(0.0, 0.0, -3.0)), Some(1)));
+    scene.meshes.push(MeshDesc {
+        name: "mirror".into(),
+        primitives: vec![quad(4.0, 1.0, 1)],
+    });
+    add_root(
+        &mut scene,
+        node("mirror", at(Vec3::new(0.0, 0.0, -3.0)), Some(1)),
+    );
     let mut renderer = Renderer::new(scene, settings(64, 64, LodMethod::Paper));
     let prepared = renderer.prepare(0, 0.0).unwrap();
     let dir = prepared.camera.primary_direction(32.0, 32.0);
-    let probe = renderer.frame_scene(&prepared).probe_lod(prepared.camera.eye, dir).unwrap();
-    assert!((probe.path_length - 8.0).abs() < 1e-3, "path length {}", probe.path_length);
+    let probe = renderer
+        .frame_scene(&prepared)
+        .probe_lod(prepared.camera.eye, dir)
+        .unwrap();
+    assert!(
+        (probe.path_length - 8.0).abs() < 1e-3,
+        "path length {}",
+        probe.path_length
+    );
     let k = 2.0 * (yfov as f64 / 2.0).tan() / 64.0;
     let expected = 8f64.log2() - ((2.0 / 256.0) / k).log2();
-    assert!((probe.level as f64 - expected).abs() < 1e-3, "level {} vs {expected}", probe.level);
+    assert!(
+        (probe.level as f64 - expected).abs() < 1e-3,
+        "level {} vs {expected}",
+        probe.level
+    );
 }
 
 fn render_bytes(scene: SceneDesc, threads: usize, lod: LodMethod) -> Vec<u8> {
-    let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(threads)
+        .build()
+        .unwrap();
     let mut s = settings(72, 40, lod);
     s.spp = 4;
     let mut renderer = Renderer::new(scene, s);
@@ -76,7 +116,11 @@ fn image_is_identical_whatever_the_thread_count() {
         assert!(one == two, "{lod}: 1-thread and 2-thread renders differ");
         // The scene is not blank: the floor's checker shows both colours.
         let distinct: std::collections::BTreeSet<&[u8]> = one.chunks(3).collect();
-        assert!(distinct.len() > 20, "only {} distinct colours", distinct.len());
+        assert!(
+            distinct.len() > 20,
+            "only {} distinct colours",
+            distinct.len()
+        );
     }
 }
 
@@ -85,12 +129,20 @@ fn frame_alone_equals_frame_in_sequence() {
     let mut sequential = Renderer::new(showcase_scene(), settings(48, 32, LodMethod::Paper));
     let mut in_sequence = Vec::new();
     for frame in 0..4 {
-        in_sequence.push(sequential.render_frame(frame, frame as f32 / 4.0).unwrap().0);
+        in_sequence.push(
+            sequential
+                .render_frame(frame, frame as f32 / 4.0)
+                .unwrap()
+                .0,
+        );
     }
     let mut alone = Renderer::new(showcase_scene(), settings(48, 32, LodMethod::Paper));
     let (image, record) = alone.render_frame(2, 0.5).unwrap();
     assert_eq!(image, in_sequence[2]);
-    assert_ne!(in_sequence[0], in_sequence[3], "the animation moves something");
+    assert_ne!(
+        in_sequence[0], in_sequence[3],
+        "the animation moves something"
+    );
     assert_eq!(record.frame, 2);
 }
 
@@ -98,14 +150,32 @@ fn frame_alone_equals_frame_in_sequence() {
 fn degenerate_and_grazing_geometry_give_finite_pixels() {
     let mut scene = showcase_scene();
     let degenerate = PrimitiveDesc {
-        positions: vec![Vec3::new(0.0, 1.0, -3.0), Vec3::new(1.0, 1.0, -3.0), Vec3::new(2.0, 1.0, -3.0), Vec3::new(0.0, 1.5, -3.0)],
-        normals: Some(vec![Vec3::ZERO, Vec3::new(f32::MAX, 0.0, 0.0), Vec3::Y, Vec3::Z]),
+        positions: vec![
+            Vec3::new(0.0, 1.0, -3.0),
+            Vec3::new(1.0, 1.0, -3.0),
+            Vec3::new(2.0, 1.0, -3.0),
+            Vec3::new(0.0, 1.5, -3.0),
+        ],
+        normals: Some(vec![
+            Vec3::ZERO,
+            Vec3::new(f32::MAX, 0.0, 0.0),
+            Vec3::Y,
+            Vec3::Z,
+        ]),
         // Triangle 0: zero world area (collinear). Triangle 1: zero UV area.
-        uvs: Some(vec![Vec2::ZERO, Vec2::X, Vec2::new(2.0, 0.0), Vec2::new(3.0, 0.0)]),
+        uvs: Some(vec![
+            Vec2::ZERO,
+            Vec2::X,
+            Vec2::new(2.0, 0.0),
+            Vec2::new(3.0, 0.0),
+        ]),
         indices: vec![0, 1, 2, 0, 1, 3],
         material: Some(0),
     };
-    scene.meshes.push(MeshDesc { name: "degenerate".into(), primitives: vec![degenerate] });
+    scene.meshes.push(MeshDesc {
+        name: "degenerate".into(),
+        primitives: vec![degenerate],
+    });
     let n = scene.meshes.len() - 1;
     add_root(&mut scene, node("degenerate", Default::default(), Some(n)));
     let mut renderer = Renderer::new(scene, settings(64, 40, LodMethod::Paper));
@@ -118,9 +188,11 @@ fn degenerate_and_grazing_geometry_give_finite_pixels() {
     // The grazing primary rays (camera at floor height) never produce NaN either.
     let prepared = renderer.prepare(0, 0.0).unwrap();
     let frame_scene = renderer.frame_scene(&prepared);
-    let grazing = frame_scene.probe_lod(Vec3A::new(0.0, 1e-4, 0.0), Vec3A::new(0.0, -1e-6, -1.0).normalize());
+    let grazing = frame_scene.probe_lod(
+        Vec3A::new(0.0, 1e-4, 0.0),
+        Vec3A::new(0.0, -1e-6, -1.0).normalize(),
+    );
     if let Some(probe) = grazing {
         assert!(!probe.level.is_nan());
     }
 }
-

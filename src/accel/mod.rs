@@ -54,14 +54,24 @@ impl Accel {
             return Ok(Accel::default());
         }
         let boxes: Vec<Aabb> = triangles.positions.iter().map(padded_box).collect();
-        let bvh = build_bvh2(&boxes, BvhBuildParams::medium_build(), &mut Duration::default());
+        let bvh = build_bvh2(
+            &boxes,
+            BvhBuildParams::medium_build(),
+            &mut Duration::default(),
+        );
         triangles.permute(&bvh.primitive_indices);
         Ok(Accel { bvh })
     }
 
     /// The closest hit with `t` in `[0, t_max)`.
     #[inline]
-    pub fn closest_hit(&self, triangles: &FrameTriangles, origin: Vec3A, direction: Vec3A, t_max: f32) -> Option<Hit> {
+    pub fn closest_hit(
+        &self,
+        triangles: &FrameTriangles,
+        origin: Vec3A,
+        direction: Vec3A,
+        t_max: f32,
+    ) -> Option<Hit> {
         let ray = Ray::new(origin, direction, 0.0, t_max);
         let mut hit = RayHit::none();
         let mut bary = Vec2::ZERO;
@@ -74,7 +84,11 @@ impl Accel {
                 _ => f32::INFINITY,
             }
         });
-        found.then_some(Hit { triangle: hit.primitive_id, t: hit.t, bary })
+        found.then_some(Hit {
+            triangle: hit.primitive_id,
+            t: hit.t,
+            bary,
+        })
     }
 
     /// Visits every triangle hit with `t` in `[0, t_max)` in no particular order until
@@ -104,7 +118,8 @@ impl Accel {
             true
         };
         fast_stack!(u32, (96, 192), self.bvh.max_depth, stack, {
-            self.bvh.ray_traverse_dynamic(&mut stack, ray, &mut RayHit::none(), &mut test_leaf)
+            self.bvh
+                .ray_traverse_dynamic(&mut stack, ray, &mut RayHit::none(), &mut test_leaf)
         });
         completed
     }
@@ -113,7 +128,10 @@ impl Accel {
 fn check_finite(triangles: &FrameTriangles) -> Result<(), AccelError> {
     for (i, tri) in triangles.positions.iter().enumerate() {
         if let Some(v) = tri.iter().find(|v| !v.is_finite()) {
-            return Err(AccelError::NonFiniteVertex { triangle: triangles.source[i] as usize, vertex: v.to_array() });
+            return Err(AccelError::NonFiniteVertex {
+                triangle: triangles.source[i] as usize,
+                vertex: v.to_array(),
+            });
         }
     }
     Ok(())
@@ -173,10 +191,18 @@ mod tests {
 
     #[test]
     fn finds_closest_of_stacked_triangles() {
-        let tri = |z: f32| [Vec3A::new(-1.0, -1.0, z), Vec3A::new(1.0, -1.0, z), Vec3A::new(0.0, 1.0, z)];
+        let tri = |z: f32| {
+            [
+                Vec3A::new(-1.0, -1.0, z),
+                Vec3A::new(1.0, -1.0, z),
+                Vec3A::new(0.0, 1.0, z),
+            ]
+        };
         let mut tris = soup(&[tri(-5.0), tri(-2.0), tri(-9.0)]);
         let accel = Accel::build(&mut tris).unwrap();
-        let hit = accel.closest_hit(&tris, Vec3A::ZERO, Vec3A::NEG_Z, f32::INFINITY).unwrap();
+        let hit = accel
+            .closest_hit(&tris, Vec3A::ZERO, Vec3A::NEG_Z, f32::INFINITY)
+            .unwrap();
         assert!((hit.t - 2.0).abs() < 1e-6);
         assert_eq!(tris.source[hit.triangle as usize], 1);
         let mut count = 0;
@@ -185,17 +211,39 @@ mod tests {
             true
         });
         assert_eq!(count, 3);
-        assert!(accel.closest_hit(&tris, Vec3A::new(5.0, 0.0, 0.0), Vec3A::NEG_Z, f32::INFINITY).is_none());
+        assert!(
+            accel
+                .closest_hit(
+                    &tris,
+                    Vec3A::new(5.0, 0.0, 0.0),
+                    Vec3A::NEG_Z,
+                    f32::INFINITY
+                )
+                .is_none()
+        );
     }
 
     #[test]
     fn axis_aligned_ray_hits_axis_aligned_flat_triangle() {
         // Floor at y = 0 seen straight down, and a wall at x = 3 hit along +x.
-        let floor = [Vec3A::new(-1.0, 0.0, -1.0), Vec3A::new(1.0, 0.0, -1.0), Vec3A::new(0.0, 0.0, 1.0)];
-        let wall = [Vec3A::new(3.0, -1.0, -1.0), Vec3A::new(3.0, 1.0, -1.0), Vec3A::new(3.0, 0.0, 1.0)];
+        let floor = [
+            Vec3A::new(-1.0, 0.0, -1.0),
+            Vec3A::new(1.0, 0.0, -1.0),
+            Vec3A::new(0.0, 0.0, 1.0),
+        ];
+        let wall = [
+            Vec3A::new(3.0, -1.0, -1.0),
+            Vec3A::new(3.0, 1.0, -1.0),
+            Vec3A::new(3.0, 0.0, 1.0),
+        ];
         let mut tris = soup(&[floor, wall]);
         let accel = Accel::build(&mut tris).unwrap();
-        let down = accel.closest_hit(&tris, Vec3A::new(0.0, 5.0, 0.0), Vec3A::NEG_Y, f32::INFINITY);
+        let down = accel.closest_hit(
+            &tris,
+            Vec3A::new(0.0, 5.0, 0.0),
+            Vec3A::NEG_Y,
+            f32::INFINITY,
+        );
         assert!((down.unwrap().t - 5.0).abs() < 1e-6);
         let side = accel.closest_hit(&tris, Vec3A::new(-2.0, 0.0, 0.0), Vec3A::X, f32::INFINITY);
         assert!((side.unwrap().t - 5.0).abs() < 1e-6);
@@ -204,13 +252,20 @@ mod tests {
     #[test]
     fn rejects_non_finite_vertices() {
         let mut tris = soup(&[[Vec3A::ZERO, Vec3A::X, Vec3A::new(f32::NAN, 0.0, 0.0)]]);
-        assert!(matches!(Accel::build(&mut tris), Err(AccelError::NonFiniteVertex { triangle: 0, .. })));
+        assert!(matches!(
+            Accel::build(&mut tris),
+            Err(AccelError::NonFiniteVertex { triangle: 0, .. })
+        ));
     }
 
     #[test]
     fn empty_scene_misses() {
         let mut tris = soup(&[]);
         let accel = Accel::build(&mut tris).unwrap();
-        assert!(accel.closest_hit(&tris, Vec3A::ZERO, Vec3A::X, f32::INFINITY).is_none());
+        assert!(
+            accel
+                .closest_hit(&tris, Vec3A::ZERO, Vec3A::X, f32::INFINITY)
+                .is_none()
+        );
     }
 }

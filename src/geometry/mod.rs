@@ -87,11 +87,18 @@ impl SceneGeometry {
         let default_material = geometry.materials.len() as u32;
         geometry.materials.push(MaterialDesc::default());
         for node in scene.traversal_order() {
-            let Some(mesh) = scene.nodes[node].mesh else { continue };
+            let Some(mesh) = scene.nodes[node].mesh else {
+                continue;
+            };
             for (p, primitive) in scene.meshes[mesh].primitives.iter().enumerate() {
                 let material = primitive.material.map_or(default_material, |m| m as u32);
                 let instance = geometry.instances.len() as u32;
-                geometry.instances.push(Instance { node: node as u32, mesh: mesh as u32, primitive: p as u32, material });
+                geometry.instances.push(Instance {
+                    node: node as u32,
+                    mesh: mesh as u32,
+                    primitive: p as u32,
+                    material,
+                });
                 let wrap = wrap_modes(scene, &geometry.materials[material as usize]);
                 for tri in primitive.indices.chunks_exact(3) {
                     let vertices = [tri[0], tri[1], tri[2]];
@@ -114,7 +121,12 @@ impl SceneGeometry {
 
     /// Fills `out` (source order) with the world-space triangles for the given node world
     /// transforms. Reuses `out`'s allocations.
-    pub fn world_triangles(&self, scene: &SceneDesc, world_from_node: &[Mat4], out: &mut FrameTriangles) {
+    pub fn world_triangles(
+        &self,
+        scene: &SceneDesc,
+        world_from_node: &[Mat4],
+        out: &mut FrameTriangles,
+    ) {
         let n = self.triangle_count();
         out.positions.clear();
         out.normals.clear();
@@ -133,19 +145,31 @@ impl SceneGeometry {
         for t in 0..n {
             let instance = self.instances[self.triangle_instance[t] as usize];
             let placement = &placements[self.triangle_instance[t] as usize];
-            let primitive = &scene.meshes[instance.mesh as usize].primitives[instance.primitive as usize];
+            let primitive =
+                &scene.meshes[instance.mesh as usize].primitives[instance.primitive as usize];
             let mut v = self.triangle_vertices[t];
             let mut uv = self.triangle_uvs[t];
             if placement.flips_winding {
                 v.swap(1, 2);
                 uv.swap(1, 2);
             }
-            let p = v.map(|i| Vec3A::from(placement.world_from_object.transform_point3(primitive.positions[i as usize])));
+            let p = v.map(|i| {
+                Vec3A::from(
+                    placement
+                        .world_from_object
+                        .transform_point3(primitive.positions[i as usize]),
+                )
+            });
             let geometric = (p[1] - p[0]).cross(p[2] - p[0]).normalize_or_zero();
             let normals = match &primitive.normals {
                 Some(normals) => v.map(|i| {
-                    let n = (placement.normal_from_object * normals[i as usize]).normalize_or_zero();
-                    if n == Vec3::ZERO { Vec3::from(geometric) } else { n }
+                    let n =
+                        (placement.normal_from_object * normals[i as usize]).normalize_or_zero();
+                    if n == Vec3::ZERO {
+                        Vec3::from(geometric)
+                    } else {
+                        n
+                    }
                 }),
                 None => [Vec3::from(geometric); 3],
             };
@@ -176,12 +200,19 @@ impl Placement {
         } else {
             Mat3::ZERO // collapsed node: every normal falls back to the geometric one
         };
-        Placement { world_from_object, normal_from_object, flips_winding: det < 0.0 }
+        Placement {
+            world_from_object,
+            normal_from_object,
+            flips_winding: det < 0.0,
+        }
     }
 }
 
 fn wrap_modes(scene: &SceneDesc, material: &MaterialDesc) -> [WrapMode; 2] {
-    match material.base_color_texture.and_then(|t| scene.textures.get(t)) {
+    match material
+        .base_color_texture
+        .and_then(|t| scene.textures.get(t))
+    {
         Some(texture) => [texture.sampler.wrap_s, texture.sampler.wrap_t],
         None => [WrapMode::ClampToEdge; 2],
     }
@@ -198,7 +229,10 @@ fn rebase_uvs(uv: [Vec2; 3], wrap: [WrapMode; 2]) -> [Vec2; 3] {
             WrapMode::MirroredRepeat => 2.0,
             WrapMode::ClampToEdge => continue,
         };
-        let min = uv.iter().map(|t| t[axis] as f64).fold(f64::INFINITY, f64::min);
+        let min = uv
+            .iter()
+            .map(|t| t[axis] as f64)
+            .fold(f64::INFINITY, f64::min);
         if !min.is_finite() {
             continue;
         }
@@ -216,7 +250,11 @@ mod tests {
 
     #[test]
     fn rebasing_keeps_differences_and_period() {
-        let uv = [Vec2::new(1000.25, -7.5), Vec2::new(1001.0, -7.0), Vec2::new(1000.5, -6.25)];
+        let uv = [
+            Vec2::new(1000.25, -7.5),
+            Vec2::new(1001.0, -7.0),
+            Vec2::new(1000.5, -6.25),
+        ];
         let r = rebase_uvs(uv, [WrapMode::Repeat, WrapMode::MirroredRepeat]);
         assert_eq!(r[0], Vec2::new(0.25, 0.5));
         assert_eq!(r[1], Vec2::new(1.0, 1.0));

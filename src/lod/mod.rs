@@ -59,10 +59,16 @@ impl FromStr for LodMethod {
     type Err = String;
 
     fn from_str(s: &str) -> Result<Self, Self::Err> {
-        LodMethod::ALL.into_iter().find(|m| m.as_str() == s).ok_or_else(|| {
-            let names: Vec<&str> = LodMethod::ALL.iter().map(|m| m.as_str()).collect();
-            format!("unknown LOD method '{s}' (expected one of: {})", names.join(", "))
-        })
+        LodMethod::ALL
+            .into_iter()
+            .find(|m| m.as_str() == s)
+            .ok_or_else(|| {
+                let names: Vec<&str> = LodMethod::ALL.iter().map(|m| m.as_str()).collect();
+                format!(
+                    "unknown LOD method '{s}' (expected one of: {})",
+                    names.join(", ")
+                )
+            })
     }
 }
 

@@ -46,7 +46,12 @@ impl PixelFootprint {
 
 /// `log2 P_b` of one triangle: world vertices `p`, texture coordinates `uv`, level-0 texture
 /// size `texture_size` (width, height), camera `footprint`.
-pub fn log2_pb(p: [Vec3A; 3], uv: [Vec2; 3], texture_size: (u32, u32), footprint: PixelFootprint) -> f32 {
+pub fn log2_pb(
+    p: [Vec3A; 3],
+    uv: [Vec2; 3],
+    texture_size: (u32, u32),
+    footprint: PixelFootprint,
+) -> f32 {
     let [p0, p1, p2] = p.map(|v| DVec3::new(v.x as f64, v.y as f64, v.z as f64));
     let world_area = 0.5 * (p1 - p0).cross(p2 - p0).length();
     let [t0, t1, t2] = uv.map(|t| DVec2::new(t.x as f64, t.y as f64));
@@ -74,9 +79,17 @@ mod tests {
 
     fn quad_triangle(size: f32, z: f32) -> [Vec3A; 3] {
         let h = size / 2.0;
-        [Vec3A::new(-h, -h, z), Vec3A::new(h, -h, z), Vec3A::new(h, h, z)]
+        [
+            Vec3A::new(-h, -h, z),
+            Vec3A::new(h, -h, z),
+            Vec3A::new(h, h, z),
+        ]
     }
-    const UV: [Vec2; 3] = [Vec2::new(0.0, 1.0), Vec2::new(1.0, 1.0), Vec2::new(1.0, 0.0)];
+    const UV: [Vec2; 3] = [
+        Vec2::new(0.0, 1.0),
+        Vec2::new(1.0, 1.0),
+        Vec2::new(1.0, 0.0),
+    ];
 
     #[test]
     fn matches_closed_form_for_facing_quad() {
@@ -101,7 +114,12 @@ mod tests {
         let denser = log2_pb(quad_triangle(2.0, 0.0), UV, (512, 512), fp);
         assert!((denser - base + 1.0).abs() < 1e-6);
         // Image height doubled -> +1.
-        let taller = log2_pb(quad_triangle(2.0, 0.0), UV, (256, 256), PixelFootprint::new(FOV, 960));
+        let taller = log2_pb(
+            quad_triangle(2.0, 0.0),
+            UV,
+            (256, 256),
+            PixelFootprint::new(FOV, 960),
+        );
         assert!((taller - base - 1.0).abs() < 1e-6);
         // UV area halved -> +0.5.
         let half_uv = UV.map(|t| Vec2::new(t.x * 0.5, t.y));
@@ -118,8 +136,16 @@ mod tests {
     #[test]
     fn rigid_motion_leaves_it_unchanged() {
         let fp = PixelFootprint::new(FOV, 480);
-        let tri = [Vec3A::new(0.3, -1.2, 0.5), Vec3A::new(2.0, 0.1, -0.7), Vec3A::new(-0.4, 1.5, 1.1)];
-        let uv = [Vec2::new(0.1, 0.2), Vec2::new(0.9, 0.35), Vec2::new(0.4, 0.8)];
+        let tri = [
+            Vec3A::new(0.3, -1.2, 0.5),
+            Vec3A::new(2.0, 0.1, -0.7),
+            Vec3A::new(-0.4, 1.5, 1.1),
+        ];
+        let uv = [
+            Vec2::new(0.1, 0.2),
+            Vec2::new(0.9, 0.35),
+            Vec2::new(0.4, 0.8),
+        ];
         let base = log2_pb(tri, uv, (300, 200), fp);
         let r = Mat3::from_euler(glam::EulerRot::XYZ, 0.7, -1.3, 2.1);
         let t = Vec3::new(150.0, -42.0, 7.5);
@@ -127,7 +153,12 @@ mod tests {
         let after = log2_pb(moved, uv, (300, 200), fp);
         assert!((after - base).abs() < 1e-6, "{base} -> {after}");
         // Winding reversed (mirror image UVs) changes nothing: areas are absolute.
-        let flipped = log2_pb([tri[0], tri[2], tri[1]], [uv[0], uv[2], uv[1]], (300, 200), fp);
+        let flipped = log2_pb(
+            [tri[0], tri[2], tri[1]],
+            [uv[0], uv[2], uv[1]],
+            (300, 200),
+            fp,
+        );
         assert!((flipped - base).abs() < 1e-6);
     }
 
@@ -136,7 +167,12 @@ mod tests {
         let fp = PixelFootprint::new(FOV, 480);
         let near = log2_pb(quad_triangle(2.0, 0.0), UV, (256, 256), fp);
         let offset = Vec3A::new(1.0e6, 0.0, 0.0);
-        let far = log2_pb(quad_triangle(2.0, 0.0).map(|p| p + offset), UV, (256, 256), fp);
+        let far = log2_pb(
+            quad_triangle(2.0, 0.0).map(|p| p + offset),
+            UV,
+            (256, 256),
+            fp,
+        );
         assert!((far - near).abs() < 1e-6);
     }
 
@@ -146,10 +182,16 @@ mod tests {
         let line = [Vec3A::ZERO, Vec3A::X, Vec3A::X * 2.0];
         assert_eq!(log2_pb(line, UV, (256, 256), fp), -LOG2_PB_LIMIT);
         let flat_uv = [Vec2::ZERO, Vec2::X, Vec2::X * 2.0];
-        assert_eq!(log2_pb(quad_triangle(1.0, 0.0), flat_uv, (256, 256), fp), LOG2_PB_LIMIT);
+        assert_eq!(
+            log2_pb(quad_triangle(1.0, 0.0), flat_uv, (256, 256), fp),
+            LOG2_PB_LIMIT
+        );
         assert_eq!(log2_pb(line, flat_uv, (256, 256), fp), -LOG2_PB_LIMIT);
         let nan = [Vec3A::NAN, Vec3A::X, Vec3A::Y];
         assert_eq!(log2_pb(nan, UV, (256, 256), fp), LOG2_PB_LIMIT);
-        assert_eq!(log2_pb(quad_triangle(1.0, 0.0), UV, (0, 0), fp), LOG2_PB_LIMIT);
+        assert_eq!(
+            log2_pb(quad_triangle(1.0, 0.0), UV, (0, 0), fp),
+            LOG2_PB_LIMIT
+        );
     }
 }

@@ -41,7 +41,11 @@ impl Camera {
             .or_else(|| forward.cross(Vec3::Y).try_normalize())
             .unwrap_or(Vec3::X);
         let up = right.cross(forward);
-        let yfov = if yfov.is_finite() && yfov > 1e-4 && yfov < 3.1 { yfov } else { 0.8 };
+        let yfov = if yfov.is_finite() && yfov > 1e-4 && yfov < 3.1 {
+            yfov
+        } else {
+            0.8
+        };
         let eye = if eye.is_finite() { eye } else { Vec3::ZERO };
         Camera {
             eye: eye.into(),
@@ -70,7 +74,14 @@ impl Camera {
         let aspect = (width as f32 / height.max(1) as f32).min(1.0);
         let distance = radius / ((yfov / 2.0).tan() * aspect).atan().sin() * 1.05;
         let direction = Vec3::new(0.35, 0.45, 1.0).normalize();
-        Camera::look(centre + direction * distance, -direction, Vec3::Y, yfov, width, height)
+        Camera::look(
+            centre + direction * distance,
+            -direction,
+            Vec3::Y,
+            yfov,
+            width,
+            height,
+        )
     }
 
     /// Unit direction through film point `(px, py)` in pixels (see the module doc).
@@ -88,7 +99,14 @@ mod tests {
 
     #[test]
     fn centre_pixel_looks_forward_and_corners_span_fov() {
-        let cam = Camera::look(Vec3::ZERO, Vec3::NEG_Z, Vec3::Y, 90f32.to_radians(), 200, 100);
+        let cam = Camera::look(
+            Vec3::ZERO,
+            Vec3::NEG_Z,
+            Vec3::Y,
+            90f32.to_radians(),
+            200,
+            100,
+        );
         let c = cam.primary_direction(100.0, 50.0);
         assert!((c - Vec3A::NEG_Z).length() < 1e-6);
         // Top edge at 45 degrees up, right edge at atan(2) (aspect 2).
@@ -100,7 +118,10 @@ mod tests {
 
     #[test]
     fn from_world_follows_node_rotation() {
-        let m = Mat4::from_rotation_translation(glam::Quat::from_rotation_y(std::f32::consts::FRAC_PI_2), Vec3::new(1.0, 2.0, 3.0));
+        let m = Mat4::from_rotation_translation(
+            glam::Quat::from_rotation_y(std::f32::consts::FRAC_PI_2),
+            Vec3::new(1.0, 2.0, 3.0),
+        );
         let cam = Camera::from_world(m, 1.0, 64, 64);
         assert!((Vec3::from(cam.eye) - Vec3::new(1.0, 2.0, 3.0)).length() < 1e-6);
         assert!((cam.forward - Vec3A::NEG_X).length() < 1e-6);

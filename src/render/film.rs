@@ -24,7 +24,10 @@ pub struct LinearImage {
 impl LinearImage {
     /// 8-bit sRGB RGB bytes (clamped to [0, 1], rounded).
     pub fn to_srgb8(&self) -> Vec<u8> {
-        self.pixels.iter().flat_map(|p| p.to_array().map(encode_srgb8)).collect()
+        self.pixels
+            .iter()
+            .flat_map(|p| p.to_array().map(encode_srgb8))
+            .collect()
     }
 }
 
@@ -35,12 +38,27 @@ pub fn render_image(scene: &FrameScene, camera: &Camera, spp: u32) -> (LinearIma
     let tiles_y = height.div_ceil(TILE);
     let tiles: Vec<(Vec<Vec3>, TraceCounters)> = (0..tiles_x * tiles_y)
         .into_par_iter()
-        .map(|tile| render_tile(scene, camera, spp, (tile % tiles_x) * TILE, (tile / tiles_x) * TILE))
+        .map(|tile| {
+            render_tile(
+                scene,
+                camera,
+                spp,
+                (tile % tiles_x) * TILE,
+                (tile / tiles_x) * TILE,
+            )
+        })
         .collect();
-    let mut image = LinearImage { width, height, pixels: vec![Vec3::ZERO; (width * height) as usize] };
+    let mut image = LinearImage {
+        width,
+        height,
+        pixels: vec![Vec3::ZERO; (width * height) as usize],
+    };
     let mut counters = TraceCounters::default();
     for (tile, (pixels, tile_counters)) in tiles.iter().enumerate() {
-        let (x0, y0) = ((tile as u32 % tiles_x) * TILE, (tile as u32 / tiles_x) * TILE);
+        let (x0, y0) = (
+            (tile as u32 % tiles_x) * TILE,
+            (tile as u32 / tiles_x) * TILE,
+        );
         let w = TILE.min(width - x0);
         for (row, chunk) in pixels.chunks_exact(w as usize).enumerate() {
             let start = ((y0 + row as u32) * width + x0) as usize;
@@ -51,7 +69,13 @@ pub fn render_image(scene: &FrameScene, camera: &Camera, spp: u32) -> (LinearIma
     (image, counters)
 }
 
-fn render_tile(scene: &FrameScene, camera: &Camera, spp: u32, x0: u32, y0: u32) -> (Vec<Vec3>, TraceCounters) {
+fn render_tile(
+    scene: &FrameScene,
+    camera: &Camera,
+    spp: u32,
+    x0: u32,
+    y0: u32,
+) -> (Vec<Vec3>, TraceCounters) {
     let x1 = (x0 + TILE).min(camera.width);
     let y1 = (y0 + TILE).min(camera.height);
     let mut counters = TraceCounters::default();
@@ -86,12 +110,16 @@ pub fn sample_offset(x: u32, y: u32, i: u32, spp: u32) -> (f32, f32) {
     let h = hash3(x, y, i);
     let jx = (h & 0xffff) as f32 / 65536.0;
     let jy = (h >> 16) as f32 / 65536.0;
-    (((i % n) as f32 + jx) / n as f32, ((i / n) as f32 + jy) / n as f32)
+    (
+        ((i % n) as f32 + jx) / n as f32,
+        ((i / n) as f32 + jy) / n as f32,
+    )
 }
 
 /// A 32-bit integer hash (lowbias32 by Chris Wellons) of three integers.
 fn hash3(x: u32, y: u32, z: u32) -> u32 {
-    let mut h = x.wrapping_mul(0x9e37_79b9) ^ y.wrapping_mul(0x85eb_ca6b) ^ z.wrapping_mul(0xc2b2_ae35);
+    let mut h =
+        x.wrapping_mul(0x9e37_79b9) ^ y.wrapping_mul(0x85eb_ca6b) ^ z.wrapping_mul(0xc2b2_ae35);
     h ^= h >> 16;
     h = h.wrapping_mul(0x7feb_352d);
     h ^= h >> 15;
@@ -101,8 +129,16 @@ fn hash3(x: u32, y: u32, z: u32) -> u32 {
 
 /// Linear [0, 1] to an 8-bit sRGB code value.
 pub fn encode_srgb8(linear: f32) -> u8 {
-    let c = if linear.is_finite() { linear.clamp(0.0, 1.0) } else { 0.0 };
-    let encoded = if c <= 0.003_130_8 { 12.92 * c } else { 1.055 * c.powf(1.0 / 2.4) - 0.055 };
+    let c = if linear.is_finite() {
+        linear.clamp(0.0, 1.0)
+    } else {
+        0.0
+    };
+    let encoded = if c <= 0.003_130_8 {
+        12.92 * c
+    } else {
+        1.055 * c.powf(1.0 / 2.4) - 0.055
+    };
     (encoded * 255.0 + 0.5) as u8
 }
 

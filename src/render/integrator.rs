@@ -36,7 +36,11 @@ pub struct TraceCounters {
 
 impl Default for TraceCounters {
     fn default() -> Self {
-        TraceCounters { rays: 0, mip_histogram: [0; MIP_LEVELS], nonfinite_samples: 0 }
+        TraceCounters {
+            rays: 0,
+            mip_histogram: [0; MIP_LEVELS],
+            nonfinite_samples: 0,
+        }
     }
 }
 
@@ -90,9 +94,19 @@ struct SurfacePoint {
 impl FrameScene<'_> {
     /// Radiance arriving at `origin` from `direction`; `path_length` is the distance already
     /// travelled from the eye, `depth` the number of bounces so far.
-    pub fn radiance(&self, origin: Vec3A, direction: Vec3A, path_length: f32, depth: u32, counters: &mut TraceCounters) -> Vec3A {
+    pub fn radiance(
+        &self,
+        origin: Vec3A,
+        direction: Vec3A,
+        path_length: f32,
+        depth: u32,
+        counters: &mut TraceCounters,
+    ) -> Vec3A {
         counters.rays += 1;
-        let Some(hit) = self.accel.closest_hit(self.triangles, origin, direction, f32::INFINITY) else {
+        let Some(hit) = self
+            .accel
+            .closest_hit(self.triangles, origin, direction, f32::INFINITY)
+        else {
             return self.background;
         };
         let slot = hit.triangle as usize;
@@ -114,10 +128,19 @@ impl FrameScene<'_> {
         let mirror = opaque * material.reflectance;
         if mirror > MIN_WEIGHT {
             let reflected = reflect(direction, surface.shading_normal, surface.face_normal);
-            color += albedo * mirror * self.spawn(&surface, reflected, path_length, depth, counters);
+            color +=
+                albedo * mirror * self.spawn(&surface, reflected, path_length, depth, counters);
         }
         if material.transmission > MIN_WEIGHT {
-            color += self.transmit(&surface, direction, albedo, material, path_length, depth, counters);
+            color += self.transmit(
+                &surface,
+                direction,
+                albedo,
+                material,
+                path_length,
+                depth,
+                counters,
+            );
         }
         color
     }
@@ -128,24 +151,40 @@ impl FrameScene<'_> {
     pub fn probe_lod(&self, origin: Vec3A, direction: Vec3A) -> Option<LodProbe> {
         let (mut origin, mut direction, mut path_length) = (origin, direction, 0.0f32);
         for _ in 0..=self.max_depth {
-            let hit = self.accel.closest_hit(self.triangles, origin, direction, f32::INFINITY)?;
+            let hit = self
+                .accel
+                .closest_hit(self.triangles, origin, direction, f32::INFINITY)?;
             let slot = hit.triangle as usize;
             let surface = self.surface_point(&hit, origin, direction);
             let material = &self.materials[self.triangles.material[slot] as usize];
             path_length += hit.t;
             if material.base_color_texture.is_some() {
                 let level = self.lod.level(path_length, self.triangles.log2_pb[slot]);
-                return Some(LodProbe { triangle: hit.triangle, path_length, level });
+                return Some(LodProbe {
+                    triangle: hit.triangle,
+                    path_length,
+                    level,
+                });
             }
             let next = if material.transmission >= 0.5 {
-                let eta = if surface.entering { 1.0 / material.ior } else { material.ior };
+                let eta = if surface.entering {
+                    1.0 / material.ior
+                } else {
+                    material.ior
+                };
                 let cos_i = (-direction.dot(surface.shading_normal)).clamp(0.0, 1.0);
                 match refract(direction, surface.shading_normal, cos_i, eta) {
                     Some((refracted, _)) => (refracted, -surface.face_normal),
-                    None => (reflect(direction, surface.shading_normal, surface.face_normal), surface.face_normal),
+                    None => (
+                        reflect(direction, surface.shading_normal, surface.face_normal),
+                        surface.face_normal,
+                    ),
                 }
             } else if material.reflectance >= 0.5 {
-                (reflect(direction, surface.shading_normal, surface.face_normal), surface.face_normal)
+                (
+                    reflect(direction, surface.shading_normal, surface.face_normal),
+                    surface.face_normal,
+                )
             } else {
                 return None;
             };
@@ -161,7 +200,8 @@ impl FrameScene<'_> {
         let geometric = (p1 - p0).cross(p2 - p0).normalize_or_zero();
         let [n0, n1, n2] = self.triangles.normals[slot];
         let (b1, b2) = (hit.bary.x, hit.bary.y);
-        let interpolated = Vec3A::from(n0 * (1.0 - b1 - b2) + n1 * b1 + n2 * b2).normalize_or_zero();
+        let interpolated =
+            Vec3A::from(n0 * (1.0 - b1 - b2) + n1 * b1 + n2 * b2).normalize_or_zero();
         let entering = geometric.dot(direction) <= 0.0;
         let face_normal = if entering { geometric } else { -geometric };
         let shading_normal = match interpolated.dot(face_normal) {
@@ -171,13 +211,29 @@ impl FrameScene<'_> {
         };
         let position = origin + direction * hit.t;
         let magnitude = position.abs().max_element().max(origin.abs().max_element());
-        SurfacePoint { position, face_normal, shading_normal, entering, epsilon: 1e-5 + magnitude * 2f32.powi(-17) }
+        SurfacePoint {
+            position,
+            face_normal,
+            shading_normal,
+            entering,
+            epsilon: 1e-5 + magnitude * 2f32.powi(-17),
+        }
     }
 
     /// Base colour at a hit: factor times the filtered texture at the method's level.
-    fn albedo(&self, slot: usize, bary: Vec2, material: &MaterialDesc, path_length: f32, counters: &mut TraceCounters) -> Vec3A {
+    fn albedo(
+        &self,
+        slot: usize,
+        bary: Vec2,
+        material: &MaterialDesc,
+        path_length: f32,
+        counters: &mut TraceCounters,
+    ) -> Vec3A {
         let base = Vec3A::from(material.base_color);
-        let Some(texture) = material.base_color_texture.and_then(|t| self.textures.get(t)) else {
+        let Some(texture) = material
+            .base_color_texture
+            .and_then(|t| self.textures.get(t))
+        else {
             return base;
         };
         let [t0, t1, t2] = self.triangles.uvs[slot];
@@ -189,7 +245,8 @@ impl FrameScene<'_> {
                 pyramid.sample_bilinear(0, uv, texture.sampler)
             }
             method => {
-                let level = pyramid.clamp_level(method.level(path_length, self.triangles.log2_pb[slot]));
+                let level =
+                    pyramid.clamp_level(method.level(path_length, self.triangles.log2_pb[slot]));
                 counters.mip_histogram[(level as usize).min(MIP_LEVELS - 1)] += 1;
                 pyramid.sample_trilinear(uv, level, texture.sampler)
             }
@@ -209,12 +266,15 @@ impl FrameScene<'_> {
     ) -> Vec3A {
         let mut color = Vec3A::ZERO;
         for light in self.lights {
-            let Some(incident) = light.incident(surface.position) else { continue };
+            let Some(incident) = light.incident(surface.position) else {
+                continue;
+            };
             let cos = surface.shading_normal.dot(incident.to_light);
             if cos <= 0.0 || surface.face_normal.dot(incident.to_light) <= 0.0 {
                 continue;
             }
-            let transmittance = self.shadow_transmittance(surface, incident.to_light, incident.distance, counters);
+            let transmittance =
+                self.shadow_transmittance(surface, incident.to_light, incident.distance, counters);
             if transmittance == Vec3A::ZERO {
                 continue;
             }
@@ -222,7 +282,11 @@ impl FrameScene<'_> {
             color += diffuse * irradiance * std::f32::consts::FRAC_1_PI;
             if material.specular > 0.0 {
                 let half = (incident.to_light - direction).normalize_or_zero();
-                let highlight = surface.shading_normal.dot(half).max(0.0).powf(material.shininess);
+                let highlight = surface
+                    .shading_normal
+                    .dot(half)
+                    .max(0.0)
+                    .powf(material.shininess);
                 let normalization = (material.shininess + 8.0) / (8.0 * std::f32::consts::PI);
                 color += irradiance * (opaque * material.specular * normalization * highlight);
             }
@@ -232,20 +296,35 @@ impl FrameScene<'_> {
 
     /// Fraction of light that reaches the surface: 0 behind anything opaque, the product of
     /// transmission times untextured base colour through glass.
-    fn shadow_transmittance(&self, surface: &SurfacePoint, to_light: Vec3A, distance: f32, counters: &mut TraceCounters) -> Vec3A {
+    fn shadow_transmittance(
+        &self,
+        surface: &SurfacePoint,
+        to_light: Vec3A,
+        distance: f32,
+        counters: &mut TraceCounters,
+    ) -> Vec3A {
         counters.rays += 1;
         let origin = surface.position + surface.face_normal * surface.epsilon;
-        let t_max = if distance.is_finite() { distance * (1.0 - 1e-4) - surface.epsilon } else { f32::INFINITY };
+        let t_max = if distance.is_finite() {
+            distance * (1.0 - 1e-4) - surface.epsilon
+        } else {
+            f32::INFINITY
+        };
         if !(t_max > 0.0) {
             return Vec3A::ONE;
         }
         let mut transmittance = Vec3A::ONE;
-        self.accel.visit_hits(self.triangles, origin, to_light, t_max, |slot| {
-            let material = &self.materials[self.triangles.material[slot as usize] as usize];
-            transmittance *= Vec3A::from(material.base_color) * material.transmission;
-            transmittance.max_element() > MIN_WEIGHT
-        });
-        if transmittance.max_element() > MIN_WEIGHT { transmittance } else { Vec3A::ZERO }
+        self.accel
+            .visit_hits(self.triangles, origin, to_light, t_max, |slot| {
+                let material = &self.materials[self.triangles.material[slot as usize] as usize];
+                transmittance *= Vec3A::from(material.base_color) * material.transmission;
+                transmittance.max_element() > MIN_WEIGHT
+            });
+        if transmittance.max_element() > MIN_WEIGHT {
+            transmittance
+        } else {
+            Vec3A::ZERO
+        }
     }
 
     /// Glass: Fresnel-weighted reflection plus refraction tinted by the albedo; total
@@ -261,7 +340,11 @@ impl FrameScene<'_> {
         depth: u32,
         counters: &mut TraceCounters,
     ) -> Vec3A {
-        let eta = if surface.entering { 1.0 / material.ior } else { material.ior };
+        let eta = if surface.entering {
+            1.0 / material.ior
+        } else {
+            material.ior
+        };
         let n = surface.shading_normal;
         let cos_i = (-direction.dot(n)).clamp(0.0, 1.0);
         let reflected = reflect(direction, n, surface.face_normal);
@@ -272,11 +355,18 @@ impl FrameScene<'_> {
                 let fresnel = dielectric_fresnel(cos_i, cos_t, eta);
                 let mut color = Vec3A::ZERO;
                 if weight * fresnel > MIN_WEIGHT {
-                    color += weight * fresnel * self.spawn(surface, reflected, path_length, depth, counters);
+                    color += weight
+                        * fresnel
+                        * self.spawn(surface, reflected, path_length, depth, counters);
                 }
                 if weight * (1.0 - fresnel) > MIN_WEIGHT {
-                    let below = SurfacePoint { face_normal: -surface.face_normal, ..*surface };
-                    color += albedo * (weight * (1.0 - fresnel)) * self.spawn(&below, refracted, path_length, depth, counters);
+                    let below = SurfacePoint {
+                        face_normal: -surface.face_normal,
+                        ..*surface
+                    };
+                    color += albedo
+                        * (weight * (1.0 - fresnel))
+                        * self.spawn(&below, refracted, path_length, depth, counters);
                 }
                 color
             }
@@ -284,7 +374,14 @@ impl FrameScene<'_> {
     }
 
     /// Traces a secondary ray leaving the surface on the side `face_normal` points to.
-    fn spawn(&self, surface: &SurfacePoint, direction: Vec3A, path_length: f32, depth: u32, counters: &mut TraceCounters) -> Vec3A {
+    fn spawn(
+        &self,
+        surface: &SurfacePoint,
+        direction: Vec3A,
+        path_length: f32,
+        depth: u32,
+        counters: &mut TraceCounters,
+    ) -> Vec3A {
         let origin = surface.position + surface.face_normal * surface.epsilon;
         self.radiance(origin, direction, path_length, depth + 1, counters)
     }
@@ -323,7 +420,11 @@ fn dielectric_fresnel(cos_i: f32, cos_t: f32, eta: f32) -> f32 {
     let rs = (eta * cos_i - cos_t) / (eta * cos_i + cos_t);
     let rp = (cos_i - eta * cos_t) / (cos_i + eta * cos_t);
     let f = 0.5 * (rs * rs + rp * rp);
-    if f.is_finite() { f.clamp(0.0, 1.0) } else { 1.0 }
+    if f.is_finite() {
+        f.clamp(0.0, 1.0)
+    } else {
+        1.0
+    }
 }
 
 #[cfg(test)]

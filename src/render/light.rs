@@ -32,7 +32,11 @@ impl Light {
     /// Places a light description at a node's world transform.
     pub fn placed(desc: &LightDesc, world_from_light: Mat4) -> Light {
         let position = world_from_light.transform_point3(Vec3::ZERO).into();
-        let direction = world_from_light.transform_vector3(Vec3::NEG_Z).try_normalize().unwrap_or(Vec3::NEG_Y).into();
+        let direction = world_from_light
+            .transform_vector3(Vec3::NEG_Z)
+            .try_normalize()
+            .unwrap_or(Vec3::NEG_Y)
+            .into();
         Light {
             kind: desc.kind,
             position,
@@ -57,7 +61,11 @@ impl Light {
     #[inline]
     pub fn incident(&self, p: Vec3A) -> Option<Incident> {
         if let LightKind::Directional = self.kind {
-            return Some(Incident { to_light: -self.direction, distance: f32::INFINITY, irradiance: self.intensity });
+            return Some(Incident {
+                to_light: -self.direction,
+                distance: f32::INFINITY,
+                irradiance: self.intensity,
+            });
         }
         let offset = self.position - p;
         let d2 = offset.length_squared();
@@ -71,14 +79,30 @@ impl Light {
             let x = distance / range;
             falloff *= (1.0 - x * x * x * x).clamp(0.0, 1.0);
         }
-        if let LightKind::Spot { inner_cone, outer_cone } = self.kind {
+        if let LightKind::Spot {
+            inner_cone,
+            outer_cone,
+        } = self.kind
+        {
             let cos_angle = (-to_light).dot(self.direction);
             let (cos_outer, cos_inner) = (outer_cone.cos(), inner_cone.cos());
-            let t = if cos_inner > cos_outer { (cos_angle - cos_outer) / (cos_inner - cos_outer) } else { 1.0 };
-            let t = if cos_angle < cos_outer { 0.0 } else { t.clamp(0.0, 1.0) };
+            let t = if cos_inner > cos_outer {
+                (cos_angle - cos_outer) / (cos_inner - cos_outer)
+            } else {
+                1.0
+            };
+            let t = if cos_angle < cos_outer {
+                0.0
+            } else {
+                t.clamp(0.0, 1.0)
+            };
             falloff *= t * t;
         }
-        (falloff > 0.0).then_some(Incident { to_light, distance, irradiance: self.intensity * falloff })
+        (falloff > 0.0).then_some(Incident {
+            to_light,
+            distance,
+            irradiance: self.intensity * falloff,
+        })
     }
 }
 
@@ -91,7 +115,12 @@ pub fn ring_lights(min: Vec3, max: Vec3, count: usize, total: usize) -> Vec<Ligh
     (0..count)
         .map(|i| {
             let angle = std::f32::consts::TAU * (i as f32 + 0.25) / count as f32;
-            let position = centre + Vec3::new(angle.cos() * radius * 1.2, radius * 0.9, angle.sin() * radius * 1.2);
+            let position = centre
+                + Vec3::new(
+                    angle.cos() * radius * 1.2,
+                    radius * 0.9,
+                    angle.sin() * radius * 1.2,
+                );
             let d2 = (position - centre).length_squared();
             Light::point(position, 3.0 * d2 / total.max(1) as f32)
         })
@@ -115,7 +144,10 @@ mod tests {
     #[test]
     fn spot_light_cuts_off_outside_cone() {
         let desc = LightDesc {
-            kind: LightKind::Spot { inner_cone: 0.2, outer_cone: 0.4 },
+            kind: LightKind::Spot {
+                inner_cone: 0.2,
+                outer_cone: 0.4,
+            },
             color: Vec3::ONE,
             intensity: 10.0,
             range: None,
@@ -129,7 +161,10 @@ mod tests {
     fn ring_lights_sum_to_constant_irradiance_at_centre() {
         for n in 1..=6 {
             let lights = ring_lights(Vec3::splat(-2.0), Vec3::splat(2.0), n, n);
-            let total: f32 = lights.iter().map(|l| l.incident(Vec3A::ZERO).unwrap().irradiance.x).sum();
+            let total: f32 = lights
+                .iter()
+                .map(|l| l.incident(Vec3A::ZERO).unwrap().irradiance.x)
+                .sum();
             assert!((total - 3.0).abs() < 1e-4, "{n}: {total}");
         }
     }
