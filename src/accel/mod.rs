@@ -13,7 +13,7 @@ use glam::{Vec2, Vec3A};
 use obvhs::{
     BvhBuildParams,
     aabb::Aabb,
-    bvh2::{Bvh2, builder::build_bvh2},
+    bvh2::{Bvh2, builder::build_bvh2, node::Bvh2Node},
     fast_stack,
     ray::{Ray, RayHit},
 };
@@ -34,7 +34,34 @@ pub struct Hit {
 #[derive(Default)]
 pub struct Accel {
     bvh: Bvh2,
+    /// For each triangle slot, the leaf node that holds it.
+    leaf_of_slot: Vec<u32>,
+    /// For each node, its parent (the root's is itself).
+    parent: Vec<u32>,
+    /// Inner nodes, children before parents: the order a full refit visits them.
+    refit_order: Vec<u32>,
+    /// SAH cost right after the last build (see [`Accel::sah_cost`]).
+    build_cost: f32,
 }
+
+/// Which refit ran.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum RefitKind {
+    /// Nothing moved.
+    None,
+    /// Only the leaves of moved triangles and their ancestors.
+    Partial,
+    /// Every leaf and inner node.
+    Full,
+}
+
+/// Relative costs of the surface-area heuristic: one node visit vs one triangle test.
+const SAH_TRAVERSAL_COST: f32 = 1.0;
+const SAH_INTERSECTION_COST: f32 = 1.0;
+
+/// A partial refit walks up from each moved leaf; past this share of leaves a full sweep
+/// is cheaper.
+const PARTIAL_REFIT_MAX_SHARE: f64 = 0.1;
 
 /// Errors that stop a BVH build.
 #[derive(Debug, thiserror::Error)]
@@ -60,10 +87,122 @@ impl Accel {
             &mut Duration::default(),
         );
         triangles.permute(&bvh.primitive_indices);
-        Ok(Accel { bvh })
+        let mut accel = Accel { bvh, ..Default::default() };
+        accel.index_tree(triangles.len());
+        accel.build_cost = accel.sah_cost();
+        Ok(accel)
     }
 
-    /// The closest hit with `t` in `[0, t_max)`.
+    /// Derives the leaf-of-slot, parent and refit-order tables from the tree.
+    fn index_tree(&mut self, slots: usize) {
+        let nodes = &self.bvh.nodes;
+        self.leaf_of_slot = vec![0; slots];
+        self.parent = vec![0; nodes.len()];
+        self.refit_order.clear();
+        // Depth-first from the root; reversing the visit order puts children before parents.
+        let mut stack = vec![0u32];
+        while let Some(id) = stack.pop() {
+            let node = &nodes[id as usize];
+            if node.is_leaf() {
+                for slot in node.first_index..node.first_index + node.prim_count {
+                    self.leaf_of_slot[slot as usize] = id;
+                }
+            } else {
+                self.refit_order.push(id);
+                for child in [node.first_index, node.first_index + 1] {
+                    self.parent[child as usize] = id;
+                    stack.push(child);
+                }
+            }
+        }
+        self.refit_order.reverse();
+    }
+
+    /// Surface-area-heuristic cost of the tree, relative to its root box: the expected cost
+    /// of a ray through the root. Compared with its value right after the build to decide
+    /// when refitting has degraded the tree enough to rebuild it.
+    pub fn sah_cost(&self) -> f32 {
+        let Some(root) = self.bvh.nodes.first() else { return 0.0 };
+        let root_area = root.aabb().half_area().max(f32::MIN_POSITIVE);
+        let mut cost = 0.0f64;
+        for node in &self.bvh.nodes {
+            let share = (node.aabb().half_area() / root_area) as f64;
+            cost += if node.is_leaf() {
+                share * (node.prim_count as f32 * SAH_INTERSECTION_COST) as f64
+            } else {
+                share * SAH_TRAVERSAL_COST as f64
+            };
+        }
+        cost as f32
+    }
+
+    /// `sah_cost() / cost right after the last build` (1 for an empty tree).
+    pub fn sah_ratio(&self) -> f32 {
+        if self.build_cost > 0.0 { self.sah_cost() / self.build_cost } else { 1.0 }
+    }
+
+    /// Refits the boxes to the moved triangles `moved_slots` (BVH order) after their
+    /// positions changed in `triangles`. The tree's topology is kept.
+    pub fn refit(&mut self, triangles: &FrameTriangles, moved_slots: &[u32]) -> RefitKind {
+        if moved_slots.is_empty() || self.bvh.nodes.is_empty() {
+            return RefitKind::None;
+        }
+        let leaves = self.bvh.nodes.len().div_ceil(2);
+        if moved_slots.len() as f64 > PARTIAL_REFIT_MAX_SHARE * leaves as f64 {
+            self.refit_full(triangles);
+            RefitKind::Full
+        } else {
+            self.refit_partial(triangles, moved_slots);
+            RefitKind::Partial
+        }
+    }
+
+    fn leaf_box(&self, triangles: &FrameTriangles, leaf: u32) -> Aabb {
+        let node = &self.bvh.nodes[leaf as usize];
+        let mut aabb = Aabb::empty();
+        for slot in node.first_index..node.first_index + node.prim_count {
+            aabb = aabb.union(&padded_box(&triangles.positions[slot as usize]));
+        }
+        aabb
+    }
+
+    fn refit_full(&mut self, triangles: &FrameTriangles) {
+        for id in 0..self.bvh.nodes.len() {
+            if self.bvh.nodes[id].is_leaf() {
+                let aabb = self.leaf_box(triangles, id as u32);
+                self.bvh.nodes[id].set_aabb(aabb);
+            }
+        }
+        for &id in &self.refit_order {
+            let first = self.bvh.nodes[id as usize].first_index as usize;
+            let aabb = self.bvh.nodes[first].aabb().union(self.bvh.nodes[first + 1].aabb());
+            self.bvh.nodes[id as usize].set_aabb(aabb);
+        }
+    }
+
+    /// Updates each moved triangle's leaf, then its ancestors up to the first one whose box
+    /// comes out unchanged: that ancestor's own ancestors cannot change because of it.
+    fn refit_partial(&mut self, triangles: &FrameTriangles, moved_slots: &[u32]) {
+        for &slot in moved_slots {
+            let leaf = self.leaf_of_slot[slot as usize];
+            let aabb = self.leaf_box(triangles, leaf);
+            self.bvh.nodes[leaf as usize].set_aabb(aabb);
+            let mut id = leaf;
+            while id != 0 {
+                id = self.parent[id as usize];
+                let first = self.bvh.nodes[id as usize].first_index as usize;
+                let aabb = self.bvh.nodes[first].aabb().union(self.bvh.nodes[first + 1].aabb());
+                if *self.bvh.nodes[id as usize].aabb() == aabb {
+                    break;
+                }
+                self.bvh.nodes[id as usize].set_aabb(aabb);
+            }
+        }
+    }
+
+    /// The closest hit with `t` in `[0, t_max)`. Among hits at exactly the same distance
+    /// (a shared edge, coplanar triangles) the lowest source triangle wins, so the result
+    /// does not depend on the tree's shape: a refitted tree and a fresh build agree.
     #[inline]
     pub fn closest_hit(
         &self,
@@ -73,26 +212,39 @@ impl Accel {
         t_max: f32,
     ) -> Option<Hit> {
         let ray = Ray::new(origin, direction, 0.0, t_max);
-        let mut hit = RayHit::none();
-        let mut bary = Vec2::ZERO;
-        let found = self.bvh.ray_traverse(ray, &mut hit, |ray, slot| {
-            match intersect(&triangles.positions[slot], ray.origin, ray.direction) {
-                Some((t, b)) if t >= ray.tmin && t < ray.tmax => {
-                    bary = b;
-                    t
+        let mut best: Option<Hit> = None;
+        let mut best_source = u32::MAX;
+        let mut test_leaf = |node: &Bvh2Node, ray: &mut Ray, _: &mut RayHit| {
+            for slot in node.first_index..node.first_index + node.prim_count {
+                let Some((t, bary)) = intersect(&triangles.positions[slot as usize], ray.origin, ray.direction) else {
+                    continue;
+                };
+                if !(t >= 0.0 && t < t_max) {
+                    continue;
                 }
-                _ => f32::INFINITY,
+                let source = triangles.source[slot as usize];
+                let better = match best {
+                    None => true,
+                    Some(h) => t < h.t || (t == h.t && source < best_source),
+                };
+                if better {
+                    best = Some(Hit { triangle: slot, t, bary });
+                    best_source = source;
+                    // Keep visiting boxes that start exactly at `t`, where a tie may hide.
+                    ray.tmax = t.next_up();
+                }
             }
+            true
+        };
+        fast_stack!(u32, (96, 192), self.bvh.max_depth, stack, {
+            self.bvh.ray_traverse_dynamic(&mut stack, ray, &mut RayHit::none(), &mut test_leaf)
         });
-        found.then_some(Hit {
-            triangle: hit.primitive_id,
-            t: hit.t,
-            bary,
-        })
+        best
     }
 
-    /// Visits every triangle hit with `t` in `[0, t_max)` in no particular order until
-    /// `visit(slot)` returns false. Returns false when it was stopped early.
+    /// Visits every triangle hit with `t` in `[0, t_max)`, as `visit(slot, t)`, in an order
+    /// that depends on the tree, until `visit` returns false. Returns false when it was
+    /// stopped early.
     #[inline]
     pub fn visit_hits(
         &self,
@@ -100,17 +252,17 @@ impl Accel {
         origin: Vec3A,
         direction: Vec3A,
         t_max: f32,
-        mut visit: impl FnMut(u32) -> bool,
+        mut visit: impl FnMut(u32, f32) -> bool,
     ) -> bool {
         let ray = Ray::new(origin, direction, 0.0, t_max);
         let mut completed = true;
-        let mut test_leaf = |node: &obvhs::bvh2::node::Bvh2Node, ray: &mut Ray, _: &mut RayHit| {
+        let mut test_leaf = |node: &Bvh2Node, ray: &mut Ray, _: &mut RayHit| {
             for slot in node.first_index..node.first_index + node.prim_count {
-                let inside = matches!(
-                    intersect(&triangles.positions[slot as usize], ray.origin, ray.direction),
-                    Some((t, _)) if t >= ray.tmin && t < ray.tmax
-                );
-                if inside && !visit(slot) {
+                let hit = intersect(&triangles.positions[slot as usize], ray.origin, ray.direction);
+                let Some((t, _)) = hit.filter(|(t, _)| *t >= ray.tmin && *t < ray.tmax) else {
+                    continue;
+                };
+                if !visit(slot, t) {
                     completed = false;
                     return false;
                 }
@@ -206,7 +358,7 @@ mod tests {
         assert!((hit.t - 2.0).abs() < 1e-6);
         assert_eq!(tris.source[hit.triangle as usize], 1);
         let mut count = 0;
-        accel.visit_hits(&tris, Vec3A::ZERO, Vec3A::NEG_Z, f32::INFINITY, |_| {
+        accel.visit_hits(&tris, Vec3A::ZERO, Vec3A::NEG_Z, f32::INFINITY, |_, _| {
             count += 1;
             true
         });

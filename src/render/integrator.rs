@@ -20,6 +20,10 @@ pub const MIP_LEVELS: usize = 16;
 /// Secondary rays whose contribution weight falls below this are not traced.
 const MIN_WEIGHT: f32 = 1e-3;
 
+/// Glass surfaces a shadow ray passes through before it counts as blocked (a fixed bound
+/// keeps the per-ray state on the stack).
+const MAX_SHADOW_GLASS: usize = 16;
+
 /// Ambient radiance (linear RGB) reflected by every diffuse surface.
 const AMBIENT: Vec3A = Vec3A::splat(0.03);
 
@@ -313,18 +317,30 @@ impl FrameScene<'_> {
         if !(t_max > 0.0) {
             return Vec3A::ONE;
         }
-        let mut transmittance = Vec3A::ONE;
-        self.accel
-            .visit_hits(self.triangles, origin, to_light, t_max, |slot| {
-                let material = &self.materials[self.triangles.material[slot as usize] as usize];
-                transmittance *= Vec3A::from(material.base_color) * material.transmission;
-                transmittance.max_element() > MIN_WEIGHT
-            });
-        if transmittance.max_element() > MIN_WEIGHT {
-            transmittance
-        } else {
-            Vec3A::ZERO
+        // Collect the glass surfaces on the way and multiply them in distance order, so the
+        // result does not depend on the tree's traversal order (float products do).
+        let mut glass = [(0.0f32, 0u32, 0u32); MAX_SHADOW_GLASS];
+        let mut count = 0;
+        let unblocked = self.accel.visit_hits(self.triangles, origin, to_light, t_max, |slot, t| {
+            let material = &self.materials[self.triangles.material[slot as usize] as usize];
+            if material.transmission <= 0.0 || count == MAX_SHADOW_GLASS {
+                return false;
+            }
+            glass[count] = (t, self.triangles.source[slot as usize], slot);
+            count += 1;
+            true
+        });
+        if !unblocked {
+            return Vec3A::ZERO;
         }
+        let glass = &mut glass[..count];
+        glass.sort_unstable_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
+        let mut transmittance = Vec3A::ONE;
+        for &(_, _, slot) in glass.iter() {
+            let material = &self.materials[self.triangles.material[slot as usize] as usize];
+            transmittance *= Vec3A::from(material.base_color) * material.transmission;
+        }
+        if transmittance.max_element() > MIN_WEIGHT { transmittance } else { Vec3A::ZERO }
     }
 
     /// Glass: Fresnel-weighted reflection plus refraction tinted by the albedo; total
