@@ -9,7 +9,7 @@ use anyhow::{Context, Result, bail};
 use clap::{Args, Parser, Subcommand};
 use indicatif::{ProgressBar, ProgressStyle};
 
-use crate::frame::{FrameRecord, RenderSettings, Renderer};
+use crate::frame::{BvhPolicy, FrameRecord, RenderSettings, Renderer};
 use crate::lod::LodMethod;
 use crate::output::{FrameFormat, OutputDir};
 use crate::scene::SceneDesc;
@@ -74,6 +74,21 @@ pub struct RenderArgs {
     /// Frame file format.
     #[arg(long, value_enum, default_value_t = FrameFormat::Png)]
     pub format: FrameFormat,
+    /// BVH update: `refit` every frame (rebuild past --rebuild-threshold) or `rebuild`
+    /// every frame (for comparison).
+    #[arg(long, value_enum, default_value_t = BvhMode::Refit)]
+    pub bvh: BvhMode,
+    /// Rebuild when the refitted tree's SAH cost exceeds this multiple of its cost right
+    /// after the last build.
+    #[arg(long, default_value_t = BvhPolicy::DEFAULT_REBUILD_THRESHOLD)]
+    pub rebuild_threshold: f32,
+}
+
+/// `--bvh` values.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum BvhMode {
+    Refit,
+    Rebuild,
 }
 
 #[derive(Args, Debug, Clone)]
@@ -252,6 +267,9 @@ fn validated_settings(args: &RenderArgs) -> Result<RenderSettings> {
     if args.lights.is_some_and(|n| n > MAX_LIGHTS) {
         bail!("--lights: at most {MAX_LIGHTS}");
     }
+    if !(args.rebuild_threshold.is_finite() && args.rebuild_threshold >= 1.0) {
+        bail!("--rebuild-threshold {}: must be a number >= 1", args.rebuild_threshold);
+    }
     if !(args.fps.is_finite() && args.fps > 0.0) {
         bail!("--fps {}: must be a positive number", args.fps);
     }
@@ -262,6 +280,10 @@ fn validated_settings(args: &RenderArgs) -> Result<RenderSettings> {
         spp: args.spp,
         max_depth: args.max_depth,
         lights: args.lights,
+        bvh: match args.bvh {
+            BvhMode::Refit => BvhPolicy::Refit { rebuild_threshold: args.rebuild_threshold },
+            BvhMode::Rebuild => BvhPolicy::Rebuild,
+        },
     })
 }
 

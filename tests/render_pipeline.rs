@@ -16,6 +16,7 @@ fn settings(width: u32, height: u32, lod: LodMethod) -> RenderSettings {
         spp: 1,
         max_depth: 5,
         lights: None,
+        ..Default::default()
     }
 }
 

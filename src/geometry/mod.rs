@@ -11,7 +11,7 @@
 
 use glam::{Mat3, Mat4, Vec2, Vec3, Vec3A};
 
-use crate::scene::{MaterialDesc, SceneDesc};
+use crate::scene::{MaterialDesc, PrimitiveDesc, SceneDesc};
 use crate::texture::WrapMode;
 
 /// One drawn primitive: a mesh primitive placed by a node.
@@ -30,6 +30,8 @@ pub struct SceneGeometry {
     pub instances: Vec<Instance>,
     /// Per source triangle: its instance.
     pub triangle_instance: Vec<u32>,
+    /// Per instance: its source triangles (consecutive).
+    pub instance_triangles: Vec<std::ops::Range<u32>>,
     /// Per source triangle: vertex indices into the instance's primitive.
     pub triangle_vertices: Vec<[u32; 3]>,
     /// Per source triangle: texture coordinates, rebased by whole periods of the texture's
@@ -100,6 +102,7 @@ impl SceneGeometry {
                     material,
                 });
                 let wrap = wrap_modes(scene, &geometry.materials[material as usize]);
+                let first = geometry.triangle_vertices.len() as u32;
                 for tri in primitive.indices.chunks_exact(3) {
                     let vertices = [tri[0], tri[1], tri[2]];
                     let uvs = match &primitive.uvs {
@@ -110,6 +113,8 @@ impl SceneGeometry {
                     geometry.triangle_vertices.push(vertices);
                     geometry.triangle_uvs.push(uvs);
                 }
+                let end = geometry.triangle_vertices.len() as u32;
+                geometry.instance_triangles.push(first..end);
             }
         }
         geometry
@@ -119,14 +124,9 @@ impl SceneGeometry {
         self.triangle_vertices.len()
     }
 
-    /// Fills `out` (source order) with the world-space triangles for the given node world
-    /// transforms. Reuses `out`'s allocations.
-    pub fn world_triangles(
-        &self,
-        scene: &SceneDesc,
-        world_from_node: &[Mat4],
-        out: &mut FrameTriangles,
-    ) {
+    /// Fills `out` (source order) with every world-space triangle for the given node world
+    /// transforms, from the meshes' rest vertices. Reuses `out`'s allocations.
+    pub fn world_triangles(&self, scene: &SceneDesc, world_from_node: &[Mat4], out: &mut FrameTriangles) {
         let n = self.triangle_count();
         out.positions.clear();
         out.normals.clear();
@@ -134,65 +134,77 @@ impl SceneGeometry {
         out.material.clear();
         out.log2_pb.clear();
         out.source.clear();
-        out.positions.reserve(n);
-        out.normals.reserve(n);
-        out.uvs.reserve(n);
-        let placements: Vec<Placement> = self
-            .instances
-            .iter()
-            .map(|inst| Placement::new(world_from_node[inst.node as usize]))
-            .collect();
-        for t in 0..n {
-            let instance = self.instances[self.triangle_instance[t] as usize];
-            let placement = &placements[self.triangle_instance[t] as usize];
-            let primitive =
-                &scene.meshes[instance.mesh as usize].primitives[instance.primitive as usize];
-            let mut v = self.triangle_vertices[t];
-            let mut uv = self.triangle_uvs[t];
-            if placement.flips_winding {
-                v.swap(1, 2);
-                uv.swap(1, 2);
+        for (i, instance) in self.instances.iter().enumerate() {
+            let placement = Placement::new(world_from_node[instance.node as usize]);
+            let primitive = self.primitive(scene, i);
+            for source in self.instance_triangles[i].clone() {
+                let (p, normals) = self.world_triangle(source, &placement, &primitive.positions, primitive.normals.as_deref());
+                out.positions.push(p);
+                out.normals.push(normals);
+                out.uvs.push(self.oriented_uvs(source, &placement));
+                out.material.push(instance.material);
+                out.log2_pb.push(0.0);
+                out.source.push(source);
             }
-            let p = v.map(|i| {
-                Vec3A::from(
-                    placement
-                        .world_from_object
-                        .transform_point3(primitive.positions[i as usize]),
-                )
-            });
-            let geometric = (p[1] - p[0]).cross(p[2] - p[0]).normalize_or_zero();
-            let normals = match &primitive.normals {
-                Some(normals) => v.map(|i| {
-                    let n =
-                        (placement.normal_from_object * normals[i as usize]).normalize_or_zero();
-                    if n == Vec3::ZERO {
-                        Vec3::from(geometric)
-                    } else {
-                        n
-                    }
-                }),
-                None => [Vec3::from(geometric); 3],
-            };
-            out.positions.push(p);
-            out.normals.push(normals);
-            out.uvs.push(uv);
-            out.material.push(instance.material);
-            out.log2_pb.push(0.0);
-            out.source.push(t as u32);
         }
+        debug_assert_eq!(out.len(), n);
+    }
+
+    /// The mesh primitive instance `i` draws.
+    pub fn primitive<'s>(&self, scene: &'s SceneDesc, i: usize) -> &'s PrimitiveDesc {
+        let instance = self.instances[i];
+        &scene.meshes[instance.mesh as usize].primitives[instance.primitive as usize]
+    }
+
+    /// World-space vertices and shading normals of source triangle `source`, read from
+    /// `positions`/`normals` (the primitive's vertex arrays: rest or deformed) and placed by
+    /// `placement`. Winding is flipped when the placement mirrors.
+    #[inline]
+    pub fn world_triangle(
+        &self,
+        source: u32,
+        placement: &Placement,
+        positions: &[Vec3],
+        normals: Option<&[Vec3]>,
+    ) -> ([Vec3A; 3], [Vec3; 3]) {
+        let mut v = self.triangle_vertices[source as usize];
+        if placement.flips_winding {
+            v.swap(1, 2);
+        }
+        let p = v.map(|i| Vec3A::from(placement.world_from_object.transform_point3(positions[i as usize])));
+        let geometric = Vec3::from((p[1] - p[0]).cross(p[2] - p[0]).normalize_or_zero());
+        let normals = match normals {
+            Some(normals) => v.map(|i| {
+                let n = (placement.normal_from_object * normals[i as usize]).normalize_or_zero();
+                if n == Vec3::ZERO { geometric } else { n }
+            }),
+            None => [geometric; 3],
+        };
+        (p, normals)
+    }
+
+    /// Source triangle UVs in the vertex order [`Self::world_triangle`] uses.
+    #[inline]
+    pub fn oriented_uvs(&self, source: u32, placement: &Placement) -> [Vec2; 3] {
+        let mut uv = self.triangle_uvs[source as usize];
+        if placement.flips_winding {
+            uv.swap(1, 2);
+        }
+        uv
     }
 }
 
 /// A node's world transform with what shading needs derived once per instance.
-struct Placement {
-    world_from_object: Mat4,
+#[derive(Debug, Clone, Copy)]
+pub struct Placement {
+    pub world_from_object: Mat4,
     /// Inverse transpose of the upper 3x3 (normals transform covariantly).
-    normal_from_object: Mat3,
-    flips_winding: bool,
+    pub normal_from_object: Mat3,
+    pub flips_winding: bool,
 }
 
 impl Placement {
-    fn new(world_from_object: Mat4) -> Self {
+    pub fn new(world_from_object: Mat4) -> Self {
         let linear = Mat3::from_mat4(world_from_object);
         let det = linear.determinant();
         let normal_from_object = if det.abs() > f32::MIN_POSITIVE && det.is_finite() {

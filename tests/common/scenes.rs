@@ -266,3 +266,31 @@ pub fn showcase_scene() -> SceneDesc {
     });
     scene
 }
+
+fn channel(node: usize, target: ChannelTarget, times: &[f32], values: &[f32]) -> ChannelDesc {
+    let components = if target == ChannelTarget::Rotation { 4 } else { 3 };
+    ChannelDesc { node, target, interpolation: Interpolation::Linear, times: times.to_vec(), values: values.to_vec(), components }
+}
+
+/// The showcase scene plus three more textured cards: one spinning (rigid), one growing
+/// uniformly (scaled), one stretched along x (non-uniform: deformed). Returns the scene and
+/// the node indices of (spinning, growing, stretched).
+pub fn dynamic_scene() -> (SceneDesc, [usize; 3]) {
+    let mut scene = showcase_scene();
+    let card_mesh = scene.meshes.iter().position(|m| m.name == "card").expect("card mesh");
+    let spin = add_root(&mut scene, node("spin", at(Vec3::new(-2.0, 1.0, -6.0)), Some(card_mesh)));
+    let grow = add_root(&mut scene, node("grow", at(Vec3::new(1.5, 0.5, -6.0)), Some(card_mesh)));
+    let stretch = add_root(&mut scene, node("stretch", at(Vec3::new(0.0, 2.2, -7.0)), Some(card_mesh)));
+    let q0 = Quat::IDENTITY.to_array();
+    let q1 = Quat::from_rotation_y(2.5).to_array();
+    let spin_values: Vec<f32> = q0.iter().chain(&q1).copied().collect();
+    scene.animations.push(AnimationDesc {
+        name: "dynamic".into(),
+        channels: vec![
+            channel(spin, ChannelTarget::Rotation, &[0.0, 1.0], &spin_values),
+            channel(grow, ChannelTarget::Scale, &[0.0, 1.0], &[1.0, 1.0, 1.0, 2.0, 2.0, 2.0]),
+            channel(stretch, ChannelTarget::Scale, &[0.0, 1.0], &[1.0, 1.0, 1.0, 3.0, 1.0, 1.0]),
+        ],
+    });
+    (scene, [spin, grow, stretch])
+}

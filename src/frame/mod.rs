@@ -1,0 +1,607 @@
+//! One frame of the frame loop: animate -> update vertices -> dirty set -> refit the BVH
+//! (rebuild when its quality degrades) -> update `log2 P_b` for what changed -> render, each
+//! step timed into a [`FrameRecord`].
+//!
+//! Invariant: a frame is a pure function of the scene, the settings and its time, so any
+//! frame can be rendered alone (or on another machine) and match a sequential run byte for
+//! byte. What the sequential run carries over (triangles, `log2 P_b`, the tree) is exactly
+//! what a fresh frame would compute: unchanged triangles keep bit-identical values, the
+//! per-triangle constant of a similarity-placed mesh is defined as object-space constant +
+//! `log2 s` (so a rigid motion needs no work), and closest-hit ties are broken by triangle
+//! id rather than by tree order (see `accel`).
+
+mod dirty;
+
+pub use dirty::{DirtySet, Motion, quantized_log2_scale, similarity_scale};
+
+use std::time::Instant;
+
+use glam::{Mat4, Vec3, Vec3A};
+use serde::Serialize;
+
+use crate::accel::{Accel, AccelError, RefitKind};
+use crate::anim::node_world_transforms;
+use crate::geometry::{FrameTriangles, Placement, SceneGeometry};
+use crate::lod::{LOG2_PB_LIMIT, LodMethod, PixelFootprint, log2_pb};
+use crate::render::light::ring_lights;
+use crate::render::{Camera, FrameScene, Light, LinearImage, TraceCounters, render_image};
+use crate::scene::SceneDesc;
+
+/// How the BVH follows the animation.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum BvhPolicy {
+    /// Refit every frame; rebuild when the SAH cost exceeds `rebuild_threshold` times its
+    /// value right after the last build.
+    Refit { rebuild_threshold: f32 },
+    /// Rebuild every frame that anything moved (for comparison).
+    Rebuild,
+}
+
+impl BvhPolicy {
+    /// Default rebuild threshold: a refitted tree 50% costlier than fresh is rebuilt.
+    pub const DEFAULT_REBUILD_THRESHOLD: f32 = 1.5;
+
+    /// Whether the tree should be rebuilt given its current SAH ratio.
+    pub fn wants_rebuild(self, sah_ratio: f32) -> bool {
+        match self {
+            BvhPolicy::Rebuild => true,
+            BvhPolicy::Refit { rebuild_threshold } => !(sah_ratio <= rebuild_threshold),
+        }
+    }
+}
+
+/// How frames are rendered (the CLI's render options).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct RenderSettings {
+    pub width: u32,
+    pub height: u32,
+    pub lod: LodMethod,
+    /// Samples per pixel (stratified).
+    pub spp: u32,
+    /// Maximum number of reflection/refraction bounces.
+    pub max_depth: u32,
+    /// Number of lights: the scene's first N, plus ring lights when it has fewer.
+    /// `None`: all of the scene's lights (at least one).
+    pub lights: Option<usize>,
+    pub bvh: BvhPolicy,
+}
+
+impl Default for RenderSettings {
+    fn default() -> Self {
+        RenderSettings {
+            width: 640,
+            height: 360,
+            lod: LodMethod::Paper,
+            spp: 1,
+            max_depth: 5,
+            lights: None,
+            bvh: BvhPolicy::Refit { rebuild_threshold: BvhPolicy::DEFAULT_REBUILD_THRESHOLD },
+        }
+    }
+}
+
+/// What one frame cost and produced: one line of `stats.jsonl`.
+#[derive(Debug, Clone, PartialEq, Serialize, serde::Deserialize)]
+pub struct FrameRecord {
+    pub frame: u32,
+    pub time_s: f32,
+    pub width: u32,
+    pub height: u32,
+    pub lod_method: String,
+    pub triangles: usize,
+    pub lights: usize,
+    pub spp: u32,
+    /// Animation evaluated at the frame time and moved vertices written.
+    pub animate_ms: f64,
+    /// Classifying instances and triangles into the dirty set.
+    pub dirty_ms: f64,
+    /// Refitting the BVH to the moved triangles (0 when nothing moved or it was rebuilt).
+    pub refit_ms: f64,
+    /// Building the BVH (first frame, or a rebuild), including the reorder into BVH order.
+    pub build_ms: f64,
+    /// Whether the BVH was built this frame.
+    pub rebuild: bool,
+    /// SAH cost of the tree used for this frame over its cost right after its last build.
+    pub sah_ratio: f32,
+    /// Updating `log2 P_b` for the dirty triangles (0 for methods that do not use it).
+    pub lod_update_ms: f64,
+    /// Triangles whose box moved this frame (rigid + scaled + deformed).
+    pub moved_triangles: usize,
+    /// Triangles whose shape changed this frame.
+    pub deformed_triangles: usize,
+    /// Textured triangles whose `log2 P_b` was computed this frame (all on the first frame).
+    pub lod_recomputed: usize,
+    /// Textured triangles whose `log2 P_b` was shifted by a new uniform scale.
+    pub lod_shifted: usize,
+    pub render_ms: f64,
+    /// Everything above plus camera/light placement (not the file write).
+    pub total_ms: f64,
+    /// All rays traced: primary, shadow, reflection, refraction.
+    pub rays: u64,
+    /// Texture lookups per integer level (floor of the clamped level), index 0 = level 0.
+    pub mip_histogram: Vec<u64>,
+    /// Samples that came out NaN/inf and were written as black (expected 0).
+    pub nonfinite_samples: u64,
+}
+
+/// Errors that stop a frame.
+#[derive(Debug, thiserror::Error)]
+pub enum FrameError {
+    #[error("frame {frame} (t = {time_s} s): {source}")]
+    Accel { frame: u32, time_s: f32, source: AccelError },
+}
+
+/// What the per-frame update did and cost.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct UpdateStats {
+    pub animate_ms: f64,
+    pub dirty_ms: f64,
+    pub refit_ms: f64,
+    pub build_ms: f64,
+    pub rebuild: bool,
+    pub sah_ratio: f32,
+    pub lod_update_ms: f64,
+    pub moved_triangles: usize,
+    pub deformed_triangles: usize,
+    pub lod_recomputed: usize,
+    pub lod_shifted: usize,
+}
+
+/// One frame after its update: camera, lights and what the update cost.
+pub struct PreparedFrame {
+    pub camera: Camera,
+    pub lights: Vec<Light>,
+    pub update: UpdateStats,
+}
+
+/// Per-instance state carried from one frame to the next.
+#[derive(Debug, Clone, Copy)]
+struct InstanceState {
+    world_from_object: Mat4,
+    /// Quantized `log2` of the uniform scale when the placement is a similarity, `None`
+    /// otherwise (see [`quantized_log2_scale`]).
+    log2_scale: Option<f64>,
+}
+
+/// Renders frames of one scene; owns the frame-to-frame state and scratch buffers.
+pub struct Renderer {
+    scene: SceneDesc,
+    geometry: SceneGeometry,
+    settings: RenderSettings,
+    /// Node whose camera is used (first in traversal order), if any.
+    camera_node: Option<usize>,
+    /// Scene bounds at t = 0: frames the scene without a camera and places added lights.
+    rest_bounds: (Vec3, Vec3),
+    footprint: PixelFootprint,
+    /// Per source triangle: `log2 P_b` of the rest vertices in object space (NaN where the
+    /// material is untextured).
+    object_log2_pb: Vec<f32>,
+    /// The frame's triangles in BVH order, carried over between frames.
+    triangles: FrameTriangles,
+    /// Inverse of `triangles.source`.
+    slot_of_source: Vec<u32>,
+    accel: Accel,
+    /// `None` before the first frame.
+    instances: Option<Vec<InstanceState>>,
+    dirty: DirtySet,
+}
+
+impl Renderer {
+    pub fn new(scene: SceneDesc, settings: RenderSettings) -> Renderer {
+        let geometry = SceneGeometry::new(&scene);
+        let mut rest = FrameTriangles::default();
+        geometry.world_triangles(&scene, &node_world_transforms(&scene, 0.0), &mut rest);
+        let rest_bounds = bounds(&rest);
+        let camera_node = first_node_with(&scene, |n| n.camera.is_some());
+        let yfov = match camera_node {
+            Some(node) => scene.cameras[scene.nodes[node].camera.unwrap_or(0)].yfov,
+            None => Camera::framing(rest_bounds.0, rest_bounds.1, settings.width, settings.height).yfov,
+        };
+        let footprint = PixelFootprint::new(yfov, settings.height);
+        let object_log2_pb = object_space_log2_pb(&scene, &geometry, footprint);
+        Renderer {
+            scene,
+            geometry,
+            settings,
+            camera_node,
+            rest_bounds,
+            footprint,
+            object_log2_pb,
+            triangles: FrameTriangles::default(),
+            slot_of_source: Vec::new(),
+            accel: Accel::default(),
+            instances: None,
+            dirty: DirtySet::default(),
+        }
+    }
+
+    pub fn scene(&self) -> &SceneDesc {
+        &self.scene
+    }
+
+    pub fn settings(&self) -> &RenderSettings {
+        &self.settings
+    }
+
+    /// The frame's triangles in BVH order (valid after `prepare`).
+    pub fn triangles(&self) -> &FrameTriangles {
+        &self.triangles
+    }
+
+    /// The current BVH (valid after `prepare`).
+    pub fn accel(&self) -> &Accel {
+        &self.accel
+    }
+
+    /// Number of lights each frame is lit by.
+    pub fn light_count(&self) -> usize {
+        let scene_lights = self.scene_light_nodes().len();
+        self.settings.lights.unwrap_or(scene_lights.max(1))
+    }
+
+    /// Renders frame `frame` at time `time_s`.
+    ///
+    /// # Errors
+    /// Animation produced a non-finite vertex.
+    pub fn render_frame(&mut self, frame: u32, time_s: f32) -> Result<(LinearImage, FrameRecord), FrameError> {
+        let start = Instant::now();
+        let prepared = self.prepare(frame, time_s)?;
+        let t = Instant::now();
+        let (image, counters) = render_image(&self.frame_scene(&prepared), &prepared.camera, self.settings.spp.max(1));
+        let render_ms = ms_since(t);
+        let record = self.record(frame, time_s, &prepared, counters, render_ms, ms_since(start));
+        Ok((image, record))
+    }
+
+    /// The per-frame update without the render: animate, mark what moved, refit or rebuild
+    /// the BVH, update `log2 P_b`, place camera and lights.
+    ///
+    /// # Errors
+    /// Animation produced a non-finite vertex.
+    pub fn prepare(&mut self, frame: u32, time_s: f32) -> Result<PreparedFrame, FrameError> {
+        let mut stats = UpdateStats::default();
+        let start = Instant::now();
+        let world = node_world_transforms(&self.scene, time_s);
+        let accel_error = |source| FrameError::Accel { frame, time_s, source };
+        if self.instances.is_none() {
+            self.first_frame(&world, &mut stats).map_err(accel_error)?;
+        } else {
+            self.update_moved(&world, &mut stats);
+            self.update_accel(&mut stats).map_err(accel_error)?;
+            let t = Instant::now();
+            if self.settings.lod.needs_log2_pb() {
+                self.update_dirty_log2_pb(&mut stats);
+            }
+            stats.lod_update_ms = ms_since(t);
+        }
+        stats.moved_triangles = self.dirty.len();
+        stats.deformed_triangles = self.dirty.count(Motion::Deformed);
+        stats.sah_ratio = self.accel.sah_ratio();
+        let _ = start;
+        Ok(PreparedFrame { camera: self.camera(&world), lights: self.lights(&world), update: stats })
+    }
+
+    /// First frame: every triangle placed, the tree built, every `log2 P_b` computed.
+    fn first_frame(&mut self, world: &[Mat4], stats: &mut UpdateStats) -> Result<(), AccelError> {
+        let t = Instant::now();
+        self.geometry.world_triangles(&self.scene, world, &mut self.triangles);
+        let states = self.instance_states(world);
+        stats.animate_ms = ms_since(t);
+
+        let t = Instant::now();
+        self.accel = Accel::build(&mut self.triangles)?;
+        self.index_slots();
+        stats.build_ms = ms_since(t);
+        stats.rebuild = true;
+
+        let t = Instant::now();
+        self.dirty.reset(self.triangles.len());
+        if self.settings.lod.needs_log2_pb() {
+            for slot in 0..self.triangles.len() as u32 {
+                let instance = self.geometry.triangle_instance[self.triangles.source[slot as usize] as usize];
+                let motion = match states[instance as usize].log2_scale {
+                    Some(_) => Motion::Scaled,
+                    None => Motion::Deformed,
+                };
+                if self.set_log2_pb(slot, motion, &states) {
+                    stats.lod_recomputed += 1;
+                }
+            }
+        }
+        stats.lod_update_ms = ms_since(t);
+        self.instances = Some(states);
+        Ok(())
+    }
+
+    fn instance_states(&self, world: &[Mat4]) -> Vec<InstanceState> {
+        self.geometry
+            .instances
+            .iter()
+            .map(|inst| {
+                let m = world[inst.node as usize];
+                InstanceState { world_from_object: m, log2_scale: quantized_log2_scale(m) }
+            })
+            .collect()
+    }
+
+    fn index_slots(&mut self) {
+        self.slot_of_source.resize(self.triangles.len(), 0);
+        for (slot, &source) in self.triangles.source.iter().enumerate() {
+            self.slot_of_source[source as usize] = slot as u32;
+        }
+    }
+
+    /// Rewrites the triangles of every instance whose placement changed and records them in
+    /// the dirty set.
+    fn update_moved(&mut self, world: &[Mat4], stats: &mut UpdateStats) {
+        let t = Instant::now();
+        self.dirty.reset(self.triangles.len());
+        let previous = self.instances.take().unwrap_or_default();
+        let current = self.instance_states(world);
+        let mut classify_ms = ms_since(t);
+        for (i, (now, before)) in current.iter().zip(&previous).enumerate() {
+            if now.world_from_object == before.world_from_object {
+                continue; // static: untouched
+            }
+            let c = Instant::now();
+            let motion = match (now.log2_scale, before.log2_scale) {
+                (Some(s), Some(p)) if s == p => Motion::Rigid,
+                (Some(_), _) => Motion::Scaled,
+                (None, _) => Motion::Deformed,
+            };
+            classify_ms += ms_since(c);
+            self.place_instance(i, now.world_from_object, motion);
+        }
+        self.instances = Some(current);
+        stats.dirty_ms = classify_ms;
+        stats.animate_ms = ms_since(t) - classify_ms;
+    }
+
+    /// Writes instance `i`'s triangles for a new placement and marks them.
+    fn place_instance(&mut self, i: usize, world_from_object: Mat4, motion: Motion) {
+        let placement = Placement::new(world_from_object);
+        let primitive = self.geometry.primitive(&self.scene, i);
+        for source in self.geometry.instance_triangles[i].clone() {
+            let slot = self.slot_of_source[source as usize];
+            let (p, n) = self.geometry.world_triangle(source, &placement, &primitive.positions, primitive.normals.as_deref());
+            let s = slot as usize;
+            self.triangles.positions[s] = p;
+            self.triangles.normals[s] = n;
+            self.triangles.uvs[s] = self.geometry.oriented_uvs(source, &placement);
+            self.dirty.mark(slot, motion);
+        }
+    }
+
+    /// Refits the tree to the dirty triangles, or rebuilds it when the policy asks.
+    fn update_accel(&mut self, stats: &mut UpdateStats) -> Result<(), AccelError> {
+        if self.dirty.is_empty() {
+            return Ok(());
+        }
+        let rebuild_every_frame = self.settings.bvh == BvhPolicy::Rebuild;
+        if !rebuild_every_frame {
+            let t = Instant::now();
+            let kind = self.accel.refit(&self.triangles, &self.dirty.slots);
+            stats.refit_ms = ms_since(t);
+            debug_assert_ne!(kind, RefitKind::None);
+            if !self.settings.bvh.wants_rebuild(self.accel.sah_ratio()) {
+                return Ok(());
+            }
+        }
+        let t = Instant::now();
+        // A rebuild reorders the slots; carry the dirty marks over by source triangle.
+        let moved: Vec<(u32, Motion)> = self
+            .dirty
+            .slots
+            .iter()
+            .zip(&self.dirty.motions)
+            .map(|(&slot, &m)| (self.triangles.source[slot as usize], m))
+            .collect();
+        self.accel = Accel::build(&mut self.triangles)?;
+        self.index_slots();
+        self.dirty.reset(self.triangles.len());
+        for (source, motion) in moved {
+            self.dirty.mark(self.slot_of_source[source as usize], motion);
+        }
+        stats.build_ms = ms_since(t);
+        stats.rebuild = true;
+        Ok(())
+    }
+
+    /// `log2 P_b` for the dirty triangles: recomputed where deformed, shifted where scaled,
+    /// kept where rigid.
+    fn update_dirty_log2_pb(&mut self, stats: &mut UpdateStats) {
+        let states = self.instances.take().unwrap_or_default();
+        for k in 0..self.dirty.len() {
+            let (slot, motion) = (self.dirty.slots[k], self.dirty.motions[k]);
+            if motion == Motion::Rigid {
+                continue;
+            }
+            if self.set_log2_pb(slot, motion, &states) {
+                match motion {
+                    Motion::Deformed => stats.lod_recomputed += 1,
+                    _ => stats.lod_shifted += 1,
+                }
+            }
+        }
+        self.instances = Some(states);
+    }
+
+    /// Sets one triangle's `log2 P_b` by the rule for its motion; false when untextured.
+    fn set_log2_pb(&mut self, slot: u32, motion: Motion, states: &[InstanceState]) -> bool {
+        let s = slot as usize;
+        let source = self.triangles.source[s] as usize;
+        let object = self.object_log2_pb[source];
+        if object.is_nan() {
+            return false;
+        }
+        let instance = self.geometry.triangle_instance[source] as usize;
+        self.triangles.log2_pb[s] = match (motion, states[instance].log2_scale) {
+            (Motion::Scaled | Motion::Rigid, Some(log2_scale)) => shift_log2_pb(object, log2_scale),
+            _ => {
+                let size = self.texture_size(source).unwrap_or((1, 1));
+                log2_pb(self.triangles.positions[s], self.triangles.uvs[s], size, self.footprint)
+            }
+        };
+        true
+    }
+
+    fn texture_size(&self, source: usize) -> Option<(u32, u32)> {
+        let instance = self.geometry.instances[self.geometry.triangle_instance[source] as usize];
+        let material = &self.geometry.materials[instance.material as usize];
+        let texture = self.scene.textures.get(material.base_color_texture?)?;
+        Some(texture.pyramid.base_size())
+    }
+
+    /// What the integrator reads for a prepared frame (valid until the next `prepare`).
+    pub fn frame_scene<'a>(&'a self, prepared: &'a PreparedFrame) -> FrameScene<'a> {
+        FrameScene {
+            triangles: &self.triangles,
+            accel: &self.accel,
+            materials: &self.geometry.materials,
+            textures: &self.scene.textures,
+            lights: &prepared.lights,
+            background: Vec3A::from(self.scene.background),
+            lod: self.settings.lod,
+            max_depth: self.settings.max_depth,
+        }
+    }
+
+    fn record(
+        &self,
+        frame: u32,
+        time_s: f32,
+        prepared: &PreparedFrame,
+        counters: TraceCounters,
+        render_ms: f64,
+        total_ms: f64,
+    ) -> FrameRecord {
+        let u = prepared.update;
+        FrameRecord {
+            frame,
+            time_s,
+            width: self.settings.width,
+            height: self.settings.height,
+            lod_method: self.settings.lod.to_string(),
+            triangles: self.triangles.len(),
+            lights: prepared.lights.len(),
+            spp: self.settings.spp.max(1),
+            animate_ms: u.animate_ms,
+            dirty_ms: u.dirty_ms,
+            refit_ms: u.refit_ms,
+            build_ms: u.build_ms,
+            rebuild: u.rebuild,
+            sah_ratio: u.sah_ratio,
+            lod_update_ms: u.lod_update_ms,
+            moved_triangles: u.moved_triangles,
+            deformed_triangles: u.deformed_triangles,
+            lod_recomputed: u.lod_recomputed,
+            lod_shifted: u.lod_shifted,
+            render_ms,
+            total_ms,
+            rays: counters.rays,
+            mip_histogram: counters.mip_histogram.to_vec(),
+            nonfinite_samples: counters.nonfinite_samples,
+        }
+    }
+
+    fn camera(&self, world: &[glam::Mat4]) -> Camera {
+        let (w, h) = (self.settings.width, self.settings.height);
+        match self.camera_node {
+            Some(node) => {
+                let desc = self.scene.cameras[self.scene.nodes[node].camera.unwrap_or(0)];
+                Camera::from_world(world[node], desc.yfov, w, h)
+            }
+            None => Camera::framing(self.rest_bounds.0, self.rest_bounds.1, w, h),
+        }
+    }
+
+    fn scene_light_nodes(&self) -> Vec<usize> {
+        self.scene
+            .traversal_order()
+            .into_iter()
+            .filter(|&i| self.scene.nodes[i].light.is_some())
+            .collect()
+    }
+
+    fn lights(&self, world: &[glam::Mat4]) -> Vec<Light> {
+        let wanted = self.light_count();
+        let mut lights: Vec<Light> = self
+            .scene_light_nodes()
+            .into_iter()
+            .take(wanted)
+            .map(|node| {
+                Light::placed(
+                    &self.scene.lights[self.scene.nodes[node].light.unwrap_or(0)],
+                    world[node],
+                )
+            })
+            .collect();
+        if lights.len() < wanted {
+            let (min, max) = self.rest_bounds;
+            lights.extend(ring_lights(min, max, wanted - lights.len(), wanted));
+        }
+        lights
+    }
+}
+
+fn first_node_with(
+    scene: &SceneDesc,
+    predicate: impl Fn(&crate::scene::NodeDesc) -> bool,
+) -> Option<usize> {
+    scene
+        .traversal_order()
+        .into_iter()
+        .find(|&i| predicate(&scene.nodes[i]))
+}
+
+/// Axis-aligned bounds of the finite vertices (a unit box when there are none).
+fn bounds(triangles: &FrameTriangles) -> (Vec3, Vec3) {
+    let mut min = Vec3::splat(f32::INFINITY);
+    let mut max = Vec3::splat(f32::NEG_INFINITY);
+    for p in triangles
+        .positions
+        .iter()
+        .flatten()
+        .filter(|p| p.is_finite())
+    {
+        min = min.min(Vec3::from(*p));
+        max = max.max(Vec3::from(*p));
+    }
+    if min.cmple(max).all() {
+        (min, max)
+    } else {
+        (Vec3::splat(-1.0), Vec3::splat(1.0))
+    }
+}
+
+fn ms_since(t: Instant) -> f64 {
+    t.elapsed().as_secs_f64() * 1e3
+}
+
+/// `log2 P_b` of a similarity-placed triangle: the object-space constant plus `log2 s`
+/// (world area scales by `s^2`, and `log2 P_b` holds half the log of the area).
+fn shift_log2_pb(object: f32, log2_scale: f64) -> f32 {
+    if object.abs() >= LOG2_PB_LIMIT {
+        return object; // degenerate stand-ins stay at their limit
+    }
+    ((object as f64 + log2_scale) as f32).clamp(-LOG2_PB_LIMIT, LOG2_PB_LIMIT)
+}
+
+/// `log2 P_b` of every source triangle from its rest vertices in object space; NaN where the
+/// material is untextured.
+fn object_space_log2_pb(scene: &SceneDesc, geometry: &SceneGeometry, footprint: PixelFootprint) -> Vec<f32> {
+    let identity = Placement::new(Mat4::IDENTITY);
+    let mut out = vec![f32::NAN; geometry.triangle_count()];
+    for (i, instance) in geometry.instances.iter().enumerate() {
+        let material = &geometry.materials[instance.material as usize];
+        let Some(texture) = material.base_color_texture.and_then(|t| scene.textures.get(t)) else {
+            continue;
+        };
+        let primitive = geometry.primitive(scene, i);
+        for source in geometry.instance_triangles[i].clone() {
+            let (p, _) = geometry.world_triangle(source, &identity, &primitive.positions, None);
+            out[source as usize] = log2_pb(p, geometry.oriented_uvs(source, &identity), texture.pyramid.base_size(), footprint);
+        }
+    }
+    out
+}

@@ -1,0 +1,163 @@
+//! The dynamic frame loop against its full-recompute reference: dirty-only `log2 P_b`
+//! updates, refitted BVH hits, statelessness.
+
+mod common;
+
+use common::scenes::*;
+use glam::Vec3A;
+use mipray::accel::Accel;
+use mipray::frame::{BvhPolicy, RenderSettings, Renderer};
+use mipray::lod::{PixelFootprint, log2_pb};
+
+const FRAMES: u32 = 30;
+const FPS: f32 = 30.0;
+
+fn settings(bvh: BvhPolicy) -> RenderSettings {
+    RenderSettings { width: 64, height: 48, bvh, ..Default::default() }
+}
+
+/// `log2 P_b` by source triangle.
+fn by_source(r: &Renderer) -> Vec<f32> {
+    let t = r.triangles();
+    let mut out = vec![f32::NAN; t.len()];
+    for (slot, &source) in t.source.iter().enumerate() {
+        out[source as usize] = t.log2_pb[slot];
+    }
+    out
+}
+
+#[test]
+fn dirty_only_update_equals_a_full_recompute_bit_for_bit() {
+    let (scene, _) = dynamic_scene();
+    let policy = BvhPolicy::Refit { rebuild_threshold: BvhPolicy::DEFAULT_REBUILD_THRESHOLD };
+    let mut sequential = Renderer::new(scene, settings(policy));
+    for frame in 0..FRAMES {
+        let time = frame as f32 / FPS;
+        let update = sequential.prepare(frame, time).unwrap().update;
+        let mut fresh = Renderer::new(dynamic_scene().0, settings(policy));
+        fresh.prepare(frame, time).unwrap();
+        let (ts, tf) = (sequential.triangles(), fresh.triangles());
+        for (slot, &source) in ts.source.iter().enumerate() {
+            let other = tf.source.iter().position(|&s| s == source).unwrap();
+            let bits = |p: [Vec3A; 3]| p.map(|v| v.to_array().map(f32::to_bits));
+            assert_eq!(bits(ts.positions[slot]), bits(tf.positions[other]), "frame {frame}, triangle {source} vertices");
+        }
+        let (a, b) = (by_source(&sequential), by_source(&fresh));
+        for (source, (x, y)) in a.iter().zip(&b).enumerate() {
+            assert!(x.to_bits() == y.to_bits(), "frame {frame}, triangle {source}: dirty-only {x} vs full {y}");
+        }
+        if frame > 0 {
+            // Rigid motions never recompute; the stretched card (2 triangles) is deformed and
+            // the growing card (2 triangles) shifted by log2 s.
+            assert_eq!(update.lod_recomputed, 2, "frame {frame}");
+            assert_eq!(update.lod_shifted, 2, "frame {frame}");
+            assert_eq!(update.deformed_triangles, 2, "frame {frame}");
+        }
+    }
+}
+
+#[test]
+fn uniform_scale_shifts_log2_pb_by_log2_s() {
+    let (scene, [_, grow, _]) = dynamic_scene();
+    let mut r = Renderer::new(scene, settings(BvhPolicy::Rebuild));
+    r.prepare(0, 0.0).unwrap();
+    let grow_slots = |r: &Renderer| -> Vec<usize> {
+        // The growing card's triangles are those whose world centre is nearest its node.
+        let t = r.triangles();
+        (0..t.len())
+            .filter(|&s| {
+                let c = (t.positions[s][0] + t.positions[s][1] + t.positions[s][2]) / 3.0;
+                (c - Vec3A::new(1.5, 0.5, -6.0)).length() < 0.8
+            })
+            .collect()
+    };
+    let before: Vec<(u32, f32)> = grow_slots(&r).iter().map(|&s| (r.triangles().source[s], r.triangles().log2_pb[s])).collect();
+    assert_eq!(before.len(), 2, "the growing card has two triangles");
+    // At t = 0.5 the scale is 1.5.
+    r.prepare(15, 0.5).unwrap();
+    let footprint = PixelFootprint::new(0.9, 48);
+    let t = r.triangles();
+    for (source, old) in before {
+        let slot = t.source.iter().position(|&s| s == source).unwrap();
+        let shifted = t.log2_pb[slot];
+        assert!((shifted - old - 1.5f32.log2()).abs() < 1e-6, "{old} -> {shifted}");
+        let full = log2_pb(t.positions[slot], t.uvs[slot], (128, 128), footprint);
+        assert!((shifted - full).abs() < 1e-6, "shifted {shifted} vs recomputed {full}");
+    }
+    let _ = grow;
+}
+
+#[test]
+fn rigid_only_animation_never_recomputes_after_the_first_frame() {
+    // The showcase scene moves one card by translation only.
+    let mut r = Renderer::new(showcase_scene(), settings(BvhPolicy::Refit { rebuild_threshold: 1.5 }));
+    let first = r.prepare(0, 0.0).unwrap().update;
+    assert!(first.lod_recomputed > 0);
+    for frame in 1..FRAMES {
+        let u = r.prepare(frame, frame as f32 / FPS).unwrap().update;
+        assert_eq!(u.lod_recomputed, 0, "frame {frame}");
+        assert_eq!(u.lod_shifted, 0, "frame {frame}");
+        assert_eq!(u.moved_triangles, 2, "frame {frame}: the card's two triangles move");
+    }
+    // A static scene (time frozen) moves nothing.
+    let u = r.prepare(FRAMES, (FRAMES - 1) as f32 / FPS).unwrap().update;
+    assert_eq!((u.moved_triangles, u.lod_recomputed, u.rebuild), (0, 0, false));
+}
+
+/// Deterministic pseudo-random rays aimed into the scene's bounds.
+fn rays(count: usize) -> Vec<(Vec3A, Vec3A)> {
+    let mut state = 0x2545_f491_4f6c_dd1du64;
+    let mut next = move || {
+        state ^= state << 13;
+        state ^= state >> 7;
+        state ^= state << 17;
+        (state >> 40) as f32 / (1u64 << 24) as f32
+    };
+    (0..count)
+        .map(|_| {
+            let origin = Vec3A::new(next() * 8.0 - 4.0, next() * 3.0 + 0.1, next() * 4.0);
+            let target = Vec3A::new(next() * 8.0 - 4.0, next() * 3.0, -3.0 - next() * 6.0);
+            (origin, (target - origin).normalize())
+        })
+        .collect()
+}
+
+#[test]
+fn refitted_tree_finds_the_same_hits_as_a_fresh_build() {
+    let (scene, _) = dynamic_scene();
+    // Never rebuild, so every frame after the first traces a refitted tree.
+    let mut r = Renderer::new(scene, settings(BvhPolicy::Refit { rebuild_threshold: f32::INFINITY }));
+    let rays = rays(10_000);
+    for frame in 0..FRAMES {
+        let u = r.prepare(frame, frame as f32 / FPS).unwrap().update;
+        assert_eq!(u.rebuild, frame == 0, "frame {frame}");
+        let mut fresh_triangles = r.triangles().clone();
+        let fresh = Accel::build(&mut fresh_triangles).unwrap();
+        let mut hits = 0;
+        for (i, &(o, d)) in rays.iter().enumerate() {
+            let a = r.accel().closest_hit(r.triangles(), o, d, f32::INFINITY);
+            let b = fresh.closest_hit(&fresh_triangles, o, d, f32::INFINITY);
+            let a = a.map(|h| (r.triangles().source[h.triangle as usize], h.t.to_bits(), h.bary.to_array().map(f32::to_bits)));
+            let b = b.map(|h| (fresh_triangles.source[h.triangle as usize], h.t.to_bits(), h.bary.to_array().map(f32::to_bits)));
+            assert_eq!(a, b, "frame {frame}, ray {i}");
+            hits += a.is_some() as usize;
+        }
+        assert!(hits > 5_000, "frame {frame}: only {hits} rays hit anything");
+    }
+}
+
+#[test]
+fn frame_alone_equals_frame_in_sequence_with_refit_and_rebuild() {
+    for policy in [BvhPolicy::Refit { rebuild_threshold: 1.5 }, BvhPolicy::Rebuild] {
+        let mut seq = Renderer::new(dynamic_scene().0, settings(policy));
+        let mut images = Vec::new();
+        for frame in 0..8 {
+            images.push(seq.render_frame(frame, frame as f32 / 8.0).unwrap().0.to_srgb8());
+        }
+        for k in [3u32, 7] {
+            let mut alone = Renderer::new(dynamic_scene().0, settings(policy));
+            let image = alone.render_frame(k, k as f32 / 8.0).unwrap().0.to_srgb8();
+            assert!(image == images[k as usize], "{policy:?}: frame {k} alone differs from the sequence");
+        }
+    }
+}
