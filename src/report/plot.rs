@@ -4,7 +4,8 @@
 //! Layout: 1000 x 900 px, two panels stacked, frame number on both x axes.
 //! - Top: time per frame of each timing phase present (`animate_ms` ... `total_ms`), one
 //!   line per phase, on a log y axis in ms because phases differ by orders of magnitude.
-//!   Zero times cannot be drawn on a log axis and are left out.
+//!   Zero times cannot be drawn on a log axis and are left out. The top of the panel is
+//!   kept free for the legend.
 //! - Bottom: `moved_triangles`, `deformed_triangles`, `lod_recomputed` per frame, linear.
 //!
 //! Each panel has a caption, axis labels and a legend naming the fields as in
@@ -36,6 +37,9 @@ const COLORS: [RGBColor; 7] = [
     RGBColor(140, 86, 75),
     RGBColor(0, 0, 0),
 ];
+
+/// Share of the time panel's height kept above the data for the legend.
+const LEGEND_HEADROOM: f64 = 0.4;
 
 /// Points of one line segment: (frame, value).
 type Run = Vec<(i64, f64)>;
@@ -116,6 +120,9 @@ fn times_panel(
 ) -> Result<(), String> {
     let lines: Vec<(&Metric, Vec<Run>)> = present(&TIMING_PHASES, records, positive);
     let (lo, hi) = value_bounds(&lines).unwrap_or((1e-3, 1.0));
+    let (lo, hi) = (lo / 1.5, hi * 1.5);
+    // Free the top ~40 % (in log space) for the legend of up to seven lines.
+    let top = hi * (hi / lo).powf(LEGEND_HEADROOM / (1.0 - LEGEND_HEADROOM));
     let mut chart = ChartBuilder::on(area)
         .caption(
             format!("Per-frame phase times ({} frames)", records.len()),
@@ -124,7 +131,7 @@ fn times_panel(
         .margin(12)
         .x_label_area_size(40)
         .y_label_area_size(70)
-        .build_cartesian_2d(frames, (lo / 1.5..hi * 1.5).log_scale())
+        .build_cartesian_2d(frames, (lo..top).log_scale())
         .map_err(text)?;
     chart
         .configure_mesh()
@@ -149,7 +156,7 @@ fn counts_panel(
         .margin(12)
         .x_label_area_size(40)
         .y_label_area_size(70)
-        .build_cartesian_2d(frames, 0.0..hi * 1.1)
+        .build_cartesian_2d(frames, 0.0..hi * 1.3)
         .map_err(text)?;
     chart
         .configure_mesh()
