@@ -13,3 +13,4 @@ pub mod frame;
 pub mod output;
 pub mod cli;
 pub mod bench;
+pub mod report;

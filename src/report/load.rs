@@ -1,0 +1,189 @@
+//! Reading and merging the stats files of one render sequence.
+//!
+//! Each path given is either a stats file, read as is, or an output folder, from which
+//! `stats.jsonl` and every `stats.shard-*.jsonl` are read (a folder with neither is an
+//! error). A render split into shards (`--shard I/N`) leaves disjoint frames in several
+//! folders or files; they are merged and sorted by frame number. When a frame appears more
+//! than once (a resumed render appends a frame it already had) the last record read wins:
+//! later lines of a file over earlier ones, later files of a folder (by name, `stats.jsonl`
+//! first) and later paths given over earlier ones. The same file named twice is read once.
+//! Blank lines are skipped; any other line that is not a record is an error naming the file
+//! and the 1-based line.
+
+use std::fs;
+use std::path::{Path, PathBuf};
+
+use super::error::ReportError;
+use super::record::{Record, RecordError};
+
+/// The merged records of a sequence and where they came from.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Sequence {
+    /// One record per frame, ascending by frame.
+    pub records: Vec<Record>,
+    /// Every stats file read, in reading order.
+    pub files: Vec<PathBuf>,
+    /// Records dropped because a later record had the same frame number.
+    pub duplicates_dropped: usize,
+}
+
+/// Reads, merges, sorts and de-duplicates the records of `dirs` (see the module docs).
+///
+/// # Errors
+/// A folder cannot be read or has no stats file, a line is not a record (the error names
+/// the file and line), or there is no record at all.
+pub fn load_records(dirs: &[PathBuf]) -> Result<Vec<Record>, ReportError> {
+    load_sequence(dirs).map(|sequence| sequence.records)
+}
+
+/// [`load_records`], also telling which files were read and how many duplicates dropped.
+///
+/// # Errors
+/// As [`load_records`].
+pub fn load_sequence(dirs: &[PathBuf]) -> Result<Sequence, ReportError> {
+    let mut files: Vec<PathBuf> = Vec::new();
+    for dir in dirs {
+        for file in stats_files(dir)? {
+            if !is_listed(&files, &file) {
+                files.push(file);
+            }
+        }
+    }
+    let mut records = Vec::new();
+    for file in &files {
+        records.extend(read_stats_file(file)?);
+    }
+    if records.is_empty() {
+        return Err(ReportError::Empty {
+            sources: describe(dirs),
+        });
+    }
+    let (records, duplicates_dropped) = sort_keeping_last(records);
+    Ok(Sequence {
+        records,
+        files,
+        duplicates_dropped,
+    })
+}
+
+/// Whether `file` (or the same file under another name) is already in `files`.
+fn is_listed(files: &[PathBuf], file: &Path) -> bool {
+    let canonical = fs::canonicalize(file).ok();
+    files
+        .iter()
+        .any(|f| f == file || (canonical.is_some() && fs::canonicalize(f).ok() == canonical))
+}
+
+/// Whether `name` is a stats file of an output folder.
+pub fn is_stats_file_name(name: &str) -> bool {
+    name == "stats.jsonl" || (name.starts_with("stats.shard-") && name.ends_with(".jsonl"))
+}
+
+/// The stats files of `path`: itself if it is a file, else the folder's stats files,
+/// `stats.jsonl` first, then the shard files by name.
+fn stats_files(path: &Path) -> Result<Vec<PathBuf>, ReportError> {
+    if path.is_file() {
+        return Ok(vec![path.to_path_buf()]);
+    }
+    let mut names: Vec<String> = Vec::new();
+    for entry in fs::read_dir(path).map_err(ReportError::io(path))? {
+        let entry = entry.map_err(ReportError::io(path))?;
+        let name = entry.file_name().to_string_lossy().into_owned();
+        if is_stats_file_name(&name) && entry.path().is_file() {
+            names.push(name);
+        }
+    }
+    if names.is_empty() {
+        return Err(ReportError::NoStatsFile {
+            dir: path.to_path_buf(),
+        });
+    }
+    names.sort_by_key(|name| (name != "stats.jsonl", name.clone()));
+    Ok(names.into_iter().map(|name| path.join(name)).collect())
+}
+
+/// The records of one stats file, in line order.
+fn read_stats_file(path: &Path) -> Result<Vec<Record>, ReportError> {
+    let text = fs::read_to_string(path).map_err(ReportError::io(path))?;
+    let mut records = Vec::new();
+    for (index, line) in text.lines().enumerate() {
+        if line.trim().is_empty() {
+            continue;
+        }
+        let record = Record::parse(line).map_err(|e| match e {
+            RecordError::Json(source) => ReportError::Json {
+                path: path.to_path_buf(),
+                line: index + 1,
+                source,
+            },
+            RecordError::Invalid(message) => ReportError::Record {
+                path: path.to_path_buf(),
+                line: index + 1,
+                message,
+            },
+        })?;
+        records.push(record);
+    }
+    Ok(records)
+}
+
+/// Sorts by frame (stable), keeps the last record of each frame; returns how many dropped.
+fn sort_keeping_last(mut records: Vec<Record>) -> (Vec<Record>, usize) {
+    let read = records.len();
+    records.sort_by_key(|r| r.frame);
+    let mut kept: Vec<Record> = Vec::with_capacity(read);
+    for record in records {
+        match kept.last_mut() {
+            Some(last) if last.frame == record.frame => *last = record,
+            _ => kept.push(record),
+        }
+    }
+    let dropped = read - kept.len();
+    (kept, dropped)
+}
+
+/// The paths as one comma-separated list for messages.
+fn describe(dirs: &[PathBuf]) -> String {
+    if dirs.is_empty() {
+        return "(no folder given)".into();
+    }
+    let names: Vec<String> = dirs.iter().map(|d| d.display().to_string()).collect();
+    names.join(", ")
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn record(frame: u32, render_ms: f64) -> Record {
+        Record {
+            frame,
+            render_ms: Some(render_ms),
+            ..Record::default()
+        }
+    }
+
+    #[test]
+    fn last_record_of_a_frame_wins() {
+        let input = vec![
+            record(2, 1.0),
+            record(0, 1.0),
+            record(2, 2.0),
+            record(1, 1.0),
+            record(2, 3.0),
+        ];
+        let (kept, dropped) = sort_keeping_last(input);
+        let frames: Vec<(u32, Option<f64>)> = kept.iter().map(|r| (r.frame, r.render_ms)).collect();
+        assert_eq!(frames, [(0, Some(1.0)), (1, Some(1.0)), (2, Some(3.0))]);
+        assert_eq!(dropped, 2);
+    }
+
+    #[test]
+    fn stats_file_names() {
+        assert!(is_stats_file_name("stats.jsonl"));
+        assert!(is_stats_file_name("stats.shard-1-of-4.jsonl"));
+        assert!(!is_stats_file_name("stats.jsonl.tmp"));
+        assert!(!is_stats_file_name("summary.json"));
+        assert!(!is_stats_file_name(".stats.jsonl.tmp"));
+    }
+}

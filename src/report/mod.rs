@@ -1,0 +1,40 @@
+//! `mipray report`: statistics and a plot of a rendered sequence from its `stats.jsonl`.
+//!
+//! [`report`] loads the records of one or more output folders ([`load_sequence`]: shards
+//! merged, sorted by frame, duplicates dropped), summarises every timing phase and count
+//! with [`Percentiles`] (min / median / nearest-rank p95 / max), computes the preprocessing
+//! share of frame time and the rebuild count, and writes an SVG plot ([`write_svg`]).
+//! Fields missing from older records are absent, never 0: a quantity no record has is left
+//! out of the table and the plot.
+
+mod atomic;
+mod error;
+mod load;
+mod metrics;
+mod percentiles;
+mod plot;
+mod record;
+mod stats;
+mod summary;
+
+use std::path::{Path, PathBuf};
+
+pub use error::ReportError;
+pub use load::{Sequence, is_stats_file_name, load_records, load_sequence};
+pub use metrics::{COUNTS, Metric, PLOTTED_COUNTS, PREPROCESSING_PHASES, TIMING_PHASES};
+pub use percentiles::{Percentiles, nearest_rank};
+pub use plot::{SVG_SIZE, render_svg, write_svg};
+pub use record::Record;
+pub use stats::{PhaseRow, PreprocessingShare, rebuild_count};
+pub use summary::ReportSummary;
+
+/// Loads the records of `dirs`, writes the plot to `svg_out` (atomically, creating its
+/// folder) and returns the statistics (`Display`: a Markdown table and summary lines).
+///
+/// # Errors
+/// Loading fails (see [`load_records`]), or the plot cannot be drawn or written.
+pub fn report(dirs: &[PathBuf], svg_out: &Path) -> Result<ReportSummary, ReportError> {
+    let sequence = load_sequence(dirs)?;
+    write_svg(&sequence.records, svg_out)?;
+    Ok(ReportSummary::of(&sequence, svg_out.to_path_buf()))
+}
