@@ -6,8 +6,10 @@
 //! key range (glTF leaves looping to the application; mipray clamps).
 
 mod sample;
+mod scale;
 
 pub use sample::{sample_channel, sample_rotation, sample_vec3};
+pub use scale::node_uniform_scales;
 
 use glam::{Mat4, Quat, Vec3};
 

@@ -12,7 +12,7 @@
 
 mod dirty;
 
-pub use dirty::{DirtySet, Motion, quantized_log2_scale, similarity_scale};
+pub use dirty::{DirtySet, Motion};
 
 use std::time::Instant;
 
@@ -20,7 +20,7 @@ use glam::{Mat4, Vec3, Vec3A};
 use serde::Serialize;
 
 use crate::accel::{Accel, AccelError, RefitKind};
-use crate::anim::node_world_transforms;
+use crate::anim::{node_uniform_scales, node_world_transforms};
 use crate::geometry::{FrameTriangles, Placement, SceneGeometry};
 use crate::lod::{LOG2_PB_LIMIT, LodMethod, PixelFootprint, log2_pb};
 use crate::render::light::ring_lights;
@@ -158,8 +158,8 @@ pub struct PreparedFrame {
 #[derive(Debug, Clone, Copy)]
 struct InstanceState {
     world_from_object: Mat4,
-    /// Quantized `log2` of the uniform scale when the placement is a similarity, `None`
-    /// otherwise (see [`quantized_log2_scale`]).
+    /// `log2` of the uniform scale when the placement is a similarity, `None` otherwise
+    /// (exact through the hierarchy: see `anim::node_uniform_scales`).
     log2_scale: Option<f64>,
 }
 
@@ -262,11 +262,12 @@ impl Renderer {
         let mut stats = UpdateStats::default();
         let start = Instant::now();
         let world = node_world_transforms(&self.scene, time_s);
+        let scales = node_uniform_scales(&self.scene, time_s);
         let accel_error = |source| FrameError::Accel { frame, time_s, source };
         if self.instances.is_none() {
-            self.first_frame(&world, &mut stats).map_err(accel_error)?;
+            self.first_frame(&world, &scales, &mut stats).map_err(accel_error)?;
         } else {
-            self.update_moved(&world, &mut stats);
+            self.update_moved(&world, &scales, &mut stats);
             self.update_accel(&mut stats).map_err(accel_error)?;
             let t = Instant::now();
             if self.settings.lod.needs_log2_pb() {
@@ -282,10 +283,10 @@ impl Renderer {
     }
 
     /// First frame: every triangle placed, the tree built, every `log2 P_b` computed.
-    fn first_frame(&mut self, world: &[Mat4], stats: &mut UpdateStats) -> Result<(), AccelError> {
+    fn first_frame(&mut self, world: &[Mat4], scales: &[Option<f64>], stats: &mut UpdateStats) -> Result<(), AccelError> {
         let t = Instant::now();
         self.geometry.world_triangles(&self.scene, world, &mut self.triangles);
-        let states = self.instance_states(world);
+        let states = self.instance_states(world, scales);
         stats.animate_ms = ms_since(t);
 
         let t = Instant::now();
@@ -313,13 +314,13 @@ impl Renderer {
         Ok(())
     }
 
-    fn instance_states(&self, world: &[Mat4]) -> Vec<InstanceState> {
+    fn instance_states(&self, world: &[Mat4], scales: &[Option<f64>]) -> Vec<InstanceState> {
         self.geometry
             .instances
             .iter()
-            .map(|inst| {
-                let m = world[inst.node as usize];
-                InstanceState { world_from_object: m, log2_scale: quantized_log2_scale(m) }
+            .map(|inst| InstanceState {
+                world_from_object: world[inst.node as usize],
+                log2_scale: scales[inst.node as usize].map(f64::log2),
             })
             .collect()
     }
@@ -333,11 +334,11 @@ impl Renderer {
 
     /// Rewrites the triangles of every instance whose placement changed and records them in
     /// the dirty set.
-    fn update_moved(&mut self, world: &[Mat4], stats: &mut UpdateStats) {
+    fn update_moved(&mut self, world: &[Mat4], scales: &[Option<f64>], stats: &mut UpdateStats) {
         let t = Instant::now();
         self.dirty.reset(self.triangles.len());
         let previous = self.instances.take().unwrap_or_default();
-        let current = self.instance_states(world);
+        let current = self.instance_states(world, scales);
         let mut classify_ms = ms_since(t);
         for (i, (now, before)) in current.iter().zip(&previous).enumerate() {
             if now.world_from_object == before.world_from_object {
