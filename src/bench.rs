@@ -11,7 +11,7 @@ use anyhow::Result;
 
 use crate::frame::{RenderSettings, Renderer};
 use crate::lod::LodMethod;
-use crate::output::Spread;
+use crate::report::Percentiles;
 use crate::scene::SceneDesc;
 
 /// One timed configuration.
@@ -26,14 +26,14 @@ pub struct BenchConfig {
 pub struct BenchResult {
     pub config: BenchConfig,
     /// Render time per frame (ms), over repeats.
-    pub render_ms_per_frame: Spread,
+    pub render_ms_per_frame: Percentiles,
     /// Whole-frame time (update + render) per frame (ms), over repeats.
-    pub total_ms_per_frame: Spread,
+    pub total_ms_per_frame: Percentiles,
     /// Rays per second of render time, over repeats.
-    pub rays_per_second: Spread,
+    pub rays_per_second: Percentiles,
     /// Per-repeat ratio of this configuration's render time to the first configuration with
     /// the same thread count.
-    pub render_ratio: Spread,
+    pub render_ratio: Percentiles,
 }
 
 /// Renders `frames` for every configuration, `repeats` times, interleaved.
@@ -89,10 +89,10 @@ pub fn run_bench(
                 .unwrap_or(c);
             BenchResult {
                 config: configs[c],
-                render_ms_per_frame: Spread::of(samples[c].iter().map(|s| s.0 / frame_count)),
-                total_ms_per_frame: Spread::of(samples[c].iter().map(|s| s.1 / frame_count)),
-                rays_per_second: Spread::of(samples[c].iter().map(|s| s.2 as f64 / (s.0 / 1e3))),
-                render_ratio: Spread::of(
+                render_ms_per_frame: Percentiles::of(samples[c].iter().map(|s| s.0 / frame_count)),
+                total_ms_per_frame: Percentiles::of(samples[c].iter().map(|s| s.1 / frame_count)),
+                rays_per_second: Percentiles::of(samples[c].iter().map(|s| s.2 as f64 / (s.0 / 1e3))),
+                render_ratio: Percentiles::of(
                     (0..repeats).map(|r| samples[c][r].0 / samples[baseline][r].0),
                 ),
             }

@@ -11,7 +11,7 @@ use indicatif::{ProgressBar, ProgressStyle};
 
 use crate::frame::{BvhPolicy, FrameRecord, RenderSettings, Renderer};
 use crate::lod::LodMethod;
-use crate::output::{FrameFormat, OutputDir};
+use crate::output::{FrameFormat, OutputDir, Shard};
 use crate::scene::SceneDesc;
 
 #[derive(Parser, Debug)]
@@ -31,6 +31,15 @@ pub enum Command {
     Render(RenderArgs),
     /// Time LOD methods and thread counts side by side (interleaved, repeated, median).
     Bench(BenchArgs),
+    /// Per-phase statistics and an SVG plot of rendered sequences (shards merged).
+    Report {
+        /// Output folders (or stats files) of one sequence.
+        #[arg(required = true)]
+        dirs: Vec<PathBuf>,
+        /// Where to write the plot [default: report.svg in the first folder].
+        #[arg(long)]
+        svg: Option<PathBuf>,
+    },
     /// Print what a scene contains.
     Info {
         /// A .gltf/.glb path, or the name of a scene in animations/ (e.g. `default`).
@@ -82,6 +91,13 @@ pub struct RenderArgs {
     /// after the last build.
     #[arg(long, default_value_t = BvhPolicy::DEFAULT_REBUILD_THRESHOLD)]
     pub rebuild_threshold: f32,
+    /// Render only shard I of N (a contiguous block of the frames); default: from Slurm or
+    /// Kubernetes Indexed Job variables when set (see README).
+    #[arg(long)]
+    pub shard: Option<String>,
+    /// Skip frames already complete in the output folder.
+    #[arg(long)]
+    pub resume: bool,
 }
 
 /// `--bvh` values.
@@ -141,6 +157,16 @@ pub fn run(cli: Cli) -> Result<()> {
         None => render(&RenderArgs::default()),
         Some(Command::Render(args)) => render(&args),
         Some(Command::Bench(args)) => bench(&args),
+        Some(Command::Report { dirs, svg }) => {
+            let svg = svg.unwrap_or_else(|| {
+                let first = &dirs[0];
+                let folder = if first.is_dir() { first.clone() } else { first.parent().map(Path::to_path_buf).unwrap_or_default() };
+                folder.join("report.svg")
+            });
+            let summary = crate::report::report(&dirs, &svg)?;
+            print!("{summary}");
+            Ok(())
+        }
         Some(Command::Info { scene }) => {
             let path = resolve_scene(&scene)?;
             let desc = load_scene(&path)?;
@@ -312,8 +338,14 @@ pub fn render(args: &RenderArgs) -> Result<()> {
         threads = threads.num_threads(n);
     }
     let pool = threads.build().context("cannot start worker threads")?;
+    let output = SequenceOutput {
+        dir: out,
+        format: args.format,
+        shard: resolve_shard(args.shard.as_deref(), |name| std::env::var(name).ok())?,
+        resume: args.resume,
+    };
     let mut renderer = Renderer::new(scene, settings);
-    pool.install(|| render_sequence(&mut renderer, frames, args.fps, &out, args.format))
+    pool.install(|| render_sequence(&mut renderer, frames, args.fps, &output))
 }
 
 /// `mipray bench`.
@@ -377,28 +409,46 @@ pub fn bench(args: &BenchArgs) -> Result<()> {
     Ok(())
 }
 
-/// Renders `frames` into `out`, one record per frame, then the summary.
-pub fn render_sequence(
-    renderer: &mut Renderer,
-    frames: std::ops::Range<u32>,
-    fps: f64,
-    out: &Path,
-    format: FrameFormat,
-) -> Result<()> {
-    let mut output = OutputDir::create(out, format)?;
-    let progress = progress_bar(frames.len() as u64);
+/// Where and how a sequence is written.
+#[derive(Debug, Clone)]
+pub struct SequenceOutput {
+    pub dir: PathBuf,
+    pub format: FrameFormat,
+    pub shard: Option<Shard>,
+    /// Skip frames already complete on disk (frame file and stats record).
+    pub resume: bool,
+}
+
+/// Renders `frames` (this shard's part of them) into the output folder, one record per
+/// frame, then the summary.
+pub fn render_sequence(renderer: &mut Renderer, frames: std::ops::Range<u32>, fps: f64, out: &SequenceOutput) -> Result<()> {
+    let frames = match out.shard {
+        Some(shard) => shard.frames(frames),
+        None => frames,
+    };
+    let (mut output, previous) = OutputDir::open(&out.dir, out.format, out.shard, out.resume)?;
+    // A frame is complete when its file exists and its record was written after it.
+    let mut records: Vec<FrameRecord> =
+        previous.into_iter().filter(|r| frames.contains(&r.frame) && output.frame_path(r.frame).is_file()).collect();
+    let done: std::collections::BTreeSet<u32> = records.iter().map(|r| r.frame).collect();
+    if !done.is_empty() {
+        println!("resuming: {} of {} frame(s) already complete", done.len(), frames.len());
+    }
+    let todo: Vec<u32> = frames.clone().filter(|f| !done.contains(f)).collect();
+    let progress = progress_bar(todo.len() as u64);
     let start = Instant::now();
-    let mut records: Vec<FrameRecord> = Vec::with_capacity(frames.len());
-    for frame in frames {
+    for frame in todo {
         let time_s = (frame as f64 / fps) as f32;
         let (image, record) = renderer.render_frame(frame, time_s)?;
         let path = output.write_frame(frame, &image)?;
         output.append_record(&record)?;
         let line = format!(
-            "frame {frame:04}  t={time_s:.3}s  {:>8.1} ms  {:>6.2} Mrays  lod={}  -> {}",
+            "frame {frame:04}  t={time_s:.3}s  {:>8.1} ms  {:>6.2} Mrays  moved {:>7}  lod_recomputed {:>7}{}  -> {}",
             record.total_ms,
             record.rays as f64 / 1e6,
-            record.lod_method,
+            record.moved_triangles,
+            record.lod_recomputed,
+            if record.rebuild { "  rebuild" } else { "" },
             path.display()
         );
         progress.suspend(|| println!("{line}"));
@@ -406,18 +456,46 @@ pub fn render_sequence(
         records.push(record);
     }
     progress.finish_and_clear();
+    records.sort_by_key(|r| r.frame);
     let summary = output.write_summary(&records)?;
     println!(
-        "rendered {} frame(s) in {:.1} s into {} (stats.jsonl, {})",
+        "rendered {} frame(s) {}..{} in {:.1} s into {} ({})",
         records.len(),
+        frames.start,
+        frames.end,
         start.elapsed().as_secs_f64(),
         output.path().display(),
-        summary
-            .file_name()
-            .map(|n| n.to_string_lossy().into_owned())
-            .unwrap_or_default()
+        summary.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default()
     );
     Ok(())
+}
+
+/// The shard to render: `--shard I/N`, else a Slurm job array (`SLURM_ARRAY_TASK_ID`,
+/// minus `SLURM_ARRAY_TASK_MIN` when set, of `SLURM_ARRAY_TASK_COUNT`), else a Kubernetes
+/// Indexed Job (`JOB_COMPLETION_INDEX` of `MIPRAY_SHARD_COUNT`, which the Job sets to its
+/// `completions`), else none.
+pub fn resolve_shard(arg: Option<&str>, env: impl Fn(&str) -> Option<String>) -> Result<Option<Shard>> {
+    let parse = |name: &str, v: &str| -> Result<u32> { v.trim().parse().with_context(|| format!("{name}={v}: not a whole number")) };
+    let (index, count) = if let Some(spec) = arg {
+        let (i, n) = spec.split_once('/').with_context(|| format!("--shard {spec}: expected I/N, e.g. 0/4"))?;
+        (parse("--shard index", i)?, parse("--shard count", n)?)
+    } else if let (Some(id), Some(count)) = (env("SLURM_ARRAY_TASK_ID"), env("SLURM_ARRAY_TASK_COUNT")) {
+        let min = match env("SLURM_ARRAY_TASK_MIN") {
+            Some(m) => parse("SLURM_ARRAY_TASK_MIN", &m)?,
+            None => 0,
+        };
+        let id = parse("SLURM_ARRAY_TASK_ID", &id)?;
+        (id.checked_sub(min).context("SLURM_ARRAY_TASK_ID is below SLURM_ARRAY_TASK_MIN")?, parse("SLURM_ARRAY_TASK_COUNT", &count)?)
+    } else if let Some(index) = env("JOB_COMPLETION_INDEX") {
+        let count = env("MIPRAY_SHARD_COUNT").context("JOB_COMPLETION_INDEX is set but MIPRAY_SHARD_COUNT (the Job's completions) is not")?;
+        (parse("JOB_COMPLETION_INDEX", &index)?, parse("MIPRAY_SHARD_COUNT", &count)?)
+    } else {
+        return Ok(None);
+    };
+    if count == 0 || index >= count {
+        bail!("shard {index} of {count}: the index must be below the count");
+    }
+    Ok(Some(Shard { index, count }))
 }
 
 fn progress_bar(len: u64) -> ProgressBar {
@@ -507,6 +585,33 @@ mod tests {
         assert_eq!(parse_frames("5").unwrap(), 5..6);
         assert!(parse_frames("7..3").is_err());
         assert!(parse_frames("x..3").is_err());
+    }
+
+    #[test]
+    fn shards_come_from_flag_slurm_or_kubernetes() {
+        let env = |vars: &'static [(&'static str, &'static str)]| move |name: &str| vars.iter().find(|(k, _)| *k == name).map(|(_, v)| v.to_string());
+        assert_eq!(resolve_shard(Some("1/4"), env(&[])).unwrap(), Some(Shard { index: 1, count: 4 }));
+        assert_eq!(resolve_shard(None, env(&[])).unwrap(), None);
+        let slurm = env(&[("SLURM_ARRAY_TASK_ID", "7"), ("SLURM_ARRAY_TASK_MIN", "5"), ("SLURM_ARRAY_TASK_COUNT", "3")]);
+        assert_eq!(resolve_shard(None, slurm).unwrap(), Some(Shard { index: 2, count: 3 }));
+        let k8s = env(&[("JOB_COMPLETION_INDEX", "0"), ("MIPRAY_SHARD_COUNT", "2")]);
+        assert_eq!(resolve_shard(None, k8s).unwrap(), Some(Shard { index: 0, count: 2 }));
+        assert!(resolve_shard(None, env(&[("JOB_COMPLETION_INDEX", "0")])).is_err());
+        assert!(resolve_shard(Some("4/4"), env(&[])).is_err());
+        assert!(resolve_shard(Some("x"), env(&[])).is_err());
+        // The flag wins over the environment.
+        assert_eq!(resolve_shard(Some("0/1"), env(&[("JOB_COMPLETION_INDEX", "3")])).unwrap(), Some(Shard { index: 0, count: 1 }));
+    }
+
+    #[test]
+    fn shard_blocks_cover_the_frames_once() {
+        for count in 1..7u32 {
+            let mut covered = Vec::new();
+            for index in 0..count {
+                covered.extend(Shard { index, count }.frames(3..50));
+            }
+            assert_eq!(covered, (3..50).collect::<Vec<_>>(), "{count} shards");
+        }
     }
 
     #[test]

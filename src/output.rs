@@ -13,6 +13,7 @@ use image::{ImageBuffer, ImageFormat, Rgb};
 use serde::Serialize;
 
 use crate::frame::FrameRecord;
+use crate::report::Percentiles;
 use crate::render::LinearImage;
 
 /// Output image format of frames.
@@ -59,6 +60,10 @@ fn io_error(path: &Path) -> impl FnOnce(std::io::Error) -> OutputError + '_ {
 pub struct OutputDir {
     dir: PathBuf,
     format: FrameFormat,
+    /// `stats.jsonl`, or `stats.shard-I-of-N.jsonl` for a shard.
+    stats_path: PathBuf,
+    /// `summary.json`, or `summary.shard-I-of-N.json` for a shard.
+    summary_path: PathBuf,
     stats: File,
 }
 
@@ -67,22 +72,60 @@ pub fn frame_file_name(index: u32, format: FrameFormat) -> String {
     format!("frame_{index:04}.{}", format.extension())
 }
 
+/// One of `count` machines rendering parts of a sequence (0-based `index`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Shard {
+    pub index: u32,
+    pub count: u32,
+}
+
+impl Shard {
+    /// This shard's contiguous block of `frames` (blocks differ in length by at most one;
+    /// contiguous so each machine refits from frame to frame).
+    pub fn frames(self, frames: std::ops::Range<u32>) -> std::ops::Range<u32> {
+        let len = (frames.end - frames.start) as u64;
+        let at = |i: u32| frames.start + (len * i as u64 / self.count as u64) as u32;
+        at(self.index)..at(self.index + 1)
+    }
+
+    fn suffix(self) -> String {
+        format!("shard-{}-of-{}", self.index, self.count)
+    }
+}
+
 impl OutputDir {
-    /// Creates the folder (and parents) and starts a fresh `stats.jsonl`.
-    pub fn create(dir: &Path, format: FrameFormat) -> Result<OutputDir, OutputError> {
+    /// Creates the folder (and parents) and starts its stats file. A fresh render truncates
+    /// it; with `resume` the complete records already there are kept (a torn last line from
+    /// an interrupted run is dropped) and returned, and new records are appended.
+    pub fn open(dir: &Path, format: FrameFormat, shard: Option<Shard>, resume: bool) -> Result<(OutputDir, Vec<FrameRecord>), OutputError> {
         fs::create_dir_all(dir).map_err(io_error(dir))?;
-        let stats_path = dir.join("stats.jsonl");
+        let (stats_name, summary_name) = match shard {
+            Some(s) => (format!("stats.{}.jsonl", s.suffix()), format!("summary.{}.json", s.suffix())),
+            None => ("stats.jsonl".to_string(), "summary.json".to_string()),
+        };
+        let stats_path = dir.join(stats_name);
+        if resume {
+            remove_stale_temporaries(dir);
+        }
+        let previous = if resume { read_complete_records(&stats_path)? } else { Vec::new() };
+        if resume {
+            // Rewrite without any torn tail before appending to it.
+            let mut text = String::new();
+            for r in &previous {
+                text.push_str(&serde_json::to_string(r).map_err(|e| OutputError::Io { path: stats_path.clone(), source: e.into() })?);
+                text.push('\n');
+            }
+            write_bytes_atomically(&stats_path, text.as_bytes())?;
+        }
         let stats = OpenOptions::new()
             .create(true)
+            .append(resume)
             .write(true)
-            .truncate(true)
+            .truncate(!resume)
             .open(&stats_path)
             .map_err(io_error(&stats_path))?;
-        Ok(OutputDir {
-            dir: dir.to_path_buf(),
-            format,
-            stats,
-        })
+        let summary_path = dir.join(summary_name);
+        Ok((OutputDir { dir: dir.to_path_buf(), format, stats_path, summary_path, stats }, previous))
     }
 
     pub fn path(&self) -> &Path {
@@ -102,7 +145,7 @@ impl OutputDir {
 
     /// Appends one record to `stats.jsonl`.
     pub fn append_record(&mut self, record: &FrameRecord) -> Result<(), OutputError> {
-        let path = self.dir.join("stats.jsonl");
+        let path = self.stats_path.clone();
         let mut line = serde_json::to_string(record).map_err(|e| OutputError::Io {
             path: path.clone(),
             source: e.into(),
@@ -116,7 +159,7 @@ impl OutputDir {
 
     /// Writes `summary.json` for the given records.
     pub fn write_summary(&self, records: &[FrameRecord]) -> Result<PathBuf, OutputError> {
-        let path = self.dir.join("summary.json");
+        let path = self.summary_path.clone();
         let text =
             serde_json::to_string_pretty(&Summary::of(records)).map_err(|e| OutputError::Io {
                 path: path.clone(),
@@ -125,6 +168,28 @@ impl OutputDir {
         write_bytes_atomically(&path, text.as_bytes())?;
         Ok(path)
     }
+}
+
+/// Removes `.NAME.tmp` files an interrupted run left behind (never complete outputs).
+fn remove_stale_temporaries(dir: &Path) {
+    let Ok(entries) = fs::read_dir(dir) else { return };
+    for entry in entries.flatten() {
+        let name = entry.file_name().to_string_lossy().into_owned();
+        if name.starts_with('.') && name.ends_with(".tmp") {
+            let _ = fs::remove_file(entry.path());
+        }
+    }
+}
+
+/// The records of a stats file up to its first unreadable line (an interrupted write leaves
+/// at most a torn last line). A missing file has no records.
+fn read_complete_records(path: &Path) -> Result<Vec<FrameRecord>, OutputError> {
+    let text = match fs::read_to_string(path) {
+        Ok(t) => t,
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(Vec::new()),
+        Err(e) => return Err(OutputError::Io { path: path.to_path_buf(), source: e }),
+    };
+    Ok(text.lines().map_while(|line| serde_json::from_str::<FrameRecord>(line).ok()).collect())
 }
 
 /// Writes `image` to `path` in `format` through a temporary file in the same folder.
@@ -178,40 +243,8 @@ fn temporary_sibling(path: &Path) -> PathBuf {
     path.with_file_name(format!(".{name}.tmp"))
 }
 
-/// Minimum, median and maximum of one per-frame quantity.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
-pub struct Spread {
-    pub min: f64,
-    pub median: f64,
-    pub max: f64,
-}
-
-impl Spread {
-    pub fn of(values: impl IntoIterator<Item = f64>) -> Spread {
-        let mut v: Vec<f64> = values.into_iter().filter(|x| x.is_finite()).collect();
-        if v.is_empty() {
-            return Spread {
-                min: 0.0,
-                median: 0.0,
-                max: 0.0,
-            };
-        }
-        v.sort_by(f64::total_cmp);
-        let mid = v.len() / 2;
-        let median = if v.len() % 2 == 1 {
-            v[mid]
-        } else {
-            0.5 * (v[mid - 1] + v[mid])
-        };
-        Spread {
-            min: v[0],
-            median,
-            max: v[v.len() - 1],
-        }
-    }
-}
-
-/// `summary.json`: totals over the sequence and the spread of every per-frame field.
+/// `summary.json`: totals over the sequence, the preprocessing share of frame time, and
+/// min / median / p95 / max of every per-frame phase and count.
 #[derive(Debug, Clone, Serialize)]
 pub struct Summary {
     pub frames: usize,
@@ -223,15 +256,22 @@ pub struct Summary {
     pub total_ms: f64,
     pub total_lod_recomputed: u64,
     pub total_nonfinite_samples: u64,
+    pub rebuilds: usize,
+    /// (animate + dirty + refit + build + lod_update) / total, over the sequence.
+    pub preprocessing_share: f64,
     pub mip_histogram: Vec<u64>,
-    pub triangles: Spread,
-    pub animate_ms: Spread,
-    pub build_ms: Spread,
-    pub lod_update_ms: Spread,
-    pub lod_recomputed: Spread,
-    pub render_ms: Spread,
-    pub frame_total_ms: Spread,
-    pub rays: Spread,
+    pub triangles: Percentiles,
+    pub animate_ms: Percentiles,
+    pub dirty_ms: Percentiles,
+    pub refit_ms: Percentiles,
+    pub build_ms: Percentiles,
+    pub lod_update_ms: Percentiles,
+    pub render_ms: Percentiles,
+    pub frame_total_ms: Percentiles,
+    pub moved_triangles: Percentiles,
+    pub deformed_triangles: Percentiles,
+    pub lod_recomputed: Percentiles,
+    pub rays: Percentiles,
     /// Rays per second of render time over the whole sequence.
     pub rays_per_second: f64,
 }
@@ -239,7 +279,8 @@ pub struct Summary {
 impl Summary {
     pub fn of(records: &[FrameRecord]) -> Summary {
         let first = records.first();
-        let spread = |f: fn(&FrameRecord) -> f64| Spread::of(records.iter().map(f));
+        let spread = |f: fn(&FrameRecord) -> f64| Percentiles::of(records.iter().map(f));
+        let sum = |f: fn(&FrameRecord) -> f64| records.iter().map(f).sum::<f64>();
         let mut histogram = vec![0u64; first.map_or(0, |r| r.mip_histogram.len())];
         for r in records {
             for (a, b) in histogram.iter_mut().zip(&r.mip_histogram) {
@@ -247,7 +288,9 @@ impl Summary {
             }
         }
         let total_rays = records.iter().map(|r| r.rays).sum();
-        let total_render_ms: f64 = records.iter().map(|r| r.render_ms).sum();
+        let total_render_ms = sum(|r| r.render_ms);
+        let total_ms = sum(|r| r.total_ms);
+        let preprocessing = sum(|r| r.animate_ms + r.dirty_ms + r.refit_ms + r.build_ms + r.lod_update_ms);
         Summary {
             frames: records.len(),
             width: first.map_or(0, |r| r.width),
@@ -255,23 +298,25 @@ impl Summary {
             lod_method: first.map_or(String::new(), |r| r.lod_method.clone()),
             total_rays,
             total_render_ms,
-            total_ms: records.iter().map(|r| r.total_ms).sum(),
+            total_ms,
             total_lod_recomputed: records.iter().map(|r| r.lod_recomputed as u64).sum(),
             total_nonfinite_samples: records.iter().map(|r| r.nonfinite_samples).sum(),
+            rebuilds: records.iter().filter(|r| r.rebuild).count(),
+            preprocessing_share: if total_ms > 0.0 { preprocessing / total_ms } else { 0.0 },
             mip_histogram: histogram,
             triangles: spread(|r| r.triangles as f64),
             animate_ms: spread(|r| r.animate_ms),
+            dirty_ms: spread(|r| r.dirty_ms),
+            refit_ms: spread(|r| r.refit_ms),
             build_ms: spread(|r| r.build_ms),
             lod_update_ms: spread(|r| r.lod_update_ms),
-            lod_recomputed: spread(|r| r.lod_recomputed as f64),
             render_ms: spread(|r| r.render_ms),
             frame_total_ms: spread(|r| r.total_ms),
+            moved_triangles: spread(|r| r.moved_triangles as f64),
+            deformed_triangles: spread(|r| r.deformed_triangles as f64),
+            lod_recomputed: spread(|r| r.lod_recomputed as f64),
             rays: spread(|r| r.rays as f64),
-            rays_per_second: if total_render_ms > 0.0 {
-                total_rays as f64 / (total_render_ms / 1e3)
-            } else {
-                0.0
-            },
+            rays_per_second: if total_render_ms > 0.0 { total_rays as f64 / (total_render_ms / 1e3) } else { 0.0 },
         }
     }
 }
@@ -279,14 +324,6 @@ impl Summary {
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn median_of_even_and_odd_counts() {
-        assert_eq!(Spread::of([3.0, 1.0, 2.0]).median, 2.0);
-        assert_eq!(Spread::of([4.0, 1.0, 2.0, 3.0]).median, 2.5);
-        let s = Spread::of([f64::NAN, 5.0]);
-        assert_eq!((s.min, s.median, s.max), (5.0, 5.0, 5.0));
-    }
 
     #[test]
     fn frame_names_are_zero_padded() {

@@ -230,3 +230,73 @@ fn exr_frames_hold_linear_floats() {
     let corner = image.get_pixel(0, 0).0;
     assert!(corner[0] < 0.1 && corner[0] > 0.0, "{corner:?}");
 }
+
+#[test]
+fn interrupted_render_resumes_without_damaged_frames() {
+    let dir = tempfile::tempdir().unwrap();
+    let args = ["render", "default", "--size", "128x72", "--spp", "4", "--frames", "0..60", "--threads", "1"];
+    let reference = {
+        let mut a = args.to_vec();
+        a.extend(["--out", "reference"]);
+        let out = mipray(&a, dir.path());
+        assert!(out.status.success(), "{}", stderr(&out));
+        dir.path().join("reference")
+    };
+    // Start the same render and kill it once a few frames are on disk.
+    let mut child = Command::new(env!("CARGO_BIN_EXE_mipray"))
+        .args(args)
+        .args(["--out", "run"])
+        .current_dir(dir.path())
+        .stdout(std::process::Stdio::null())
+        .stderr(std::process::Stdio::null())
+        .spawn()
+        .unwrap();
+    let run = dir.path().join("run");
+    let deadline = std::time::Instant::now() + std::time::Duration::from_secs(60);
+    while !run.join("frame_0003.png").exists() && std::time::Instant::now() < deadline {
+        std::thread::sleep(std::time::Duration::from_millis(2));
+    }
+    child.kill().unwrap();
+    child.wait().unwrap();
+    assert!(run.join("frame_0003.png").exists(), "the render never got going");
+    assert!(!run.join("frame_0059.png").exists(), "the render finished before it could be interrupted");
+    // Whatever the kill left, tear the stats file's last line too, as a crash mid-write would.
+    let stats = run.join("stats.jsonl");
+    let text = std::fs::read_to_string(&stats).unwrap();
+    std::fs::write(&stats, &text[..text.len().saturating_sub(7)]).unwrap();
+
+    let mut a = args.to_vec();
+    a.extend(["--out", "run", "--resume"]);
+    let out = mipray(&a, dir.path());
+    assert!(out.status.success(), "{}", stderr(&out));
+    for frame in 0..60 {
+        let name = format!("frame_{frame:04}.png");
+        let got = std::fs::read(run.join(&name)).unwrap_or_else(|_| panic!("{name} missing after resume"));
+        let want = std::fs::read(reference.join(&name)).unwrap();
+        assert!(got == want, "{name} differs from an uninterrupted render");
+    }
+    let records: Vec<serde_json::Value> =
+        std::fs::read_to_string(&stats).unwrap().lines().map(|l| serde_json::from_str(l).expect("every stats line is complete")).collect();
+    let mut frames: Vec<u64> = records.iter().map(|r| r["frame"].as_u64().unwrap()).collect();
+    frames.sort();
+    assert_eq!(frames, (0..60).collect::<Vec<u64>>(), "one record per frame");
+    let leftovers = std::fs::read_dir(&run).unwrap().filter_map(|e| e.ok()).filter(|e| e.file_name().to_string_lossy().ends_with(".tmp")).count();
+    assert_eq!(leftovers, 0);
+}
+
+#[test]
+fn shards_render_disjoint_blocks_that_report_merges() {
+    let dir = tempfile::tempdir().unwrap();
+    for shard in ["0/3", "1/3", "2/3"] {
+        let out = mipray(&["render", "default", "--size", "32x18", "--frames", "0..10", "--shard", shard, "--out", "s"], dir.path());
+        assert!(out.status.success(), "{}", stderr(&out));
+    }
+    let frames = std::fs::read_dir(dir.path().join("s")).unwrap().filter_map(|e| e.ok()).filter(|e| e.file_name().to_string_lossy().starts_with("frame_")).count();
+    assert_eq!(frames, 10);
+    let out = mipray(&["report", "s"], dir.path());
+    assert!(out.status.success(), "{}", stderr(&out));
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(text.contains("frames: 10 (0 to 9, 0 missing)"), "{text}");
+    assert!(text.contains("shards merged: 3"), "{text}");
+    assert!(dir.path().join("s/report.svg").is_file());
+}
