@@ -6,8 +6,10 @@
 //! key range (glTF leaves looping to the application; mipray clamps).
 
 mod sample;
+mod selection;
 
 pub use sample::{sample_channel, sample_rotation, sample_vec3};
+pub use selection::{AnimationSelection, select_animation};
 
 use glam::{Mat4, Quat, Vec3};
 
