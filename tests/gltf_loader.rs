@@ -9,6 +9,7 @@ use std::f32::consts::FRAC_PI_2;
 use std::path::{Path, PathBuf};
 
 use glam::{Mat4, Quat, Vec2, Vec3};
+use mipray::anim::{AnimationSelection, Pose, VertexSpace, deform_primitive, primitive_deforms};
 use mipray::scene::gltf::load;
 use mipray::scene::{ChannelTarget, Interpolation, LightKind, SceneDesc};
 use mipray::texture::WrapMode;
@@ -271,8 +272,8 @@ fn strips_fans_and_non_indexed_primitives_become_triangle_lists() {
     assert_eq!(scene.instanced_triangle_count(), 4);
 }
 
-/// Morph targets load as data beside the un-morphed base (default weights are no longer
-/// baked into positions).
+/// Morph targets load as data beside the un-morphed base; the default weights shape the
+/// rest pose only when the pose is evaluated (they are no longer baked into positions).
 #[test]
 fn default_morph_weights_shape_the_rest_pose() {
     let mut b = BufferBuilder::default();
@@ -325,6 +326,21 @@ fn default_morph_weights_shape_the_rest_pose() {
         Some(&[Vec3::splat(9.0); 3][..])
     );
     assert_eq!(primitive.morph_targets[1].normals, None);
+    assert!(primitive_deforms(&scene, 0, 0, 0));
+
+    // The rest pose: base + 0.5 * target 0.
+    let mut pose = Pose::default();
+    pose.evaluate(&scene, AnimationSelection::All, 0.0);
+    let (mut positions, mut normals) = (Vec::new(), Vec::new());
+    let space = deform_primitive(&scene, &pose, 0, 0, 0, &mut positions, &mut normals);
+    assert_eq!(space, VertexSpace::Object);
+    assert_eq!(
+        positions,
+        vec![Vec3::new(0.0, 0.0, 1.0), Vec3::X, Vec3::new(2.0, 1.0, 0.0)]
+    );
+    // Normal 0: (0, 0, 1) + 0.5 * (2, 0, -1) = (1, 0, 0.5), renormalised.
+    assert!(normals[0].abs_diff_eq(Vec3::new(1.0, 0.0, 0.5).normalize(), 1e-6));
+    assert_eq!(normals[1], Vec3::Z);
     assert!(
         !scene
             .notes

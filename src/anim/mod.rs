@@ -12,10 +12,12 @@
 //! [`deform_primitive`] writes its vertices (object space for morph-only primitives, world
 //! space for skinned ones); the other primitives are placed rigidly by `world_from_node`.
 
+mod deform;
 mod pose;
 mod sample;
 mod selection;
 
+pub use deform::{VertexSpace, deform_primitive, primitive_deforms};
 pub use pose::Pose;
 pub use sample::{sample_channel, sample_rotation, sample_vec3};
 pub use selection::{AnimationSelection, select_animation};
