@@ -1,4 +1,5 @@
-//! Vertex deformation: morph targets, then linear blend skinning (glTF 2.0 §3.7.3, §3.7.4).
+//! Vertex deformation: morph targets, then linear blend skinning (glTF 2.0 §3.7.2.2 Morph
+//! Targets, §3.7.3 Skins).
 //!
 //! For a vertex with base position `p`, base normal `n`, morph weights `w_i` and deltas
 //! `dp_i`, `dn_i`:
@@ -20,7 +21,7 @@
 //!   position: the same rigid placement; if that is not finite either, `p'` itself;
 //! - a morphed position that overflows: the base position;
 //! - a normal that comes out zero or non-finite: the previous stage's normal (morph: the
-//!   base normal; skin: the morphed normal rotated by `M3`, else the morphed normal).
+//!   base normal; skin: `normalize(M3 n')`, else `n'` unchanged).
 //!
 //! Every loop runs in vertex order with a fixed summation order (targets in file order,
 //! influences in slot order), so results are bit-identical across calls and thread counts.
