@@ -9,6 +9,7 @@ use std::f32::consts::FRAC_PI_2;
 use std::path::{Path, PathBuf};
 
 use glam::{Mat4, Quat, Vec2, Vec3};
+use mipray::anim::{AnimationSelection, Pose, VertexSpace, deform_primitive, primitive_deforms};
 use mipray::scene::gltf::load;
 use mipray::scene::{ChannelTarget, Interpolation, LightKind, SceneDesc};
 use mipray::texture::WrapMode;
@@ -271,6 +272,8 @@ fn strips_fans_and_non_indexed_primitives_become_triangle_lists() {
     assert_eq!(scene.instanced_triangle_count(), 4);
 }
 
+/// Morph targets load as data beside the un-morphed base; the default weights shape the
+/// rest pose only when the pose is evaluated (they are no longer baked into positions).
 #[test]
 fn default_morph_weights_shape_the_rest_pose() {
     let mut b = BufferBuilder::default();
@@ -297,17 +300,52 @@ fn default_morph_weights_shape_the_rest_pose() {
         &serde_json::to_vec(&common::with_embedded_buffer(json, &b)).unwrap(),
     );
     let scene = load(&path).unwrap_or_else(|e| panic!("{e}"));
-    let primitive = &scene.meshes[0].primitives[0];
+    let mesh = &scene.meshes[0];
+    assert_eq!(mesh.weights, vec![0.5, 0.0]);
+    let primitive = &mesh.primitives[0];
+    // The base geometry is exactly the file's.
+    assert_eq!(primitive.positions, vec![Vec3::ZERO, Vec3::X, Vec3::Y]);
+    assert_eq!(primitive.normals.as_deref(), Some(&[Vec3::Z; 3][..]));
+    assert_eq!(primitive.morph_targets.len(), 2);
     assert_eq!(
-        primitive.positions,
+        primitive.morph_targets[0].positions.as_deref(),
+        Some(
+            &[
+                Vec3::new(0.0, 0.0, 2.0),
+                Vec3::ZERO,
+                Vec3::new(4.0, 0.0, 0.0)
+            ][..]
+        )
+    );
+    assert_eq!(
+        primitive.morph_targets[0].normals.as_deref(),
+        Some(&[Vec3::new(2.0, 0.0, -1.0), Vec3::ZERO, Vec3::ZERO][..])
+    );
+    assert_eq!(
+        primitive.morph_targets[1].positions.as_deref(),
+        Some(&[Vec3::splat(9.0); 3][..])
+    );
+    assert_eq!(primitive.morph_targets[1].normals, None);
+    assert!(primitive_deforms(&scene, 0, 0, 0));
+
+    // The rest pose: base + 0.5 * target 0.
+    let mut pose = Pose::default();
+    pose.evaluate(&scene, AnimationSelection::All, 0.0);
+    let (mut positions, mut normals) = (Vec::new(), Vec::new());
+    let space = deform_primitive(&scene, &pose, 0, 0, 0, &mut positions, &mut normals);
+    assert_eq!(space, VertexSpace::Object);
+    assert_eq!(
+        positions,
         vec![Vec3::new(0.0, 0.0, 1.0), Vec3::X, Vec3::new(2.0, 1.0, 0.0)]
     );
     // Normal 0: (0, 0, 1) + 0.5 * (2, 0, -1) = (1, 0, 0.5), renormalised.
-    let normals = primitive.normals.as_ref().unwrap();
     assert!(normals[0].abs_diff_eq(Vec3::new(1.0, 0.0, 0.5).normalize(), 1e-6));
     assert_eq!(normals[1], Vec3::Z);
     assert!(
-        scene.notes.iter().any(|n| n.contains("morph targets")),
+        !scene
+            .notes
+            .iter()
+            .any(|n| n.contains("morph") || n.contains("rest pose")),
         "{:?}",
         scene.notes
     );

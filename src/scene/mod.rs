@@ -2,10 +2,20 @@
 //!
 //! Nothing here knows a file format: `gltf.rs` fills a [`SceneDesc`] and the rest of the
 //! renderer (animation, geometry, BVH, LOD, integrator) only ever reads these types.
-//! Invariants every loader guarantees (and `SceneDesc::validate` re-checks):
-//! - all positions, normals, UVs, transforms and key values are finite;
-//! - every index (vertex, node, mesh, material, texture, camera, light) is in range;
-//! - a primitive's `indices.len()` is a multiple of 3.
+//! Invariants every loader guarantees:
+//! - all positions, normals, UVs, transforms, key values, morph deltas and weights, skin
+//!   weights and inverse bind matrices are finite;
+//! - every index (vertex, node, mesh, material, texture, camera, light, skin) is in range;
+//! - a primitive's `indices.len()` is a multiple of 3;
+//! - every per-vertex array of a primitive (normals, UVs, joints, skin weights, morph
+//!   deltas) has one element per position; `joints` and `weights` are both set or both not;
+//! - every primitive of a mesh has `mesh.weights.len()` morph targets, and a node's
+//!   `weights` override has that length too;
+//! - a primitive drawn by a node with a skin has every joint index below that skin's
+//!   joint count.
+//!
+//! Geometry is the un-deformed base: morph targets (even with non-zero default weights)
+//! and skins are applied per frame by `anim::deform_primitive`.
 
 pub mod gltf;
 
@@ -29,10 +39,13 @@ pub struct SceneDesc {
     pub cameras: Vec<CameraDesc>,
     pub lights: Vec<LightDesc>,
     pub animations: Vec<AnimationDesc>,
+    /// Skins referenced by `NodeDesc::skin`.
+    pub skins: Vec<SkinDesc>,
     /// Radiance of rays that leave the scene (linear RGB).
     pub background: Vec3,
-    /// Features the file uses that this version renders only approximately (e.g. skins in
-    /// rest pose). Printed by `info` and at the start of `render`.
+    /// Features the file uses that this version renders only approximately or ignores
+    /// (e.g. point primitives, orthographic cameras). Printed by `info` and at the start of
+    /// `render`.
     pub notes: Vec<String>,
 }
 
@@ -41,13 +54,18 @@ pub struct SceneDesc {
 pub struct MeshDesc {
     pub name: String,
     pub primitives: Vec<PrimitiveDesc>,
+    /// Default morph target weights, one per morph target of each primitive (zeros when
+    /// the file gives none; empty for a mesh without morph targets).
+    pub weights: Vec<f32>,
 }
 
 /// An indexed triangle list in object space.
 #[derive(Debug, Default, Clone)]
 pub struct PrimitiveDesc {
+    /// Base (un-morphed, un-skinned) vertex positions.
     pub positions: Vec<Vec3>,
-    /// Per-vertex normals; `None` means flat shading from the geometric normal.
+    /// Per-vertex unit normals of the base geometry; `None` means flat shading from the
+    /// geometric normal.
     pub normals: Option<Vec<Vec3>>,
     /// The texture coordinates the material's base-colour texture reads (its `texCoord` set,
     /// with `KHR_texture_transform` already applied). `None` when untextured.
@@ -56,6 +74,43 @@ pub struct PrimitiveDesc {
     pub indices: Vec<u32>,
     /// Index into `SceneDesc::materials`; `None` uses [`MaterialDesc::default`].
     pub material: Option<usize>,
+    /// Per-vertex joint indices (glTF `JOINTS_0`) into `SkinDesc::joints` of the skin of
+    /// the node that draws the mesh. A file with further sets (`JOINTS_1`, ...) is folded
+    /// into one: the 4 largest weights of each vertex are kept and rescaled to the vertex's
+    /// total weight over all sets. `None` for an unskinned primitive.
+    pub joints: Option<Vec<[u16; 4]>>,
+    /// Per-vertex joint weights (glTF `WEIGHTS_0`, normalized integers converted), each
+    /// non-negative, paired slot by slot with `joints`. Used as given (glTF says they sum
+    /// to 1; they are not renormalised except when folding sets).
+    pub weights: Option<Vec<[f32; 4]>>,
+    /// Morph targets: per-vertex deltas added to the base geometry, weighted by the node's
+    /// effective morph weights (`anim::Pose::morph_weights`).
+    pub morph_targets: Vec<MorphTargetDesc>,
+}
+
+/// One morph target of a primitive: displacements of the base attributes (glTF
+/// `TANGENT` deltas are not loaded: the renderer uses no tangents).
+#[derive(Debug, Default, Clone)]
+pub struct MorphTargetDesc {
+    /// Position deltas, one per vertex; `None` when the target does not move positions.
+    pub positions: Option<Vec<Vec3>>,
+    /// Normal deltas, one per vertex; `None` when the target has none or the primitive
+    /// has no normals.
+    pub normals: Option<Vec<Vec3>>,
+}
+
+/// A skin: the joints that deform the vertices of the meshes drawn by nodes using it.
+#[derive(Debug, Default, Clone)]
+pub struct SkinDesc {
+    pub name: String,
+    /// Node index of each joint; a vertex's joint index `j` refers to `joints[j]`.
+    pub joints: Vec<usize>,
+    /// Per joint: the matrix taking the mesh's bind-pose space to the joint's space
+    /// (identity when the file gives none). Same length as `joints`.
+    pub inverse_bind_matrices: Vec<Mat4>,
+    /// The skeleton's root node, if the file names one (informative only: joint
+    /// matrices are computed from the joints' world transforms).
+    pub skeleton: Option<usize>,
 }
 
 impl PrimitiveDesc {
@@ -74,7 +129,11 @@ pub struct Trs {
 
 impl Default for Trs {
     fn default() -> Self {
-        Trs { translation: Vec3::ZERO, rotation: Quat::IDENTITY, scale: Vec3::ONE }
+        Trs {
+            translation: Vec3::ZERO,
+            rotation: Quat::IDENTITY,
+            scale: Vec3::ONE,
+        }
     }
 }
 
@@ -97,6 +156,11 @@ pub struct NodeDesc {
     pub mesh: Option<usize>,
     pub camera: Option<usize>,
     pub light: Option<usize>,
+    /// Index into `SceneDesc::skins`: the mesh is skinned by it (its vertices are placed
+    /// by the joints, and this node's own transform is ignored for it, as glTF requires).
+    pub skin: Option<usize>,
+    /// Morph weights for this node's mesh, overriding `MeshDesc::weights`.
+    pub weights: Option<Vec<f32>>,
 }
 
 /// A surface's appearance, mapped to the Whitted model.
@@ -170,7 +234,7 @@ pub enum ChannelTarget {
     Translation,
     Rotation,
     Scale,
-    /// Morph target weights (sampled, applied by the frame-loop issue).
+    /// Morph target weights of the node's mesh (`components` = its morph target count).
     Weights,
 }
 
@@ -206,7 +270,10 @@ pub struct AnimationDesc {
 impl AnimationDesc {
     /// Time of the last key over all channels (0 for an empty animation).
     pub fn duration(&self) -> f32 {
-        self.channels.iter().filter_map(|c| c.times.last().copied()).fold(0.0, f32::max)
+        self.channels
+            .iter()
+            .filter_map(|c| c.times.last().copied())
+            .fold(0.0, f32::max)
     }
 }
 
@@ -217,7 +284,11 @@ impl SceneDesc {
         let mut count = 0;
         self.visit_nodes(|node| {
             if let Some(mesh) = node.mesh {
-                count += self.meshes[mesh].primitives.iter().map(|p| p.triangle_count()).sum::<usize>();
+                count += self.meshes[mesh]
+                    .primitives
+                    .iter()
+                    .map(|p| p.triangle_count())
+                    .sum::<usize>();
             }
         });
         count
@@ -244,6 +315,9 @@ impl SceneDesc {
 
     /// The longest animation's duration in seconds (0 for a static scene).
     pub fn duration(&self) -> f32 {
-        self.animations.iter().map(|a| a.duration()).fold(0.0, f32::max)
+        self.animations
+            .iter()
+            .map(|a| a.duration())
+            .fold(0.0, f32::max)
     }
 }

@@ -3,6 +3,7 @@
 
 #![allow(dead_code)]
 
+pub mod deform_scenes;
 pub mod invariants;
 pub mod round_trip;
 pub mod scenes;

@@ -49,6 +49,7 @@ pub fn quad(size: f32, uv_repeat: f32, material: usize) -> PrimitiveDesc {
         ]),
         indices: vec![0, 1, 2, 0, 2, 3],
         material: Some(material),
+        ..Default::default()
     }
 }
 
@@ -84,6 +85,7 @@ pub fn sphere(material: usize, subdivisions: u32) -> PrimitiveDesc {
         uvs: None,
         indices,
         material: Some(material),
+        ..Default::default()
     }
 }
 
@@ -163,6 +165,7 @@ pub fn facing_quad_scene(distance: f32, size: f32, texture_size: u32, yfov: f32)
     scene.meshes.push(MeshDesc {
         name: "quad".into(),
         primitives: vec![quad(size, 1.0, 0)],
+        ..Default::default()
     });
     add_root(
         &mut scene,
@@ -186,18 +189,22 @@ pub fn showcase_scene() -> SceneDesc {
     scene.meshes.push(MeshDesc {
         name: "floor".into(),
         primitives: vec![quad(200.0, 100.0, 0)],
+        ..Default::default()
     });
     scene.meshes.push(MeshDesc {
         name: "mirror".into(),
         primitives: vec![quad(3.0, 1.0, 1)],
+        ..Default::default()
     });
     scene.meshes.push(MeshDesc {
         name: "ball".into(),
         primitives: vec![sphere(2, 3)],
+        ..Default::default()
     });
     scene.meshes.push(MeshDesc {
         name: "card".into(),
         primitives: vec![quad(1.0, 1.0, 0)],
+        ..Default::default()
     });
     add_root(
         &mut scene,

@@ -111,6 +111,32 @@ pub(super) fn read_indices(
     }
 }
 
+/// Reads a `JOINTS_n` accessor (`VEC4` of unsigned byte or short) widened to u16.
+pub(super) fn read_joint_indices(
+    accessor: &Accessor,
+    buffers: &Buffers,
+    what: &str,
+) -> Result<Vec<[u16; 4]>, String> {
+    if accessor.dimensions() != Dimensions::Vec4 {
+        return Err(format!(
+            "{} has type {:?}, expected Vec4",
+            label(accessor, what),
+            accessor.dimensions()
+        ));
+    }
+    match accessor.data_type() {
+        DataType::U8 => Ok(convert(
+            read_items::<[u8; 4]>(accessor, buffers, what)?,
+            |j| j.map(u16::from),
+        )),
+        DataType::U16 => read_items::<[u16; 4]>(accessor, buffers, what),
+        other => Err(format!(
+            "{} has component type {other:?}; joints must be unsigned byte or short",
+            label(accessor, what)
+        )),
+    }
+}
+
 fn convert<C, T>(items: Vec<C>, f: impl Fn(C) -> T) -> Vec<T> {
     items.into_iter().map(f).collect()
 }
@@ -127,6 +153,11 @@ fn read_flat<C: Item + Copy>(
         2 => read_items::<[C; 2]>(accessor, buffers, what)?.concat(),
         3 => read_items::<[C; 3]>(accessor, buffers, what)?.concat(),
         4 => read_items::<[C; 4]>(accessor, buffers, what)?.concat(),
+        // MAT4: four 4-component columns (no column padding for 4-byte components, the
+        // only kind callers ask for).
+        16 => read_items::<[[C; 4]; 4]>(accessor, buffers, what)?
+            .concat()
+            .concat(),
         _ => {
             return Err(format!(
                 "{} has {components} components per element, which is not supported",

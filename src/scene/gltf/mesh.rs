@@ -2,8 +2,8 @@
 //!
 //! Every primitive that comes out has finite positions, normals and UVs, one normal/UV per
 //! position, and `indices.len() % 3 == 0` with every index `< positions.len()`.
-//! Geometry is the rest pose: morph targets are applied with the mesh's default
-//! `weights` (what a viewer shows before animation), skins are ignored here.
+//! Geometry is the un-deformed base: morph targets (`morph.rs`) and skin influences
+//! (`skin.rs`) are loaded beside it and applied per frame by `anim::deform_primitive`.
 
 use glam::{Vec2, Vec3};
 use gltf::accessor::Dimensions;
@@ -12,6 +12,8 @@ use gltf::mesh::Mode;
 use super::accessor::{Integers, read_floats, read_indices};
 use super::buffers::Buffers;
 use super::material::{UvSource, uv_source};
+use super::morph;
+use super::skin;
 use crate::scene::{MeshDesc, PrimitiveDesc};
 
 /// Per-document counts of things rendered approximately, turned into notes at the end.
@@ -20,6 +22,18 @@ struct Approximations {
     skipped_modes: usize,
     dropped_normals: usize,
     missing_uvs: usize,
+    /// Primitives with more than one `JOINTS_n`/`WEIGHTS_n` set, folded into four
+    /// influences per vertex.
+    folded_influences: usize,
+}
+
+/// Whether a primitive mode is loaded (triangles, strips, fans); points and lines are
+/// skipped, so a mesh's loaded primitives are its triangle-mode glTF primitives in order.
+pub(super) fn is_loaded(mode: Mode) -> bool {
+    matches!(
+        mode,
+        Mode::Triangles | Mode::TriangleStrip | Mode::TriangleFan
+    )
 }
 
 /// Loads every mesh; primitives that are not triangles (points, lines) are skipped.
@@ -31,19 +45,18 @@ pub(super) fn load_meshes(
     let mut approximations = Approximations::default();
     let mut meshes = Vec::with_capacity(document.meshes().len());
     for mesh in document.meshes() {
-        let weights = mesh.weights().unwrap_or_default();
+        let weights = morph::default_weights(&mesh)?;
         let mut primitives = Vec::new();
         for primitive in mesh.primitives() {
             let what = format!("mesh {} primitive {}", mesh.index(), primitive.index());
-            if let Some(desc) =
-                load_primitive(&primitive, weights, buffers, &what, &mut approximations)?
-            {
+            if let Some(desc) = load_primitive(&primitive, buffers, &what, &mut approximations)? {
                 primitives.push(desc);
             }
         }
         meshes.push(MeshDesc {
             name: mesh.name().unwrap_or_default().to_string(),
             primitives,
+            weights,
         });
     }
     push_notes(&approximations, notes);
@@ -55,6 +68,7 @@ fn push_notes(approximations: &Approximations, notes: &mut Vec<String>) {
         skipped_modes,
         dropped_normals,
         missing_uvs,
+        folded_influences,
     } = *approximations;
     if skipped_modes > 0 {
         notes.push(format!(
@@ -71,29 +85,30 @@ fn push_notes(approximations: &Approximations, notes: &mut Vec<String>) {
             "{missing_uvs} textured primitive(s) lack the UV set their texture reads; rendered untextured"
         ));
     }
+    if folded_influences > 0 {
+        notes.push(format!(
+            "{folded_influences} skinned primitive(s) have more than 4 joint influences per vertex; the 4 largest are kept and rescaled"
+        ));
+    }
 }
 
 /// One primitive as a triangle list, or `None` for a skipped (non-triangle) mode.
 fn load_primitive(
     primitive: &gltf::Primitive,
-    default_weights: &[f32],
     buffers: &Buffers,
     what: &str,
     approximations: &mut Approximations,
 ) -> Result<Option<PrimitiveDesc>, String> {
     let mode = primitive.mode();
-    if !matches!(
-        mode,
-        Mode::Triangles | Mode::TriangleStrip | Mode::TriangleFan
-    ) {
+    if !is_loaded(mode) {
         approximations.skipped_modes += 1;
         return Ok(None);
     }
     let position_accessor = primitive
         .get(&gltf::Semantic::Positions)
         .ok_or_else(|| format!("{what} has no POSITION"))?;
-    let mut positions = read_vec3s(&position_accessor, buffers, &format!("POSITION of {what}"))?;
-    let mut normals = match primitive.get(&gltf::Semantic::Normals) {
+    let positions = read_vec3s(&position_accessor, buffers, &format!("POSITION of {what}"))?;
+    let normals = match primitive.get(&gltf::Semantic::Normals) {
         Some(accessor) => Some(read_attribute_vec3s(
             &accessor,
             buffers,
@@ -103,14 +118,6 @@ fn load_primitive(
         )?),
         None => None,
     };
-    apply_default_morph(
-        primitive,
-        default_weights,
-        buffers,
-        what,
-        &mut positions,
-        normals.as_mut(),
-    )?;
     let normals = match normals {
         Some(n) => {
             let unit = normalized(n);
@@ -132,17 +139,27 @@ fn load_primitive(
         None => None,
     };
     let indices = read_triangle_indices(primitive, mode, buffers, what, positions.len())?;
+    let influences = skin::read_influences(primitive, buffers, what, positions.len())?;
+    if influences.as_ref().is_some_and(|i| i.sets > 1) {
+        approximations.folded_influences += 1;
+    }
+    let (joints, weights) = influences.map_or((None, None), |i| (Some(i.joints), Some(i.weights)));
+    let morph_targets =
+        morph::read_targets(primitive, buffers, what, positions.len(), normals.is_some())?;
     Ok(Some(PrimitiveDesc {
         positions,
         normals,
         uvs,
         indices,
         material: primitive.material().index(),
+        joints,
+        weights,
+        morph_targets,
     }))
 }
 
 /// Reads a FLOAT VEC3 accessor, rejecting non-finite values.
-fn read_vec3s(
+pub(super) fn read_vec3s(
     accessor: &gltf::Accessor,
     buffers: &Buffers,
     what: &str,
@@ -160,7 +177,7 @@ fn read_vec3s(
 }
 
 /// Reads a per-vertex VEC3 attribute, which must have one element per position.
-fn read_attribute_vec3s(
+pub(super) fn read_attribute_vec3s(
     accessor: &gltf::Accessor,
     buffers: &Buffers,
     semantic: &str,
@@ -173,7 +190,7 @@ fn read_attribute_vec3s(
     Ok(values)
 }
 
-fn check_count(
+pub(super) fn check_count(
     count: usize,
     vertex_count: usize,
     accessor: &gltf::Accessor,
@@ -189,7 +206,7 @@ fn check_count(
     }
 }
 
-fn check_finite<T: std::fmt::Debug>(
+pub(super) fn check_finite<T: std::fmt::Debug>(
     values: &[T],
     is_finite: impl Fn(&T) -> bool,
     accessor: &gltf::Accessor,
@@ -208,54 +225,6 @@ fn check_finite<T: std::fmt::Debug>(
 /// Unit normals, or `None` if any normal has zero length (shade flat rather than guess).
 fn normalized(normals: Vec<Vec3>) -> Option<Vec<Vec3>> {
     normals.into_iter().map(|n| n.try_normalize()).collect()
-}
-
-/// Adds the morph target deltas weighted by the mesh's default weights (rest pose).
-fn apply_default_morph(
-    primitive: &gltf::Primitive,
-    weights: &[f32],
-    buffers: &Buffers,
-    what: &str,
-    positions: &mut [Vec3],
-    mut normals: Option<&mut Vec<Vec3>>,
-) -> Result<(), String> {
-    for (target_index, target) in primitive.morph_targets().enumerate() {
-        let weight = weights.get(target_index).copied().unwrap_or(0.0);
-        if weight == 0.0 {
-            continue;
-        }
-        if !weight.is_finite() {
-            return Err(format!(
-                "{what}: default weight {target_index} is not finite"
-            ));
-        }
-        let target_what = format!("{what} morph target {target_index}");
-        if let Some(accessor) = target.positions() {
-            let deltas = read_attribute_vec3s(
-                &accessor,
-                buffers,
-                "POSITION",
-                &target_what,
-                positions.len(),
-            )?;
-            add_weighted(positions, &deltas, weight);
-        }
-        if let (Some(accessor), Some(normals)) = (target.normals(), normals.as_deref_mut()) {
-            let deltas =
-                read_attribute_vec3s(&accessor, buffers, "NORMAL", &target_what, normals.len())?;
-            add_weighted(normals, &deltas, weight);
-        }
-    }
-    if !positions.iter().all(|p| p.is_finite()) {
-        return Err(format!("{what}: morphed positions are not finite"));
-    }
-    Ok(())
-}
-
-fn add_weighted(values: &mut [Vec3], deltas: &[Vec3], weight: f32) {
-    for (value, delta) in values.iter_mut().zip(deltas) {
-        *value += weight * *delta;
-    }
 }
 
 /// The base-colour UVs with `KHR_texture_transform` applied, or `None` if the primitive

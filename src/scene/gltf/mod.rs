@@ -9,15 +9,19 @@
 //! index is in range, triangle lists are whole. Malformed input is an `Err` naming the
 //! file and the element (accessor, mesh/primitive, node, image) — never a panic: every
 //! byte range is checked before the gltf crate reads it (see `accessor.rs`). Features
-//! rendered approximately (skins, morph animation, ignored texture slots) become
-//! `SceneDesc::notes`.
+//! rendered approximately or ignored (point/line primitives, orthographic cameras, ignored
+//! texture slots, more than 4 joint influences, skins without joints) become
+//! `SceneDesc::notes`. Skins and morph targets are loaded as data (`skin.rs`, `morph.rs`);
+//! the geometry stays un-deformed and `anim` poses and deforms it per frame.
 
 mod accessor;
 mod animation;
 mod buffers;
 mod material;
 mod mesh;
+mod morph;
 mod nodes;
+mod skin;
 
 use std::panic::{AssertUnwindSafe, catch_unwind};
 use std::path::{Path, PathBuf};
@@ -67,8 +71,9 @@ fn load_scene(path: &Path) -> Result<SceneDesc, String> {
     let lights = nodes::load_lights(&document)?;
     let nodes = nodes::load_nodes(&document, &camera_of)?;
     let roots = nodes::scene_roots(&document, &nodes)?;
+    let skins = skin::load_skins(&document, &buffers)?;
+    skin::check_skinned_nodes(&document, &nodes, &meshes, &skins, &mut notes)?;
     let animations = animation::load_animations(&document, &buffers, &nodes, &mut notes)?;
-    note_rest_pose(&document, &mut notes);
 
     Ok(SceneDesc {
         source: path.to_path_buf(),
@@ -80,6 +85,7 @@ fn load_scene(path: &Path) -> Result<SceneDesc, String> {
         cameras,
         lights,
         animations,
+        skins,
         background: BACKGROUND,
         notes,
     })
@@ -190,26 +196,4 @@ fn check_unvalidated_references(document: &gltf::Document) -> Result<(), String>
         }
     }
     Ok(())
-}
-
-/// Notes for geometry shown in its rest pose until skinning and morphing land.
-fn note_rest_pose(document: &gltf::Document, notes: &mut Vec<String>) {
-    let skinned = document
-        .nodes()
-        .filter(|n| n.skin().is_some() && n.mesh().is_some())
-        .count();
-    if skinned > 0 {
-        notes.push(format!(
-            "{skinned} skinned mesh(es) rendered in rest pose (skinning lands with the frame loop)"
-        ));
-    }
-    let morphed = document
-        .meshes()
-        .filter(|m| m.primitives().any(|p| p.morph_targets().len() > 0))
-        .count();
-    if morphed > 0 {
-        notes.push(format!(
-            "{morphed} mesh(es) with morph targets rendered with their default weights (morphing lands with the frame loop)"
-        ));
-    }
 }

@@ -6,6 +6,7 @@
 
 use glam::{Mat4, Quat, Vec3};
 
+use super::morph;
 use crate::scene::{CameraDesc, LightDesc, LightKind, NodeDesc, Trs};
 
 /// Loads every node; `camera_of` maps glTF camera indices to `SceneDesc::cameras`
@@ -28,6 +29,8 @@ pub(super) fn load_nodes(
                     .camera()
                     .and_then(|camera| camera_of.get(camera.index()).copied().flatten()),
                 light: node.light().map(|light| light.index()),
+                skin: node.skin().map(|skin| skin.index()),
+                weights: morph::node_weights(&node)?,
             })
         })
         .collect::<Result<Vec<_>, String>>()?;

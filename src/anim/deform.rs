@@ -1,0 +1,270 @@
+//! Vertex deformation: morph targets, then linear blend skinning (glTF 2.0 §3.7.2.2 Morph
+//! Targets, §3.7.3 Skins).
+//!
+//! For a vertex with base position `p`, base normal `n`, morph weights `w_i` and deltas
+//! `dp_i`, `dn_i`:
+//! - morph: `p' = p + sum_i w_i dp_i`, `n' = normalize(n + sum_i w_i dn_i)` (the base
+//!   normal when that sum is zero);
+//! - skin: `M = sum_k weight_k * joint_matrix[joint_k]` over the vertex's four influences,
+//!   `p'' = M p'` in world space (glTF: the skinned node's own transform is ignored, the
+//!   joints place the mesh), `n'' = normalize(cofactor(M3) n')` where `M3` is the upper 3x3
+//!   of `M` and `cofactor(M3) = det(M3) M3^-T` — the exact inverse transpose up to a positive
+//!   scale once multiplied by `sign(det)`, so it is right for any invertible blend (shears and
+//!   non-uniform scales included), costs three cross products, and needs no division.
+//!
+//! Weights are used as given (glTF requires them to sum to 1; they are not renormalised).
+//! Fallbacks that keep every output finite, given the loader's finite inputs:
+//! - skin weights summing to 0: the vertex stays rigidly attached to its node,
+//!   `world_from_node * p'` (as if unskinned);
+//! - a non-finite blended matrix (a joint matrix overflowed; see
+//!   [`Pose::nonfinite_joint`](super::Pose::nonfinite_joint)) or a non-finite skinned
+//!   position: the same rigid placement; if that is not finite either, `p'` itself;
+//! - a morphed position that overflows: the base position;
+//! - a normal that comes out zero or non-finite: the previous stage's normal (morph: the
+//!   base normal; skin: `normalize(M3 n')`, else `n'` unchanged).
+//!
+//! Every loop runs in vertex order with a fixed summation order (targets in file order,
+//! influences in slot order), so results are bit-identical across calls and thread counts.
+
+use glam::{Mat3, Mat4, Vec3};
+
+use super::Pose;
+use crate::scene::{PrimitiveDesc, SceneDesc};
+
+/// The space `deform_primitive` wrote its vertices in.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum VertexSpace {
+    /// The node's object space: the caller applies `world_from_node` (morph-only and
+    /// rigid primitives).
+    Object,
+    /// World space (skinned primitives): the caller applies nothing.
+    World,
+}
+
+/// Whether the primitive drawn by `node` needs [`deform_primitive`] for its geometry: it is
+/// skinned (the node has a skin and the primitive has joints), or it has morph targets (even
+/// with all-zero or static weights: the loader no longer bakes default weights into the base
+/// positions). Otherwise its base positions, placed by `world_from_node`, are its geometry
+/// at every time. The answer does not depend on time.
+///
+/// # Panics
+/// If `node`, `mesh` or `primitive` is out of range.
+pub fn primitive_deforms(scene: &SceneDesc, node: usize, mesh: usize, primitive: usize) -> bool {
+    let desc = &scene.meshes[mesh].primitives[primitive];
+    !desc.morph_targets.is_empty() || skin_of(scene, node, desc).is_some()
+}
+
+/// Writes the primitive's vertices for `pose` into `positions` and `normals` (cleared first;
+/// `normals` stays empty when the primitive has no normals) and returns their space:
+/// [`VertexSpace::World`] when skinned, else [`VertexSpace::Object`]. Morph targets use
+/// `pose.morph_weights[node]`; skinning uses the joint matrices of the node's skin. Normals
+/// are unit length. A primitive that does not deform comes out as its base geometry in
+/// object space.
+///
+/// Pure function of its inputs; every output is finite (see the module docs for the
+/// fallbacks). `pose` must have been evaluated for `scene`.
+///
+/// # Panics
+/// If `node`, `mesh` or `primitive` is out of range, or `pose` is for another scene.
+pub fn deform_primitive(
+    scene: &SceneDesc,
+    pose: &Pose,
+    node: usize,
+    mesh: usize,
+    primitive: usize,
+    positions: &mut Vec<Vec3>,
+    normals: &mut Vec<Vec3>,
+) -> VertexSpace {
+    let desc = &scene.meshes[mesh].primitives[primitive];
+    positions.clear();
+    positions.extend_from_slice(&desc.positions);
+    normals.clear();
+    if let Some(base) = &desc.normals {
+        normals.extend_from_slice(base);
+    }
+    apply_morph(desc, &pose.morph_weights[node], positions, normals);
+    match skin_of(scene, node, desc) {
+        Some((skin, influences)) => {
+            let skinning = Skinning {
+                joint_matrices: &pose.joint_matrices[skin],
+                world_from_node: pose.world_from_node[node],
+            };
+            skinning.apply(influences, positions, normals);
+            VertexSpace::World
+        }
+        None => VertexSpace::Object,
+    }
+}
+
+/// A skinned primitive's per-vertex joint indices and weights.
+#[derive(Clone, Copy)]
+struct Influences<'a> {
+    joints: &'a [[u16; 4]],
+    weights: &'a [[f32; 4]],
+}
+
+/// The node's skin index and the primitive's influences, when the primitive is skinned.
+fn skin_of<'a>(
+    scene: &SceneDesc,
+    node: usize,
+    primitive: &'a PrimitiveDesc,
+) -> Option<(usize, Influences<'a>)> {
+    let skin = scene.nodes[node].skin.filter(|&s| s < scene.skins.len())?;
+    match (&primitive.joints, &primitive.weights) {
+        (Some(joints), Some(weights)) => Some((skin, Influences { joints, weights })),
+        _ => None,
+    }
+}
+
+/// Adds the weighted morph deltas, then renormalises the normals.
+fn apply_morph(
+    primitive: &PrimitiveDesc,
+    weights: &[f32],
+    positions: &mut [Vec3],
+    normals: &mut [Vec3],
+) {
+    let mut moved = false;
+    for (target, &w) in primitive.morph_targets.iter().zip(weights) {
+        if w == 0.0 {
+            continue;
+        }
+        if let Some(deltas) = &target.positions {
+            add_weighted(positions, deltas, w);
+        }
+        if let Some(deltas) = &target.normals {
+            add_weighted(normals, deltas, w);
+            moved = true;
+        }
+    }
+    for (p, base) in positions.iter_mut().zip(&primitive.positions) {
+        if !p.is_finite() {
+            *p = *base;
+        }
+    }
+    if moved && let Some(base) = &primitive.normals {
+        for (n, base) in normals.iter_mut().zip(base) {
+            *n = n.try_normalize().unwrap_or(*base);
+        }
+    }
+}
+
+fn add_weighted(values: &mut [Vec3], deltas: &[Vec3], weight: f32) {
+    for (value, delta) in values.iter_mut().zip(deltas) {
+        *value += weight * *delta;
+    }
+}
+
+/// What linear blend skinning of one primitive reads from the pose.
+struct Skinning<'a> {
+    joint_matrices: &'a [Mat4],
+    /// The skinned node's transform, used only for the rigid fallback.
+    world_from_node: Mat4,
+}
+
+impl Skinning<'_> {
+    fn apply(&self, influences: Influences, positions: &mut [Vec3], normals: &mut [Vec3]) {
+        let Influences { joints, weights } = influences;
+        let rigid_normals = cofactor(Mat3::from_mat4(self.world_from_node));
+        for (v, position) in positions.iter_mut().enumerate() {
+            let normal = normals.get_mut(v);
+            let blended = self.blend(&joints[v], &weights[v]);
+            let skinned = blended
+                .map(|m| (m, m.transform_point3(*position)))
+                .filter(|(_, p)| p.is_finite());
+            match skinned {
+                Some((m, p)) => {
+                    *position = p;
+                    if let Some(n) = normal {
+                        *n =
+                            transform_normal(&cofactor(Mat3::from_mat4(m)), Mat3::from_mat4(m), *n);
+                    }
+                }
+                None => {
+                    let p = self.world_from_node.transform_point3(*position);
+                    if p.is_finite() {
+                        *position = p;
+                        if let Some(n) = normal {
+                            *n = transform_normal(
+                                &rigid_normals,
+                                Mat3::from_mat4(self.world_from_node),
+                                *n,
+                            );
+                        }
+                    }
+                }
+            }
+        }
+    }
+
+    /// `sum_k weight_k * joint_matrix[joint_k]`, or `None` when the weights sum to zero or
+    /// the blend is not finite. Joints past the skin's end (impossible after loading) are
+    /// skipped.
+    fn blend(&self, joints: &[u16; 4], weights: &[f32; 4]) -> Option<Mat4> {
+        let mut sum = Mat4::ZERO;
+        let mut total = 0.0;
+        for (&j, &w) in joints.iter().zip(weights) {
+            if w == 0.0 {
+                continue;
+            }
+            let Some(m) = self.joint_matrices.get(usize::from(j)) else {
+                continue;
+            };
+            sum += *m * w;
+            total += w;
+        }
+        (total != 0.0 && sum.is_finite()).then_some(sum)
+    }
+}
+
+/// The normal transform of a linear map `m` and its sign: `(cofactor(m), sign(det m))`,
+/// where `cofactor(m) = det(m) * m^-T` has columns `c1 x c2`, `c2 x c0`, `c0 x c1`.
+fn cofactor(m: Mat3) -> (Mat3, f32) {
+    let cofactor = Mat3::from_cols(
+        m.y_axis.cross(m.z_axis),
+        m.z_axis.cross(m.x_axis),
+        m.x_axis.cross(m.y_axis),
+    );
+    let det = m.x_axis.dot(cofactor.x_axis);
+    (cofactor, if det < 0.0 { -1.0 } else { 1.0 })
+}
+
+/// `normalize(sign * cofactor * n)`; when that degenerates (singular map), `normalize(m n)`;
+/// failing that, `n` unchanged.
+fn transform_normal(normal_from_object: &(Mat3, f32), m: Mat3, n: Vec3) -> Vec3 {
+    let (cofactor, sign) = *normal_from_object;
+    (sign * (cofactor * n))
+        .try_normalize()
+        .or_else(|| (m * n).try_normalize())
+        .unwrap_or(n)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use glam::Quat;
+
+    #[test]
+    fn cofactor_is_the_inverse_transpose_up_to_a_positive_scale() {
+        let m = Mat3::from_cols(
+            Vec3::new(2.0, 0.3, 0.0),
+            Vec3::new(-0.5, 1.0, 0.2),
+            Vec3::new(0.1, 0.0, -3.0),
+        );
+        let (c, sign) = cofactor(m);
+        assert!(m.determinant() < 0.0 && sign == -1.0);
+        let reference = m.inverse().transpose();
+        for n in [Vec3::X, Vec3::new(0.3, -1.0, 2.0).normalize()] {
+            let ours = transform_normal(&(c, sign), m, n);
+            let expected = (reference * n).normalize();
+            assert!(ours.abs_diff_eq(expected, 1e-6), "{ours} vs {expected}");
+        }
+        // A rotation maps normals like vectors.
+        let r = Mat3::from_quat(Quat::from_rotation_y(0.7));
+        let n = Vec3::new(0.0, 0.6, 0.8);
+        assert!(transform_normal(&cofactor(r), r, n).abs_diff_eq(r * n, 1e-6));
+        // A singular map (flattened z) still gives a unit normal.
+        let flat = Mat3::from_diagonal(Vec3::new(1.0, 1.0, 0.0));
+        let out = transform_normal(&cofactor(flat), flat, Vec3::new(1.0, 0.0, 1.0).normalize());
+        assert!((out.length() - 1.0).abs() < 1e-6 && out.is_finite());
+    }
+}
