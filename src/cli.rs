@@ -9,6 +9,7 @@ use anyhow::{Context, Result, bail};
 use clap::{Args, Parser, Subcommand};
 use indicatif::{ProgressBar, ProgressStyle};
 
+use crate::anim::{AnimationSelection, select_animation};
 use crate::frame::{BvhPolicy, FrameRecord, RenderSettings, Renderer};
 use crate::lod::LodMethod;
 use crate::output::{FrameFormat, OutputDir, Shard};
@@ -98,6 +99,9 @@ pub struct RenderArgs {
     /// Skip frames already complete in the output folder.
     #[arg(long)]
     pub resume: bool,
+    /// Play one animation clip (its name or index) instead of all clips together.
+    #[arg(long)]
+    pub animation: Option<String>,
 }
 
 /// `--bvh` values.
@@ -310,6 +314,7 @@ fn validated_settings(args: &RenderArgs) -> Result<RenderSettings> {
             BvhMode::Refit => BvhPolicy::Refit { rebuild_threshold: args.rebuild_threshold },
             BvhMode::Rebuild => BvhPolicy::Rebuild,
         },
+        animation: AnimationSelection::All,
     })
 }
 
@@ -321,9 +326,13 @@ pub fn render(args: &RenderArgs) -> Result<()> {
     for note in &scene.notes {
         eprintln!("note: {}: {note}", path.display());
     }
+    let mut settings = settings;
+    if let Some(spec) = &args.animation {
+        settings.animation = select_animation(&scene, spec).map_err(|e| anyhow::anyhow!("{}: --animation {spec}: {e}", path.display()))?;
+    }
     let frames = match &args.frames {
         Some(f) => parse_frames(f)?,
-        None => default_frames(scene.duration(), args.fps),
+        None => default_frames(settings.animation.duration(&scene), args.fps),
     };
     let out = args.out.clone().unwrap_or_else(|| {
         PathBuf::from("out")

@@ -7,14 +7,14 @@
 
 use glam::{Mat3, Vec3};
 
-use super::sample_vec3;
+use super::{AnimationSelection, sample_vec3};
 use crate::scene::{ChannelTarget, SceneDesc};
 
 /// Per node: `Some(s)` when its world transform is a similarity with uniform scale `s`
 /// (every node on its chain scales uniformly), `None` otherwise. Nodes not reachable from the
 /// roots get `None`.
-pub fn node_uniform_scales(scene: &SceneDesc, time_s: f32) -> Vec<Option<f64>> {
-    let local = local_uniform_scales(scene, time_s);
+pub fn node_uniform_scales(scene: &SceneDesc, selection: AnimationSelection, time_s: f32) -> Vec<Option<f64>> {
+    let local = local_uniform_scales(scene, selection, time_s);
     let mut world = vec![None; scene.nodes.len()];
     let mut stack: Vec<(usize, Option<f64>)> = scene.roots.iter().map(|&r| (r, Some(1.0))).collect();
     while let Some((node, parent)) = stack.pop() {
@@ -28,9 +28,9 @@ pub fn node_uniform_scales(scene: &SceneDesc, time_s: f32) -> Vec<Option<f64>> {
 }
 
 /// Each node's own uniform scale factor at `time_s`, `None` when it scales non-uniformly.
-fn local_uniform_scales(scene: &SceneDesc, time_s: f32) -> Vec<Option<f64>> {
+fn local_uniform_scales(scene: &SceneDesc, selection: AnimationSelection, time_s: f32) -> Vec<Option<f64>> {
     let mut scales: Vec<Vec3> = scene.nodes.iter().map(|n| n.local.scale).collect();
-    for animation in &scene.animations {
+    for animation in selection.clips(scene) {
         for channel in animation.channels.iter().filter(|c| c.target == ChannelTarget::Scale) {
             if let Some(s) = scales.get_mut(channel.node) {
                 *s = sample_vec3(channel, time_s);
@@ -92,7 +92,7 @@ mod tests {
             roots: vec![0],
             ..Default::default()
         };
-        let s = node_uniform_scales(&scene, 0.0);
+        let s = node_uniform_scales(&scene, AnimationSelection::All, 0.0);
         assert_eq!(s, vec![Some(2.0), Some(3.0), None, None]);
     }
 
@@ -100,6 +100,6 @@ mod tests {
     fn matrix_nodes_use_their_similarity_scale() {
         let m = Mat4::from_scale_rotation_translation(Vec3::splat(4.0), Quat::from_rotation_x(1.0), Vec3::ONE);
         let scene = SceneDesc { nodes: vec![NodeDesc { matrix: Some(m), ..Default::default() }], roots: vec![0], ..Default::default() };
-        assert!((node_uniform_scales(&scene, 0.0)[0].unwrap() - 4.0).abs() < 1e-6);
+        assert!((node_uniform_scales(&scene, AnimationSelection::All, 0.0)[0].unwrap() - 4.0).abs() < 1e-6);
     }
 }

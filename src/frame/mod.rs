@@ -11,6 +11,7 @@
 //! id rather than by tree order (see `accel`).
 
 mod dirty;
+mod posed;
 
 pub use dirty::{DirtySet, Motion};
 
@@ -20,7 +21,8 @@ use glam::{Mat4, Vec3, Vec3A};
 use serde::Serialize;
 
 use crate::accel::{Accel, AccelError, RefitKind};
-use crate::anim::{node_uniform_scales, node_world_transforms};
+use crate::anim::{AnimationSelection, Pose, node_uniform_scales, primitive_deforms};
+use posed::{DeformScratch, instance_vertices, same_deformation, write_all_triangles};
 use crate::geometry::{FrameTriangles, Placement, SceneGeometry};
 use crate::lod::{LOG2_PB_LIMIT, LodMethod, PixelFootprint, log2_pb};
 use crate::render::light::ring_lights;
@@ -64,6 +66,8 @@ pub struct RenderSettings {
     /// `None`: all of the scene's lights (at least one).
     pub lights: Option<usize>,
     pub bvh: BvhPolicy,
+    /// Which clips play (`--animation`).
+    pub animation: AnimationSelection,
 }
 
 impl Default for RenderSettings {
@@ -76,6 +80,7 @@ impl Default for RenderSettings {
             max_depth: 5,
             lights: None,
             bvh: BvhPolicy::Refit { rebuild_threshold: BvhPolicy::DEFAULT_REBUILD_THRESHOLD },
+            animation: AnimationSelection::All,
         }
     }
 }
@@ -183,14 +188,28 @@ pub struct Renderer {
     accel: Accel,
     /// `None` before the first frame.
     instances: Option<Vec<InstanceState>>,
+    /// Per instance: its primitive is skinned or morphed.
+    deforms: Vec<bool>,
+    /// This frame's pose and the previous frame's (swapped each frame, reused).
+    pose: Pose,
+    previous_pose: Pose,
+    scratch: DeformScratch,
     dirty: DirtySet,
 }
 
 impl Renderer {
     pub fn new(scene: SceneDesc, settings: RenderSettings) -> Renderer {
         let geometry = SceneGeometry::new(&scene);
+        let deforms: Vec<bool> = geometry
+            .instances
+            .iter()
+            .map(|i| primitive_deforms(&scene, i.node as usize, i.mesh as usize, i.primitive as usize))
+            .collect();
+        let mut pose = Pose::default();
+        pose.evaluate(&scene, settings.animation, 0.0);
+        let mut scratch = DeformScratch::default();
         let mut rest = FrameTriangles::default();
-        geometry.world_triangles(&scene, &node_world_transforms(&scene, 0.0), &mut rest);
+        write_all_triangles(&scene, &geometry, &pose, &deforms, &mut scratch, &mut rest);
         let rest_bounds = bounds(&rest);
         let camera_node = first_node_with(&scene, |n| n.camera.is_some());
         let yfov = match camera_node {
@@ -211,6 +230,10 @@ impl Renderer {
             slot_of_source: Vec::new(),
             accel: Accel::default(),
             instances: None,
+            deforms,
+            pose,
+            previous_pose: Pose::default(),
+            scratch,
             dirty: DirtySet::default(),
         }
     }
@@ -261,13 +284,15 @@ impl Renderer {
     pub fn prepare(&mut self, frame: u32, time_s: f32) -> Result<PreparedFrame, FrameError> {
         let mut stats = UpdateStats::default();
         let start = Instant::now();
-        let world = node_world_transforms(&self.scene, time_s);
-        let scales = node_uniform_scales(&self.scene, time_s);
+        std::mem::swap(&mut self.pose, &mut self.previous_pose);
+        self.pose.evaluate(&self.scene, self.settings.animation, time_s);
+        let scales = node_uniform_scales(&self.scene, self.settings.animation, time_s);
         let accel_error = |source| FrameError::Accel { frame, time_s, source };
         if self.instances.is_none() {
-            self.first_frame(&world, &scales, &mut stats).map_err(accel_error)?;
+            self.first_frame(&scales, &mut stats).map_err(accel_error)?;
         } else {
-            self.update_moved(&world, &scales, &mut stats);
+            self.update_moved(&scales, &mut stats);
+            self.check_moved_finite().map_err(accel_error)?;
             self.update_accel(&mut stats).map_err(accel_error)?;
             let t = Instant::now();
             if self.settings.lod.needs_log2_pb() {
@@ -279,14 +304,15 @@ impl Renderer {
         stats.deformed_triangles = self.dirty.count(Motion::Deformed);
         stats.sah_ratio = self.accel.sah_ratio();
         let _ = start;
-        Ok(PreparedFrame { camera: self.camera(&world), lights: self.lights(&world), update: stats })
+        let world = &self.pose.world_from_node;
+        Ok(PreparedFrame { camera: self.camera(world), lights: self.lights(world), update: stats })
     }
 
     /// First frame: every triangle placed, the tree built, every `log2 P_b` computed.
-    fn first_frame(&mut self, world: &[Mat4], scales: &[Option<f64>], stats: &mut UpdateStats) -> Result<(), AccelError> {
+    fn first_frame(&mut self, scales: &[Option<f64>], stats: &mut UpdateStats) -> Result<(), AccelError> {
         let t = Instant::now();
-        self.geometry.world_triangles(&self.scene, world, &mut self.triangles);
-        let states = self.instance_states(world, scales);
+        write_all_triangles(&self.scene, &self.geometry, &self.pose, &self.deforms, &mut self.scratch, &mut self.triangles);
+        let states = self.instance_states(scales);
         stats.animate_ms = ms_since(t);
 
         let t = Instant::now();
@@ -314,13 +340,16 @@ impl Renderer {
         Ok(())
     }
 
-    fn instance_states(&self, world: &[Mat4], scales: &[Option<f64>]) -> Vec<InstanceState> {
+    /// Each instance's placement now; a deforming instance has no similarity scale (its
+    /// `log2 P_b` always comes from its world vertices).
+    fn instance_states(&self, scales: &[Option<f64>]) -> Vec<InstanceState> {
         self.geometry
             .instances
             .iter()
-            .map(|inst| InstanceState {
-                world_from_object: world[inst.node as usize],
-                log2_scale: scales[inst.node as usize].map(f64::log2),
+            .zip(&self.deforms)
+            .map(|(inst, &deforms)| InstanceState {
+                world_from_object: self.pose.world_from_node[inst.node as usize],
+                log2_scale: if deforms { None } else { scales[inst.node as usize].map(f64::log2) },
             })
             .collect()
     }
@@ -334,13 +363,19 @@ impl Renderer {
 
     /// Rewrites the triangles of every instance whose placement changed and records them in
     /// the dirty set.
-    fn update_moved(&mut self, world: &[Mat4], scales: &[Option<f64>], stats: &mut UpdateStats) {
+    fn update_moved(&mut self, scales: &[Option<f64>], stats: &mut UpdateStats) {
         let t = Instant::now();
         self.dirty.reset(self.triangles.len());
         let previous = self.instances.take().unwrap_or_default();
-        let current = self.instance_states(world, scales);
+        let current = self.instance_states(scales);
         let mut classify_ms = ms_since(t);
         for (i, (now, before)) in current.iter().zip(&previous).enumerate() {
+            if self.deforms[i] {
+                if !same_deformation(&self.scene, &self.geometry, i, &self.pose, &self.previous_pose) {
+                    classify_ms += self.deform_instance(i);
+                }
+                continue;
+            }
             if now.world_from_object == before.world_from_object {
                 continue; // static: untouched
             }
@@ -356,6 +391,41 @@ impl Renderer {
         self.instances = Some(current);
         stats.dirty_ms = classify_ms;
         stats.animate_ms = ms_since(t) - classify_ms;
+    }
+
+    /// Rewrites a skinned or morphed instance's triangles from its deformed vertices; marks
+    /// exactly those whose vertices changed as deformed. Returns the milliseconds spent
+    /// comparing (the classification share of the work).
+    fn deform_instance(&mut self, i: usize) -> f64 {
+        let mut compare_ms = 0.0;
+        let (placement, positions, normals) = instance_vertices(&self.scene, &self.geometry, &self.pose, i, true, &mut self.scratch);
+        for source in self.geometry.instance_triangles[i].clone() {
+            let slot = self.slot_of_source[source as usize];
+            let s = slot as usize;
+            let (p, n) = self.geometry.world_triangle(source, &placement, positions, normals);
+            let c = Instant::now();
+            let moved = p.map(|v| v.to_array().map(f32::to_bits)) != self.triangles.positions[s].map(|v| v.to_array().map(f32::to_bits));
+            compare_ms += ms_since(c);
+            if moved {
+                self.triangles.positions[s] = p;
+                self.triangles.uvs[s] = self.geometry.oriented_uvs(source, &placement);
+                self.dirty.mark(slot, Motion::Deformed);
+            }
+            // Normals can turn without the triangle moving (a neighbour's vertex moved).
+            self.triangles.normals[s] = n;
+        }
+        compare_ms
+    }
+
+    /// A moved vertex that came out NaN or infinite stops the frame (never a NaN pixel).
+    fn check_moved_finite(&self) -> Result<(), AccelError> {
+        for &slot in &self.dirty.slots {
+            let tri = self.triangles.positions[slot as usize];
+            if let Some(v) = tri.iter().find(|v| !v.is_finite()) {
+                return Err(AccelError::NonFiniteVertex { triangle: self.triangles.source[slot as usize] as usize, vertex: v.to_array() });
+            }
+        }
+        Ok(())
     }
 
     /// Writes instance `i`'s triangles for a new placement and marks them.
