@@ -37,7 +37,14 @@ fn patch(n: u32) -> PrimitiveDesc {
             indices.extend([i, i + 1, i + n + 2, i, i + n + 2, i + n + 1]);
         }
     }
-    PrimitiveDesc { normals: Some(vec![Vec3::Z; positions.len()]), positions, uvs: Some(uvs), indices, material: Some(0), ..Default::default() }
+    PrimitiveDesc {
+        normals: Some(vec![Vec3::Z; positions.len()]),
+        positions,
+        uvs: Some(uvs),
+        indices,
+        material: Some(0),
+        ..Default::default()
+    }
 }
 
 /// `triangles` textured triangles in patches on a grid facing a camera; the first
@@ -47,11 +54,31 @@ fn scene(triangles: usize, deformed_share: f64) -> SceneDesc {
     let per_patch = patch.triangle_count();
     let patches = triangles.div_ceil(per_patch);
     let side = (patches as f64).sqrt().ceil() as usize;
-    let texels = (0..64 * 64).map(|i| if (i % 64 / 8 + i / 64 / 8) % 2 == 0 { Vec4::ONE } else { Vec4::new(0.1, 0.2, 0.6, 1.0) }).collect();
+    let texels = (0..64 * 64)
+        .map(|i| {
+            if (i % 64 / 8 + i / 64 / 8) % 2 == 0 {
+                Vec4::ONE
+            } else {
+                Vec4::new(0.1, 0.2, 0.6, 1.0)
+            }
+        })
+        .collect();
     let mut scene = SceneDesc {
-        textures: vec![Texture { name: "checker".into(), pyramid: MipPyramid::from_linear_rgba(64, 64, texels).unwrap(), sampler: Sampler::default() }],
-        materials: vec![MaterialDesc { base_color: Vec3::ONE, base_color_texture: Some(0), ..Default::default() }],
-        meshes: vec![MeshDesc { name: "patch".into(), primitives: vec![patch], ..Default::default() }],
+        textures: vec![Texture {
+            name: "checker".into(),
+            pyramid: MipPyramid::from_linear_rgba(64, 64, texels).unwrap(),
+            sampler: Sampler::default(),
+        }],
+        materials: vec![MaterialDesc {
+            base_color: Vec3::ONE,
+            base_color_texture: Some(0),
+            ..Default::default()
+        }],
+        meshes: vec![MeshDesc {
+            name: "patch".into(),
+            primitives: vec![patch],
+            ..Default::default()
+        }],
         background: Vec3::splat(0.2),
         ..Default::default()
     };
@@ -59,8 +86,19 @@ fn scene(triangles: usize, deformed_share: f64) -> SceneDesc {
     let mut channels = Vec::new();
     for p in 0..patches {
         let (x, y) = ((p % side) as f32, (p / side) as f32);
-        let translation = Vec3::new(x * 1.1 - side as f32 * 0.55, y * 1.1 - side as f32 * 0.55, 0.0);
-        scene.nodes.push(NodeDesc { local: Trs { translation, ..Default::default() }, mesh: Some(0), ..Default::default() });
+        let translation = Vec3::new(
+            x * 1.1 - side as f32 * 0.55,
+            y * 1.1 - side as f32 * 0.55,
+            0.0,
+        );
+        scene.nodes.push(NodeDesc {
+            local: Trs {
+                translation,
+                ..Default::default()
+            },
+            mesh: Some(0),
+            ..Default::default()
+        });
         scene.roots.push(p);
         if p < deformed {
             channels.push(ChannelDesc {
@@ -73,17 +111,35 @@ fn scene(triangles: usize, deformed_share: f64) -> SceneDesc {
             });
         }
     }
-    scene.animations.push(AnimationDesc { name: "stretch".into(), channels });
+    scene.animations.push(AnimationDesc {
+        name: "stretch".into(),
+        channels,
+    });
     let distance = side as f32 * 1.1;
-    scene.cameras.push(CameraDesc { yfov: 1.0, znear: 0.1 });
-    scene.nodes.push(NodeDesc { local: Trs { translation: Vec3::new(0.0, 0.0, distance), ..Default::default() }, camera: Some(0), ..Default::default() });
+    scene.cameras.push(CameraDesc {
+        yfov: 1.0,
+        znear: 0.1,
+    });
+    scene.nodes.push(NodeDesc {
+        local: Trs {
+            translation: Vec3::new(0.0, 0.0, distance),
+            ..Default::default()
+        },
+        camera: Some(0),
+        ..Default::default()
+    });
     scene.roots.push(scene.nodes.len() - 1);
     scene
 }
 
 /// Median per-frame update stats over frames 1..=FRAMES (frame 0 is the initial build).
 fn update_medians(scene: SceneDesc, bvh: BvhPolicy) -> (UpdateStats, [f64; 5], f64) {
-    let settings = RenderSettings { width: 640, height: 480, bvh, ..Default::default() };
+    let settings = RenderSettings {
+        width: 640,
+        height: 480,
+        bvh,
+        ..Default::default()
+    };
     let mut renderer = Renderer::new(scene, settings);
     let t = Instant::now();
     renderer.prepare(0, 0.0).unwrap();
@@ -105,7 +161,11 @@ fn update_medians(scene: SceneDesc, bvh: BvhPolicy) -> (UpdateStats, [f64; 5], f
 
 /// Preprocessing share of one rendered frame (frame 1, after the initial build) at 640x480.
 fn preprocessing_share(scene: SceneDesc) -> (f64, f64) {
-    let settings = RenderSettings { width: 640, height: 480, ..Default::default() };
+    let settings = RenderSettings {
+        width: 640,
+        height: 480,
+        ..Default::default()
+    };
     let mut renderer = Renderer::new(scene, settings);
     renderer.prepare(0, 0.0).unwrap();
     let (_, r) = renderer.render_frame(1, 1.0 / 30.0).unwrap();
@@ -116,14 +176,21 @@ fn preprocessing_share(scene: SceneDesc) -> (f64, f64) {
 fn main() {
     // `cargo bench` passes `--bench`; an optional size filter like `100k` or `1M` may follow.
     let filter: Option<String> = std::env::args().skip(1).find(|a| !a.starts_with("--"));
-    println!("| triangles | deformed | animate+dirty ms | refit ms | LOD update ms | update ms (refit) | rebuild ms | update ms (rebuild) | refit/rebuild | LOD recomputed | preprocessing share @640x480 | frame ms |");
+    println!(
+        "| triangles | deformed | animate+dirty ms | refit ms | LOD update ms | update ms (refit) | rebuild ms | update ms (rebuild) | refit/rebuild | LOD recomputed | preprocessing share @640x480 | frame ms |"
+    );
     println!("|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|");
     for (label, triangles) in [("100k", 100_000usize), ("1M", 1_000_000)] {
         if filter.as_deref().is_some_and(|f| f != label) {
             continue;
         }
         for share in [0.01, 0.10, 1.0] {
-            let (last, refit, _) = update_medians(scene(triangles, share), BvhPolicy::Refit { rebuild_threshold: f32::INFINITY });
+            let (last, refit, _) = update_medians(
+                scene(triangles, share),
+                BvhPolicy::Refit {
+                    rebuild_threshold: f32::INFINITY,
+                },
+            );
             let (_, rebuild, _) = update_medians(scene(triangles, share), BvhPolicy::Rebuild);
             let (pre_share, frame_ms) = preprocessing_share(scene(triangles, share));
             println!(

@@ -91,7 +91,9 @@ pub fn run_bench(
                 config: configs[c],
                 render_ms_per_frame: Percentiles::of(samples[c].iter().map(|s| s.0 / frame_count)),
                 total_ms_per_frame: Percentiles::of(samples[c].iter().map(|s| s.1 / frame_count)),
-                rays_per_second: Percentiles::of(samples[c].iter().map(|s| s.2 as f64 / (s.0 / 1e3))),
+                rays_per_second: Percentiles::of(
+                    samples[c].iter().map(|s| s.2 as f64 / (s.0 / 1e3)),
+                ),
                 render_ratio: Percentiles::of(
                     (0..repeats).map(|r| samples[c][r].0 / samples[baseline][r].0),
                 ),

@@ -164,7 +164,11 @@ pub fn run(cli: Cli) -> Result<()> {
         Some(Command::Report { dirs, svg }) => {
             let svg = svg.unwrap_or_else(|| {
                 let first = &dirs[0];
-                let folder = if first.is_dir() { first.clone() } else { first.parent().map(Path::to_path_buf).unwrap_or_default() };
+                let folder = if first.is_dir() {
+                    first.clone()
+                } else {
+                    first.parent().map(Path::to_path_buf).unwrap_or_default()
+                };
                 folder.join("report.svg")
             });
             let summary = crate::report::report(&dirs, &svg)?;
@@ -298,7 +302,10 @@ fn validated_settings(args: &RenderArgs) -> Result<RenderSettings> {
         bail!("--lights: at most {MAX_LIGHTS}");
     }
     if !(args.rebuild_threshold.is_finite() && args.rebuild_threshold >= 1.0) {
-        bail!("--rebuild-threshold {}: must be a number >= 1", args.rebuild_threshold);
+        bail!(
+            "--rebuild-threshold {}: must be a number >= 1",
+            args.rebuild_threshold
+        );
     }
     if !(args.fps.is_finite() && args.fps > 0.0) {
         bail!("--fps {}: must be a positive number", args.fps);
@@ -311,7 +318,9 @@ fn validated_settings(args: &RenderArgs) -> Result<RenderSettings> {
         max_depth: args.max_depth,
         lights: args.lights,
         bvh: match args.bvh {
-            BvhMode::Refit => BvhPolicy::Refit { rebuild_threshold: args.rebuild_threshold },
+            BvhMode::Refit => BvhPolicy::Refit {
+                rebuild_threshold: args.rebuild_threshold,
+            },
             BvhMode::Rebuild => BvhPolicy::Rebuild,
         },
         animation: AnimationSelection::All,
@@ -328,7 +337,8 @@ pub fn render(args: &RenderArgs) -> Result<()> {
     }
     let mut settings = settings;
     if let Some(spec) = &args.animation {
-        settings.animation = select_animation(&scene, spec).map_err(|e| anyhow::anyhow!("{}: --animation {spec}: {e}", path.display()))?;
+        settings.animation = select_animation(&scene, spec)
+            .map_err(|e| anyhow::anyhow!("{}: --animation {spec}: {e}", path.display()))?;
     }
     let frames = match &args.frames {
         Some(f) => parse_frames(f)?,
@@ -430,18 +440,29 @@ pub struct SequenceOutput {
 
 /// Renders `frames` (this shard's part of them) into the output folder, one record per
 /// frame, then the summary.
-pub fn render_sequence(renderer: &mut Renderer, frames: std::ops::Range<u32>, fps: f64, out: &SequenceOutput) -> Result<()> {
+pub fn render_sequence(
+    renderer: &mut Renderer,
+    frames: std::ops::Range<u32>,
+    fps: f64,
+    out: &SequenceOutput,
+) -> Result<()> {
     let frames = match out.shard {
         Some(shard) => shard.frames(frames),
         None => frames,
     };
     let (mut output, previous) = OutputDir::open(&out.dir, out.format, out.shard, out.resume)?;
     // A frame is complete when its file exists and its record was written after it.
-    let mut records: Vec<FrameRecord> =
-        previous.into_iter().filter(|r| frames.contains(&r.frame) && output.frame_path(r.frame).is_file()).collect();
+    let mut records: Vec<FrameRecord> = previous
+        .into_iter()
+        .filter(|r| frames.contains(&r.frame) && output.frame_path(r.frame).is_file())
+        .collect();
     let done: std::collections::BTreeSet<u32> = records.iter().map(|r| r.frame).collect();
     if !done.is_empty() {
-        println!("resuming: {} of {} frame(s) already complete", done.len(), frames.len());
+        println!(
+            "resuming: {} of {} frame(s) already complete",
+            done.len(),
+            frames.len()
+        );
     }
     let todo: Vec<u32> = frames.clone().filter(|f| !done.contains(f)).collect();
     let progress = progress_bar(todo.len() as u64);
@@ -474,7 +495,10 @@ pub fn render_sequence(renderer: &mut Renderer, frames: std::ops::Range<u32>, fp
         frames.end,
         start.elapsed().as_secs_f64(),
         output.path().display(),
-        summary.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default()
+        summary
+            .file_name()
+            .map(|n| n.to_string_lossy().into_owned())
+            .unwrap_or_default()
     );
     Ok(())
 }
@@ -483,21 +507,41 @@ pub fn render_sequence(renderer: &mut Renderer, frames: std::ops::Range<u32>, fp
 /// minus `SLURM_ARRAY_TASK_MIN` when set, of `SLURM_ARRAY_TASK_COUNT`), else a Kubernetes
 /// Indexed Job (`JOB_COMPLETION_INDEX` of `MIPRAY_SHARD_COUNT`, which the Job sets to its
 /// `completions`), else none.
-pub fn resolve_shard(arg: Option<&str>, env: impl Fn(&str) -> Option<String>) -> Result<Option<Shard>> {
-    let parse = |name: &str, v: &str| -> Result<u32> { v.trim().parse().with_context(|| format!("{name}={v}: not a whole number")) };
+pub fn resolve_shard(
+    arg: Option<&str>,
+    env: impl Fn(&str) -> Option<String>,
+) -> Result<Option<Shard>> {
+    let parse = |name: &str, v: &str| -> Result<u32> {
+        v.trim()
+            .parse()
+            .with_context(|| format!("{name}={v}: not a whole number"))
+    };
     let (index, count) = if let Some(spec) = arg {
-        let (i, n) = spec.split_once('/').with_context(|| format!("--shard {spec}: expected I/N, e.g. 0/4"))?;
+        let (i, n) = spec
+            .split_once('/')
+            .with_context(|| format!("--shard {spec}: expected I/N, e.g. 0/4"))?;
         (parse("--shard index", i)?, parse("--shard count", n)?)
-    } else if let (Some(id), Some(count)) = (env("SLURM_ARRAY_TASK_ID"), env("SLURM_ARRAY_TASK_COUNT")) {
+    } else if let (Some(id), Some(count)) =
+        (env("SLURM_ARRAY_TASK_ID"), env("SLURM_ARRAY_TASK_COUNT"))
+    {
         let min = match env("SLURM_ARRAY_TASK_MIN") {
             Some(m) => parse("SLURM_ARRAY_TASK_MIN", &m)?,
             None => 0,
         };
         let id = parse("SLURM_ARRAY_TASK_ID", &id)?;
-        (id.checked_sub(min).context("SLURM_ARRAY_TASK_ID is below SLURM_ARRAY_TASK_MIN")?, parse("SLURM_ARRAY_TASK_COUNT", &count)?)
+        (
+            id.checked_sub(min)
+                .context("SLURM_ARRAY_TASK_ID is below SLURM_ARRAY_TASK_MIN")?,
+            parse("SLURM_ARRAY_TASK_COUNT", &count)?,
+        )
     } else if let Some(index) = env("JOB_COMPLETION_INDEX") {
-        let count = env("MIPRAY_SHARD_COUNT").context("JOB_COMPLETION_INDEX is set but MIPRAY_SHARD_COUNT (the Job's completions) is not")?;
-        (parse("JOB_COMPLETION_INDEX", &index)?, parse("MIPRAY_SHARD_COUNT", &count)?)
+        let count = env("MIPRAY_SHARD_COUNT").context(
+            "JOB_COMPLETION_INDEX is set but MIPRAY_SHARD_COUNT (the Job's completions) is not",
+        )?;
+        (
+            parse("JOB_COMPLETION_INDEX", &index)?,
+            parse("MIPRAY_SHARD_COUNT", &count)?,
+        )
     } else {
         return Ok(None);
     };
@@ -598,18 +642,40 @@ mod tests {
 
     #[test]
     fn shards_come_from_flag_slurm_or_kubernetes() {
-        let env = |vars: &'static [(&'static str, &'static str)]| move |name: &str| vars.iter().find(|(k, _)| *k == name).map(|(_, v)| v.to_string());
-        assert_eq!(resolve_shard(Some("1/4"), env(&[])).unwrap(), Some(Shard { index: 1, count: 4 }));
+        let env = |vars: &'static [(&'static str, &'static str)]| {
+            move |name: &str| {
+                vars.iter()
+                    .find(|(k, _)| *k == name)
+                    .map(|(_, v)| v.to_string())
+            }
+        };
+        assert_eq!(
+            resolve_shard(Some("1/4"), env(&[])).unwrap(),
+            Some(Shard { index: 1, count: 4 })
+        );
         assert_eq!(resolve_shard(None, env(&[])).unwrap(), None);
-        let slurm = env(&[("SLURM_ARRAY_TASK_ID", "7"), ("SLURM_ARRAY_TASK_MIN", "5"), ("SLURM_ARRAY_TASK_COUNT", "3")]);
-        assert_eq!(resolve_shard(None, slurm).unwrap(), Some(Shard { index: 2, count: 3 }));
+        let slurm = env(&[
+            ("SLURM_ARRAY_TASK_ID", "7"),
+            ("SLURM_ARRAY_TASK_MIN", "5"),
+            ("SLURM_ARRAY_TASK_COUNT", "3"),
+        ]);
+        assert_eq!(
+            resolve_shard(None, slurm).unwrap(),
+            Some(Shard { index: 2, count: 3 })
+        );
         let k8s = env(&[("JOB_COMPLETION_INDEX", "0"), ("MIPRAY_SHARD_COUNT", "2")]);
-        assert_eq!(resolve_shard(None, k8s).unwrap(), Some(Shard { index: 0, count: 2 }));
+        assert_eq!(
+            resolve_shard(None, k8s).unwrap(),
+            Some(Shard { index: 0, count: 2 })
+        );
         assert!(resolve_shard(None, env(&[("JOB_COMPLETION_INDEX", "0")])).is_err());
         assert!(resolve_shard(Some("4/4"), env(&[])).is_err());
         assert!(resolve_shard(Some("x"), env(&[])).is_err());
         // The flag wins over the environment.
-        assert_eq!(resolve_shard(Some("0/1"), env(&[("JOB_COMPLETION_INDEX", "3")])).unwrap(), Some(Shard { index: 0, count: 1 }));
+        assert_eq!(
+            resolve_shard(Some("0/1"), env(&[("JOB_COMPLETION_INDEX", "3")])).unwrap(),
+            Some(Shard { index: 0, count: 1 })
+        );
     }
 
     #[test]

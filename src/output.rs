@@ -13,8 +13,8 @@ use image::{ImageBuffer, ImageFormat, Rgb};
 use serde::Serialize;
 
 use crate::frame::FrameRecord;
-use crate::report::Percentiles;
 use crate::render::LinearImage;
+use crate::report::Percentiles;
 
 /// Output image format of frames.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, clap::ValueEnum)]
@@ -97,22 +97,37 @@ impl OutputDir {
     /// Creates the folder (and parents) and starts its stats file. A fresh render truncates
     /// it; with `resume` the complete records already there are kept (a torn last line from
     /// an interrupted run is dropped) and returned, and new records are appended.
-    pub fn open(dir: &Path, format: FrameFormat, shard: Option<Shard>, resume: bool) -> Result<(OutputDir, Vec<FrameRecord>), OutputError> {
+    pub fn open(
+        dir: &Path,
+        format: FrameFormat,
+        shard: Option<Shard>,
+        resume: bool,
+    ) -> Result<(OutputDir, Vec<FrameRecord>), OutputError> {
         fs::create_dir_all(dir).map_err(io_error(dir))?;
         let (stats_name, summary_name) = match shard {
-            Some(s) => (format!("stats.{}.jsonl", s.suffix()), format!("summary.{}.json", s.suffix())),
+            Some(s) => (
+                format!("stats.{}.jsonl", s.suffix()),
+                format!("summary.{}.json", s.suffix()),
+            ),
             None => ("stats.jsonl".to_string(), "summary.json".to_string()),
         };
         let stats_path = dir.join(stats_name);
         if resume {
             remove_stale_temporaries(dir);
         }
-        let previous = if resume { read_complete_records(&stats_path)? } else { Vec::new() };
+        let previous = if resume {
+            read_complete_records(&stats_path)?
+        } else {
+            Vec::new()
+        };
         if resume {
             // Rewrite without any torn tail before appending to it.
             let mut text = String::new();
             for r in &previous {
-                text.push_str(&serde_json::to_string(r).map_err(|e| OutputError::Io { path: stats_path.clone(), source: e.into() })?);
+                text.push_str(&serde_json::to_string(r).map_err(|e| OutputError::Io {
+                    path: stats_path.clone(),
+                    source: e.into(),
+                })?);
                 text.push('\n');
             }
             write_bytes_atomically(&stats_path, text.as_bytes())?;
@@ -125,7 +140,16 @@ impl OutputDir {
             .open(&stats_path)
             .map_err(io_error(&stats_path))?;
         let summary_path = dir.join(summary_name);
-        Ok((OutputDir { dir: dir.to_path_buf(), format, stats_path, summary_path, stats }, previous))
+        Ok((
+            OutputDir {
+                dir: dir.to_path_buf(),
+                format,
+                stats_path,
+                summary_path,
+                stats,
+            },
+            previous,
+        ))
     }
 
     pub fn path(&self) -> &Path {
@@ -172,7 +196,9 @@ impl OutputDir {
 
 /// Removes `.NAME.tmp` files an interrupted run left behind (never complete outputs).
 fn remove_stale_temporaries(dir: &Path) {
-    let Ok(entries) = fs::read_dir(dir) else { return };
+    let Ok(entries) = fs::read_dir(dir) else {
+        return;
+    };
     for entry in entries.flatten() {
         let name = entry.file_name().to_string_lossy().into_owned();
         if name.starts_with('.') && name.ends_with(".tmp") {
@@ -187,9 +213,17 @@ fn read_complete_records(path: &Path) -> Result<Vec<FrameRecord>, OutputError> {
     let text = match fs::read_to_string(path) {
         Ok(t) => t,
         Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(Vec::new()),
-        Err(e) => return Err(OutputError::Io { path: path.to_path_buf(), source: e }),
+        Err(e) => {
+            return Err(OutputError::Io {
+                path: path.to_path_buf(),
+                source: e,
+            });
+        }
     };
-    Ok(text.lines().map_while(|line| serde_json::from_str::<FrameRecord>(line).ok()).collect())
+    Ok(text
+        .lines()
+        .map_while(|line| serde_json::from_str::<FrameRecord>(line).ok())
+        .collect())
 }
 
 /// Writes `image` to `path` in `format` through a temporary file in the same folder.
@@ -290,7 +324,8 @@ impl Summary {
         let total_rays = records.iter().map(|r| r.rays).sum();
         let total_render_ms = sum(|r| r.render_ms);
         let total_ms = sum(|r| r.total_ms);
-        let preprocessing = sum(|r| r.animate_ms + r.dirty_ms + r.refit_ms + r.build_ms + r.lod_update_ms);
+        let preprocessing =
+            sum(|r| r.animate_ms + r.dirty_ms + r.refit_ms + r.build_ms + r.lod_update_ms);
         Summary {
             frames: records.len(),
             width: first.map_or(0, |r| r.width),
@@ -302,7 +337,11 @@ impl Summary {
             total_lod_recomputed: records.iter().map(|r| r.lod_recomputed as u64).sum(),
             total_nonfinite_samples: records.iter().map(|r| r.nonfinite_samples).sum(),
             rebuilds: records.iter().filter(|r| r.rebuild).count(),
-            preprocessing_share: if total_ms > 0.0 { preprocessing / total_ms } else { 0.0 },
+            preprocessing_share: if total_ms > 0.0 {
+                preprocessing / total_ms
+            } else {
+                0.0
+            },
             mip_histogram: histogram,
             triangles: spread(|r| r.triangles as f64),
             animate_ms: spread(|r| r.animate_ms),
@@ -316,7 +355,11 @@ impl Summary {
             deformed_triangles: spread(|r| r.deformed_triangles as f64),
             lod_recomputed: spread(|r| r.lod_recomputed as f64),
             rays: spread(|r| r.rays as f64),
-            rays_per_second: if total_render_ms > 0.0 { total_rays as f64 / (total_render_ms / 1e3) } else { 0.0 },
+            rays_per_second: if total_render_ms > 0.0 {
+                total_rays as f64 / (total_render_ms / 1e3)
+            } else {
+                0.0
+            },
         }
     }
 }

@@ -234,7 +234,18 @@ fn exr_frames_hold_linear_floats() {
 #[test]
 fn interrupted_render_resumes_without_damaged_frames() {
     let dir = tempfile::tempdir().unwrap();
-    let args = ["render", "default", "--size", "128x72", "--spp", "4", "--frames", "0..60", "--threads", "1"];
+    let args = [
+        "render",
+        "default",
+        "--size",
+        "128x72",
+        "--spp",
+        "4",
+        "--frames",
+        "0..60",
+        "--threads",
+        "1",
+    ];
     let reference = {
         let mut a = args.to_vec();
         a.extend(["--out", "reference"]);
@@ -258,8 +269,14 @@ fn interrupted_render_resumes_without_damaged_frames() {
     }
     child.kill().unwrap();
     child.wait().unwrap();
-    assert!(run.join("frame_0003.png").exists(), "the render never got going");
-    assert!(!run.join("frame_0059.png").exists(), "the render finished before it could be interrupted");
+    assert!(
+        run.join("frame_0003.png").exists(),
+        "the render never got going"
+    );
+    assert!(
+        !run.join("frame_0059.png").exists(),
+        "the render finished before it could be interrupted"
+    );
     // Whatever the kill left, tear the stats file's last line too, as a crash mid-write would.
     let stats = run.join("stats.jsonl");
     let text = std::fs::read_to_string(&stats).unwrap();
@@ -271,16 +288,31 @@ fn interrupted_render_resumes_without_damaged_frames() {
     assert!(out.status.success(), "{}", stderr(&out));
     for frame in 0..60 {
         let name = format!("frame_{frame:04}.png");
-        let got = std::fs::read(run.join(&name)).unwrap_or_else(|_| panic!("{name} missing after resume"));
+        let got = std::fs::read(run.join(&name))
+            .unwrap_or_else(|_| panic!("{name} missing after resume"));
         let want = std::fs::read(reference.join(&name)).unwrap();
         assert!(got == want, "{name} differs from an uninterrupted render");
     }
-    let records: Vec<serde_json::Value> =
-        std::fs::read_to_string(&stats).unwrap().lines().map(|l| serde_json::from_str(l).expect("every stats line is complete")).collect();
-    let mut frames: Vec<u64> = records.iter().map(|r| r["frame"].as_u64().unwrap()).collect();
+    let records: Vec<serde_json::Value> = std::fs::read_to_string(&stats)
+        .unwrap()
+        .lines()
+        .map(|l| serde_json::from_str(l).expect("every stats line is complete"))
+        .collect();
+    let mut frames: Vec<u64> = records
+        .iter()
+        .map(|r| r["frame"].as_u64().unwrap())
+        .collect();
     frames.sort();
-    assert_eq!(frames, (0..60).collect::<Vec<u64>>(), "one record per frame");
-    let leftovers = std::fs::read_dir(&run).unwrap().filter_map(|e| e.ok()).filter(|e| e.file_name().to_string_lossy().ends_with(".tmp")).count();
+    assert_eq!(
+        frames,
+        (0..60).collect::<Vec<u64>>(),
+        "one record per frame"
+    );
+    let leftovers = std::fs::read_dir(&run)
+        .unwrap()
+        .filter_map(|e| e.ok())
+        .filter(|e| e.file_name().to_string_lossy().ends_with(".tmp"))
+        .count();
     assert_eq!(leftovers, 0);
 }
 
@@ -288,10 +320,20 @@ fn interrupted_render_resumes_without_damaged_frames() {
 fn shards_render_disjoint_blocks_that_report_merges() {
     let dir = tempfile::tempdir().unwrap();
     for shard in ["0/3", "1/3", "2/3"] {
-        let out = mipray(&["render", "default", "--size", "32x18", "--frames", "0..10", "--shard", shard, "--out", "s"], dir.path());
+        let out = mipray(
+            &[
+                "render", "default", "--size", "32x18", "--frames", "0..10", "--shard", shard,
+                "--out", "s",
+            ],
+            dir.path(),
+        );
         assert!(out.status.success(), "{}", stderr(&out));
     }
-    let frames = std::fs::read_dir(dir.path().join("s")).unwrap().filter_map(|e| e.ok()).filter(|e| e.file_name().to_string_lossy().starts_with("frame_")).count();
+    let frames = std::fs::read_dir(dir.path().join("s"))
+        .unwrap()
+        .filter_map(|e| e.ok())
+        .filter(|e| e.file_name().to_string_lossy().starts_with("frame_"))
+        .count();
     assert_eq!(frames, 10);
     let out = mipray(&["report", "s"], dir.path());
     assert!(out.status.success(), "{}", stderr(&out));

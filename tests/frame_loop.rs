@@ -13,7 +13,12 @@ const FRAMES: u32 = 30;
 const FPS: f32 = 30.0;
 
 fn settings(bvh: BvhPolicy) -> RenderSettings {
-    RenderSettings { width: 64, height: 48, bvh, ..Default::default() }
+    RenderSettings {
+        width: 64,
+        height: 48,
+        bvh,
+        ..Default::default()
+    }
 }
 
 /// `log2 P_b` by source triangle.
@@ -26,32 +31,54 @@ fn by_source(r: &Renderer) -> Vec<f32> {
     out
 }
 
+/// The dynamic scene plus a textured skinned strip bending over the first second.
+fn skinned_dynamic_scene() -> mipray::scene::SceneDesc {
+    let (mut scene, _) = dynamic_scene();
+    merge_textured(
+        &mut scene,
+        common::deform_scenes::skinned_strip_scene(1.3),
+        0,
+        glam::Vec3::new(-1.0, 1.5, -3.0),
+    );
+    scene
+}
+
 #[test]
 fn dirty_only_update_equals_a_full_recompute_bit_for_bit() {
-    let (scene, _) = dynamic_scene();
-    let policy = BvhPolicy::Refit { rebuild_threshold: BvhPolicy::DEFAULT_REBUILD_THRESHOLD };
+    let scene = skinned_dynamic_scene();
+    let policy = BvhPolicy::Refit {
+        rebuild_threshold: BvhPolicy::DEFAULT_REBUILD_THRESHOLD,
+    };
     let mut sequential = Renderer::new(scene, settings(policy));
     for frame in 0..FRAMES {
         let time = frame as f32 / FPS;
         let update = sequential.prepare(frame, time).unwrap().update;
-        let mut fresh = Renderer::new(dynamic_scene().0, settings(policy));
+        let mut fresh = Renderer::new(skinned_dynamic_scene(), settings(policy));
         fresh.prepare(frame, time).unwrap();
         let (ts, tf) = (sequential.triangles(), fresh.triangles());
         for (slot, &source) in ts.source.iter().enumerate() {
             let other = tf.source.iter().position(|&s| s == source).unwrap();
             let bits = |p: [Vec3A; 3]| p.map(|v| v.to_array().map(f32::to_bits));
-            assert_eq!(bits(ts.positions[slot]), bits(tf.positions[other]), "frame {frame}, triangle {source} vertices");
+            assert_eq!(
+                bits(ts.positions[slot]),
+                bits(tf.positions[other]),
+                "frame {frame}, triangle {source} vertices"
+            );
         }
         let (a, b) = (by_source(&sequential), by_source(&fresh));
         for (source, (x, y)) in a.iter().zip(&b).enumerate() {
-            assert!(x.to_bits() == y.to_bits(), "frame {frame}, triangle {source}: dirty-only {x} vs full {y}");
+            assert!(
+                x.to_bits() == y.to_bits(),
+                "frame {frame}, triangle {source}: dirty-only {x} vs full {y}"
+            );
         }
         if frame > 0 {
-            // Rigid motions never recompute; the stretched card (2 triangles) is deformed and
-            // the growing card (2 triangles) shifted by log2 s.
-            assert_eq!(update.lod_recomputed, 2, "frame {frame}");
+            // Rigid motions never recompute; the stretched card (2 triangles) and the bent
+            // part of the strip (the 6 of its 8 triangles with a vertex weighted to joint 1)
+            // are deformed and recomputed; the growing card (2 triangles) is shifted by log2 s.
+            assert_eq!(update.deformed_triangles, 2 + 6, "frame {frame}");
+            assert_eq!(update.lod_recomputed, 2 + 6, "frame {frame}");
             assert_eq!(update.lod_shifted, 2, "frame {frame}");
-            assert_eq!(update.deformed_triangles, 2, "frame {frame}");
         }
     }
 }
@@ -71,7 +98,10 @@ fn uniform_scale_shifts_log2_pb_by_log2_s() {
             })
             .collect()
     };
-    let before: Vec<(u32, f32)> = grow_slots(&r).iter().map(|&s| (r.triangles().source[s], r.triangles().log2_pb[s])).collect();
+    let before: Vec<(u32, f32)> = grow_slots(&r)
+        .iter()
+        .map(|&s| (r.triangles().source[s], r.triangles().log2_pb[s]))
+        .collect();
     assert_eq!(before.len(), 2, "the growing card has two triangles");
     // At t = 0.5 the scale is 1.5.
     r.prepare(15, 0.5).unwrap();
@@ -80,9 +110,15 @@ fn uniform_scale_shifts_log2_pb_by_log2_s() {
     for (source, old) in before {
         let slot = t.source.iter().position(|&s| s == source).unwrap();
         let shifted = t.log2_pb[slot];
-        assert!((shifted - old - 1.5f32.log2()).abs() < 1e-6, "{old} -> {shifted}");
+        assert!(
+            (shifted - old - 1.5f32.log2()).abs() < 1e-6,
+            "{old} -> {shifted}"
+        );
         let full = log2_pb(t.positions[slot], t.uvs[slot], (128, 128), footprint);
-        assert!((shifted - full).abs() < 1e-6, "shifted {shifted} vs recomputed {full}");
+        assert!(
+            (shifted - full).abs() < 1e-6,
+            "shifted {shifted} vs recomputed {full}"
+        );
     }
     let _ = grow;
 }
@@ -90,18 +126,29 @@ fn uniform_scale_shifts_log2_pb_by_log2_s() {
 #[test]
 fn rigid_only_animation_never_recomputes_after_the_first_frame() {
     // The showcase scene moves one card by translation only.
-    let mut r = Renderer::new(showcase_scene(), settings(BvhPolicy::Refit { rebuild_threshold: 1.5 }));
+    let mut r = Renderer::new(
+        showcase_scene(),
+        settings(BvhPolicy::Refit {
+            rebuild_threshold: 1.5,
+        }),
+    );
     let first = r.prepare(0, 0.0).unwrap().update;
     assert!(first.lod_recomputed > 0);
     for frame in 1..FRAMES {
         let u = r.prepare(frame, frame as f32 / FPS).unwrap().update;
         assert_eq!(u.lod_recomputed, 0, "frame {frame}");
         assert_eq!(u.lod_shifted, 0, "frame {frame}");
-        assert_eq!(u.moved_triangles, 2, "frame {frame}: the card's two triangles move");
+        assert_eq!(
+            u.moved_triangles, 2,
+            "frame {frame}: the card's two triangles move"
+        );
     }
     // A static scene (time frozen) moves nothing.
     let u = r.prepare(FRAMES, (FRAMES - 1) as f32 / FPS).unwrap().update;
-    assert_eq!((u.moved_triangles, u.lod_recomputed, u.rebuild), (0, 0, false));
+    assert_eq!(
+        (u.moved_triangles, u.lod_recomputed, u.rebuild),
+        (0, 0, false)
+    );
 }
 
 /// Deterministic pseudo-random rays aimed into the scene's bounds.
@@ -124,9 +171,14 @@ fn rays(count: usize) -> Vec<(Vec3A, Vec3A)> {
 
 #[test]
 fn refitted_tree_finds_the_same_hits_as_a_fresh_build() {
-    let (scene, _) = dynamic_scene();
+    let scene = skinned_dynamic_scene();
     // Never rebuild, so every frame after the first traces a refitted tree.
-    let mut r = Renderer::new(scene, settings(BvhPolicy::Refit { rebuild_threshold: f32::INFINITY }));
+    let mut r = Renderer::new(
+        scene,
+        settings(BvhPolicy::Refit {
+            rebuild_threshold: f32::INFINITY,
+        }),
+    );
     let rays = rays(10_000);
     for frame in 0..FRAMES {
         let u = r.prepare(frame, frame as f32 / FPS).unwrap().update;
@@ -137,8 +189,20 @@ fn refitted_tree_finds_the_same_hits_as_a_fresh_build() {
         for (i, &(o, d)) in rays.iter().enumerate() {
             let a = r.accel().closest_hit(r.triangles(), o, d, f32::INFINITY);
             let b = fresh.closest_hit(&fresh_triangles, o, d, f32::INFINITY);
-            let a = a.map(|h| (r.triangles().source[h.triangle as usize], h.t.to_bits(), h.bary.to_array().map(f32::to_bits)));
-            let b = b.map(|h| (fresh_triangles.source[h.triangle as usize], h.t.to_bits(), h.bary.to_array().map(f32::to_bits)));
+            let a = a.map(|h| {
+                (
+                    r.triangles().source[h.triangle as usize],
+                    h.t.to_bits(),
+                    h.bary.to_array().map(f32::to_bits),
+                )
+            });
+            let b = b.map(|h| {
+                (
+                    fresh_triangles.source[h.triangle as usize],
+                    h.t.to_bits(),
+                    h.bary.to_array().map(f32::to_bits),
+                )
+            });
             assert_eq!(a, b, "frame {frame}, ray {i}");
             hits += a.is_some() as usize;
         }
@@ -147,17 +211,70 @@ fn refitted_tree_finds_the_same_hits_as_a_fresh_build() {
 }
 
 #[test]
+fn morph_recomputes_exactly_the_triangles_touching_moved_vertices() {
+    let n = 6u32;
+    // Vertex 0 is the corner both triangles of the first quad share (the diagonal starts
+    // there); 17 (row 2, column 3) and 30 (row 4, column 2) are interior: six triangles each.
+    let lifted = [0u32, 17, 30];
+    let mut r = Renderer::new(
+        morph_grid_scene(n, &lifted),
+        settings(BvhPolicy::Refit {
+            rebuild_threshold: 1.5,
+        }),
+    );
+    r.prepare(0, 0.0).unwrap();
+    let indices = r.scene().meshes[0].primitives[0].indices.clone();
+    let expected: Vec<u32> = (0..indices.len() as u32 / 3)
+        .filter(|t| {
+            indices[*t as usize * 3..*t as usize * 3 + 3]
+                .iter()
+                .any(|v| lifted.contains(v))
+        })
+        .collect();
+    assert_eq!(expected.len(), 2 + 6 + 6);
+    for frame in 1..10 {
+        let u = r.prepare(frame, frame as f32 / 10.0).unwrap().update;
+        let t = r.triangles();
+        let mut recomputed: Vec<u32> = (0..t.len())
+            .filter(|&s| t.positions[s].iter().any(|p| p.z > -2.0 + 1e-6))
+            .map(|s| t.source[s])
+            .collect();
+        recomputed.sort();
+        assert_eq!(recomputed, expected, "frame {frame}: lifted triangles");
+        assert_eq!(u.deformed_triangles, expected.len(), "frame {frame}");
+        assert_eq!(u.lod_recomputed, expected.len(), "frame {frame}");
+    }
+    // Past the last key the weight holds: nothing moves.
+    r.prepare(10, 1.5).unwrap();
+    let u = r.prepare(11, 1.6).unwrap().update;
+    assert_eq!((u.moved_triangles, u.lod_recomputed), (0, 0));
+}
+
+#[test]
 fn frame_alone_equals_frame_in_sequence_with_refit_and_rebuild() {
-    for policy in [BvhPolicy::Refit { rebuild_threshold: 1.5 }, BvhPolicy::Rebuild] {
-        let mut seq = Renderer::new(dynamic_scene().0, settings(policy));
+    for policy in [
+        BvhPolicy::Refit {
+            rebuild_threshold: 1.5,
+        },
+        BvhPolicy::Rebuild,
+    ] {
+        let mut seq = Renderer::new(skinned_dynamic_scene(), settings(policy));
         let mut images = Vec::new();
         for frame in 0..8 {
-            images.push(seq.render_frame(frame, frame as f32 / 8.0).unwrap().0.to_srgb8());
+            images.push(
+                seq.render_frame(frame, frame as f32 / 8.0)
+                    .unwrap()
+                    .0
+                    .to_srgb8(),
+            );
         }
         for k in [3u32, 7] {
-            let mut alone = Renderer::new(dynamic_scene().0, settings(policy));
+            let mut alone = Renderer::new(skinned_dynamic_scene(), settings(policy));
             let image = alone.render_frame(k, k as f32 / 8.0).unwrap().0.to_srgb8();
-            assert!(image == images[k as usize], "{policy:?}: frame {k} alone differs from the sequence");
+            assert!(
+                image == images[k as usize],
+                "{policy:?}: frame {k} alone differs from the sequence"
+            );
         }
     }
 }

@@ -68,8 +68,15 @@ fn mirror_uses_total_path_length() {
     scene.nodes[0].local.translation = Vec3::new(0.0, 0.0, 2.0);
     scene.nodes[0].local.rotation = glam::Quat::from_rotation_y(std::f32::consts::PI);
     scene.materials.push(mirror());
-    scene.meshes.push(MeshDesc { name: "mirror".into(), primitives: vec![quad(4.0, 1.0, 1)], ..Default::default() });
-    add_root(&mut scene, node("mirror", at(Vec3::new(0.0, 0.0, -3.0)), Some(1)));
+    scene.meshes.push(MeshDesc {
+        name: "mirror".into(),
+        primitives: vec![quad(4.0, 1.0, 1)],
+        ..Default::default()
+    });
+    add_root(
+        &mut scene,
+        node("mirror", at(Vec3::new(0.0, 0.0, -3.0)), Some(1)),
+    );
     let mut renderer = Renderer::new(scene, settings(64, 64, LodMethod::Paper));
     let prepared = renderer.prepare(0, 0.0).unwrap();
     let dir = prepared.camera.primary_direction(32.0, 32.0);
@@ -168,7 +175,11 @@ fn degenerate_and_grazing_geometry_give_finite_pixels() {
         material: Some(0),
         ..Default::default()
     };
-    scene.meshes.push(MeshDesc { name: "degenerate".into(), primitives: vec![degenerate], ..Default::default() });
+    scene.meshes.push(MeshDesc {
+        name: "degenerate".into(),
+        primitives: vec![degenerate],
+        ..Default::default()
+    });
     let n = scene.meshes.len() - 1;
     add_root(&mut scene, node("degenerate", Default::default(), Some(n)));
     let mut renderer = Renderer::new(scene, settings(64, 40, LodMethod::Paper));

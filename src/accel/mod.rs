@@ -87,7 +87,10 @@ impl Accel {
             &mut Duration::default(),
         );
         triangles.permute(&bvh.primitive_indices);
-        let mut accel = Accel { bvh, ..Default::default() };
+        let mut accel = Accel {
+            bvh,
+            ..Default::default()
+        };
         accel.index_tree(triangles.len());
         accel.build_cost = accel.sah_cost();
         Ok(accel)
@@ -122,7 +125,9 @@ impl Accel {
     /// of a ray through the root. Compared with its value right after the build to decide
     /// when refitting has degraded the tree enough to rebuild it.
     pub fn sah_cost(&self) -> f32 {
-        let Some(root) = self.bvh.nodes.first() else { return 0.0 };
+        let Some(root) = self.bvh.nodes.first() else {
+            return 0.0;
+        };
         let root_area = root.aabb().half_area().max(f32::MIN_POSITIVE);
         let mut cost = 0.0f64;
         for node in &self.bvh.nodes {
@@ -138,7 +143,11 @@ impl Accel {
 
     /// `sah_cost() / cost right after the last build` (1 for an empty tree).
     pub fn sah_ratio(&self) -> f32 {
-        if self.build_cost > 0.0 { self.sah_cost() / self.build_cost } else { 1.0 }
+        if self.build_cost > 0.0 {
+            self.sah_cost() / self.build_cost
+        } else {
+            1.0
+        }
     }
 
     /// Refits the boxes to the moved triangles `moved_slots` (BVH order) after their
@@ -175,7 +184,9 @@ impl Accel {
         }
         for &id in &self.refit_order {
             let first = self.bvh.nodes[id as usize].first_index as usize;
-            let aabb = self.bvh.nodes[first].aabb().union(self.bvh.nodes[first + 1].aabb());
+            let aabb = self.bvh.nodes[first]
+                .aabb()
+                .union(self.bvh.nodes[first + 1].aabb());
             self.bvh.nodes[id as usize].set_aabb(aabb);
         }
     }
@@ -191,7 +202,9 @@ impl Accel {
             while id != 0 {
                 id = self.parent[id as usize];
                 let first = self.bvh.nodes[id as usize].first_index as usize;
-                let aabb = self.bvh.nodes[first].aabb().union(self.bvh.nodes[first + 1].aabb());
+                let aabb = self.bvh.nodes[first]
+                    .aabb()
+                    .union(self.bvh.nodes[first + 1].aabb());
                 if *self.bvh.nodes[id as usize].aabb() == aabb {
                     break;
                 }
@@ -216,7 +229,11 @@ impl Accel {
         let mut best_source = u32::MAX;
         let mut test_leaf = |node: &Bvh2Node, ray: &mut Ray, _: &mut RayHit| {
             for slot in node.first_index..node.first_index + node.prim_count {
-                let Some((t, bary)) = intersect(&triangles.positions[slot as usize], ray.origin, ray.direction) else {
+                let Some((t, bary)) = intersect(
+                    &triangles.positions[slot as usize],
+                    ray.origin,
+                    ray.direction,
+                ) else {
                     continue;
                 };
                 if !(t >= 0.0 && t < t_max) {
@@ -228,7 +245,11 @@ impl Accel {
                     Some(h) => t < h.t || (t == h.t && source < best_source),
                 };
                 if better {
-                    best = Some(Hit { triangle: slot, t, bary });
+                    best = Some(Hit {
+                        triangle: slot,
+                        t,
+                        bary,
+                    });
                     best_source = source;
                     // Keep visiting boxes that start exactly at `t`, where a tie may hide.
                     ray.tmax = t.next_up();
@@ -237,7 +258,8 @@ impl Accel {
             true
         };
         fast_stack!(u32, (96, 192), self.bvh.max_depth, stack, {
-            self.bvh.ray_traverse_dynamic(&mut stack, ray, &mut RayHit::none(), &mut test_leaf)
+            self.bvh
+                .ray_traverse_dynamic(&mut stack, ray, &mut RayHit::none(), &mut test_leaf)
         });
         best
     }
@@ -258,7 +280,11 @@ impl Accel {
         let mut completed = true;
         let mut test_leaf = |node: &Bvh2Node, ray: &mut Ray, _: &mut RayHit| {
             for slot in node.first_index..node.first_index + node.prim_count {
-                let hit = intersect(&triangles.positions[slot as usize], ray.origin, ray.direction);
+                let hit = intersect(
+                    &triangles.positions[slot as usize],
+                    ray.origin,
+                    ray.direction,
+                );
                 let Some((t, _)) = hit.filter(|(t, _)| *t >= ray.tmin && *t < ray.tmax) else {
                     continue;
                 };

@@ -20,17 +20,33 @@ struct KeySpan {
 fn locate(times: &[f32], t: f32) -> KeySpan {
     let last = times.len().saturating_sub(1);
     if times.is_empty() || !(t > times[0]) {
-        return KeySpan { index: 0, fraction: 0.0, dt: 0.0 };
+        return KeySpan {
+            index: 0,
+            fraction: 0.0,
+            dt: 0.0,
+        };
     }
     if t >= times[last] {
-        return KeySpan { index: last, fraction: 0.0, dt: 0.0 };
+        return KeySpan {
+            index: last,
+            fraction: 0.0,
+            dt: 0.0,
+        };
     }
     // First key strictly after t; the interval is [next - 1, next].
     let next = times.partition_point(|&k| k <= t);
     let index = next - 1;
     let dt = times[next] - times[index];
-    let fraction = if dt > 0.0 { ((t - times[index]) / dt).clamp(0.0, 1.0) } else { 0.0 };
-    KeySpan { index, fraction, dt }
+    let fraction = if dt > 0.0 {
+        ((t - times[index]) / dt).clamp(0.0, 1.0)
+    } else {
+        0.0
+    };
+    KeySpan {
+        index,
+        fraction,
+        dt,
+    }
 }
 
 /// Samples a channel into `out` (`channel.components` numbers) at time `t`.
@@ -94,7 +110,11 @@ pub fn sample_vec3(channel: &ChannelDesc, t: f32) -> Vec3 {
 /// normalised Hermite spline for CUBICSPLINE.
 pub fn sample_rotation(channel: &ChannelDesc, t: f32) -> Quat {
     let quat_at = |k: usize| {
-        let stride = if channel.interpolation == Interpolation::CubicSpline { 3 } else { 1 };
+        let stride = if channel.interpolation == Interpolation::CubicSpline {
+            3
+        } else {
+            1
+        };
         let base = (k * stride + stride / 2) * 4;
         Quat::from_vec4(Vec4::from_slice(&channel.values[base..base + 4]))
     };
@@ -120,7 +140,12 @@ mod tests {
     use super::*;
     use crate::scene::ChannelTarget;
 
-    fn channel(interpolation: Interpolation, times: &[f32], values: &[f32], n: usize) -> ChannelDesc {
+    fn channel(
+        interpolation: Interpolation,
+        times: &[f32],
+        values: &[f32],
+        n: usize,
+    ) -> ChannelDesc {
         ChannelDesc {
             node: 0,
             target: ChannelTarget::Translation,
@@ -133,7 +158,12 @@ mod tests {
 
     #[test]
     fn linear_equals_keys_at_key_times_and_clamps_outside() {
-        let c = channel(Interpolation::Linear, &[1.0, 2.0, 4.0], &[0.0, 10.0, 30.0], 1);
+        let c = channel(
+            Interpolation::Linear,
+            &[1.0, 2.0, 4.0],
+            &[0.0, 10.0, 30.0],
+            1,
+        );
         let at = |t| {
             let mut v = [0.0];
             sample_channel(&c, t, &mut v);
@@ -160,7 +190,12 @@ mod tests {
 
     #[test]
     fn duplicate_key_times_jump_without_nan() {
-        let c = channel(Interpolation::Linear, &[0.0, 1.0, 1.0, 2.0], &[0.0, 1.0, 5.0, 6.0], 1);
+        let c = channel(
+            Interpolation::Linear,
+            &[0.0, 1.0, 1.0, 2.0],
+            &[0.0, 1.0, 5.0, 6.0],
+            1,
+        );
         let mut v = [0.0];
         sample_channel(&c, 1.0, &mut v);
         assert_eq!(v[0], 5.0);
@@ -173,7 +208,12 @@ mod tests {
     #[test]
     fn cubic_spline_hits_values_and_follows_tangents() {
         // Keys at 0 and 2 with values 0 and 1, zero tangents: smoothstep in between.
-        let c = channel(Interpolation::CubicSpline, &[0.0, 2.0], &[9.0, 0.0, 0.0, 0.0, 1.0, 9.0], 1);
+        let c = channel(
+            Interpolation::CubicSpline,
+            &[0.0, 2.0],
+            &[9.0, 0.0, 0.0, 0.0, 1.0, 9.0],
+            1,
+        );
         let mut v = [0.0];
         sample_channel(&c, 0.0, &mut v);
         assert_eq!(v[0], 0.0);
@@ -182,7 +222,12 @@ mod tests {
         sample_channel(&c, 1.0, &mut v);
         assert!((v[0] - 0.5).abs() < 1e-6);
         // Out-tangent 1 per second at key 0, value 0 at both ends: positive bump.
-        let c = channel(Interpolation::CubicSpline, &[0.0, 1.0], &[0.0, 0.0, 1.0, 0.0, 0.0, 0.0], 1);
+        let c = channel(
+            Interpolation::CubicSpline,
+            &[0.0, 1.0],
+            &[0.0, 0.0, 1.0, 0.0, 0.0, 0.0],
+            1,
+        );
         sample_channel(&c, 0.5, &mut v);
         assert!((v[0] - 0.125).abs() < 1e-6, "{}", v[0]);
     }

@@ -13,10 +13,15 @@ use crate::scene::{ChannelTarget, SceneDesc};
 /// Per node: `Some(s)` when its world transform is a similarity with uniform scale `s`
 /// (every node on its chain scales uniformly), `None` otherwise. Nodes not reachable from the
 /// roots get `None`.
-pub fn node_uniform_scales(scene: &SceneDesc, selection: AnimationSelection, time_s: f32) -> Vec<Option<f64>> {
+pub fn node_uniform_scales(
+    scene: &SceneDesc,
+    selection: AnimationSelection,
+    time_s: f32,
+) -> Vec<Option<f64>> {
     let local = local_uniform_scales(scene, selection, time_s);
     let mut world = vec![None; scene.nodes.len()];
-    let mut stack: Vec<(usize, Option<f64>)> = scene.roots.iter().map(|&r| (r, Some(1.0))).collect();
+    let mut stack: Vec<(usize, Option<f64>)> =
+        scene.roots.iter().map(|&r| (r, Some(1.0))).collect();
     while let Some((node, parent)) = stack.pop() {
         let s = parent.zip(local[node]).map(|(a, b)| a * b);
         world[node] = s;
@@ -28,10 +33,18 @@ pub fn node_uniform_scales(scene: &SceneDesc, selection: AnimationSelection, tim
 }
 
 /// Each node's own uniform scale factor at `time_s`, `None` when it scales non-uniformly.
-fn local_uniform_scales(scene: &SceneDesc, selection: AnimationSelection, time_s: f32) -> Vec<Option<f64>> {
+fn local_uniform_scales(
+    scene: &SceneDesc,
+    selection: AnimationSelection,
+    time_s: f32,
+) -> Vec<Option<f64>> {
     let mut scales: Vec<Vec3> = scene.nodes.iter().map(|n| n.local.scale).collect();
     for animation in selection.clips(scene) {
-        for channel in animation.channels.iter().filter(|c| c.target == ChannelTarget::Scale) {
+        for channel in animation
+            .channels
+            .iter()
+            .filter(|c| c.target == ChannelTarget::Scale)
+        {
             if let Some(s) = scales.get_mut(channel.node) {
                 *s = sample_vec3(channel, time_s);
             }
@@ -77,7 +90,15 @@ mod tests {
     use glam::{Mat4, Quat};
 
     fn node(scale: Vec3, children: Vec<usize>) -> NodeDesc {
-        NodeDesc { local: Trs { scale, rotation: Quat::from_rotation_z(0.7), ..Default::default() }, children, ..Default::default() }
+        NodeDesc {
+            local: Trs {
+                scale,
+                rotation: Quat::from_rotation_z(0.7),
+                ..Default::default()
+            },
+            children,
+            ..Default::default()
+        }
     }
 
     #[test]
@@ -98,8 +119,22 @@ mod tests {
 
     #[test]
     fn matrix_nodes_use_their_similarity_scale() {
-        let m = Mat4::from_scale_rotation_translation(Vec3::splat(4.0), Quat::from_rotation_x(1.0), Vec3::ONE);
-        let scene = SceneDesc { nodes: vec![NodeDesc { matrix: Some(m), ..Default::default() }], roots: vec![0], ..Default::default() };
-        assert!((node_uniform_scales(&scene, AnimationSelection::All, 0.0)[0].unwrap() - 4.0).abs() < 1e-6);
+        let m = Mat4::from_scale_rotation_translation(
+            Vec3::splat(4.0),
+            Quat::from_rotation_x(1.0),
+            Vec3::ONE,
+        );
+        let scene = SceneDesc {
+            nodes: vec![NodeDesc {
+                matrix: Some(m),
+                ..Default::default()
+            }],
+            roots: vec![0],
+            ..Default::default()
+        };
+        assert!(
+            (node_uniform_scales(&scene, AnimationSelection::All, 0.0)[0].unwrap() - 4.0).abs()
+                < 1e-6
+        );
     }
 }

@@ -22,12 +22,12 @@ use serde::Serialize;
 
 use crate::accel::{Accel, AccelError, RefitKind};
 use crate::anim::{AnimationSelection, Pose, node_uniform_scales, primitive_deforms};
-use posed::{DeformScratch, instance_vertices, same_deformation, write_all_triangles};
 use crate::geometry::{FrameTriangles, Placement, SceneGeometry};
 use crate::lod::{LOG2_PB_LIMIT, LodMethod, PixelFootprint, log2_pb};
 use crate::render::light::ring_lights;
 use crate::render::{Camera, FrameScene, Light, LinearImage, TraceCounters, render_image};
 use crate::scene::SceneDesc;
+use posed::{DeformScratch, instance_vertices, same_deformation, write_all_triangles};
 
 /// How the BVH follows the animation.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -79,7 +79,9 @@ impl Default for RenderSettings {
             spp: 1,
             max_depth: 5,
             lights: None,
-            bvh: BvhPolicy::Refit { rebuild_threshold: BvhPolicy::DEFAULT_REBUILD_THRESHOLD },
+            bvh: BvhPolicy::Refit {
+                rebuild_threshold: BvhPolicy::DEFAULT_REBUILD_THRESHOLD,
+            },
             animation: AnimationSelection::All,
         }
     }
@@ -133,7 +135,11 @@ pub struct FrameRecord {
 #[derive(Debug, thiserror::Error)]
 pub enum FrameError {
     #[error("frame {frame} (t = {time_s} s): {source}")]
-    Accel { frame: u32, time_s: f32, source: AccelError },
+    Accel {
+        frame: u32,
+        time_s: f32,
+        source: AccelError,
+    },
 }
 
 /// What the per-frame update did and cost.
@@ -203,7 +209,14 @@ impl Renderer {
         let deforms: Vec<bool> = geometry
             .instances
             .iter()
-            .map(|i| primitive_deforms(&scene, i.node as usize, i.mesh as usize, i.primitive as usize))
+            .map(|i| {
+                primitive_deforms(
+                    &scene,
+                    i.node as usize,
+                    i.mesh as usize,
+                    i.primitive as usize,
+                )
+            })
             .collect();
         let mut pose = Pose::default();
         pose.evaluate(&scene, settings.animation, 0.0);
@@ -214,7 +227,15 @@ impl Renderer {
         let camera_node = first_node_with(&scene, |n| n.camera.is_some());
         let yfov = match camera_node {
             Some(node) => scene.cameras[scene.nodes[node].camera.unwrap_or(0)].yfov,
-            None => Camera::framing(rest_bounds.0, rest_bounds.1, settings.width, settings.height).yfov,
+            None => {
+                Camera::framing(
+                    rest_bounds.0,
+                    rest_bounds.1,
+                    settings.width,
+                    settings.height,
+                )
+                .yfov
+            }
         };
         let footprint = PixelFootprint::new(yfov, settings.height);
         let object_log2_pb = object_space_log2_pb(&scene, &geometry, footprint);
@@ -266,13 +287,28 @@ impl Renderer {
     ///
     /// # Errors
     /// Animation produced a non-finite vertex.
-    pub fn render_frame(&mut self, frame: u32, time_s: f32) -> Result<(LinearImage, FrameRecord), FrameError> {
+    pub fn render_frame(
+        &mut self,
+        frame: u32,
+        time_s: f32,
+    ) -> Result<(LinearImage, FrameRecord), FrameError> {
         let start = Instant::now();
         let prepared = self.prepare(frame, time_s)?;
         let t = Instant::now();
-        let (image, counters) = render_image(&self.frame_scene(&prepared), &prepared.camera, self.settings.spp.max(1));
+        let (image, counters) = render_image(
+            &self.frame_scene(&prepared),
+            &prepared.camera,
+            self.settings.spp.max(1),
+        );
         let render_ms = ms_since(t);
-        let record = self.record(frame, time_s, &prepared, counters, render_ms, ms_since(start));
+        let record = self.record(
+            frame,
+            time_s,
+            &prepared,
+            counters,
+            render_ms,
+            ms_since(start),
+        );
         Ok((image, record))
     }
 
@@ -285,9 +321,14 @@ impl Renderer {
         let mut stats = UpdateStats::default();
         let start = Instant::now();
         std::mem::swap(&mut self.pose, &mut self.previous_pose);
-        self.pose.evaluate(&self.scene, self.settings.animation, time_s);
+        self.pose
+            .evaluate(&self.scene, self.settings.animation, time_s);
         let scales = node_uniform_scales(&self.scene, self.settings.animation, time_s);
-        let accel_error = |source| FrameError::Accel { frame, time_s, source };
+        let accel_error = |source| FrameError::Accel {
+            frame,
+            time_s,
+            source,
+        };
         if self.instances.is_none() {
             self.first_frame(&scales, &mut stats).map_err(accel_error)?;
         } else {
@@ -305,13 +346,28 @@ impl Renderer {
         stats.sah_ratio = self.accel.sah_ratio();
         let _ = start;
         let world = &self.pose.world_from_node;
-        Ok(PreparedFrame { camera: self.camera(world), lights: self.lights(world), update: stats })
+        Ok(PreparedFrame {
+            camera: self.camera(world),
+            lights: self.lights(world),
+            update: stats,
+        })
     }
 
     /// First frame: every triangle placed, the tree built, every `log2 P_b` computed.
-    fn first_frame(&mut self, scales: &[Option<f64>], stats: &mut UpdateStats) -> Result<(), AccelError> {
+    fn first_frame(
+        &mut self,
+        scales: &[Option<f64>],
+        stats: &mut UpdateStats,
+    ) -> Result<(), AccelError> {
         let t = Instant::now();
-        write_all_triangles(&self.scene, &self.geometry, &self.pose, &self.deforms, &mut self.scratch, &mut self.triangles);
+        write_all_triangles(
+            &self.scene,
+            &self.geometry,
+            &self.pose,
+            &self.deforms,
+            &mut self.scratch,
+            &mut self.triangles,
+        );
         let states = self.instance_states(scales);
         stats.animate_ms = ms_since(t);
 
@@ -325,7 +381,8 @@ impl Renderer {
         self.dirty.reset(self.triangles.len());
         if self.settings.lod.needs_log2_pb() {
             for slot in 0..self.triangles.len() as u32 {
-                let instance = self.geometry.triangle_instance[self.triangles.source[slot as usize] as usize];
+                let instance =
+                    self.geometry.triangle_instance[self.triangles.source[slot as usize] as usize];
                 let motion = match states[instance as usize].log2_scale {
                     Some(_) => Motion::Scaled,
                     None => Motion::Deformed,
@@ -349,7 +406,11 @@ impl Renderer {
             .zip(&self.deforms)
             .map(|(inst, &deforms)| InstanceState {
                 world_from_object: self.pose.world_from_node[inst.node as usize],
-                log2_scale: if deforms { None } else { scales[inst.node as usize].map(f64::log2) },
+                log2_scale: if deforms {
+                    None
+                } else {
+                    scales[inst.node as usize].map(f64::log2)
+                },
             })
             .collect()
     }
@@ -371,7 +432,13 @@ impl Renderer {
         let mut classify_ms = ms_since(t);
         for (i, (now, before)) in current.iter().zip(&previous).enumerate() {
             if self.deforms[i] {
-                if !same_deformation(&self.scene, &self.geometry, i, &self.pose, &self.previous_pose) {
+                if !same_deformation(
+                    &self.scene,
+                    &self.geometry,
+                    i,
+                    &self.pose,
+                    &self.previous_pose,
+                ) {
                     classify_ms += self.deform_instance(i);
                 }
                 continue;
@@ -398,13 +465,23 @@ impl Renderer {
     /// comparing (the classification share of the work).
     fn deform_instance(&mut self, i: usize) -> f64 {
         let mut compare_ms = 0.0;
-        let (placement, positions, normals) = instance_vertices(&self.scene, &self.geometry, &self.pose, i, true, &mut self.scratch);
+        let (placement, positions, normals) = instance_vertices(
+            &self.scene,
+            &self.geometry,
+            &self.pose,
+            i,
+            true,
+            &mut self.scratch,
+        );
         for source in self.geometry.instance_triangles[i].clone() {
             let slot = self.slot_of_source[source as usize];
             let s = slot as usize;
-            let (p, n) = self.geometry.world_triangle(source, &placement, positions, normals);
+            let (p, n) = self
+                .geometry
+                .world_triangle(source, &placement, positions, normals);
             let c = Instant::now();
-            let moved = p.map(|v| v.to_array().map(f32::to_bits)) != self.triangles.positions[s].map(|v| v.to_array().map(f32::to_bits));
+            let moved = p.map(|v| v.to_array().map(f32::to_bits))
+                != self.triangles.positions[s].map(|v| v.to_array().map(f32::to_bits));
             compare_ms += ms_since(c);
             if moved {
                 self.triangles.positions[s] = p;
@@ -422,7 +499,10 @@ impl Renderer {
         for &slot in &self.dirty.slots {
             let tri = self.triangles.positions[slot as usize];
             if let Some(v) = tri.iter().find(|v| !v.is_finite()) {
-                return Err(AccelError::NonFiniteVertex { triangle: self.triangles.source[slot as usize] as usize, vertex: v.to_array() });
+                return Err(AccelError::NonFiniteVertex {
+                    triangle: self.triangles.source[slot as usize] as usize,
+                    vertex: v.to_array(),
+                });
             }
         }
         Ok(())
@@ -434,7 +514,12 @@ impl Renderer {
         let primitive = self.geometry.primitive(&self.scene, i);
         for source in self.geometry.instance_triangles[i].clone() {
             let slot = self.slot_of_source[source as usize];
-            let (p, n) = self.geometry.world_triangle(source, &placement, &primitive.positions, primitive.normals.as_deref());
+            let (p, n) = self.geometry.world_triangle(
+                source,
+                &placement,
+                &primitive.positions,
+                primitive.normals.as_deref(),
+            );
             let s = slot as usize;
             self.triangles.positions[s] = p;
             self.triangles.normals[s] = n;
@@ -471,7 +556,8 @@ impl Renderer {
         self.index_slots();
         self.dirty.reset(self.triangles.len());
         for (source, motion) in moved {
-            self.dirty.mark(self.slot_of_source[source as usize], motion);
+            self.dirty
+                .mark(self.slot_of_source[source as usize], motion);
         }
         stats.build_ms = ms_since(t);
         stats.rebuild = true;
@@ -510,7 +596,12 @@ impl Renderer {
             (Motion::Scaled | Motion::Rigid, Some(log2_scale)) => shift_log2_pb(object, log2_scale),
             _ => {
                 let size = self.texture_size(source).unwrap_or((1, 1));
-                log2_pb(self.triangles.positions[s], self.triangles.uvs[s], size, self.footprint)
+                log2_pb(
+                    self.triangles.positions[s],
+                    self.triangles.uvs[s],
+                    size,
+                    self.footprint,
+                )
             }
         };
         true
@@ -660,18 +751,30 @@ fn shift_log2_pb(object: f32, log2_scale: f64) -> f32 {
 
 /// `log2 P_b` of every source triangle from its rest vertices in object space; NaN where the
 /// material is untextured.
-fn object_space_log2_pb(scene: &SceneDesc, geometry: &SceneGeometry, footprint: PixelFootprint) -> Vec<f32> {
+fn object_space_log2_pb(
+    scene: &SceneDesc,
+    geometry: &SceneGeometry,
+    footprint: PixelFootprint,
+) -> Vec<f32> {
     let identity = Placement::new(Mat4::IDENTITY);
     let mut out = vec![f32::NAN; geometry.triangle_count()];
     for (i, instance) in geometry.instances.iter().enumerate() {
         let material = &geometry.materials[instance.material as usize];
-        let Some(texture) = material.base_color_texture.and_then(|t| scene.textures.get(t)) else {
+        let Some(texture) = material
+            .base_color_texture
+            .and_then(|t| scene.textures.get(t))
+        else {
             continue;
         };
         let primitive = geometry.primitive(scene, i);
         for source in geometry.instance_triangles[i].clone() {
             let (p, _) = geometry.world_triangle(source, &identity, &primitive.positions, None);
-            out[source as usize] = log2_pb(p, geometry.oriented_uvs(source, &identity), texture.pyramid.base_size(), footprint);
+            out[source as usize] = log2_pb(
+                p,
+                geometry.oriented_uvs(source, &identity),
+                texture.pyramid.base_size(),
+                footprint,
+            );
         }
     }
     out

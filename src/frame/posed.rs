@@ -29,7 +29,11 @@ pub fn instance_vertices<'a>(
     let world_from_node = pose.world_from_node[instance.node as usize];
     if !deforms {
         let primitive = geometry.primitive(scene, i);
-        return (Placement::new(world_from_node), &primitive.positions, primitive.normals.as_deref());
+        return (
+            Placement::new(world_from_node),
+            &primitive.positions,
+            primitive.normals.as_deref(),
+        );
     }
     let space = deform_primitive(
         scene,
@@ -64,7 +68,8 @@ pub fn write_all_triangles(
     out.log2_pb.clear();
     out.source.clear();
     for (i, instance) in geometry.instances.iter().enumerate() {
-        let (placement, positions, normals) = instance_vertices(scene, geometry, pose, i, deforms[i], scratch);
+        let (placement, positions, normals) =
+            instance_vertices(scene, geometry, pose, i, deforms[i], scratch);
         for source in geometry.instance_triangles[i].clone() {
             let (p, n) = geometry.world_triangle(source, &placement, positions, normals);
             out.positions.push(p);
@@ -79,11 +84,19 @@ pub fn write_all_triangles(
 
 /// Whether instance `i`'s deformation inputs are the same in both poses (node transform,
 /// morph weights, and its skin's joint matrices), so its vertices cannot have changed.
-pub fn same_deformation(scene: &SceneDesc, geometry: &SceneGeometry, i: usize, now: &Pose, before: &Pose) -> bool {
+pub fn same_deformation(
+    scene: &SceneDesc,
+    geometry: &SceneGeometry,
+    i: usize,
+    now: &Pose,
+    before: &Pose,
+) -> bool {
     let node = geometry.instances[i].node as usize;
     let skin_same = match scene.nodes[node].skin {
         Some(skin) => now.joint_matrices.get(skin) == before.joint_matrices.get(skin),
         None => true,
     };
-    skin_same && now.world_from_node[node] == before.world_from_node[node] && now.morph_weights[node] == before.morph_weights[node]
+    skin_same
+        && now.world_from_node[node] == before.world_from_node[node]
+        && now.morph_weights[node] == before.morph_weights[node]
 }

@@ -126,7 +126,12 @@ impl SceneGeometry {
 
     /// Fills `out` (source order) with every world-space triangle for the given node world
     /// transforms, from the meshes' rest vertices. Reuses `out`'s allocations.
-    pub fn world_triangles(&self, scene: &SceneDesc, world_from_node: &[Mat4], out: &mut FrameTriangles) {
+    pub fn world_triangles(
+        &self,
+        scene: &SceneDesc,
+        world_from_node: &[Mat4],
+        out: &mut FrameTriangles,
+    ) {
         let n = self.triangle_count();
         out.positions.clear();
         out.normals.clear();
@@ -138,7 +143,12 @@ impl SceneGeometry {
             let placement = Placement::new(world_from_node[instance.node as usize]);
             let primitive = self.primitive(scene, i);
             for source in self.instance_triangles[i].clone() {
-                let (p, normals) = self.world_triangle(source, &placement, &primitive.positions, primitive.normals.as_deref());
+                let (p, normals) = self.world_triangle(
+                    source,
+                    &placement,
+                    &primitive.positions,
+                    primitive.normals.as_deref(),
+                );
                 out.positions.push(p);
                 out.normals.push(normals);
                 out.uvs.push(self.oriented_uvs(source, &placement));
@@ -171,7 +181,13 @@ impl SceneGeometry {
         if placement.flips_winding {
             v.swap(1, 2);
         }
-        let p = v.map(|i| Vec3A::from(placement.world_from_object.transform_point3(positions[i as usize])));
+        let p = v.map(|i| {
+            Vec3A::from(
+                placement
+                    .world_from_object
+                    .transform_point3(positions[i as usize]),
+            )
+        });
         let geometric = Vec3::from((p[1] - p[0]).cross(p[2] - p[0]).normalize_or_zero());
         let normals = match normals {
             Some(normals) => v.map(|i| {

@@ -321,15 +321,17 @@ impl FrameScene<'_> {
         // result does not depend on the tree's traversal order (float products do).
         let mut glass = [(0.0f32, 0u32, 0u32); MAX_SHADOW_GLASS];
         let mut count = 0;
-        let unblocked = self.accel.visit_hits(self.triangles, origin, to_light, t_max, |slot, t| {
-            let material = &self.materials[self.triangles.material[slot as usize] as usize];
-            if material.transmission <= 0.0 || count == MAX_SHADOW_GLASS {
-                return false;
-            }
-            glass[count] = (t, self.triangles.source[slot as usize], slot);
-            count += 1;
-            true
-        });
+        let unblocked =
+            self.accel
+                .visit_hits(self.triangles, origin, to_light, t_max, |slot, t| {
+                    let material = &self.materials[self.triangles.material[slot as usize] as usize];
+                    if material.transmission <= 0.0 || count == MAX_SHADOW_GLASS {
+                        return false;
+                    }
+                    glass[count] = (t, self.triangles.source[slot as usize], slot);
+                    count += 1;
+                    true
+                });
         if !unblocked {
             return Vec3A::ZERO;
         }
@@ -340,7 +342,11 @@ impl FrameScene<'_> {
             let material = &self.materials[self.triangles.material[slot as usize] as usize];
             transmittance *= Vec3A::from(material.base_color) * material.transmission;
         }
-        if transmittance.max_element() > MIN_WEIGHT { transmittance } else { Vec3A::ZERO }
+        if transmittance.max_element() > MIN_WEIGHT {
+            transmittance
+        } else {
+            Vec3A::ZERO
+        }
     }
 
     /// Glass: Fresnel-weighted reflection plus refraction tinted by the albedo; total

@@ -275,8 +275,19 @@ pub fn showcase_scene() -> SceneDesc {
 }
 
 fn channel(node: usize, target: ChannelTarget, times: &[f32], values: &[f32]) -> ChannelDesc {
-    let components = if target == ChannelTarget::Rotation { 4 } else { 3 };
-    ChannelDesc { node, target, interpolation: Interpolation::Linear, times: times.to_vec(), values: values.to_vec(), components }
+    let components = if target == ChannelTarget::Rotation {
+        4
+    } else {
+        3
+    };
+    ChannelDesc {
+        node,
+        target,
+        interpolation: Interpolation::Linear,
+        times: times.to_vec(),
+        values: values.to_vec(),
+        components,
+    }
 }
 
 /// The showcase scene plus three more textured cards: one spinning (rigid), one growing
@@ -284,10 +295,23 @@ fn channel(node: usize, target: ChannelTarget, times: &[f32], values: &[f32]) ->
 /// the node indices of (spinning, growing, stretched).
 pub fn dynamic_scene() -> (SceneDesc, [usize; 3]) {
     let mut scene = showcase_scene();
-    let card_mesh = scene.meshes.iter().position(|m| m.name == "card").expect("card mesh");
-    let spin = add_root(&mut scene, node("spin", at(Vec3::new(-2.0, 1.0, -6.0)), Some(card_mesh)));
-    let grow = add_root(&mut scene, node("grow", at(Vec3::new(1.5, 0.5, -6.0)), Some(card_mesh)));
-    let stretch = add_root(&mut scene, node("stretch", at(Vec3::new(0.0, 2.2, -7.0)), Some(card_mesh)));
+    let card_mesh = scene
+        .meshes
+        .iter()
+        .position(|m| m.name == "card")
+        .expect("card mesh");
+    let spin = add_root(
+        &mut scene,
+        node("spin", at(Vec3::new(-2.0, 1.0, -6.0)), Some(card_mesh)),
+    );
+    let grow = add_root(
+        &mut scene,
+        node("grow", at(Vec3::new(1.5, 0.5, -6.0)), Some(card_mesh)),
+    );
+    let stretch = add_root(
+        &mut scene,
+        node("stretch", at(Vec3::new(0.0, 2.2, -7.0)), Some(card_mesh)),
+    );
     let q0 = Quat::IDENTITY.to_array();
     let q1 = Quat::from_rotation_y(2.5).to_array();
     let spin_values: Vec<f32> = q0.iter().chain(&q1).copied().collect();
@@ -295,9 +319,137 @@ pub fn dynamic_scene() -> (SceneDesc, [usize; 3]) {
         name: "dynamic".into(),
         channels: vec![
             channel(spin, ChannelTarget::Rotation, &[0.0, 1.0], &spin_values),
-            channel(grow, ChannelTarget::Scale, &[0.0, 1.0], &[1.0, 1.0, 1.0, 2.0, 2.0, 2.0]),
-            channel(stretch, ChannelTarget::Scale, &[0.0, 1.0], &[1.0, 1.0, 1.0, 3.0, 1.0, 1.0]),
+            channel(
+                grow,
+                ChannelTarget::Scale,
+                &[0.0, 1.0],
+                &[1.0, 1.0, 1.0, 2.0, 2.0, 2.0],
+            ),
+            channel(
+                stretch,
+                ChannelTarget::Scale,
+                &[0.0, 1.0],
+                &[1.0, 1.0, 1.0, 3.0, 1.0, 1.0],
+            ),
         ],
     });
     (scene, [spin, grow, stretch])
+}
+
+/// Appends every node, mesh, skin and animation channel of `other` to `scene` (indices
+/// shifted), with `other`'s primitives drawn with `material` and given planar UVs (x, y).
+pub fn merge_textured(scene: &mut SceneDesc, mut other: SceneDesc, material: usize, offset: Vec3) {
+    let (nodes, meshes, skins) = (scene.nodes.len(), scene.meshes.len(), scene.skins.len());
+    for mesh in &mut other.meshes {
+        for p in &mut mesh.primitives {
+            p.material = Some(material);
+            p.uvs = Some(
+                p.positions
+                    .iter()
+                    .map(|v| Vec2::new(v.x * 0.5, v.y * 0.5))
+                    .collect(),
+            );
+        }
+    }
+    for node in &mut other.nodes {
+        node.children.iter_mut().for_each(|c| *c += nodes);
+        node.mesh = node.mesh.map(|m| m + meshes);
+        node.skin = node.skin.map(|s| s + skins);
+    }
+    for skin in &mut other.skins {
+        skin.joints.iter_mut().for_each(|j| *j += nodes);
+        skin.skeleton = skin.skeleton.map(|s| s + nodes);
+    }
+    for root in &other.roots {
+        other.nodes[*root].local.translation += offset;
+    }
+    scene.roots.extend(other.roots.iter().map(|r| r + nodes));
+    scene.nodes.extend(other.nodes);
+    scene.meshes.extend(other.meshes);
+    scene.skins.extend(other.skins);
+    let channels: Vec<ChannelDesc> = other
+        .animations
+        .into_iter()
+        .flat_map(|a| a.channels)
+        .map(|mut c| {
+            c.node += nodes;
+            c
+        })
+        .collect();
+    scene.animations.push(AnimationDesc {
+        name: "merged".into(),
+        channels,
+    });
+}
+
+/// A textured `n x n`-quad grid in the XY plane (unit size) with one morph target that lifts
+/// the vertices listed in `lifted` along +Z; its weight goes 0 -> 1 over one second.
+pub fn morph_grid_scene(n: u32, lifted: &[u32]) -> SceneDesc {
+    let mut positions = Vec::new();
+    for y in 0..=n {
+        for x in 0..=n {
+            positions.push(Vec3::new(
+                x as f32 / n as f32 - 0.5,
+                y as f32 / n as f32 - 0.5,
+                0.0,
+            ));
+        }
+    }
+    let mut indices = Vec::new();
+    for y in 0..n {
+        for x in 0..n {
+            let i = y * (n + 1) + x;
+            indices.extend([i, i + 1, i + n + 2, i, i + n + 2, i + n + 1]);
+        }
+    }
+    let mut delta = vec![Vec3::ZERO; positions.len()];
+    for &v in lifted {
+        delta[v as usize] = Vec3::new(0.0, 0.0, 0.3);
+    }
+    let primitive = PrimitiveDesc {
+        normals: Some(vec![Vec3::Z; positions.len()]),
+        uvs: Some(
+            positions
+                .iter()
+                .map(|p| Vec2::new(p.x + 0.5, 0.5 - p.y))
+                .collect(),
+        ),
+        positions,
+        indices,
+        material: Some(0),
+        morph_targets: vec![mipray::scene::MorphTargetDesc {
+            positions: Some(delta),
+            normals: None,
+        }],
+        ..Default::default()
+    };
+    let mut scene = SceneDesc {
+        background: Vec3::splat(0.2),
+        ..Default::default()
+    };
+    scene.textures.push(checker(64, 8));
+    scene.materials.push(textured(0));
+    scene.meshes.push(MeshDesc {
+        name: "grid".into(),
+        primitives: vec![primitive],
+        weights: vec![0.0],
+    });
+    let grid = add_root(
+        &mut scene,
+        node("grid", at(Vec3::new(0.0, 0.0, -2.0)), Some(0)),
+    );
+    let cam = camera_node(Vec3::ZERO, &mut scene, 0.8);
+    scene.roots.push(cam);
+    scene.animations.push(AnimationDesc {
+        name: "lift".into(),
+        channels: vec![ChannelDesc {
+            node: grid,
+            target: ChannelTarget::Weights,
+            interpolation: Interpolation::Linear,
+            times: vec![0.0, 1.0],
+            values: vec![0.0, 1.0],
+            components: 1,
+        }],
+    });
+    scene
 }
