@@ -564,19 +564,81 @@ fn progress_bar(len: u64) -> ProgressBar {
     bar
 }
 
+/// Drawn triangles by how they move (all clips playing).
+#[derive(Debug, Default, Clone, Copy, PartialEq, Eq)]
+pub struct TriangleMotion {
+    /// Under no animated node and not deforming.
+    pub fixed: usize,
+    /// Placed by a node that is animated or has an animated ancestor (rigid or scaled).
+    pub animated: usize,
+    /// Skinned or with morph targets.
+    pub deforming: usize,
+    /// Nodes targeted by a translation/rotation/scale channel.
+    pub animated_nodes: usize,
+}
+
+impl TriangleMotion {
+    pub fn of(scene: &SceneDesc) -> TriangleMotion {
+        use crate::scene::ChannelTarget;
+        let mut targeted = vec![false; scene.nodes.len()];
+        for c in scene.animations.iter().flat_map(|a| &a.channels) {
+            if c.target != ChannelTarget::Weights && c.node < targeted.len() {
+                targeted[c.node] = true;
+            }
+        }
+        let mut out = TriangleMotion {
+            animated_nodes: targeted.iter().filter(|&&t| t).count(),
+            ..Default::default()
+        };
+        let mut stack: Vec<(usize, bool)> = scene.roots.iter().map(|&r| (r, false)).collect();
+        while let Some((i, parent_animated)) = stack.pop() {
+            let node = &scene.nodes[i];
+            let animated = parent_animated || targeted[i];
+            if let Some(mesh) = node.mesh {
+                for (p, primitive) in scene.meshes[mesh].primitives.iter().enumerate() {
+                    let n = primitive.triangle_count();
+                    if crate::anim::primitive_deforms(scene, i, mesh, p) {
+                        out.deforming += n;
+                    } else if animated {
+                        out.animated += n;
+                    } else {
+                        out.fixed += n;
+                    }
+                }
+            }
+            stack.extend(node.children.iter().map(|&c| (c, animated)));
+        }
+        out
+    }
+}
+
 /// The text `mipray info` prints.
 pub fn describe(scene: &SceneDesc) -> String {
     use std::fmt::Write;
     let mut s = String::new();
     let primitives: usize = scene.meshes.iter().map(|m| m.primitives.len()).sum();
     let _ = writeln!(s, "scene: {}", scene.source.display());
-    let _ = writeln!(s, "triangles: {}", scene.instanced_triangle_count());
+    let motion = TriangleMotion::of(scene);
+    let _ = writeln!(
+        s,
+        "triangles: {} ({} static, {} moved by animated nodes, {} skinned or morphing)",
+        scene.instanced_triangle_count(),
+        motion.fixed,
+        motion.animated,
+        motion.deforming
+    );
     let _ = writeln!(
         s,
         "meshes: {} ({primitives} primitives)",
         scene.meshes.len()
     );
-    let _ = writeln!(s, "nodes: {}", scene.nodes.len());
+    let tracks: usize = scene.animations.iter().map(|a| a.channels.len()).sum();
+    let _ = writeln!(
+        s,
+        "nodes: {} ({} animated, {tracks} key tracks)",
+        scene.nodes.len(),
+        motion.animated_nodes
+    );
     let _ = writeln!(s, "materials: {}", scene.materials.len());
     let _ = writeln!(s, "textures: {}", scene.textures.len());
     for t in &scene.textures {

@@ -118,7 +118,12 @@ fn info_reports_counts() {
     let out = mipray(&["info", "tri.gltf"], dir.path());
     assert!(out.status.success(), "{}", stderr(&out));
     let text = String::from_utf8_lossy(&out.stdout);
-    assert!(text.contains("triangles: 1\n"), "{text}");
+    assert!(
+        text.contains(
+            "triangles: 1 (1 static, 0 moved by animated nodes, 0 skinned or morphing)\n"
+        ),
+        "{text}"
+    );
     assert!(text.contains("4x4, 3 MIP levels"), "{text}");
 }
 
