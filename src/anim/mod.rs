@@ -24,9 +24,9 @@ pub use sample::{sample_channel, sample_rotation, sample_vec3};
 pub use scale::node_uniform_scales;
 pub use selection::{AnimationSelection, select_animation};
 
-use glam::{Mat4, Quat, Vec3};
+use glam::Mat4;
 
-use crate::scene::{SceneDesc, Trs};
+use crate::scene::SceneDesc;
 
 /// World transforms of every node at time `time_s` with all clips playing (indexed like
 /// `SceneDesc::nodes`). Nodes not reachable from the scene roots keep the identity.
@@ -35,20 +35,4 @@ pub fn node_world_transforms(scene: &SceneDesc, time_s: f32) -> Vec<Mat4> {
     let mut pose = Pose::default();
     pose.evaluate(scene, AnimationSelection::All, time_s);
     pose.world_from_node
-}
-
-/// Decomposes a matrix into TRS (used by loaders for matrix nodes).
-pub fn decompose(m: Mat4) -> Trs {
-    let (scale, rotation, translation) = m.to_scale_rotation_translation();
-    let rotation = if rotation.is_finite() {
-        rotation.normalize()
-    } else {
-        Quat::IDENTITY
-    };
-    let scale = if scale.is_finite() { scale } else { Vec3::ONE };
-    Trs {
-        translation,
-        rotation,
-        scale,
-    }
 }

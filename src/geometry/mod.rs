@@ -124,42 +124,6 @@ impl SceneGeometry {
         self.triangle_vertices.len()
     }
 
-    /// Fills `out` (source order) with every world-space triangle for the given node world
-    /// transforms, from the meshes' rest vertices. Reuses `out`'s allocations.
-    pub fn world_triangles(
-        &self,
-        scene: &SceneDesc,
-        world_from_node: &[Mat4],
-        out: &mut FrameTriangles,
-    ) {
-        let n = self.triangle_count();
-        out.positions.clear();
-        out.normals.clear();
-        out.uvs.clear();
-        out.material.clear();
-        out.log2_pb.clear();
-        out.source.clear();
-        for (i, instance) in self.instances.iter().enumerate() {
-            let placement = Placement::new(world_from_node[instance.node as usize]);
-            let primitive = self.primitive(scene, i);
-            for source in self.instance_triangles[i].clone() {
-                let (p, normals) = self.world_triangle(
-                    source,
-                    &placement,
-                    &primitive.positions,
-                    primitive.normals.as_deref(),
-                );
-                out.positions.push(p);
-                out.normals.push(normals);
-                out.uvs.push(self.oriented_uvs(source, &placement));
-                out.material.push(instance.material);
-                out.log2_pb.push(0.0);
-                out.source.push(source);
-            }
-        }
-        debug_assert_eq!(out.len(), n);
-    }
-
     /// The mesh primitive instance `i` draws.
     pub fn primitive<'s>(&self, scene: &'s SceneDesc, i: usize) -> &'s PrimitiveDesc {
         let instance = self.instances[i];
