@@ -9,7 +9,12 @@ use anyhow::{Context, Result, bail};
 use clap::{Args, Parser, Subcommand};
 use indicatif::{ProgressBar, ProgressStyle};
 
+use std::process::ExitCode;
+
 use crate::anim::{AnimationSelection, select_animation};
+use crate::diff::{
+    DiffMetric, DiffOptions, DiffReport, compare_stats, diff_dirs, diff_frame, junit_xml,
+};
 use crate::frame::{BvhPolicy, FrameRecord, RenderSettings, Renderer};
 use crate::lod::LodMethod;
 use crate::output::{FrameFormat, OutputDir, Shard};
@@ -41,6 +46,8 @@ pub enum Command {
         #[arg(long)]
         svg: Option<PathBuf>,
     },
+    /// Compare a rendered sequence with a reference sequence, frame by frame.
+    Diff(DiffArgs),
     /// Print what a scene contains.
     Info {
         /// A .gltf/.glb path, or the name of a scene in animations/ (e.g. `default`).
@@ -102,6 +109,42 @@ pub struct RenderArgs {
     /// Play one animation clip (its name or index) instead of all clips together.
     #[arg(long)]
     pub animation: Option<String>,
+    /// Compare each frame as it finishes with the same frame in this reference folder
+    /// (results in OUT/check/).
+    #[arg(long)]
+    pub check: Option<PathBuf>,
+    /// With --check: stop at the first frame outside the threshold.
+    #[arg(long, requires = "check")]
+    pub fail_fast: bool,
+    #[command(flatten)]
+    pub check_args: CheckArgs,
+}
+
+/// How frames are judged against a reference (shared by `diff` and `render --check`).
+#[derive(Args, Debug, Clone)]
+pub struct CheckArgs {
+    /// Metric that decides pass or fail.
+    #[arg(long, value_enum, default_value_t = DiffMetric::Psnr)]
+    pub metric: DiffMetric,
+    /// Threshold for the metric [default: psnr 40 dB, flip 0.01, max-abs 0].
+    #[arg(long)]
+    pub threshold: Option<f64>,
+    /// Also write a JUnit XML report (one test case per frame).
+    #[arg(long)]
+    pub junit: Option<PathBuf>,
+}
+
+#[derive(Args, Debug, Clone)]
+pub struct DiffArgs {
+    /// The reference sequence's folder.
+    pub reference: PathBuf,
+    /// The sequence to check.
+    pub test: PathBuf,
+    #[command(flatten)]
+    pub check: CheckArgs,
+    /// Where diff.md, diff.csv and the failing frames' images go [default: TEST/diff].
+    #[arg(long)]
+    pub out: Option<PathBuf>,
 }
 
 /// `--bvh` values.
@@ -156,11 +199,15 @@ const MAX_DEPTH: u32 = 64;
 const MAX_LIGHTS: usize = 1024;
 
 /// Runs the parsed command line.
-pub fn run(cli: Cli) -> Result<()> {
+/// Runs the parsed command line. `Ok(FAILURE)` means a regression check found frames outside
+/// the threshold; errors are bad input (see `main.rs` for the exit codes).
+pub fn run(cli: Cli) -> Result<ExitCode> {
+    let ok = |()| ExitCode::SUCCESS;
     match cli.command {
         None => render(&RenderArgs::default()),
         Some(Command::Render(args)) => render(&args),
-        Some(Command::Bench(args)) => bench(&args),
+        Some(Command::Bench(args)) => bench(&args).map(ok),
+        Some(Command::Diff(args)) => diff(&args),
         Some(Command::Report { dirs, svg }) => {
             let svg = svg.unwrap_or_else(|| {
                 let first = &dirs[0];
@@ -173,13 +220,13 @@ pub fn run(cli: Cli) -> Result<()> {
             });
             let summary = crate::report::report(&dirs, &svg)?;
             print!("{summary}");
-            Ok(())
+            Ok(ExitCode::SUCCESS)
         }
         Some(Command::Info { scene }) => {
             let path = resolve_scene(&scene)?;
             let desc = load_scene(&path)?;
             print!("{}", describe(&desc));
-            Ok(())
+            Ok(ExitCode::SUCCESS)
         }
     }
 }
@@ -327,8 +374,44 @@ fn validated_settings(args: &RenderArgs) -> Result<RenderSettings> {
     })
 }
 
+/// `mipray diff`.
+pub fn diff(args: &DiffArgs) -> Result<ExitCode> {
+    let options = DiffOptions {
+        metric: args.check.metric,
+        threshold: args
+            .check
+            .threshold
+            .unwrap_or(args.check.metric.default_threshold()),
+        out: args.out.clone().unwrap_or_else(|| args.test.join("diff")),
+    };
+    let report = diff_dirs(&args.reference, &args.test, &options)?;
+    print!("{}", report.table());
+    if let Some(note) = &report.stats_note {
+        println!("stats not compared: {note}");
+    }
+    finish_report(&report, &options.out, args.check.junit.as_deref())
+}
+
+/// Writes diff.md / diff.csv (and JUnit), prints the verdict, and gives the exit code.
+fn finish_report(report: &DiffReport, out: &Path, junit: Option<&Path>) -> Result<ExitCode> {
+    report
+        .write(out)
+        .with_context(|| format!("{}: cannot write the diff report", out.display()))?;
+    if let Some(path) = junit {
+        crate::output::write_text_atomically(path, &junit_xml(report))
+            .with_context(|| format!("{}: cannot write JUnit XML", path.display()))?;
+    }
+    println!("{}", report.verdict());
+    println!("report: {}", out.join("diff.md").display());
+    Ok(if report.failed() == 0 {
+        ExitCode::SUCCESS
+    } else {
+        ExitCode::FAILURE
+    })
+}
+
 /// `mipray render`.
-pub fn render(args: &RenderArgs) -> Result<()> {
+pub fn render(args: &RenderArgs) -> Result<ExitCode> {
     let settings = validated_settings(args)?;
     let path = resolve_scene(&args.scene)?;
     let scene = load_scene(&path)?;
@@ -363,8 +446,30 @@ pub fn render(args: &RenderArgs) -> Result<()> {
         shard: resolve_shard(args.shard.as_deref(), |name| std::env::var(name).ok())?,
         resume: args.resume,
     };
+    let check = args.check.as_ref().map(|reference| Check {
+        reference: reference.clone(),
+        options: DiffOptions {
+            metric: args.check_args.metric,
+            threshold: args
+                .check_args
+                .threshold
+                .unwrap_or(args.check_args.metric.default_threshold()),
+            out: output.dir.join("check"),
+        },
+        fail_fast: args.fail_fast,
+        junit: args.check_args.junit.clone(),
+    });
     let mut renderer = Renderer::new(scene, settings);
-    pool.install(|| render_sequence(&mut renderer, frames, args.fps, &output))
+    pool.install(|| render_sequence(&mut renderer, frames, args.fps, &output, check.as_ref()))
+}
+
+/// `render --check`: judge each frame against a reference as soon as it is written.
+#[derive(Debug, Clone)]
+pub struct Check {
+    pub reference: PathBuf,
+    pub options: DiffOptions,
+    pub fail_fast: bool,
+    pub junit: Option<PathBuf>,
 }
 
 /// `mipray bench`.
@@ -445,7 +550,8 @@ pub fn render_sequence(
     frames: std::ops::Range<u32>,
     fps: f64,
     out: &SequenceOutput,
-) -> Result<()> {
+    check: Option<&Check>,
+) -> Result<ExitCode> {
     let frames = match out.shard {
         Some(shard) => shard.frames(frames),
         None => frames,
@@ -465,6 +571,7 @@ pub fn render_sequence(
         );
     }
     let todo: Vec<u32> = frames.clone().filter(|f| !done.contains(f)).collect();
+    let mut checked: Vec<crate::diff::FrameDiff> = Vec::new();
     let progress = progress_bar(todo.len() as u64);
     let start = Instant::now();
     for frame in todo {
@@ -484,6 +591,24 @@ pub fn render_sequence(
         progress.suspend(|| println!("{line}"));
         progress.inc(1);
         records.push(record);
+        if let Some(check) = check {
+            let name = crate::output::frame_file_name(frame, out.format);
+            let judged = diff_frame(frame, &check.reference.join(&name), &path, &check.options)?;
+            let verdict = format!(
+                "check frame {frame:04}: {}  psnr {} dB  flip {:.5}  max abs {}",
+                if judged.passed { "pass" } else { "FAIL" },
+                crate::metrics::format_psnr(judged.metrics.psnr_db),
+                judged.metrics.mean_flip,
+                judged.metrics.max_abs
+            );
+            progress.suspend(|| println!("{verdict}"));
+            let stop = !judged.passed && check.fail_fast;
+            checked.push(judged);
+            if stop {
+                progress.suspend(|| println!("--fail-fast: stopping at frame {frame}"));
+                break;
+            }
+        }
     }
     progress.finish_and_clear();
     records.sort_by_key(|r| r.frame);
@@ -500,7 +625,21 @@ pub fn render_sequence(
             .map(|n| n.to_string_lossy().into_owned())
             .unwrap_or_default()
     );
-    Ok(())
+    match check {
+        None => Ok(ExitCode::SUCCESS),
+        Some(check) => {
+            let mut report = DiffReport {
+                reference_dir: check.reference.clone(),
+                test_dir: out.dir.clone(),
+                metric: check.options.metric,
+                threshold: check.options.threshold,
+                frames: checked,
+                stats_note: None,
+            };
+            report.stats_note = compare_stats(&check.reference, &out.dir, &mut report.frames).err();
+            finish_report(&report, &check.options.out, check.junit.as_deref())
+        }
+    }
 }
 
 /// The shard to render: `--shard I/N`, else a Slurm job array (`SLURM_ARRAY_TASK_ID`,

@@ -6,11 +6,21 @@ use std::process::ExitCode;
 use clap::Parser;
 
 fn main() -> ExitCode {
+    // Exit codes: 0 success; 1 failure (a regression check found frames outside the
+    // threshold, or a render/load error); 2 bad input to `diff` / `render --check` (a missing
+    // frame, different sizes, unreadable files).
     match mipray::cli::run(mipray::cli::Cli::parse()) {
-        Ok(()) => ExitCode::SUCCESS,
+        Ok(code) => code,
         Err(error) => {
             eprintln!("error: {error:#}");
-            ExitCode::FAILURE
+            if error
+                .downcast_ref::<mipray::diff::DiffInputError>()
+                .is_some()
+            {
+                ExitCode::from(2)
+            } else {
+                ExitCode::FAILURE
+            }
         }
     }
 }

@@ -262,6 +262,27 @@ pub fn write_image_atomically(
     fs::rename(&tmp, path).map_err(io_error(path))
 }
 
+/// Writes an 8-bit RGB PNG through a temporary file in the same folder.
+pub fn write_rgb8_atomically(path: &Path, image: &image::RgbImage) -> Result<(), OutputError> {
+    let tmp = temporary_sibling(path);
+    if let Err(source) = image.save_with_format(&tmp, ImageFormat::Png) {
+        let _ = fs::remove_file(&tmp);
+        return Err(OutputError::Encode {
+            path: path.to_path_buf(),
+            source,
+        });
+    }
+    fs::rename(&tmp, path).map_err(io_error(path))
+}
+
+/// Writes a text file through a temporary file in the same folder.
+pub fn write_text_atomically(path: &Path, text: &str) -> std::io::Result<()> {
+    write_bytes_atomically(path, text.as_bytes()).map_err(|e| match e {
+        OutputError::Io { source, .. } => source,
+        other => std::io::Error::other(other.to_string()),
+    })
+}
+
 fn write_bytes_atomically(path: &Path, bytes: &[u8]) -> Result<(), OutputError> {
     let tmp = temporary_sibling(path);
     fs::write(&tmp, bytes).map_err(io_error(&tmp))?;

@@ -1,0 +1,95 @@
+//! JUnit XML for CI systems: one test case per frame, a failure element for each frame
+//! outside the threshold.
+
+use std::fmt::Write as _;
+
+use super::DiffReport;
+use crate::metrics::format_psnr;
+
+/// The report as JUnit XML (testsuites > testsuite > testcase per frame).
+pub fn junit_xml(report: &DiffReport) -> String {
+    let suite = format!(
+        "mipray diff {} vs {}",
+        report.reference_dir.display(),
+        report.test_dir.display()
+    );
+    let mut s = String::from("<?xml version=\"1.0\" encoding=\"UTF-8\"?>\n");
+    let (n, failed) = (report.frames.len(), report.failed());
+    let _ = writeln!(
+        s,
+        "<testsuites name=\"mipray\" tests=\"{n}\" failures=\"{failed}\">"
+    );
+    let _ = writeln!(
+        s,
+        "  <testsuite name=\"{}\" tests=\"{n}\" failures=\"{failed}\" errors=\"0\">",
+        escape(&suite)
+    );
+    for f in &report.frames {
+        let name = format!("frame_{:04}", f.frame);
+        let m = &f.metrics;
+        let summary = format!(
+            "psnr {} dB, mean FLIP {:.5}, max abs {}, {} differing pixels; {} threshold {}",
+            format_psnr(m.psnr_db),
+            m.mean_flip,
+            m.max_abs,
+            m.differing_pixels,
+            report.metric.name(),
+            report.threshold
+        );
+        if f.passed {
+            let _ = writeln!(
+                s,
+                "    <testcase classname=\"mipray.diff\" name=\"{name}\"/>"
+            );
+        } else {
+            let _ = writeln!(
+                s,
+                "    <testcase classname=\"mipray.diff\" name=\"{name}\">"
+            );
+            let detail = format!(
+                "reference {}\ntest {}\nheat map {}",
+                f.reference.display(),
+                f.test.display(),
+                f.heat_map
+                    .as_ref()
+                    .map_or(String::from("-"), |p| p.display().to_string())
+            );
+            let _ = writeln!(
+                s,
+                "      <failure type=\"regression\" message=\"{}\">{}</failure>",
+                escape(&summary),
+                escape(&detail)
+            );
+            let _ = writeln!(s, "    </testcase>");
+        }
+    }
+    s.push_str("  </testsuite>\n</testsuites>\n");
+    s
+}
+
+/// Escapes text for XML attributes and content.
+fn escape(s: &str) -> String {
+    let mut out = String::with_capacity(s.len());
+    for c in s.chars() {
+        match c {
+            '&' => out.push_str("&amp;"),
+            '<' => out.push_str("&lt;"),
+            '>' => out.push_str("&gt;"),
+            '"' => out.push_str("&quot;"),
+            '\'' => out.push_str("&apos;"),
+            c if (c as u32) < 0x20 && c != '\n' && c != '\t' && c != '\r' => {}
+            c => out.push(c),
+        }
+    }
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn escapes_markup_and_drops_control_characters() {
+        assert_eq!(escape("a<b>&\"c'\u{1}"), "a&lt;b&gt;&amp;&quot;c&apos;");
+    }
+}

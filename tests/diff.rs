@@ -1,0 +1,236 @@
+//! `mipray diff` and `render --check`: the regression-testing contract.
+
+use std::path::Path;
+use std::process::{Command, Output};
+
+fn mipray(args: &[&str], cwd: &Path) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_mipray"))
+        .args(args)
+        .current_dir(cwd)
+        .output()
+        .expect("run mipray")
+}
+
+fn text(o: &Output) -> String {
+    format!(
+        "{}{}",
+        String::from_utf8_lossy(&o.stdout),
+        String::from_utf8_lossy(&o.stderr)
+    )
+}
+
+/// Renders frames 0..3 of the default animation at 48x27 into `dir/name`.
+fn render(dir: &Path, name: &str) {
+    let out = mipray(
+        &[
+            "render", "default", "--size", "48x27", "--frames", "0..3", "--out", name,
+        ],
+        dir,
+    );
+    assert!(out.status.success(), "{}", text(&out));
+}
+
+fn csv_rows(path: &Path) -> Vec<Vec<String>> {
+    std::fs::read_to_string(path)
+        .unwrap()
+        .lines()
+        .skip(1)
+        .map(|l| l.split(',').map(str::to_string).collect())
+        .collect()
+}
+
+#[test]
+fn identical_sequences_pass() {
+    let dir = tempfile::tempdir().unwrap();
+    render(dir.path(), "a");
+    render(dir.path(), "b");
+    let out = mipray(&["diff", "a", "b", "--out", "d"], dir.path());
+    assert_eq!(out.status.code(), Some(0), "{}", text(&out));
+    assert!(
+        text(&out).contains("PASS: 0 of 3 frame(s)"),
+        "{}",
+        text(&out)
+    );
+    let rows = csv_rows(&dir.path().join("d/diff.csv"));
+    assert_eq!(rows.len(), 3);
+    for row in &rows {
+        assert_eq!(
+            (row[1].as_str(), row[2].as_str(), row[4].as_str()),
+            ("true", "inf", "0"),
+            "{row:?}"
+        );
+        // Stats compared: the same rays on both sides.
+        assert_eq!(row[8], "0", "{row:?}");
+    }
+    assert!(dir.path().join("d/diff.md").is_file());
+}
+
+#[test]
+fn one_changed_pixel_fails_exactly_that_frame() {
+    let dir = tempfile::tempdir().unwrap();
+    render(dir.path(), "a");
+    render(dir.path(), "b");
+    let frame = dir.path().join("b/frame_0001.png");
+    let mut image = image::open(&frame).unwrap().to_rgb8();
+    let p = image.get_pixel_mut(10, 5);
+    p.0[0] = if p.0[0] > 127 {
+        p.0[0] - 60
+    } else {
+        p.0[0] + 60
+    };
+    image.save(&frame).unwrap();
+    for metric in ["psnr", "max-abs"] {
+        let junit = format!("junit-{metric}.xml");
+        let out = mipray(
+            &[
+                "diff",
+                "a",
+                "b",
+                "--metric",
+                metric,
+                "--threshold",
+                if metric == "psnr" { "60" } else { "0" },
+                "--out",
+                "d",
+                "--junit",
+                &junit,
+            ],
+            dir.path(),
+        );
+        assert_eq!(out.status.code(), Some(1), "{metric}: {}", text(&out));
+        let rows = csv_rows(&dir.path().join("d/diff.csv"));
+        let failing: Vec<&str> = rows
+            .iter()
+            .filter(|r| r[1] == "false")
+            .map(|r| r[0].as_str())
+            .collect();
+        assert_eq!(failing, vec!["1"], "{metric}");
+        let row = &rows[1];
+        // One channel of one pixel off by 60: MSE = 3600 / (3 * 48 * 27).
+        let expected = 10.0 * (255.0f64 * 255.0 / (3600.0 / (3.0 * 48.0 * 27.0))).log10();
+        let psnr: f64 = row[2].parse().unwrap();
+        assert!((psnr - expected).abs() < 1e-6, "{psnr} vs {expected}");
+        assert_eq!((row[4].as_str(), row[5].as_str()), ("60", "1"));
+        let flip: f64 = row[3].parse().unwrap();
+        assert!(flip > 0.0, "FLIP sees the change");
+        assert!(dir.path().join("d/frame_0001_diff.png").is_file());
+        assert!(
+            !dir.path().join("d/frame_0000_diff.png").exists()
+                && !dir.path().join("d/frame_0002_diff.png").exists()
+        );
+        // The table lists the failing frame first.
+        let first_row = text(&out)
+            .lines()
+            .find(|l| l.starts_with("| ") && !l.starts_with("| frame"))
+            .unwrap_or_default()
+            .to_string();
+        assert!(first_row.starts_with("| 1 | FAIL"), "{first_row}");
+        // JUnit: well-formed, one case per frame, one failure.
+        let xml = std::fs::read_to_string(dir.path().join(&junit)).unwrap();
+        let doc = roxmltree::Document::parse(&xml).expect("well-formed XML");
+        let cases: Vec<_> = doc
+            .descendants()
+            .filter(|n| n.has_tag_name("testcase"))
+            .collect();
+        assert_eq!(cases.len(), 3);
+        let failed: Vec<&str> = cases
+            .iter()
+            .filter(|c| c.children().any(|k| k.has_tag_name("failure")))
+            .filter_map(|c| c.attribute("name"))
+            .collect();
+        assert_eq!(failed, vec!["frame_0001"]);
+    }
+}
+
+#[test]
+fn missing_frame_or_size_mismatch_is_bad_input() {
+    let dir = tempfile::tempdir().unwrap();
+    render(dir.path(), "a");
+    render(dir.path(), "b");
+    std::fs::remove_file(dir.path().join("b/frame_0002.png")).unwrap();
+    let out = mipray(&["diff", "a", "b"], dir.path());
+    assert_eq!(out.status.code(), Some(2), "{}", text(&out));
+    assert!(
+        text(&out).contains("frame 2") && text(&out).contains("frame_0002.png"),
+        "{}",
+        text(&out)
+    );
+
+    let out = mipray(
+        &[
+            "render", "default", "--size", "40x20", "--frames", "0..3", "--out", "c",
+        ],
+        dir.path(),
+    );
+    assert!(out.status.success());
+    let out = mipray(&["diff", "a", "c"], dir.path());
+    assert_eq!(out.status.code(), Some(2), "{}", text(&out));
+    assert!(
+        text(&out).contains("48x27") && text(&out).contains("40x20"),
+        "{}",
+        text(&out)
+    );
+    assert!(!text(&out).contains("panicked"));
+}
+
+#[test]
+fn render_check_passes_on_an_unchanged_scene_and_fails_fast_on_a_changed_one() {
+    let dir = tempfile::tempdir().unwrap();
+    render(dir.path(), "reference");
+    let out = mipray(
+        &[
+            "render",
+            "default",
+            "--size",
+            "48x27",
+            "--frames",
+            "0..3",
+            "--out",
+            "t",
+            "--check",
+            "reference",
+            "--junit",
+            "j.xml",
+        ],
+        dir.path(),
+    );
+    assert_eq!(out.status.code(), Some(0), "{}", text(&out));
+    assert_eq!(text(&out).matches("check frame").count(), 3);
+    assert!(
+        roxmltree::Document::parse(&std::fs::read_to_string(dir.path().join("j.xml")).unwrap())
+            .is_ok()
+    );
+
+    // Break the reference's frame 1: a check of the same scene now fails there and stops.
+    let frame = dir.path().join("reference/frame_0001.png");
+    let image = image::open(&frame).unwrap().to_rgb8();
+    image::imageops::flip_horizontal(&image)
+        .save(&frame)
+        .unwrap();
+    let out = mipray(
+        &[
+            "render",
+            "default",
+            "--size",
+            "48x27",
+            "--frames",
+            "0..3",
+            "--out",
+            "u",
+            "--check",
+            "reference",
+            "--fail-fast",
+        ],
+        dir.path(),
+    );
+    assert_eq!(out.status.code(), Some(1), "{}", text(&out));
+    assert!(
+        text(&out).contains("check frame 0001: FAIL"),
+        "{}",
+        text(&out)
+    );
+    assert!(
+        !dir.path().join("u/frame_0002.png").exists(),
+        "--fail-fast rendered past the failing frame"
+    );
+}
