@@ -6,6 +6,13 @@ use std::process::ExitCode;
 use clap::Parser;
 
 fn main() -> ExitCode {
+    // Rust ignores SIGPIPE, which turns a closed pipe (`mipray diff ... | head`) into a
+    // panic in `println!`; the default action ends the process quietly, like other tools.
+    #[cfg(unix)]
+    // SAFETY: called once at start-up, before any thread exists; SIG_DFL is a valid action.
+    unsafe {
+        libc::signal(libc::SIGPIPE, libc::SIG_DFL);
+    }
     // Exit codes: 0 success; 1 failure (a regression check found frames outside the
     // threshold, or a render/load error); 2 bad input to `diff` / `render --check` (a missing
     // frame, different sizes, unreadable files).
