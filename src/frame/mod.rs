@@ -277,6 +277,16 @@ impl Renderer {
         &self.accel
     }
 
+    /// Materials indexed by `FrameTriangles::material` (the scene's, plus a default last).
+    pub fn materials(&self) -> &[crate::scene::MaterialDesc] {
+        &self.geometry.materials
+    }
+
+    /// What moved in the last `prepare` (empty after the first frame's: everything was new).
+    pub fn dirty(&self) -> &DirtySet {
+        &self.dirty
+    }
+
     /// Number of lights each frame is lit by.
     pub fn light_count(&self) -> usize {
         let scene_lights = self.scene_light_nodes().len();
