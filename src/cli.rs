@@ -583,9 +583,13 @@ pub fn render_sequence(
             "frame {frame:04}  t={time_s:.3}s  {:>8.1} ms  {:>6.2} Mrays  moved {:>7}  lod_recomputed {:>7}{}  -> {}",
             record.total_ms,
             record.rays as f64 / 1e6,
-            record.moved_triangles,
-            record.lod_recomputed,
-            if record.rebuild { "  rebuild" } else { "" },
+            record.update.moved_triangles,
+            record.update.lod_recomputed,
+            if record.update.rebuild {
+                "  rebuild"
+            } else {
+                ""
+            },
             path.display()
         );
         progress.suspend(|| println!("{line}"));

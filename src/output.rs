@@ -345,8 +345,13 @@ impl Summary {
         let total_rays = records.iter().map(|r| r.rays).sum();
         let total_render_ms = sum(|r| r.render_ms);
         let total_ms = sum(|r| r.total_ms);
-        let preprocessing =
-            sum(|r| r.animate_ms + r.dirty_ms + r.refit_ms + r.build_ms + r.lod_update_ms);
+        let preprocessing = sum(|r| {
+            r.update.animate_ms
+                + r.update.dirty_ms
+                + r.update.refit_ms
+                + r.update.build_ms
+                + r.update.lod_update_ms
+        });
         Summary {
             frames: records.len(),
             width: first.map_or(0, |r| r.width),
@@ -355,9 +360,9 @@ impl Summary {
             total_rays,
             total_render_ms,
             total_ms,
-            total_lod_recomputed: records.iter().map(|r| r.lod_recomputed as u64).sum(),
+            total_lod_recomputed: records.iter().map(|r| r.update.lod_recomputed as u64).sum(),
             total_nonfinite_samples: records.iter().map(|r| r.nonfinite_samples).sum(),
-            rebuilds: records.iter().filter(|r| r.rebuild).count(),
+            rebuilds: records.iter().filter(|r| r.update.rebuild).count(),
             preprocessing_share: if total_ms > 0.0 {
                 preprocessing / total_ms
             } else {
@@ -365,16 +370,16 @@ impl Summary {
             },
             mip_histogram: histogram,
             triangles: spread(|r| r.triangles as f64),
-            animate_ms: spread(|r| r.animate_ms),
-            dirty_ms: spread(|r| r.dirty_ms),
-            refit_ms: spread(|r| r.refit_ms),
-            build_ms: spread(|r| r.build_ms),
-            lod_update_ms: spread(|r| r.lod_update_ms),
+            animate_ms: spread(|r| r.update.animate_ms),
+            dirty_ms: spread(|r| r.update.dirty_ms),
+            refit_ms: spread(|r| r.update.refit_ms),
+            build_ms: spread(|r| r.update.build_ms),
+            lod_update_ms: spread(|r| r.update.lod_update_ms),
             render_ms: spread(|r| r.render_ms),
             frame_total_ms: spread(|r| r.total_ms),
-            moved_triangles: spread(|r| r.moved_triangles as f64),
-            deformed_triangles: spread(|r| r.deformed_triangles as f64),
-            lod_recomputed: spread(|r| r.lod_recomputed as f64),
+            moved_triangles: spread(|r| r.update.moved_triangles as f64),
+            deformed_triangles: spread(|r| r.update.deformed_triangles as f64),
+            lod_recomputed: spread(|r| r.update.lod_recomputed as f64),
             rays: spread(|r| r.rays as f64),
             rays_per_second: if total_render_ms > 0.0 {
                 total_rays as f64 / (total_render_ms / 1e3)

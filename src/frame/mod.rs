@@ -98,28 +98,9 @@ pub struct FrameRecord {
     pub triangles: usize,
     pub lights: usize,
     pub spp: u32,
-    /// Animation evaluated at the frame time and moved vertices written.
-    pub animate_ms: f64,
-    /// Classifying instances and triangles into the dirty set.
-    pub dirty_ms: f64,
-    /// Refitting the BVH to the moved triangles (0 when nothing moved or it was rebuilt).
-    pub refit_ms: f64,
-    /// Building the BVH (first frame, or a rebuild), including the reorder into BVH order.
-    pub build_ms: f64,
-    /// Whether the BVH was built this frame.
-    pub rebuild: bool,
-    /// SAH cost of the tree used for this frame over its cost right after its last build.
-    pub sah_ratio: f32,
-    /// Updating `log2 P_b` for the dirty triangles (0 for methods that do not use it).
-    pub lod_update_ms: f64,
-    /// Triangles whose box moved this frame (rigid + scaled + deformed).
-    pub moved_triangles: usize,
-    /// Triangles whose shape changed this frame.
-    pub deformed_triangles: usize,
-    /// Textured triangles whose `log2 P_b` was computed this frame (all on the first frame).
-    pub lod_recomputed: usize,
-    /// Textured triangles whose `log2 P_b` was shifted by a new uniform scale.
-    pub lod_shifted: usize,
+    /// The per-frame update: what moved and what each step cost.
+    #[serde(flatten)]
+    pub update: UpdateStats,
     pub render_ms: f64,
     /// Everything above plus camera/light placement (not the file write).
     pub total_ms: f64,
@@ -142,19 +123,30 @@ pub enum FrameError {
     },
 }
 
-/// What the per-frame update did and cost.
-#[derive(Debug, Clone, Copy, Default, PartialEq)]
+/// What the per-frame update did and cost (flattened into each `stats.jsonl` line).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize, serde::Deserialize)]
 pub struct UpdateStats {
+    /// Animation evaluated at the frame time and moved vertices written.
     pub animate_ms: f64,
+    /// Classifying instances and triangles into the dirty set.
     pub dirty_ms: f64,
+    /// Refitting the BVH to the moved triangles (0 when nothing moved or it was rebuilt).
     pub refit_ms: f64,
+    /// Building the BVH (first frame, or a rebuild), including the reorder into BVH order.
     pub build_ms: f64,
+    /// Whether the BVH was built this frame.
     pub rebuild: bool,
+    /// SAH cost of the tree used for this frame over its cost right after its last build.
     pub sah_ratio: f32,
+    /// Updating `log2 P_b` for the dirty triangles (0 for methods that do not use it).
     pub lod_update_ms: f64,
+    /// Triangles whose box moved this frame (rigid + scaled + deformed).
     pub moved_triangles: usize,
+    /// Triangles whose shape changed this frame.
     pub deformed_triangles: usize,
+    /// Textured triangles whose `log2 P_b` was computed this frame (all on the first frame).
     pub lod_recomputed: usize,
+    /// Textured triangles whose `log2 P_b` was shifted by a new uniform scale.
     pub lod_shifted: usize,
 }
 
@@ -657,17 +649,7 @@ impl Renderer {
             triangles: self.triangles.len(),
             lights: prepared.lights.len(),
             spp: self.settings.spp.max(1),
-            animate_ms: u.animate_ms,
-            dirty_ms: u.dirty_ms,
-            refit_ms: u.refit_ms,
-            build_ms: u.build_ms,
-            rebuild: u.rebuild,
-            sah_ratio: u.sah_ratio,
-            lod_update_ms: u.lod_update_ms,
-            moved_triangles: u.moved_triangles,
-            deformed_triangles: u.deformed_triangles,
-            lod_recomputed: u.lod_recomputed,
-            lod_shifted: u.lod_shifted,
+            update: u,
             render_ms,
             total_ms,
             rays: counters.rays,
