@@ -68,7 +68,7 @@ pub fn read_mesh(r: &mut Reader) -> Result<ParsedMesh, String> {
         ..Default::default()
     };
     let mut corner_vertex: HashMap<(u32, u32, u32), u32> = HashMap::new();
-    let mut index = |r: &mut Reader, len: usize, what: &str| -> Result<u32, String> {
+    let index = |r: &mut Reader, len: usize, what: &str| -> Result<u32, String> {
         let line = r.peek().map_or(r.lexer.line(), |t| t.line);
         let i = r.int("triangles")?;
         if i < 0 || i as u64 >= len as u64 {

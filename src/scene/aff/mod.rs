@@ -164,6 +164,7 @@ fn finish(path: &Path, mut p: Parser) -> Result<(SceneDesc, AffStats), String> {
     let mut channels: Vec<ChannelDesc> = Vec::new();
     let mut used_blocks: std::collections::HashSet<&str> = Default::default();
     let mut visibility_ignored = 0;
+    let mut approximations = 0;
 
     // Animated transforms.
     for (node, name) in &p.x_nodes {
@@ -174,7 +175,7 @@ fn finish(path: &Path, mut p: Parser) -> Result<(SceneDesc, AffStats), String> {
         if block.visibility.is_some() {
             visibility_ignored += 1;
         }
-        let local = track_channels(block, *node, rest_time, &mut channels);
+        let local = track_channels(block, *node, rest_time, &mut channels, &mut approximations);
         p.builder.nodes[*node].local = local;
     }
 
@@ -200,7 +201,8 @@ fn finish(path: &Path, mut p: Parser) -> Result<(SceneDesc, AffStats), String> {
         p.builder.nodes[node].camera = Some(0);
         if let Some(block) = p.key_blocks.get("camera") {
             used_blocks.insert("camera");
-            let mut local = track_channels(block, node, rest_time, &mut channels);
+            let mut local =
+                track_channels(block, node, rest_time, &mut channels, &mut approximations);
             // Only transl and rot apply to the camera: scale stays 1, a missing track keeps
             // the `v` value.
             local.scale = Vec3::ONE;
@@ -279,6 +281,17 @@ fn finish(path: &Path, mut p: Parser) -> Result<(SceneDesc, AffStats), String> {
         });
     }
 
+    if p.tracks_going_back > 0 {
+        notes.push(format!(
+            "{} key track(s) have key times that go back; they are evaluated as the reference does (the first segment ending after t)",
+            p.tracks_going_back
+        ));
+    }
+    if approximations > 0 {
+        notes.push(format!(
+            "{approximations} rotation track(s) have key times going back that make the reference enter a squad segment part-way; such segments play in full over their time range"
+        ));
+    }
     if visibility_ignored > 0 {
         notes.push(format!(
             "{visibility_ignored} node(s) have 'visibility' tracks, which are ignored (always visible)"
@@ -345,6 +358,7 @@ fn track_channels(
     node: usize,
     rest_time: f32,
     channels: &mut Vec<ChannelDesc>,
+    approximations: &mut usize,
 ) -> Trs {
     let mut local = Trs::default();
     if let Some(c) = block
@@ -355,11 +369,12 @@ fn track_channels(
         local.translation = sample_vec3(&c, rest_time);
         channels.push(c);
     }
-    if let Some(c) = block
+    if let Some((c, approximated)) = block
         .rotation
         .as_deref()
         .and_then(|k| tracks::rotation_channel(k, node))
     {
+        *approximations += usize::from(approximated);
         local.rotation = sample_rotation(&c, rest_time);
         channels.push(c);
     }

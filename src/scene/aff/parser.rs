@@ -56,6 +56,8 @@ pub struct Parser {
     pub detail: i64,
     pub stats: AffStats,
     pub notes: Vec<String>,
+    /// Key tracks whose times go back somewhere.
+    pub tracks_going_back: usize,
 }
 
 fn tcb(r: &mut Reader, after: &str) -> Result<Tcb, String> {
@@ -107,6 +109,7 @@ impl Parser {
             detail: 0,
             stats: AffStats::default(),
             notes: Vec::new(),
+            tracks_going_back: 0,
         }
     }
 
@@ -426,6 +429,20 @@ impl Parser {
         Ok(())
     }
 
+    /// Counts a track whose key times go back somewhere (Robots' `gun_rot` tracks restart
+    /// at 42 after 48): the tracks evaluate them as the reference does (see
+    /// `tracks::segment_uses`), and a note reports them.
+    fn count_time_order(&mut self, mut times: impl Iterator<Item = f32>) {
+        let Some(mut last) = times.next() else { return };
+        for t in times {
+            if t < last {
+                self.tracks_going_back += 1;
+                return;
+            }
+            last = t;
+        }
+    }
+
     fn key_block(&mut self, r: &mut Reader) -> Result<(), String> {
         let (name, _) = r.name("k")?;
         r.expect("{", "k")?;
@@ -457,7 +474,7 @@ impl Parser {
                             })
                         })
                         .collect::<Result<Vec<_>, String>>()?;
-                    check_times(r, line, motion, keys.iter().map(|k| k.time))?;
+                    self.count_time_order(keys.iter().map(|k| k.time));
                     if motion == "transl" {
                         block.translation = Some(keys);
                     } else {
@@ -481,7 +498,7 @@ impl Parser {
                             })
                         })
                         .collect::<Result<Vec<_>, String>>()?;
-                    check_times(r, line, "rot", keys.iter().map(|k| k.time))?;
+                    self.count_time_order(keys.iter().map(|k| k.time));
                     block.rotation = Some(keys);
                 }
                 b"visibility" => {
@@ -494,7 +511,7 @@ impl Parser {
                             })
                         })
                         .collect::<Result<Vec<_>, String>>()?;
-                    check_times(r, line, "visibility", keys.iter().map(|k| k.time))?;
+                    self.count_time_order(keys.iter().map(|k| k.time));
                     block.visibility = Some(keys);
                 }
                 _ => {
