@@ -1,4 +1,5 @@
-//! Keyframe sampling: STEP, LINEAR (slerp for rotations) and CUBICSPLINE (glTF 2.0 Appendix C).
+//! Keyframe sampling: STEP, LINEAR (slerp for rotations) and CUBICSPLINE (glTF 2.0 Appendix C),
+//! plus SQUAD for rotations (BART/AFF `rot` tracks, see [`squad`]).
 //!
 //! Times outside the key range clamp to the first / last key. Duplicate key times are
 //! allowed: the later key wins from its time on (a jump), never a division by zero.
@@ -84,6 +85,27 @@ pub fn sample_channel(channel: &ChannelDesc, t: f32, out: &mut [f32]) {
                     + h11 * dt * in_tangent(k + 1, j);
             }
         }
+        Interpolation::Squad => {
+            // Per key: in-control b_k, value q_k, out-control a_k, each `n` numbers.
+            let quat = |k: usize, slot: usize| {
+                let base = (3 * k + slot) * n;
+                Quat::from_slice(&channel.values[base..base + 4])
+            };
+            if n != 4 || span.dt == 0.0 || span.fraction == 0.0 || span.index + 1 >= keys {
+                let base = (3 * span.index + 1) * n;
+                out.copy_from_slice(&channel.values[base..base + n]);
+                return;
+            }
+            let k = span.index;
+            let q = squad(
+                quat(k, 1),
+                quat(k + 1, 1),
+                quat(k, 2),
+                quat(k + 1, 0),
+                span.fraction,
+            );
+            out.copy_from_slice(&q.to_array());
+        }
         Interpolation::Step | Interpolation::Linear => {
             let a = &channel.values[span.index * n..(span.index + 1) * n];
             let linear = channel.interpolation == Interpolation::Linear;
@@ -110,7 +132,10 @@ pub fn sample_vec3(channel: &ChannelDesc, t: f32) -> Vec3 {
 /// normalised Hermite spline for CUBICSPLINE.
 pub fn sample_rotation(channel: &ChannelDesc, t: f32) -> Quat {
     let quat_at = |k: usize| {
-        let stride = if channel.interpolation == Interpolation::CubicSpline {
+        let stride = if matches!(
+            channel.interpolation,
+            Interpolation::CubicSpline | Interpolation::Squad
+        ) {
             3
         } else {
             1
@@ -133,6 +158,30 @@ pub fn sample_rotation(channel: &ChannelDesc, t: f32) -> Quat {
     };
     let q = q.normalize();
     if q.is_finite() { q } else { Quat::IDENTITY }
+}
+
+/// Slerp as the BART reference (Eberly's) computes it: no hemisphere flip (the shorter arc
+/// is the caller's business), and when `sin(angle) < 1e-6` the first argument unchanged.
+pub fn slerp_no_flip(p: Quat, q: Quat, u: f32) -> Quat {
+    let angle = p.dot(q).clamp(-1.0, 1.0).acos();
+    let sin = angle.sin();
+    if sin < 1e-6 {
+        return p;
+    }
+    let a = ((1.0 - u) * angle).sin() / sin;
+    let b = (u * angle).sin() / sin;
+    Quat::from_vec4(Vec4::from(p) * a + Vec4::from(q) * b)
+}
+
+/// Spherical quadrangle interpolation between keys `q1` and `q2` with controls `a` (outgoing
+/// at `q1`) and `b` (incoming at `q2`):
+/// `slerp(slerp(q1, q2, u), slerp(a, b, u), 2u(1-u))`, with [`slerp_no_flip`].
+pub fn squad(q1: Quat, q2: Quat, a: Quat, b: Quat, u: f32) -> Quat {
+    slerp_no_flip(
+        slerp_no_flip(q1, q2, u),
+        slerp_no_flip(a, b, u),
+        2.0 * u * (1.0 - u),
+    )
 }
 
 #[cfg(test)]
@@ -230,6 +279,27 @@ mod tests {
         );
         sample_channel(&c, 0.5, &mut v);
         assert!((v[0] - 0.125).abs() < 1e-6, "{}", v[0]);
+    }
+
+    #[test]
+    fn squad_with_key_controls_is_slerp_and_clamps() {
+        // Controls equal to the keys: squad reduces to slerp between the keys.
+        let a = Quat::IDENTITY;
+        let b = Quat::from_rotation_z(1.0);
+        let mut values = Vec::new();
+        for q in [a, a, a, b, b, b] {
+            values.extend_from_slice(&q.to_array());
+        }
+        let mut c = channel(Interpolation::Squad, &[1.0, 3.0], &values, 4);
+        c.target = ChannelTarget::Rotation;
+        let q = sample_rotation(&c, 2.0);
+        assert!(q.angle_between(Quat::from_rotation_z(0.5)) < 1e-5);
+        assert!(sample_rotation(&c, 0.0).angle_between(a) < 1e-6);
+        assert!(sample_rotation(&c, 9.0).angle_between(b) < 1e-6);
+        assert!(sample_rotation(&c, 3.0).angle_between(b) < 1e-6);
+        // No hemisphere flip: from q to -q (the same rotation) stays put at u = 0 and 1.
+        let q = Quat::from_rotation_x(0.3);
+        assert_eq!(slerp_no_flip(q, q, 0.5), q);
     }
 
     #[test]

@@ -2,7 +2,9 @@
 //!
 //! Units follow KHR_lights_punctual: point and spot intensity in candela (irradiance
 //! `I / d^2` at distance d), directional in lux. `range` fades the light to zero with the
-//! extension's recommended window `clamp(1 - (d/range)^4, 0, 1)`.
+//! extension's recommended window `clamp(1 - (d/range)^4, 0, 1)`. A light whose description
+//! has `inverse_square: false` (AFF/NFF point lights) skips the `1 / d^2`: its irradiance is
+//! `color * intensity` at any distance (range window and spot cone still apply).
 
 use glam::{Mat4, Vec3, Vec3A};
 
@@ -17,6 +19,8 @@ pub struct Light {
     /// Colour times intensity.
     pub intensity: Vec3A,
     pub range: Option<f32>,
+    /// Whether irradiance falls off as `1 / d^2` (see `LightDesc::inverse_square`).
+    pub inverse_square: bool,
 }
 
 /// What a light delivers to a point: unit direction towards the light, distance to it
@@ -43,6 +47,7 @@ impl Light {
             direction,
             intensity: (desc.color * desc.intensity.max(0.0)).into(),
             range: desc.range.filter(|r| *r > 0.0),
+            inverse_square: desc.inverse_square,
         }
     }
 
@@ -54,6 +59,7 @@ impl Light {
             direction: Vec3A::NEG_Y,
             intensity: Vec3A::splat(intensity),
             range: None,
+            inverse_square: true,
         }
     }
 
@@ -74,7 +80,7 @@ impl Light {
         }
         let distance = d2.sqrt();
         let to_light = offset / distance;
-        let mut falloff = 1.0 / d2;
+        let mut falloff = if self.inverse_square { 1.0 / d2 } else { 1.0 };
         if let Some(range) = self.range {
             let x = distance / range;
             falloff *= (1.0 - x * x * x * x).clamp(0.0, 1.0);
@@ -151,10 +157,27 @@ mod tests {
             color: Vec3::ONE,
             intensity: 10.0,
             range: None,
+            inverse_square: true,
         };
         let light = Light::placed(&desc, Mat4::from_translation(Vec3::new(0.0, 0.0, 5.0)));
         assert!(light.incident(Vec3A::ZERO).is_some());
         assert!(light.incident(Vec3A::new(10.0, 0.0, 0.0)).is_none());
+    }
+
+    #[test]
+    fn light_without_inverse_square_has_no_distance_falloff() {
+        let desc = LightDesc {
+            kind: LightKind::Point,
+            color: Vec3::new(0.5, 0.25, 1.0),
+            intensity: 2.0,
+            range: None,
+            inverse_square: false,
+        };
+        let light = Light::placed(&desc, Mat4::from_translation(Vec3::new(0.0, 10.0, 0.0)));
+        for y in [0.0, 5.0, 9.0, -100.0] {
+            let i = light.incident(Vec3A::new(0.0, y, 0.0)).unwrap();
+            assert_eq!(i.irradiance, Vec3A::new(1.0, 0.5, 2.0));
+        }
     }
 
     #[test]

@@ -17,6 +17,7 @@
 //! Geometry is the un-deformed base: morph targets (even with non-zero default weights)
 //! and skins are applied per frame by `anim::deform_primitive`.
 
+pub mod aff;
 pub mod gltf;
 
 use std::path::PathBuf;
@@ -43,10 +44,35 @@ pub struct SceneDesc {
     pub skins: Vec<SkinDesc>,
     /// Radiance of rays that leave the scene (linear RGB).
     pub background: Vec3,
+    /// Scene-wide ambient light colour, when the file defines one (AFF `am`, default 1 1 1
+    /// there); the shaded ambient term is `ambient * material ambient * texture`. `None`
+    /// (glTF): the renderer's fixed ambient applies.
+    pub ambient: Option<Vec3>,
+    /// The frame sequence the file asks for (AFF `a`), when it gives one.
+    pub frame_times: Option<FrameTimes>,
     /// Features the file uses that this version renders only approximately or ignores
     /// (e.g. point primitives, orthographic cameras). Printed by `info` and at the start of
     /// `render`.
     pub notes: Vec<String>,
+}
+
+/// A file's own frame sequence: `frames` frames from `start` to `end` seconds, both ends
+/// included (BART convention: frame `i` at `start + i * (end - start) / (frames - 1)`).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct FrameTimes {
+    pub start: f32,
+    pub end: f32,
+    pub frames: u32,
+}
+
+impl FrameTimes {
+    /// Time of frame `i` (`start` when there is a single frame).
+    pub fn time(&self, i: u32) -> f32 {
+        if self.frames <= 1 {
+            return self.start;
+        }
+        self.start + i as f32 * (self.end - self.start) / (self.frames - 1) as f32
+    }
 }
 
 /// A mesh: one or more primitives, each with its own material.
@@ -182,6 +208,9 @@ pub struct MaterialDesc {
     /// Phong highlight strength.
     pub specular: f32,
     pub double_sided: bool,
+    /// Ambient reflectance colour (AFF `fm` ambient); `None` when the file gives none (the
+    /// renderer's fixed ambient model applies).
+    pub ambient: Option<Vec3>,
 }
 
 impl Default for MaterialDesc {
@@ -196,6 +225,7 @@ impl Default for MaterialDesc {
             shininess: 32.0,
             specular: 0.0,
             double_sided: false,
+            ambient: None,
         }
     }
 }
@@ -226,6 +256,9 @@ pub struct LightDesc {
     pub intensity: f32,
     /// Distance past which the light has no effect (`None`: unlimited).
     pub range: Option<f32>,
+    /// Irradiance falls off as `1 / d^2` (physical lights, glTF). `false`: no distance
+    /// falloff (NFF/AFF point lights deliver `color * intensity` at any distance).
+    pub inverse_square: bool,
 }
 
 /// What an animation channel drives.
@@ -243,6 +276,13 @@ pub enum Interpolation {
     Step,
     Linear,
     CubicSpline,
+    /// Rotations only (4 components): spherical quadrangle interpolation. Values are laid
+    /// out like CUBICSPLINE, per key the incoming control quaternion `b_k`, the key `q_k`
+    /// and the outgoing control `a_k`; segment k -> k+1 is
+    /// `slerp(slerp(q_k, q_k+1, u), slerp(a_k, b_k+1, u), 2u(1-u))` with a slerp that does
+    /// not flip hemispheres (see `anim::sample`). Used by the AFF loader for BART `rot`
+    /// tracks.
+    Squad,
 }
 
 /// One keyframe track of one node property.
@@ -254,7 +294,8 @@ pub struct ChannelDesc {
     /// Strictly non-decreasing key times in seconds.
     pub times: Vec<f32>,
     /// Flat key values: `times.len() * components` numbers, or three times that for
-    /// CUBICSPLINE (in-tangent, value, out-tangent per key, as glTF stores them).
+    /// CUBICSPLINE (in-tangent, value, out-tangent per key, as glTF stores them) and SQUAD
+    /// (in-control, value, out-control quaternions per key).
     /// Components: 3 (translation, scale), 4 (rotation quaternion x, y, z, w), or the
     /// morph target count (weights).
     pub values: Vec<f32>,

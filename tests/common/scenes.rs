@@ -248,6 +248,7 @@ pub fn showcase_scene() -> SceneDesc {
             color: Vec3::ONE,
             intensity: 60.0,
             range: None,
+            inverse_square: true,
         });
         let n = add_root(
             &mut scene,

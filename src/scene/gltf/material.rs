@@ -90,6 +90,7 @@ pub(super) fn load_materials(
             shininess: shininess(roughness),
             specular: specular(roughness),
             double_sided: material.double_sided(),
+            ambient: None,
         });
     }
     if ignored_maps > 0 {

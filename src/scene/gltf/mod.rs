@@ -87,6 +87,8 @@ fn load_scene(path: &Path) -> Result<SceneDesc, String> {
         animations,
         skins,
         background: BACKGROUND,
+        ambient: None,
+        frame_times: None,
         notes,
     })
 }

@@ -245,6 +245,7 @@ fn light_desc(light: &gltf::khr_lights_punctual::Light) -> Result<LightDesc, Str
         color,
         intensity,
         range,
+        inverse_square: true,
     })
 }
 

@@ -1,0 +1,390 @@
+//! BART / AFF loader: an `.aff` scene (NFF plus animation extensions, Lext et al. 2001) to a
+//! [`SceneDesc`]. The format and its reference algorithms are summarised in the project's
+//! BART notes (FORMAT.md); this module follows them exactly where they define behaviour.
+//!
+//! Split by concept:
+//! - `lexer`: bytes -> tokens (Latin-1, CRLF, `#`/`%` comments anywhere, `{` `}` split);
+//! - `reader`: typed reads with `file:line:` messages;
+//! - `parser`: the command loop (global `fm` state, transform stack, includes, `k` blocks);
+//! - `includes`: include/texture path rules, file cache, include-cycle detection;
+//! - `mesh`: `m` with per-attribute indices, expanded to one index list;
+//! - `shapes`: polygons (fan), open cones (32 segments, smooth normals), spheres;
+//! - `materials`: `fm` -> [`MaterialDesc`](crate::scene::MaterialDesc), PPM textures (sRGB);
+//! - [`tracks`]: `transl`/`scale` KB splines -> CUBICSPLINE, `rot` -> SQUAD channels;
+//! - `camera`: `v` and the camera node; `builder`: nodes, meshes, primitives, `tpa` morphs.
+//!
+//! Scene mapping:
+//! - **hierarchy**: a root node holds geometry outside any transform; each `xs` (static TRS,
+//!   M = T·R·S) and `x name` (TRS from `k name`, identity without one) is a child node of
+//!   the enclosing one; geometry goes to its node's mesh, one primitive per material run;
+//! - **animation**: one clip named `"aff"` with every channel; `k` blocks resolve by name
+//!   after the whole parse (the last block of a name wins; one block can drive several
+//!   nodes); a node's rest TRS is its tracks sampled at the first frame time;
+//! - **camera**: a root node named `camera` (see `camera`); **lights**: one root node per
+//!   `l`, a point light of intensity 1 with the given colour (default white) and
+//!   `inverse_square: false` (NFF lights have no distance falloff);
+//! - **tpa**: per run of triangles with one material and sample times, a child node whose
+//!   mesh has sample 0 as base and one morph target per further sample (deltas of positions
+//!   and of unit normals), driven by a LINEAR weights channel with one-hot keys at the sample
+//!   times (linear interpolation between samples; clamped outside). Difference from the
+//!   reference: normals are normalised per sample before interpolation (the reference
+//!   interpolates the raw, non-unit normals, then normalises), so in-between normals can
+//!   differ slightly in direction where a normal's length changes between samples;
+//! - `SceneDesc::ambient` = `am` (default 1 1 1), `background` = `b` (default black),
+//!   `frame_times` = `a` (frame i at `start + i (end - start) / (frames - 1)`).
+//!
+//! Not rendered as the reference would, each reported in `SceneDesc::notes` when used:
+//! `visibility` tracks (parsed, ignored), `la` animated lights (static at their position),
+//! the `v resolution` (informational; the CLI's size applies).
+
+mod builder;
+mod camera;
+mod includes;
+mod lexer;
+mod materials;
+mod mesh;
+mod parser;
+mod reader;
+mod shapes;
+pub mod tracks;
+
+use std::path::Path;
+
+use glam::Vec3;
+
+pub use super::gltf::LoadError;
+pub use camera::look_at_rotation;
+pub use lexer::{Lexer, Token, latin1};
+pub use shapes::CONE_SEGMENTS;
+
+use super::{
+    AnimationDesc, CameraDesc, ChannelDesc, ChannelTarget, Interpolation, LightDesc, LightKind,
+    SceneDesc, Trs,
+};
+use crate::anim::{sample_rotation, sample_vec3};
+use parser::Parser;
+
+/// What the files contained, counted per source command (for `info` and tests). "Meshes"
+/// are `m` commands, the unit FORMAT.md's scene facts count (Kitchen 393, Robots 1,849); a
+/// file included twice counts twice, as its geometry is loaded twice.
+#[derive(Debug, Clone, Default, PartialEq, Eq)]
+pub struct AffStats {
+    /// Files parsed, an include counted each time it is expanded (the main file too).
+    pub files: usize,
+    /// `m` commands and their triangles.
+    pub meshes: usize,
+    pub mesh_triangles: usize,
+    /// `p` and `pp` commands and their fan triangles.
+    pub polygons: usize,
+    pub polygon_triangles: usize,
+    /// `tt` and `ttp` triangles.
+    pub textured_triangles: usize,
+    /// `tpa` (vertex-morphing) triangles.
+    pub morph_triangles: usize,
+    /// `c` commands and the triangles of their tessellation ([`CONE_SEGMENTS`] x 2 each).
+    pub cones: usize,
+    pub cone_triangles: usize,
+    /// `s` commands and the triangles of their tessellation.
+    pub spheres: usize,
+    pub sphere_triangles: usize,
+    /// `xs` and `x` blocks.
+    pub static_transforms: usize,
+    pub animated_transforms: usize,
+    /// Distinct `k` names.
+    pub key_blocks: usize,
+    /// `l` and `la` lights.
+    pub lights: usize,
+    /// Distinct texture files.
+    pub textures: usize,
+}
+
+impl AffStats {
+    /// Triangles of the source's own triangles and polygons (`m`, `p`/`pp`, `tt`/`ttp`):
+    /// FORMAT.md's "static" count, without `tpa` and tessellated cones and spheres.
+    pub fn source_triangles(&self) -> usize {
+        self.mesh_triangles + self.polygon_triangles + self.textured_triangles
+    }
+
+    /// Every triangle the scene renders.
+    pub fn total_triangles(&self) -> usize {
+        self.source_triangles() + self.morph_triangles + self.cone_triangles + self.sphere_triangles
+    }
+}
+
+/// Loads an `.aff` file and everything it includes.
+///
+/// # Errors
+/// A [`LoadError`] for the main file whose message names the file and line of the problem
+/// (`kitchen.aff:1234: expected a number after 'v', found 'foo'`): unreadable or missing
+/// include or texture, malformed number or count, unknown command, index out of range,
+/// include cycle (naming the chain), unbalanced `}`, decreasing key times.
+pub fn load(path: &Path) -> Result<SceneDesc, LoadError> {
+    load_with_stats(path).map(|(scene, _)| scene)
+}
+
+/// [`load`], also returning the per-command counts.
+pub fn load_with_stats(path: &Path) -> Result<(SceneDesc, AffStats), LoadError> {
+    load_scene(path).map_err(|message| LoadError {
+        path: path.to_path_buf(),
+        message,
+    })
+}
+
+fn display_name(path: &Path) -> String {
+    path.file_name()
+        .map(|n| n.to_string_lossy().into_owned())
+        .unwrap_or_else(|| path.display().to_string())
+}
+
+fn load_scene(path: &Path) -> Result<(SceneDesc, AffStats), String> {
+    if !path.is_file() {
+        return Err("cannot read file: not found".into());
+    }
+    let name = display_name(path);
+    let main_dir = path.parent().unwrap_or(Path::new("")).to_path_buf();
+    let root_name = path
+        .file_stem()
+        .map(|s| s.to_string_lossy().into_owned())
+        .unwrap_or_else(|| "aff".into());
+    let mut p = Parser::new(main_dir, root_name);
+    p.parse_file(path, &name)?;
+    finish(path, p)
+}
+
+/// Resolves key blocks, adds camera and light nodes, and assembles the description.
+fn finish(path: &Path, mut p: Parser) -> Result<(SceneDesc, AffStats), String> {
+    let mut notes = std::mem::take(&mut p.notes);
+    if p.scopes.len() > 1 {
+        notes.push(format!(
+            "{} transform block(s) not closed by '}}' at the end of the file",
+            p.scopes.len() - 1
+        ));
+    }
+    let rest_time = p.frame_times.map_or(0.0, |f| f.start);
+    let mut channels: Vec<ChannelDesc> = Vec::new();
+    let mut used_blocks: std::collections::HashSet<&str> = Default::default();
+    let mut visibility_ignored = 0;
+    let mut approximations = 0;
+
+    // Animated transforms.
+    for (node, name) in &p.x_nodes {
+        let Some(block) = p.key_blocks.get(name) else {
+            continue;
+        };
+        used_blocks.insert(name);
+        if block.visibility.is_some() {
+            visibility_ignored += 1;
+        }
+        let local = track_channels(block, *node, rest_time, &mut channels, &mut approximations);
+        p.builder.nodes[*node].local = local;
+    }
+
+    // Camera.
+    let mut cameras = Vec::new();
+    if let Some(view) = p.view {
+        if !(view.angle > 0.0 && view.angle < 180.0) {
+            return Err(format!(
+                "view angle {} is outside (0, 180) degrees",
+                view.angle
+            ));
+        }
+        cameras.push(CameraDesc {
+            yfov: view.angle.to_radians(),
+            znear: view.hither,
+        });
+        let rest = Trs {
+            translation: view.from,
+            rotation: look_at_rotation(view.from, view.at, view.up),
+            scale: Vec3::ONE,
+        };
+        let node = p.builder.add_node(None, "camera".into(), rest);
+        p.builder.nodes[node].camera = Some(0);
+        if let Some(block) = p.key_blocks.get("camera") {
+            used_blocks.insert("camera");
+            let mut local =
+                track_channels(block, node, rest_time, &mut channels, &mut approximations);
+            // Only transl and rot apply to the camera: scale stays 1, a missing track keeps
+            // the `v` value.
+            local.scale = Vec3::ONE;
+            if block.translation.is_none() {
+                local.translation = view.from;
+            }
+            if block.rotation.is_none() {
+                local.rotation = rest.rotation;
+            }
+            channels.retain(|c| !(c.node == node && c.target == ChannelTarget::Scale));
+            p.builder.nodes[node].local = local;
+        }
+        let (w, h) = view.resolution;
+        notes.push(format!(
+            "the file asks for {w}x{h} pixels (v resolution); the render size options apply"
+        ));
+    } else {
+        notes.push("the file has no 'v' view: no camera".into());
+    }
+
+    // Lights.
+    let mut lights = Vec::new();
+    let mut animated_lights = Vec::new();
+    for (i, light) in p.lights.iter().enumerate() {
+        lights.push(LightDesc {
+            kind: LightKind::Point,
+            color: light.color,
+            intensity: 1.0,
+            range: None,
+            inverse_square: false,
+        });
+        let name = light.name.clone().unwrap_or_else(|| format!("light{i}"));
+        if light.name.is_some() {
+            animated_lights.push(name.clone());
+        }
+        let node = p.builder.add_node(
+            None,
+            name,
+            Trs {
+                translation: light.position,
+                ..Default::default()
+            },
+        );
+        p.builder.nodes[node].light = Some(i);
+    }
+    if !lights.is_empty() {
+        notes.push(
+            "AFF point lights have no distance falloff (lights use inverse_square = false)".into(),
+        );
+    }
+    if !animated_lights.is_empty() {
+        notes.push(format!(
+            "animated lights (la) are placed statically: {}",
+            animated_lights.join(", ")
+        ));
+    }
+
+    // Vertex morphing.
+    for group in &p.builder.morph_groups {
+        let k = group.times.len();
+        if k < 2 {
+            continue;
+        }
+        let targets = k - 1;
+        let mut values = vec![0.0; k * targets];
+        for i in 1..k {
+            values[i * targets + (i - 1)] = 1.0;
+        }
+        channels.push(ChannelDesc {
+            node: group.node,
+            target: ChannelTarget::Weights,
+            interpolation: Interpolation::Linear,
+            times: group.times.clone(),
+            values,
+            components: targets,
+        });
+    }
+
+    if p.tracks_going_back > 0 {
+        notes.push(format!(
+            "{} key track(s) have key times that go back; they are evaluated as the reference does (the first segment ending after t)",
+            p.tracks_going_back
+        ));
+    }
+    if approximations > 0 {
+        notes.push(format!(
+            "{approximations} rotation track(s) have key times going back that make the reference enter a squad segment part-way; such segments play in full over their time range"
+        ));
+    }
+    if visibility_ignored > 0 {
+        notes.push(format!(
+            "{visibility_ignored} node(s) have 'visibility' tracks, which are ignored (always visible)"
+        ));
+    }
+    let mut unused: Vec<&str> = p
+        .key_blocks
+        .keys()
+        .map(String::as_str)
+        .filter(|n| !used_blocks.contains(n))
+        .collect();
+    unused.sort_unstable();
+    if !unused.is_empty() {
+        notes.push(format!(
+            "key blocks not used by any node: {}",
+            unused.join(", ")
+        ));
+    }
+    if p.materials.used_default {
+        notes.push("geometry before the first 'fm' uses plain white diffuse".into());
+    }
+    notes.push(
+        "textures are treated as sRGB; shine is used as the Phong exponent without the OpenGL x4"
+            .into(),
+    );
+
+    let mut stats = p.stats.clone();
+    stats.files = p.files.expanded;
+    stats.key_blocks = p.key_blocks.len();
+    stats.lights = p.lights.len();
+    stats.textures = p.materials.textures.len();
+
+    let animations = if channels.is_empty() {
+        Vec::new()
+    } else {
+        vec![AnimationDesc {
+            name: "aff".into(),
+            channels,
+        }]
+    };
+    let scene = SceneDesc {
+        source: path.to_path_buf(),
+        meshes: p.builder.meshes,
+        nodes: p.builder.nodes,
+        roots: p.builder.roots,
+        materials: p.materials.materials,
+        textures: p.materials.textures,
+        cameras,
+        lights,
+        animations,
+        skins: Vec::new(),
+        background: p.background.unwrap_or(Vec3::ZERO),
+        ambient: Some(p.ambient.unwrap_or(Vec3::ONE)),
+        frame_times: p.frame_times,
+        notes,
+    };
+    Ok((scene, stats))
+}
+
+/// Adds the channels of `block` for `node` and returns the node's TRS sampled at
+/// `rest_time` (identity components for missing tracks).
+fn track_channels(
+    block: &tracks::KeyBlock,
+    node: usize,
+    rest_time: f32,
+    channels: &mut Vec<ChannelDesc>,
+    approximations: &mut usize,
+) -> Trs {
+    let mut local = Trs::default();
+    if let Some(c) = block
+        .translation
+        .as_deref()
+        .and_then(|k| tracks::position_channel(k, node, ChannelTarget::Translation))
+    {
+        local.translation = sample_vec3(&c, rest_time);
+        channels.push(c);
+    }
+    if let Some((c, approximated)) = block
+        .rotation
+        .as_deref()
+        .and_then(|k| tracks::rotation_channel(k, node))
+    {
+        *approximations += usize::from(approximated);
+        local.rotation = sample_rotation(&c, rest_time);
+        channels.push(c);
+    }
+    if let Some(c) = block
+        .scale
+        .as_deref()
+        .and_then(|k| tracks::position_channel(k, node, ChannelTarget::Scale))
+    {
+        local.scale = sample_vec3(&c, rest_time);
+        channels.push(c);
+    }
+    local
+}
