@@ -43,7 +43,7 @@ pub use handles::{
 };
 pub use material::{Material, TextureBinding, WrapMode};
 pub use node::{Mesh, Node, PerspectiveCamera, PointLight, Primitive};
-pub use shapes::MeshData;
+pub use shapes::{MeshData, MorphTarget};
 pub use textures::RgbaImage;
 
 /// Writes every authored animation into `dir` (today only [`write_default`]'s); returns
