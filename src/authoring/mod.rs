@@ -23,8 +23,10 @@ mod error;
 mod gltf_json;
 mod gltf_writer;
 mod handles;
+mod kitchen;
 mod material;
 mod node;
+mod scene_kit;
 pub mod shapes;
 pub mod textures;
 mod validation;
@@ -41,6 +43,7 @@ pub use gltf_writer::{EncodedFile, GENERATOR};
 pub use handles::{
     AnimationId, CameraId, GeometryId, ImageId, LightId, MaterialId, MeshId, NodeId,
 };
+pub use kitchen::{KITCHEN_DURATION_SECONDS, KITCHEN_SCENE_NAME, kitchen_scene, write_kitchen};
 pub use material::{Material, TextureBinding, WrapMode};
 pub use node::{Mesh, Node, PerspectiveCamera, PointLight, Primitive};
 pub use shapes::{MeshData, MorphTarget};
@@ -52,5 +55,7 @@ pub use textures::RgbaImage;
 /// # Errors
 /// The first scene's [`AuthoringError`].
 pub fn write_all(dir: &Path) -> Result<Vec<PathBuf>, AuthoringError> {
-    write_default(dir)
+    let mut paths = write_default(dir)?;
+    paths.extend(write_kitchen(dir)?);
+    Ok(paths)
 }
