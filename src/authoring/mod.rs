@@ -26,6 +26,7 @@ mod handles;
 mod kitchen;
 mod material;
 mod node;
+mod robots;
 mod scene_kit;
 pub mod shapes;
 pub mod textures;
@@ -46,6 +47,9 @@ pub use handles::{
 pub use kitchen::{KITCHEN_DURATION_SECONDS, KITCHEN_SCENE_NAME, kitchen_scene, write_kitchen};
 pub use material::{Material, TextureBinding, WrapMode};
 pub use node::{Mesh, Node, PerspectiveCamera, PointLight, Primitive};
+pub use robots::{
+    ROBOTS_DURATION_SECONDS, ROBOTS_SCENE_NAME, STEP_CYCLE_SECONDS, robots_scene, write_robots,
+};
 pub use shapes::{MeshData, MorphTarget};
 pub use textures::RgbaImage;
 
@@ -57,5 +61,6 @@ pub use textures::RgbaImage;
 pub fn write_all(dir: &Path) -> Result<Vec<PathBuf>, AuthoringError> {
     let mut paths = write_default(dir)?;
     paths.extend(write_kitchen(dir)?);
+    paths.extend(write_robots(dir)?);
     Ok(paths)
 }
