@@ -122,7 +122,7 @@ fn add_room(scene: &mut GltfBuilder) {
         size: ROOM,
         // 8 squares of 0.5 m per repeat; 8 tiles of 15 cm per repeat.
         floor: Some((floor, 4.0)),
-        walls: Some((walls, 1.2)),
+        walls: Some((walls, Some(1.2))),
         ceiling: Some(ceiling),
     }
     .add(scene);

@@ -43,11 +43,12 @@ pub(crate) fn add_light(
 
 /// The inner surfaces of a box-shaped room centred on x = z = 0: floor (y = 0), ceiling
 /// (y = `size.y`) and four walls, all facing inward. `tile` is the texture repeat length
-/// in metres for the floor and for the walls; `None` materials leave a surface out.
+/// in metres for the floor and for the walls (walls without one have no UVs); `None`
+/// materials leave a surface out.
 pub(crate) struct Room {
     pub size: Vec3,
     pub floor: Option<(MaterialId, f32)>,
-    pub walls: Option<(MaterialId, f32)>,
+    pub walls: Option<(MaterialId, Option<f32>)>,
     pub ceiling: Option<MaterialId>,
 }
 
@@ -76,16 +77,12 @@ impl Room {
             );
         }
         if let Some((material, tile)) = self.walls {
-            let long = scene.add_simple_mesh(
-                "WallX",
-                quad(s.x, s.y, Vec2::new(s.x, s.y) / tile),
-                material,
-            );
-            let deep = scene.add_simple_mesh(
-                "WallZ",
-                quad(s.z, s.y, Vec2::new(s.z, s.y) / tile),
-                material,
-            );
+            let wall = |width: f32| match tile {
+                Some(tile) => quad(width, s.y, Vec2::new(width, s.y) / tile),
+                None => quad(width, s.y, Vec2::ONE).without_uvs(),
+            };
+            let long = scene.add_simple_mesh("WallX", wall(s.x), material);
+            let deep = scene.add_simple_mesh("WallZ", wall(s.z), material);
             let half = s / 2.0;
             let walls = [
                 ("WallBack", long, Vec3::new(0.0, half.y, -half.z), 0.0),
