@@ -442,7 +442,8 @@ mod tests {
         let turns = lap / (TAU * r);
         assert!((turns - turns.round()).abs() < 1e-3 && (0.06..0.08).contains(&r));
         let yaw = headings();
-        assert!((yaw[KEY_INTERVALS as usize] - yaw[0] - TAU).abs() < 1e-3);
+        // One full turn (clockwise seen from above: x = cos, z = sin turns about -Y).
+        assert!((yaw[KEY_INTERVALS as usize] - yaw[0] + TAU).abs() < 1e-3);
         // Spin per key stays well under half a turn, so slerp spins the right way.
         let per_key = lengths
             .windows(2)
