@@ -1,5 +1,5 @@
-//! Keyframed node animation: channels of translation, rotation or scale keys with glTF's
-//! LINEAR, STEP or CUBICSPLINE interpolation.
+//! Keyframed node animation: channels of translation, rotation, scale or morph-target
+//! weight keys with glTF's LINEAR, STEP or CUBICSPLINE interpolation.
 //!
 //! Invariants checked by the builder: key times are non-negative and strictly increasing;
 //! each channel has `times.len() * values_per_key()` values; rotation values are unit
@@ -19,13 +19,21 @@ pub enum AnimatedProperty {
     Rotation,
     /// The node's `scale` (3 numbers per key).
     Scale,
+    /// The morph-target `weights` of the node's mesh (`targets` numbers per key, one per
+    /// morph target; the node's mesh must have exactly that many targets).
+    Weights {
+        /// Morph targets of the node's mesh, > 0.
+        targets: usize,
+    },
 }
 
 impl AnimatedProperty {
-    /// Numbers per key value: 3 for translation and scale, 4 for a quaternion.
+    /// Numbers per key value: 3 for translation and scale, 4 for a quaternion, one per
+    /// morph target for weights.
     pub fn components(self) -> usize {
         match self {
             AnimatedProperty::Rotation => 4,
+            AnimatedProperty::Weights { targets } => targets,
             _ => 3,
         }
     }
@@ -111,6 +119,25 @@ impl Channel {
         Channel {
             property: AnimatedProperty::Scale,
             ..Channel::translation(node, interpolation, times, keys)
+        }
+    }
+
+    /// A morph-weights track for a node whose mesh has `targets` morph targets: `values`
+    /// holds `targets` weights per key time (for CUBICSPLINE, the in-tangents, the weights
+    /// and the out-tangents of each key, `targets` numbers each).
+    pub fn weights(
+        node: NodeId,
+        interpolation: Interpolation,
+        times: Vec<f32>,
+        targets: usize,
+        values: Vec<f32>,
+    ) -> Self {
+        Channel {
+            node,
+            property: AnimatedProperty::Weights { targets },
+            interpolation,
+            times,
+            values,
         }
     }
 

@@ -46,8 +46,27 @@ impl GltfBuilder {
         self.meshes.push(Mesh {
             name: name.into(),
             primitives,
+            weights: Vec::new(),
         });
         MeshId(self.meshes.len() - 1)
+    }
+
+    /// Sets a mesh's default morph-target weights (one per morph target of its geometry).
+    ///
+    /// # Panics
+    /// If `mesh` is not a mesh of this builder.
+    pub fn set_mesh_weights(&mut self, mesh: MeshId, weights: Vec<f32>) {
+        self.meshes[mesh.0].weights = weights;
+    }
+
+    /// Morph targets of a mesh: those of its first primitive's geometry (0 when the mesh
+    /// or geometry is unknown).
+    pub fn morph_target_count(&self, mesh: MeshId) -> usize {
+        self.meshes
+            .get(mesh.0)
+            .and_then(|m| m.primitives.first())
+            .and_then(|p| self.geometries.get(p.geometry.0))
+            .map_or(0, |(_, g)| g.morph_targets.len())
     }
 
     /// Adds `geometry` and a one-primitive mesh of the same name drawing it with `material`.

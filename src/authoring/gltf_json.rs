@@ -130,6 +130,8 @@ pub struct Perspective {
 pub struct Mesh {
     pub name: String,
     pub primitives: Vec<Primitive>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub weights: Option<Vec<f32>>,
 }
 
 #[derive(Serialize)]
@@ -139,6 +141,9 @@ pub struct Primitive {
     pub indices: usize,
     #[serde(skip_serializing_if = "Option::is_none")]
     pub material: Option<usize>,
+    /// Morph targets: semantic (`POSITION`, `NORMAL`) to delta accessor, per target.
+    #[serde(skip_serializing_if = "is_empty")]
+    pub targets: Vec<BTreeMap<&'static str, usize>>,
 }
 
 #[derive(Serialize)]

@@ -7,7 +7,7 @@
 //! POSITION and of animation inputs carry `min`/`max`; each accessor has its own buffer
 //! view aligned to 4 bytes; `extensionsUsed` lists exactly the extensions present.
 
-use std::collections::BTreeSet;
+use std::collections::{BTreeMap, BTreeSet};
 use std::path::{Path, PathBuf};
 
 use super::animation::{AnimatedProperty, Animation, Interpolation};
@@ -108,14 +108,17 @@ impl GltfBuilder {
                     .primitives
                     .iter()
                     .map(|p| {
-                        let (attributes, indices) = geometry_attributes[p.geometry.0].clone();
+                        let (attributes, indices, targets) =
+                            geometry_attributes[p.geometry.0].clone();
                         json::Primitive {
                             attributes,
                             indices,
                             material: p.material.map(|m| m.0),
+                            targets,
                         }
                     })
                     .collect(),
+                weights: mesh_weights(self, mesh),
             })
             .collect();
         let textures = TextureTable::new(&self.materials);
@@ -173,16 +176,14 @@ impl GltfBuilder {
         (root, bin)
     }
 
-    /// Writes every geometry's arrays; returns each one's attribute map and index accessor.
-    fn encode_geometries(
-        &self,
-        buffer: &mut BinaryBuffer,
-    ) -> Vec<(std::collections::BTreeMap<&'static str, usize>, usize)> {
+    /// Writes every geometry's arrays; returns each one's attribute map, index accessor and
+    /// morph targets' attribute maps.
+    fn encode_geometries(&self, buffer: &mut BinaryBuffer) -> Vec<EncodedGeometry> {
         let target = Some(json::ARRAY_BUFFER);
         self.geometries
             .iter()
             .map(|(_, g)| {
-                let mut attributes = std::collections::BTreeMap::new();
+                let mut attributes = BTreeMap::new();
                 let positions: Vec<f32> = g.positions.iter().flat_map(|p| p.to_array()).collect();
                 let position = buffer.push_floats(&positions, 3, "VEC3", target, Bounds::Declared);
                 attributes.insert("POSITION", position);
@@ -197,7 +198,28 @@ impl GltfBuilder {
                     attributes.insert("TEXCOORD_0", accessor);
                 }
                 let indices = buffer.push_indices(&g.indices, json::ELEMENT_ARRAY_BUFFER);
-                (attributes, indices)
+                let targets = g
+                    .morph_targets
+                    .iter()
+                    .map(|t| {
+                        let mut map = BTreeMap::new();
+                        let flat: Vec<f32> =
+                            t.positions.iter().flat_map(|d| d.to_array()).collect();
+                        // Morph POSITION accessors need min/max like the base's.
+                        let accessor =
+                            buffer.push_floats(&flat, 3, "VEC3", target, Bounds::Declared);
+                        map.insert("POSITION", accessor);
+                        if let Some(normals) = &t.normals {
+                            let flat: Vec<f32> =
+                                normals.iter().flat_map(|d| d.to_array()).collect();
+                            let accessor =
+                                buffer.push_floats(&flat, 3, "VEC3", target, Bounds::Omitted);
+                            map.insert("NORMAL", accessor);
+                        }
+                        map
+                    })
+                    .collect();
+                (attributes, indices, targets)
             })
             .collect()
     }
@@ -252,6 +274,25 @@ impl GltfBuilder {
         json::RootExtensions {
             lights_punctual: json::LightsPunctual { lights },
         }
+    }
+}
+
+/// A geometry's attribute accessors, index accessor and morph targets' accessors.
+type EncodedGeometry = (
+    BTreeMap<&'static str, usize>,
+    usize,
+    Vec<BTreeMap<&'static str, usize>>,
+);
+
+/// `mesh.weights`: the mesh's own, or zeros when its geometry has morph targets.
+fn mesh_weights(builder: &GltfBuilder, mesh: &super::node::Mesh) -> Option<Vec<f32>> {
+    let targets = mesh.primitives.first().map_or(0, |p| {
+        builder.geometries[p.geometry.0].1.morph_targets.len()
+    });
+    if !mesh.weights.is_empty() {
+        Some(mesh.weights.clone())
+    } else {
+        (targets > 0).then(|| vec![0.0; targets])
     }
 }
 
@@ -371,6 +412,7 @@ fn encode_animation(animation: &Animation, buffer: &mut BinaryBuffer) -> json::A
         };
         let (kind, components) = match ch.property {
             AnimatedProperty::Rotation => ("VEC4", 4),
+            AnimatedProperty::Weights { .. } => ("SCALAR", 1),
             _ => ("VEC3", 3),
         };
         let output = buffer.push_floats(&ch.values, components, kind, None, Bounds::Omitted);
@@ -391,6 +433,7 @@ fn encode_animation(animation: &Animation, buffer: &mut BinaryBuffer) -> json::A
                     AnimatedProperty::Translation => "translation",
                     AnimatedProperty::Rotation => "rotation",
                     AnimatedProperty::Scale => "scale",
+                    AnimatedProperty::Weights { .. } => "weights",
                 },
             },
         });
@@ -577,6 +620,83 @@ mod tests {
             doc["extensionsUsed"],
             serde_json::json!(["KHR_lights_punctual"])
         );
+    }
+
+    /// A two-target morphed icosphere with CUBICSPLINE weights.
+    fn morph_scene() -> (GltfBuilder, NodeId) {
+        use crate::authoring::shapes::{MorphTarget, icosphere};
+        let mut b = GltfBuilder::new();
+        let mut sphere = icosphere(1.0, 1);
+        let n = sphere.positions.len();
+        sphere.morph_targets = vec![
+            MorphTarget {
+                positions: vec![Vec3::Y; n],
+                normals: Some(vec![Vec3::ZERO; n]),
+            },
+            MorphTarget {
+                positions: sphere.positions.iter().map(|p| *p * 0.5).collect(),
+                normals: Some(vec![Vec3::ZERO; n]),
+            },
+        ];
+        let material = b.add_material(Material::matte("M", Vec3::ONE));
+        let mesh = b.add_simple_mesh("Blob", sphere, material);
+        b.set_mesh_weights(mesh, vec![0.25, 0.0]);
+        let node = b.add_node(Node::new("Blob").with_mesh(mesh));
+        b.add_animation(Animation {
+            name: "Morph".into(),
+            channels: vec![Channel::weights(
+                node,
+                Interpolation::CubicSpline,
+                vec![0.0, 1.0],
+                2,
+                vec![0.0, 0.0, 0.25, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.5, 0.0, 0.0],
+            )],
+        });
+        (b, node)
+    }
+
+    #[test]
+    fn encodes_morph_targets_default_weights_and_weight_channels() {
+        let (scene, _) = morph_scene();
+        let doc = parse(&scene.encode("morph").unwrap());
+        let mesh = &doc["meshes"][0];
+        assert_eq!(mesh["weights"], serde_json::json!([0.25, 0.0]));
+        let targets = mesh["primitives"][0]["targets"].as_array().unwrap();
+        assert_eq!(targets.len(), 2);
+        for t in targets {
+            let position = &doc["accessors"][t["POSITION"].as_u64().unwrap() as usize];
+            assert_eq!(position["count"], 42);
+            assert!(position["min"].is_array() && position["max"].is_array());
+            assert!(t["NORMAL"].is_u64());
+        }
+        let animation = &doc["animations"][0];
+        assert_eq!(animation["channels"][0]["target"]["path"], "weights");
+        let sampler = &animation["samplers"][0];
+        assert_eq!(sampler["interpolation"], "CUBICSPLINE");
+        let output = &doc["accessors"][sampler["output"].as_u64().unwrap() as usize];
+        assert_eq!(
+            (output["type"].as_str(), output["count"].as_u64()),
+            (Some("SCALAR"), Some(12))
+        );
+
+        // Weights for the wrong number of targets, or on a node without targets, are refused.
+        let (mut wrong, node) = morph_scene();
+        if let AnimatedProperty::Weights { targets } = &mut wrong.animations[0].channels[0].property
+        {
+            *targets = 3;
+        }
+        wrong.animations[0].channels[0].values.extend([0.0; 6]);
+        assert!(matches!(
+            wrong.encode("bad"),
+            Err(AuthoringError::Invalid(_))
+        ));
+        let (mut bad_default, _) = morph_scene();
+        bad_default.set_mesh_weights(MeshId(0), vec![1.0]);
+        assert!(matches!(
+            bad_default.encode("bad"),
+            Err(AuthoringError::Invalid(_))
+        ));
+        let _ = node;
     }
 
     #[test]

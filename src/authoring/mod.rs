@@ -11,7 +11,9 @@
 //! `node.rs`, `animation.rs` (its elements) and `validation.rs` (its checks);
 //! `gltf_writer.rs` (encoding) with `gltf_json.rs` and `binary_buffer.rs` (the glTF
 //! document and buffer); `shapes.rs` and `textures.rs` (generators); `default_scene.rs`
-//! (the default animation).
+//! (the default animation) and the BART-style animations `kitchen.rs` (rigid car
+//! hierarchy), `robots.rs` (walking jointed robots) and `museum.rs` (a morph-target
+//! sculpture with a detail knob), with `scene_kit.rs` (helpers they share).
 
 #![warn(missing_docs)]
 
@@ -23,8 +25,12 @@ mod error;
 mod gltf_json;
 mod gltf_writer;
 mod handles;
+mod kitchen;
 mod material;
+mod museum;
 mod node;
+mod robots;
+mod scene_kit;
 pub mod shapes;
 pub mod textures;
 mod validation;
@@ -41,16 +47,29 @@ pub use gltf_writer::{EncodedFile, GENERATOR};
 pub use handles::{
     AnimationId, CameraId, GeometryId, ImageId, LightId, MaterialId, MeshId, NodeId,
 };
+pub use kitchen::{KITCHEN_DURATION_SECONDS, KITCHEN_SCENE_NAME, kitchen_scene, write_kitchen};
 pub use material::{Material, TextureBinding, WrapMode};
+pub use museum::{
+    MUSEUM_DEFAULT_DETAIL, MUSEUM_DURATION_SECONDS, MUSEUM_MAX_DETAIL, MUSEUM_SCENE_NAME,
+    museum_scene, museum_sculpture_triangles, write_museum,
+};
 pub use node::{Mesh, Node, PerspectiveCamera, PointLight, Primitive};
-pub use shapes::MeshData;
+pub use robots::{
+    ROBOTS_DURATION_SECONDS, ROBOTS_SCENE_NAME, STEP_CYCLE_SECONDS, robots_scene, write_robots,
+};
+pub use shapes::{MeshData, MorphTarget};
 pub use textures::RgbaImage;
 
-/// Writes every authored animation into `dir` (today only [`write_default`]'s); returns
-/// the paths written, each scene's `.gltf` first.
+/// Writes every authored animation into `dir`: `default`, `kitchen`, `robots` and
+/// `museum` (at [`MUSEUM_DEFAULT_DETAIL`]); returns the paths written, each scene's
+/// `.gltf` first.
 ///
 /// # Errors
 /// The first scene's [`AuthoringError`].
 pub fn write_all(dir: &Path) -> Result<Vec<PathBuf>, AuthoringError> {
-    write_default(dir)
+    let mut paths = write_default(dir)?;
+    paths.extend(write_kitchen(dir)?);
+    paths.extend(write_robots(dir)?);
+    paths.extend(write_museum(dir, MUSEUM_SCENE_NAME, MUSEUM_DEFAULT_DETAIL)?);
+    Ok(paths)
 }

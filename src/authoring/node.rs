@@ -24,6 +24,10 @@ pub struct Mesh {
     pub name: String,
     /// At least one.
     pub primitives: Vec<Primitive>,
+    /// Default morph-target weights (glTF `mesh.weights`), one per target of its
+    /// primitives' geometries (which must all have the same number of targets). Empty
+    /// writes zeros when the geometries have targets.
+    pub weights: Vec<f32>,
 }
 
 /// A perspective camera; it looks down its node's -Z with +Y up.

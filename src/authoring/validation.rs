@@ -39,6 +39,24 @@ impl GltfBuilder {
                     check_index("mesh", i, "material", m.0, self.materials.len())?;
                 }
             }
+            let targets =
+                |p: &super::node::Primitive| self.geometries[p.geometry.0].1.morph_targets.len();
+            let count = targets(&mesh.primitives[0]);
+            if mesh.primitives.iter().any(|p| targets(p) != count) {
+                return Err(invalid(format!(
+                    "mesh {i} ({:?}): primitives have different numbers of morph targets",
+                    mesh.name
+                )));
+            }
+            let weights_ok = mesh.weights.is_empty()
+                || (mesh.weights.len() == count && mesh.weights.iter().all(|w| w.is_finite()));
+            if !weights_ok {
+                return Err(invalid(format!(
+                    "mesh {i} ({:?}) has {} morph weights for {count} morph targets",
+                    mesh.name,
+                    mesh.weights.len()
+                )));
+            }
         }
         Ok(())
     }
@@ -196,6 +214,17 @@ impl GltfBuilder {
                         "{}: wrong number of key values",
                         context(c)
                     )));
+                }
+                if let AnimatedProperty::Weights { targets } = ch.property {
+                    let mesh_targets = self.nodes[ch.node.0]
+                        .mesh
+                        .map_or(0, |m| self.morph_target_count(m));
+                    if targets == 0 || targets != mesh_targets {
+                        return Err(invalid(format!(
+                            "{}: weights for {targets} morph targets, but the node's mesh has {mesh_targets}",
+                            context(c)
+                        )));
+                    }
                 }
                 if ch.property == AnimatedProperty::Rotation {
                     check_unit_rotations(ch)
