@@ -568,9 +568,9 @@ fn render_three_frames(name: &str) -> Vec<mipray::frame::FrameRecord> {
 fn kitchen_renders_with_rigid_updates_only() {
     let records = render_three_frames("kitchen");
     for r in &records[1..] {
-        assert!(r.moved_triangles > 0, "frame {}", r.frame);
-        assert_eq!(r.lod_recomputed, 0, "frame {}", r.frame);
-        assert_eq!(r.deformed_triangles, 0, "frame {}", r.frame);
+        assert!(r.update.moved_triangles > 0, "frame {}", r.frame);
+        assert_eq!(r.update.lod_recomputed, 0, "frame {}", r.frame);
+        assert_eq!(r.update.deformed_triangles, 0, "frame {}", r.frame);
     }
 }
 
@@ -578,8 +578,8 @@ fn kitchen_renders_with_rigid_updates_only() {
 fn robots_render_with_moving_limbs() {
     let records = render_three_frames("robots");
     for r in &records[1..] {
-        assert!(r.moved_triangles > 0, "frame {}", r.frame);
-        assert_eq!(r.deformed_triangles, 0, "frame {}", r.frame);
+        assert!(r.update.moved_triangles > 0, "frame {}", r.frame);
+        assert_eq!(r.update.deformed_triangles, 0, "frame {}", r.frame);
     }
 }
 
@@ -587,6 +587,6 @@ fn robots_render_with_moving_limbs() {
 fn museum_renders_with_a_deforming_sculpture() {
     let records = render_three_frames("museum");
     for r in &records[1..] {
-        assert!(r.deformed_triangles > 0, "frame {}", r.frame);
+        assert!(r.update.deformed_triangles > 0, "frame {}", r.frame);
     }
 }
