@@ -41,7 +41,7 @@ pub fn run_bench(
     load: impl Fn() -> Result<SceneDesc>,
     settings: RenderSettings,
     frames: std::ops::Range<u32>,
-    fps: f64,
+    clock: crate::frame::FrameClock,
     configs: &[BenchConfig],
     repeats: usize,
 ) -> Result<Vec<BenchResult>> {
@@ -72,7 +72,7 @@ pub fn run_bench(
         for k in 0..n {
             let c = (k + repeat) % n;
             for frame in frames.clone() {
-                let time_s = (frame as f64 / fps) as f32;
+                let time_s = clock.time(frame);
                 let (_, record) = pools[c].install(|| renderers[c].render_frame(frame, time_s))?;
                 let s = &mut samples[c][repeat];
                 s.0 += record.render_ms;

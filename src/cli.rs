@@ -15,7 +15,7 @@ use crate::anim::{AnimationSelection, select_animation};
 use crate::diff::{
     DiffMetric, DiffOptions, DiffReport, compare_stats, diff_dirs, diff_frame, junit_xml,
 };
-use crate::frame::{BvhPolicy, FrameRecord, RenderSettings, Renderer};
+use crate::frame::{BvhPolicy, FrameClock, FrameRecord, RenderSettings, Renderer};
 use crate::lod::LodMethod;
 use crate::output::{FrameFormat, OutputDir, Shard};
 use crate::scene::SceneDesc;
@@ -66,9 +66,10 @@ pub struct RenderArgs {
     /// Half-open frame range `A..B` (or a single frame `A`) [default: the animation's length].
     #[arg(long)]
     pub frames: Option<String>,
-    /// Frames per second: frame i is at time i / fps.
-    #[arg(long, default_value_t = 30.0)]
-    pub fps: f64,
+    /// Frames per second: frame i is at time i / fps [default: 30, or the scene's own frame
+    /// times when it has them (AFF `a`)].
+    #[arg(long)]
+    pub fps: Option<f64>,
     /// Image size `WxH`.
     #[arg(long, default_value = "640x360")]
     pub size: String,
@@ -162,8 +163,9 @@ pub struct BenchArgs {
     /// Half-open frame range `A..B` rendered per repeat [default: the animation's length].
     #[arg(long)]
     pub frames: Option<String>,
-    #[arg(long, default_value_t = 30.0)]
-    pub fps: f64,
+    /// Frames per second [default: 30, or the scene's own frame times].
+    #[arg(long)]
+    pub fps: Option<f64>,
     #[arg(long, default_value = "640x360")]
     pub size: String,
     /// LOD methods, comma separated; ratios are against the first.
@@ -268,8 +270,9 @@ pub fn load_scene(path: &Path) -> Result<SceneDesc> {
         .map(str::to_ascii_lowercase);
     match ext.as_deref() {
         Some("gltf") | Some("glb") => Ok(crate::scene::gltf::load(path)?),
+        Some("aff") => Ok(crate::scene::aff::load(path)?),
         _ => bail!(
-            "{}: unsupported scene format (expected .gltf or .glb)",
+            "{}: unsupported scene format (expected .gltf, .glb or .aff)",
             path.display()
         ),
     }
@@ -324,13 +327,6 @@ pub fn parse_frames(s: &str) -> Result<std::ops::Range<u32>> {
     Ok(range)
 }
 
-/// Frames covering the animation once at `fps` (frame i at i / fps; the end time itself is
-/// left out so a loop does not repeat its first pose). A static scene has one frame.
-pub fn default_frames(duration_s: f32, fps: f64) -> std::ops::Range<u32> {
-    let n = (duration_s as f64 * fps).round();
-    0..(n.clamp(1.0, 1e6) as u32)
-}
-
 fn scene_name(path: &Path) -> String {
     path.file_stem()
         .map(|s| s.to_string_lossy().into_owned())
@@ -354,8 +350,8 @@ fn validated_settings(args: &RenderArgs) -> Result<RenderSettings> {
             args.rebuild_threshold
         );
     }
-    if !(args.fps.is_finite() && args.fps > 0.0) {
-        bail!("--fps {}: must be a positive number", args.fps);
+    if let Some(fps) = args.fps.filter(|f| !(f.is_finite() && *f > 0.0)) {
+        bail!("--fps {fps}: must be a positive number");
     }
     Ok(RenderSettings {
         width,
@@ -423,9 +419,10 @@ pub fn render(args: &RenderArgs) -> Result<ExitCode> {
         settings.animation = select_animation(&scene, spec)
             .map_err(|e| anyhow::anyhow!("{}: --animation {spec}: {e}", path.display()))?;
     }
+    let clock = FrameClock::for_scene(&scene, args.fps);
     let frames = match &args.frames {
         Some(f) => parse_frames(f)?,
-        None => default_frames(settings.animation.duration(&scene), args.fps),
+        None => clock.default_frames(settings.animation.duration(&scene)),
     };
     let out = args.out.clone().unwrap_or_else(|| {
         PathBuf::from("out")
@@ -460,7 +457,7 @@ pub fn render(args: &RenderArgs) -> Result<ExitCode> {
         junit: args.check_args.junit.clone(),
     });
     let mut renderer = Renderer::new(scene, settings);
-    pool.install(|| render_sequence(&mut renderer, frames, args.fps, &output, check.as_ref()))
+    pool.install(|| render_sequence(&mut renderer, frames, clock, &output, check.as_ref()))
 }
 
 /// `render --check`: judge each frame against a reference as soon as it is written.
@@ -488,11 +485,13 @@ pub fn bench(args: &BenchArgs) -> Result<()> {
         bail!("bench needs at least one repeat and one method");
     }
     let path = resolve_scene(&args.scene)?;
-    let duration = load_scene(&path)?.duration();
+    let scene = load_scene(&path)?;
+    let clock = FrameClock::for_scene(&scene, args.fps);
     let frames = match &args.frames {
         Some(f) => parse_frames(f)?,
-        None => default_frames(duration, args.fps),
+        None => clock.default_frames(scene.duration()),
     };
+    drop(scene);
     let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
     let mut threads = if args.threads.is_empty() {
         vec![1, cores]
@@ -525,7 +524,7 @@ pub fn bench(args: &BenchArgs) -> Result<()> {
         || load_scene(&path),
         settings,
         frames,
-        args.fps,
+        clock,
         &configs,
         args.repeats,
     )?;
@@ -548,7 +547,7 @@ pub struct SequenceOutput {
 pub fn render_sequence(
     renderer: &mut Renderer,
     frames: std::ops::Range<u32>,
-    fps: f64,
+    clock: FrameClock,
     out: &SequenceOutput,
     check: Option<&Check>,
 ) -> Result<ExitCode> {
@@ -575,7 +574,7 @@ pub fn render_sequence(
     let progress = progress_bar(todo.len() as u64);
     let start = Instant::now();
     for frame in todo {
-        let time_s = (frame as f64 / fps) as f32;
+        let time_s = clock.time(frame);
         let (image, record) = renderer.render_frame(frame, time_s)?;
         let path = output.write_frame(frame, &image)?;
         output.append_record(&record)?;
@@ -896,7 +895,15 @@ mod tests {
 
     #[test]
     fn default_frames_cover_the_animation_once() {
-        assert_eq!(default_frames(1.6, 30.0), 0..48);
-        assert_eq!(default_frames(0.0, 30.0), 0..1);
+        assert_eq!(FrameClock::Fps(30.0).default_frames(1.6), 0..48);
+        assert_eq!(FrameClock::Fps(30.0).default_frames(0.0), 0..1);
+        let aff = FrameClock::Scene(crate::scene::FrameTimes {
+            start: 0.0,
+            end: 20.0,
+            frames: 800,
+        });
+        assert_eq!(aff.default_frames(123.0), 0..800);
+        assert_eq!(aff.time(799), 20.0);
+        assert_eq!(aff.time(0), 0.0);
     }
 }

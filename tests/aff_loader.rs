@@ -181,7 +181,8 @@ fn fixture_uses_every_command() {
     assert_eq!(frames.time(1), 0.5);
     assert_eq!(frames.time(4), 2.0);
 
-    // Lights: white by default, no distance falloff.
+    // Lights: white by default, no distance falloff, intensity pi (the NFF light through
+    // the integrator's Lambert `1/pi`).
     assert_eq!(scene.lights.len(), 2);
     assert_eq!(scene.lights[0].color, Vec3::ONE);
     assert_eq!(scene.lights[1].color, Vec3::new(0.5, 0.25, 0.125));
@@ -189,7 +190,7 @@ fn fixture_uses_every_command() {
         scene
             .lights
             .iter()
-            .all(|l| !l.inverse_square && l.intensity == 1.0)
+            .all(|l| !l.inverse_square && l.intensity == std::f32::consts::PI)
     );
     let l1 = node_named(&scene, "light1");
     assert_eq!(scene.nodes[l1].local.translation, Vec3::new(-1.0, 4.0, 1.0));

@@ -347,3 +347,29 @@ fn shards_render_disjoint_blocks_that_report_merges() {
     assert!(text.contains("shards merged: 3"), "{text}");
     assert!(dir.path().join("s/report.svg").is_file());
 }
+
+#[test]
+fn aff_scene_renders_at_its_own_frame_times() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/aff/scene.aff");
+    let scene = scene.to_str().unwrap();
+    let out = mipray(
+        &["render", scene, "--size", "32x24", "--out", "o"],
+        dir.path(),
+    );
+    assert!(out.status.success(), "{}", stderr(&out));
+    let stats = std::fs::read_to_string(dir.path().join("o/stats.jsonl")).unwrap();
+    let times: Vec<f64> = stats
+        .lines()
+        .map(|l| {
+            serde_json::from_str::<serde_json::Value>(l).unwrap()["time_s"]
+                .as_f64()
+                .unwrap()
+        })
+        .collect();
+    // The fixture's `a 0 2 5`: five frames from 0 to 2 s.
+    assert_eq!(times, vec![0.0, 0.5, 1.0, 1.5, 2.0]);
+    let info = mipray(&["info", scene], dir.path());
+    assert!(info.status.success(), "{}", stderr(&info));
+    assert!(String::from_utf8_lossy(&info.stdout).contains("skinned or morphing"));
+}

@@ -29,6 +29,44 @@ use crate::render::{Camera, FrameScene, Light, LinearImage, TraceCounters, rende
 use crate::scene::SceneDesc;
 use posed::{DeformScratch, instance_vertices, same_deformation, write_all_triangles};
 
+/// Which time each frame number shows.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum FrameClock {
+    /// Frame `i` at `i / fps` seconds.
+    Fps(f64),
+    /// The scene's own frame times (AFF `a start end frames`).
+    Scene(crate::scene::FrameTimes),
+}
+
+impl FrameClock {
+    /// The clock for a scene: `--fps` when given, else the scene's own frame times, else
+    /// 30 frames per second.
+    pub fn for_scene(scene: &SceneDesc, fps: Option<f64>) -> FrameClock {
+        match (fps, scene.frame_times) {
+            (Some(fps), _) => FrameClock::Fps(fps),
+            (None, Some(times)) => FrameClock::Scene(times),
+            (None, None) => FrameClock::Fps(30.0),
+        }
+    }
+
+    /// Time of frame `frame` in seconds.
+    pub fn time(&self, frame: u32) -> f32 {
+        match self {
+            FrameClock::Fps(fps) => (frame as f64 / fps) as f32,
+            FrameClock::Scene(times) => times.time(frame),
+        }
+    }
+
+    /// The frames that cover an animation of `duration_s` once (`0..round(duration * fps)`,
+    /// at least one), or all of the scene's own frames.
+    pub fn default_frames(&self, duration_s: f32) -> std::ops::Range<u32> {
+        match self {
+            FrameClock::Fps(fps) => 0..((duration_s as f64 * fps).round().clamp(1.0, 1e6) as u32),
+            FrameClock::Scene(times) => 0..times.frames.max(1),
+        }
+    }
+}
+
 /// How the BVH follows the animation.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum BvhPolicy {

@@ -21,7 +21,7 @@
 //!   after the whole parse (the last block of a name wins; one block can drive several
 //!   nodes); a node's rest TRS is its tracks sampled at the first frame time;
 //! - **camera**: a root node named `camera` (see `camera`); **lights**: one root node per
-//!   `l`, a point light of intensity 1 with the given colour (default white) and
+//!   `l`, a point light of intensity pi (see below) with the given colour (default white) and
 //!   `inverse_square: false` (NFF lights have no distance falloff);
 //! - **tpa**: per run of triangles with one material and sample times, a child node whose
 //!   mesh has sample 0 as base and one morph target per further sample (deltas of positions
@@ -230,7 +230,9 @@ fn finish(path: &Path, mut p: Parser) -> Result<(SceneDesc, AffStats), String> {
         lights.push(LightDesc {
             kind: LightKind::Point,
             color: light.color,
-            intensity: 1.0,
+            // NFF shades `diff * Lc * max(0, N.L)`; the integrator's Lambert term is
+            // `albedo * E * cos / pi`, so an irradiance of pi reproduces the NFF light.
+            intensity: std::f32::consts::PI,
             range: None,
             inverse_square: false,
         });
