@@ -21,7 +21,7 @@ mod selection;
 pub use deform::{VertexSpace, deform_primitive, primitive_deforms};
 pub use pose::Pose;
 pub use sample::{sample_channel, sample_rotation, sample_vec3};
-pub use scale::node_uniform_scales;
+pub use scale::{NodeShape, node_shapes};
 pub use selection::{AnimationSelection, select_animation};
 
 use glam::Mat4;

@@ -21,7 +21,7 @@ use glam::{Mat4, Vec3, Vec3A};
 use serde::Serialize;
 
 use crate::accel::{Accel, AccelError, RefitKind};
-use crate::anim::{AnimationSelection, Pose, node_uniform_scales, primitive_deforms};
+use crate::anim::{AnimationSelection, NodeShape, Pose, node_shapes, primitive_deforms};
 use crate::geometry::{FrameTriangles, Placement, SceneGeometry};
 use crate::lod::{LOG2_PB_LIMIT, LodMethod, PixelFootprint, log2_pb};
 use crate::render::light::ring_lights;
@@ -199,9 +199,10 @@ pub struct PreparedFrame {
 #[derive(Debug, Clone, Copy)]
 struct InstanceState {
     world_from_object: Mat4,
-    /// `log2` of the uniform scale when the placement is a similarity, `None` otherwise
-    /// (exact through the hierarchy: see `anim::node_uniform_scales`).
-    log2_scale: Option<f64>,
+    /// The placement's shape (uniform scale and axis stretch), exact through the hierarchy
+    /// (see `anim::node_shapes`); `None` for a shear, a stretch under a rotation, or a
+    /// skinned/morphed primitive (then only its world vertices tell its shape).
+    shape: Option<NodeShape>,
 }
 
 /// Renders frames of one scene; owns the frame-to-frame state and scratch buffers.
@@ -363,7 +364,7 @@ impl Renderer {
         std::mem::swap(&mut self.pose, &mut self.previous_pose);
         self.pose
             .evaluate(&self.scene, self.settings.animation, time_s);
-        let scales = node_uniform_scales(&self.scene, self.settings.animation, time_s);
+        let scales = node_shapes(&self.scene, self.settings.animation, time_s);
         let accel_error = |source| FrameError::Accel {
             frame,
             time_s,
@@ -396,7 +397,7 @@ impl Renderer {
     /// First frame: every triangle placed, the tree built, every `log2 P_b` computed.
     fn first_frame(
         &mut self,
-        scales: &[Option<f64>],
+        scales: &[Option<NodeShape>],
         stats: &mut UpdateStats,
     ) -> Result<(), AccelError> {
         let t = Instant::now();
@@ -421,13 +422,7 @@ impl Renderer {
         self.dirty.reset(self.triangles.len());
         if self.settings.lod.needs_log2_pb() {
             for slot in 0..self.triangles.len() as u32 {
-                let instance =
-                    self.geometry.triangle_instance[self.triangles.source[slot as usize] as usize];
-                let motion = match states[instance as usize].log2_scale {
-                    Some(_) => Motion::Scaled,
-                    None => Motion::Deformed,
-                };
-                if self.set_log2_pb(slot, motion, &states) {
+                if self.set_log2_pb(slot, &states) {
                     stats.lod_recomputed += 1;
                 }
             }
@@ -437,19 +432,19 @@ impl Renderer {
         Ok(())
     }
 
-    /// Each instance's placement now; a deforming instance has no similarity scale (its
-    /// `log2 P_b` always comes from its world vertices).
-    fn instance_states(&self, scales: &[Option<f64>]) -> Vec<InstanceState> {
+    /// Each instance's placement now; a deforming instance has no shape key (its `log2 P_b`
+    /// always comes from its world vertices).
+    fn instance_states(&self, scales: &[Option<NodeShape>]) -> Vec<InstanceState> {
         self.geometry
             .instances
             .iter()
             .zip(&self.deforms)
             .map(|(inst, &deforms)| InstanceState {
                 world_from_object: self.pose.world_from_node[inst.node as usize],
-                log2_scale: if deforms {
+                shape: if deforms {
                     None
                 } else {
-                    scales[inst.node as usize].map(f64::log2)
+                    scales[inst.node as usize]
                 },
             })
             .collect()
@@ -464,7 +459,7 @@ impl Renderer {
 
     /// Rewrites the triangles of every instance whose placement changed and records them in
     /// the dirty set.
-    fn update_moved(&mut self, scales: &[Option<f64>], stats: &mut UpdateStats) {
+    fn update_moved(&mut self, scales: &[Option<NodeShape>], stats: &mut UpdateStats) {
         let t = Instant::now();
         self.dirty.reset(self.triangles.len());
         let previous = self.instances.take().unwrap_or_default();
@@ -487,10 +482,12 @@ impl Renderer {
                 continue; // static: untouched
             }
             let c = Instant::now();
-            let motion = match (now.log2_scale, before.log2_scale) {
+            // Same shape key: the triangles only turned and moved. Otherwise a new uniform
+            // scale shifts `log2 P_b`; anything else changed the shape.
+            let motion = match (now.shape, before.shape) {
                 (Some(s), Some(p)) if s == p => Motion::Rigid,
-                (Some(_), _) => Motion::Scaled,
-                (None, _) => Motion::Deformed,
+                (Some(NodeShape { stretch: None, .. }), _) => Motion::Scaled,
+                _ => Motion::Deformed,
             };
             classify_ms += ms_since(c);
             self.place_instance(i, now.world_from_object, motion);
@@ -613,7 +610,7 @@ impl Renderer {
             if motion == Motion::Rigid {
                 continue;
             }
-            if self.set_log2_pb(slot, motion, &states) {
+            if self.set_log2_pb(slot, &states) {
                 match motion {
                     Motion::Deformed => stats.lod_recomputed += 1,
                     _ => stats.lod_shifted += 1,
@@ -623,8 +620,10 @@ impl Renderer {
         self.instances = Some(states);
     }
 
-    /// Sets one triangle's `log2 P_b` by the rule for its motion; false when untextured.
-    fn set_log2_pb(&mut self, slot: u32, motion: Motion, states: &[InstanceState]) -> bool {
+    /// Sets one triangle's `log2 P_b` by the rule for its instance's shape; false when
+    /// untextured. The value depends only on the shape key and the vertices, never on the
+    /// frames before: this is what keeps a sequential run equal to a fresh frame.
+    fn set_log2_pb(&mut self, slot: u32, states: &[InstanceState]) -> bool {
         let s = slot as usize;
         let source = self.triangles.source[s] as usize;
         let object = self.object_log2_pb[source];
@@ -632,9 +631,16 @@ impl Renderer {
             return false;
         }
         let instance = self.geometry.triangle_instance[source] as usize;
-        self.triangles.log2_pb[s] = match (motion, states[instance].log2_scale) {
-            (Motion::Scaled | Motion::Rigid, Some(log2_scale)) => shift_log2_pb(object, log2_scale),
-            _ => {
+        self.triangles.log2_pb[s] = match states[instance].shape {
+            // Similarity: the object-space constant plus log2 s.
+            Some(NodeShape {
+                scale,
+                stretch: None,
+            }) => shift_log2_pb(object, scale.log2()),
+            // Stretch: the object-space triangle under the exact diagonal (a canonical value,
+            // whatever rotation the frame adds).
+            Some(shape) => self.stretched_log2_pb(source, shape),
+            None => {
                 let size = self.texture_size(source).unwrap_or((1, 1));
                 log2_pb(
                     self.triangles.positions[s],
@@ -645,6 +651,25 @@ impl Renderer {
             }
         };
         true
+    }
+
+    /// `log2 P_b` of a source triangle's rest vertices under `diag(shape.diagonal())`.
+    fn stretched_log2_pb(&self, source: usize, shape: NodeShape) -> f32 {
+        let instance = self.geometry.triangle_instance[source] as usize;
+        let primitive = self.geometry.primitive(&self.scene, instance);
+        let [x, y, z] = shape.diagonal();
+        let stretch = Mat4::from_scale(Vec3::new(x as f32, y as f32, z as f32));
+        let placement = Placement::new(stretch);
+        let (p, _) =
+            self.geometry
+                .world_triangle(source as u32, &placement, &primitive.positions, None);
+        let size = self.texture_size(source).unwrap_or((1, 1));
+        log2_pb(
+            p,
+            self.geometry.oriented_uvs(source as u32, &placement),
+            size,
+            self.footprint,
+        )
     }
 
     fn texture_size(&self, source: usize) -> Option<(u32, u32)> {
