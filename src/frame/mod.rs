@@ -308,6 +308,11 @@ impl Renderer {
         &self.accel
     }
 
+    /// The scene's drawn instances and source triangles.
+    pub fn geometry(&self) -> &SceneGeometry {
+        &self.geometry
+    }
+
     /// Materials indexed by `FrameTriangles::material` (the scene's, plus a default last).
     pub fn materials(&self) -> &[crate::scene::MaterialDesc] {
         &self.geometry.materials
