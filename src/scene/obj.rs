@@ -196,9 +196,8 @@ fn add_camera_file(scene: &mut SceneDesc, path: &Path) -> Result<(), ObjError> {
     let file: CameraFile = serde_json::from_str(&text)
         .map_err(|e| error(path, Some(e.line()), format!("bad camera file: {e}")))?;
     let vectors = [file.eye, file.forward, file.up, file.right, file.background];
-    if !vectors.iter().all(|v| finite3(*v))
-        || !(file.yfov_radians > 0.0 && file.yfov_radians < std::f32::consts::PI)
-    {
+    let fov_ok = file.yfov_radians > 0.0 && file.yfov_radians < std::f32::consts::PI;
+    if !fov_ok || !vectors.iter().all(|v| finite3(*v)) {
         return Err(error(
             path,
             None,
@@ -331,7 +330,7 @@ fn primitive(
         None
     };
     let indices: Vec<u32> = mesh.indices.clone();
-    if indices.iter().any(|&i| i as usize >= count) || indices.len() % 3 != 0 {
+    if indices.iter().any(|&i| i as usize >= count) || !indices.len().is_multiple_of(3) {
         return Err(error(path, None, "face index out of range"));
     }
     Ok(Some(PrimitiveDesc {
