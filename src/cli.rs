@@ -48,6 +48,8 @@ pub enum Command {
     },
     /// Compare a rendered sequence with a reference sequence, frame by frame.
     Diff(DiffArgs),
+    /// Write each frame's world-space triangles (OBJ or PLY), camera and lights.
+    Export(ExportArgs),
     /// Print what a scene contains.
     Info {
         /// A .gltf/.glb path, or the name of a scene in animations/ (e.g. `default`).
@@ -119,6 +121,34 @@ pub struct RenderArgs {
     pub fail_fast: bool,
     #[command(flatten)]
     pub check_args: CheckArgs,
+}
+
+/// `mipray export` options (render's defaults: 640x360, 30 fps).
+#[derive(Args, Debug, Clone)]
+pub struct ExportArgs {
+    /// A .gltf/.glb/.obj path, or the name of a scene in animations/ (e.g. `default`).
+    pub scene: String,
+    /// Half-open frame range `A..B` (or a single frame `A`) [default: the animation's length].
+    #[arg(long)]
+    pub frames: Option<String>,
+    /// Mesh file format.
+    #[arg(long, value_enum, default_value_t = crate::export::ExportFormat::Obj)]
+    pub format: crate::export::ExportFormat,
+    /// Output folder [default: out/<scene>/export/].
+    #[arg(long)]
+    pub out: Option<PathBuf>,
+    /// Image size `WxH` (sets the camera's aspect and the LOD footprint).
+    #[arg(long, default_value = "640x360")]
+    pub size: String,
+    /// Frames per second [default: 30, or the scene's own frame times (AFF `a`)].
+    #[arg(long)]
+    pub fps: Option<f64>,
+    /// Play one animation clip (its name or index) instead of all clips together.
+    #[arg(long)]
+    pub animation: Option<String>,
+    /// Number of lights, as for render.
+    #[arg(long)]
+    pub lights: Option<usize>,
 }
 
 /// How frames are judged against a reference (shared by `diff` and `render --check`).
@@ -210,6 +240,7 @@ pub fn run(cli: Cli) -> Result<ExitCode> {
         Some(Command::Render(args)) => render(&args),
         Some(Command::Bench(args)) => bench(&args).map(ok),
         Some(Command::Diff(args)) => diff(&args),
+        Some(Command::Export(args)) => export(&args).map(ok),
         Some(Command::Report { dirs, svg }) => {
             let svg = svg.unwrap_or_else(|| {
                 let first = &dirs[0];
@@ -271,8 +302,9 @@ pub fn load_scene(path: &Path) -> Result<SceneDesc> {
     match ext.as_deref() {
         Some("gltf") | Some("glb") => Ok(crate::scene::gltf::load(path)?),
         Some("aff") => Ok(crate::scene::aff::load(path)?),
+        Some("obj") => Ok(crate::scene::obj::load(path)?),
         _ => bail!(
-            "{}: unsupported scene format (expected .gltf, .glb or .aff)",
+            "{}: unsupported scene format (expected .gltf, .glb, .aff or .obj)",
             path.display()
         ),
     }
@@ -458,6 +490,56 @@ pub fn render(args: &RenderArgs) -> Result<ExitCode> {
     });
     let mut renderer = Renderer::new(scene, settings);
     pool.install(|| render_sequence(&mut renderer, frames, clock, &output, check.as_ref()))
+}
+
+/// `mipray export`: prepares each frame with render's settings and writes its triangles,
+/// camera and lights (see `export`).
+pub fn export(args: &ExportArgs) -> Result<()> {
+    let render_args = RenderArgs {
+        scene: args.scene.clone(),
+        size: args.size.clone(),
+        fps: args.fps,
+        lights: args.lights,
+        ..RenderArgs::default()
+    };
+    let mut settings = validated_settings(&render_args)?;
+    let path = resolve_scene(&args.scene)?;
+    let scene = load_scene(&path)?;
+    if let Some(spec) = &args.animation {
+        settings.animation = select_animation(&scene, spec)
+            .map_err(|e| anyhow::anyhow!("{}: --animation {spec}: {e}", path.display()))?;
+    }
+    let clock = FrameClock::for_scene(&scene, args.fps);
+    let frames = match &args.frames {
+        Some(f) => parse_frames(f)?,
+        None => clock.default_frames(settings.animation.duration(&scene)),
+    };
+    let options = crate::export::ExportOptions {
+        format: args.format,
+        dir: args
+            .out
+            .clone()
+            .unwrap_or_else(|| PathBuf::from("out").join(scene_name(&path)).join("export")),
+        frames,
+        clock,
+    };
+    let mut renderer = Renderer::new(scene, settings);
+    let done = crate::export::export_frames(&mut renderer, &options, |f| {
+        println!(
+            "frame {:04}  t={:.3}s  {} triangles  {} deformed  -> {}",
+            f.frame,
+            f.time_s,
+            f.triangles,
+            f.deformed,
+            f.mesh.display()
+        );
+    })?;
+    println!(
+        "exported {} frame(s) into {}",
+        done.len(),
+        options.dir.display()
+    );
+    Ok(())
 }
 
 /// `render --check`: judge each frame against a reference as soon as it is written.

@@ -7,6 +7,7 @@ pub mod authoring;
 pub mod bench;
 pub mod cli;
 pub mod diff;
+pub mod export;
 pub mod frame;
 pub mod geometry;
 pub mod lod;

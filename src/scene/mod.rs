@@ -19,6 +19,7 @@
 
 pub mod aff;
 pub mod gltf;
+pub mod obj;
 
 use std::path::PathBuf;
 

@@ -1,0 +1,207 @@
+//! `mipray export`: each frame's world-space triangles exactly as the renderer traces them
+//! (positions, shading normals, UVs, material, `log2 P_b`), the camera with its primary-ray
+//! convention and the frame's lights, for other tools (Blender, a second renderer) and for
+//! regression checks.
+//!
+//! Files per frame `N` in the output folder (see `docs/export.md` for the formats):
+//! - `frame_NNNN.obj` (+ one shared `materials.mtl` and `textures/*.png`), or
+//!   `frame_NNNN.ply` (binary little-endian, with per-face material, `log2_pb`, `deformed`);
+//! - `camera_NNNN.json`: camera, primary-ray convention, lights, background.
+//!
+//! Invariants: meshes stream from `Renderer::triangles()` through a `BufWriter` (no second
+//! in-memory copy of the mesh); every file is written to a hidden temporary file in the same
+//! folder and renamed into place, so a file is either absent or complete.
+
+pub mod camera;
+mod obj;
+mod ply;
+
+use std::fs::{self, File};
+use std::io::{self, BufWriter, Write};
+use std::ops::Range;
+use std::path::{Path, PathBuf};
+
+use crate::frame::{FrameError, Motion, Renderer};
+
+pub use camera::{CameraFile, LightFile};
+pub use obj::{MTL_FILE, texture_file_name};
+
+/// Mesh file format of an export.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, clap::ValueEnum)]
+pub enum ExportFormat {
+    /// Wavefront OBJ + MTL + PNG textures (Blender, most tools).
+    #[default]
+    Obj,
+    /// Binary little-endian PLY with per-face material, log2_pb and deformed flags.
+    Ply,
+}
+
+impl ExportFormat {
+    pub fn extension(self) -> &'static str {
+        match self {
+            ExportFormat::Obj => "obj",
+            ExportFormat::Ply => "ply",
+        }
+    }
+}
+
+/// What to export and where.
+#[derive(Debug, Clone)]
+pub struct ExportOptions {
+    pub format: ExportFormat,
+    pub dir: PathBuf,
+    /// Half-open frame range; frame `i` is at `clock.time(i)` (as `render` does).
+    pub frames: Range<u32>,
+    pub clock: crate::frame::FrameClock,
+}
+
+/// One exported frame.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ExportedFrame {
+    pub frame: u32,
+    pub time_s: f32,
+    pub mesh: PathBuf,
+    pub camera: PathBuf,
+    pub triangles: usize,
+    /// Triangles flagged `deformed` (shape changed since the previous frame).
+    pub deformed: usize,
+}
+
+#[derive(Debug, thiserror::Error)]
+pub enum ExportError {
+    #[error("{path}: {source}")]
+    Io { path: PathBuf, source: io::Error },
+    #[error("{path}: cannot encode texture: {source}")]
+    Encode {
+        path: PathBuf,
+        source: image::ImageError,
+    },
+    #[error(transparent)]
+    Frame(#[from] FrameError),
+}
+
+pub(crate) fn io_error(path: &Path) -> impl FnOnce(io::Error) -> ExportError + '_ {
+    move |source| ExportError::Io {
+        path: path.to_path_buf(),
+        source,
+    }
+}
+
+/// File name of frame `index`'s mesh: `frame_0000.obj` (at least four digits).
+pub fn mesh_file_name(index: u32, format: ExportFormat) -> String {
+    format!("frame_{index:04}.{}", format.extension())
+}
+
+/// File name of frame `index`'s camera: `camera_0000.json`.
+pub fn camera_file_name(index: u32) -> String {
+    format!("camera_{index:04}.json")
+}
+
+/// `dir/.name.tmp`: hidden, same folder (so the rename stays on one file system).
+fn temporary_sibling(path: &Path) -> PathBuf {
+    let name = path
+        .file_name()
+        .map(|n| n.to_string_lossy().into_owned())
+        .unwrap_or_default();
+    path.with_file_name(format!(".{name}.tmp"))
+}
+
+/// Streams a file through a `BufWriter` into a temporary sibling, then renames it into
+/// place; on any error the temporary file is removed and `path` is untouched.
+pub(crate) fn write_atomically(
+    path: &Path,
+    write: impl FnOnce(&mut BufWriter<File>) -> io::Result<()>,
+) -> Result<(), ExportError> {
+    let tmp = temporary_sibling(path);
+    let file = File::create(&tmp).map_err(io_error(&tmp))?;
+    let mut writer = BufWriter::with_capacity(1 << 20, file);
+    let written = write(&mut writer).and_then(|()| writer.flush());
+    drop(writer);
+    if let Err(e) = written {
+        let _ = fs::remove_file(&tmp);
+        return Err(io_error(path)(e));
+    }
+    fs::rename(&tmp, path).map_err(|e| {
+        let _ = fs::remove_file(&tmp);
+        io_error(path)(e)
+    })
+}
+
+/// Per-slot bitset of the triangles the last `prepare` marked [`Motion::Deformed`].
+pub(crate) fn deformed_slots(renderer: &Renderer) -> Vec<u64> {
+    let dirty = renderer.dirty();
+    let mut bits = vec![0u64; renderer.triangles().len().div_ceil(64)];
+    for (&slot, &motion) in dirty.slots.iter().zip(&dirty.motions) {
+        if motion == Motion::Deformed && dirty.contains(slot) {
+            bits[slot as usize / 64] |= 1 << (slot % 64);
+        }
+    }
+    bits
+}
+
+pub(crate) fn bit(bits: &[u64], slot: usize) -> bool {
+    bits.get(slot / 64)
+        .is_some_and(|w| w & (1 << (slot % 64)) != 0)
+}
+
+/// Exports `options.frames` of the renderer's scene into `options.dir` (created if
+/// needed), calling `on_frame` after each frame's files are in place.
+///
+/// When the range starts after frame 0, frame `start - 1` is prepared first (and not
+/// written) so that `deformed` always means "changed since the previous frame", whatever
+/// frame an export starts at; frame 0 has no previous frame and flags nothing.
+///
+/// # Errors
+/// The folder or a file cannot be written, a texture cannot be encoded, or animation
+/// produced a non-finite vertex.
+pub fn export_frames(
+    renderer: &mut Renderer,
+    options: &ExportOptions,
+    mut on_frame: impl FnMut(&ExportedFrame),
+) -> Result<Vec<ExportedFrame>, ExportError> {
+    fs::create_dir_all(&options.dir).map_err(io_error(&options.dir))?;
+    let time_of = |frame: u32| options.clock.time(frame);
+    if options.frames.start > 0 {
+        let previous = options.frames.start - 1;
+        renderer.prepare(previous, time_of(previous))?;
+    }
+    if options.format == ExportFormat::Obj {
+        let textures = obj::write_textures(renderer, &options.dir)?;
+        obj::write_mtl(renderer, &options.dir, &textures)?;
+    }
+    let mut done = Vec::with_capacity(options.frames.len());
+    for frame in options.frames.clone() {
+        let time_s = time_of(frame);
+        let prepared = renderer.prepare(frame, time_s)?;
+        let mesh = options.dir.join(mesh_file_name(frame, options.format));
+        let deformed = deformed_slots(renderer);
+        match options.format {
+            ExportFormat::Obj => obj::write_obj(renderer, &mesh, frame, time_s)?,
+            ExportFormat::Ply => ply::write_ply(renderer, &mesh, frame, time_s, &deformed)?,
+        }
+        let camera = options.dir.join(camera_file_name(frame));
+        let file = CameraFile::new(
+            frame,
+            time_s,
+            &prepared.camera,
+            &prepared.lights,
+            renderer.scene().background,
+        );
+        let json = serde_json::to_string_pretty(&file).map_err(|e| io_error(&camera)(e.into()))?;
+        write_atomically(&camera, |w| {
+            w.write_all(json.as_bytes())?;
+            w.write_all(b"\n")
+        })?;
+        let exported = ExportedFrame {
+            frame,
+            time_s,
+            mesh,
+            camera,
+            triangles: renderer.triangles().len(),
+            deformed: deformed.iter().map(|w| w.count_ones() as usize).sum(),
+        };
+        on_frame(&exported);
+        done.push(exported);
+    }
+    Ok(done)
+}

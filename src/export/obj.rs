@@ -1,0 +1,256 @@
+//! OBJ + MTL + PNG writer.
+//!
+//! Conventions: positions and normals are world space (+Y up, -Z forward, as glTF); one
+//! vertex, texture coordinate and normal per triangle corner (no sharing), one `usemtl`
+//! group per material. OBJ's `vt` origin is the bottom-left of the image while mipray's
+//! (glTF's) is the top-left, so `vt` holds `u, 1 - v` (computed in f64, exact for the
+//! coordinates a frame holds); `scene::obj` flips it back. Numbers are printed in the
+//! shortest form that parses back to the same f32.
+
+use std::collections::BTreeMap;
+use std::io::Write;
+use std::path::Path;
+
+use image::{DynamicImage, ImageFormat, RgbImage, RgbaImage};
+
+use super::{ExportError, io_error, write_atomically};
+use crate::frame::Renderer;
+use crate::render::film::encode_srgb8;
+use crate::scene::MaterialDesc;
+use crate::texture::{Texture, WrapMode};
+
+/// The shared material library every exported OBJ frame references.
+pub const MTL_FILE: &str = "materials.mtl";
+
+/// `textures/<index>_<name>.png`: the name is the texture's own, reduced to
+/// `[A-Za-z0-9._-]` without an image extension.
+pub fn texture_file_name(index: usize, texture: &Texture) -> String {
+    let base = Path::new(&texture.name)
+        .file_name()
+        .map(|n| n.to_string_lossy().into_owned())
+        .unwrap_or_default();
+    let stem = match base.rsplit_once('.') {
+        Some((stem, ext))
+            if ["png", "jpg", "jpeg", "ppm", "pnm", "pgm"]
+                .contains(&ext.to_ascii_lowercase().as_str()) =>
+        {
+            stem.to_string()
+        }
+        _ => base,
+    };
+    let mut clean: String = stem
+        .chars()
+        .map(|c| {
+            if c.is_ascii_alphanumeric() || "._-".contains(c) {
+                c
+            } else {
+                '_'
+            }
+        })
+        .collect();
+    if clean.is_empty() {
+        clean = "texture".into();
+    }
+    format!("textures/{index}_{clean}.png")
+}
+
+/// Name of material `i` in the MTL: `<i>_<name>` with whitespace replaced (`usemtl` reads
+/// the rest of its line, and the index keeps names unique).
+pub(crate) fn material_name(i: usize, material: &MaterialDesc) -> String {
+    let clean: String = material
+        .name
+        .chars()
+        .map(|c| if c.is_whitespace() { '_' } else { c })
+        .collect();
+    if clean.is_empty() {
+        format!("{i}")
+    } else {
+        format!("{i}_{clean}")
+    }
+}
+
+/// Writes each base-colour texture the materials use once (level 0, 8-bit sRGB; RGB when
+/// every alpha is 1, RGBA otherwise). Returns texture index -> relative file name.
+pub(crate) fn write_textures(
+    renderer: &Renderer,
+    dir: &Path,
+) -> Result<BTreeMap<usize, String>, ExportError> {
+    let scene = renderer.scene();
+    let mut names = BTreeMap::new();
+    for material in renderer.materials() {
+        let Some(index) = material.base_color_texture else {
+            continue;
+        };
+        let Some(texture) = scene.textures.get(index) else {
+            continue;
+        };
+        if names.contains_key(&index) {
+            continue;
+        }
+        let name = texture_file_name(index, texture);
+        let path = dir.join(&name);
+        if let Some(parent) = path.parent() {
+            std::fs::create_dir_all(parent).map_err(io_error(parent))?;
+        }
+        let level = &texture.pyramid.levels[0];
+        let opaque = level.texels.iter().all(|t| t.w == 1.0);
+        let image = if opaque {
+            let bytes = level
+                .texels
+                .iter()
+                .flat_map(|t| [t.x, t.y, t.z].map(encode_srgb8))
+                .collect();
+            DynamicImage::ImageRgb8(
+                RgbImage::from_raw(level.width, level.height, bytes).expect("level size"),
+            )
+        } else {
+            let alpha = |a: f32| (a.clamp(0.0, 1.0) * 255.0 + 0.5) as u8;
+            let bytes = level
+                .texels
+                .iter()
+                .flat_map(|t| {
+                    [
+                        encode_srgb8(t.x),
+                        encode_srgb8(t.y),
+                        encode_srgb8(t.z),
+                        alpha(t.w),
+                    ]
+                })
+                .collect();
+            DynamicImage::ImageRgba8(
+                RgbaImage::from_raw(level.width, level.height, bytes).expect("level size"),
+            )
+        };
+        let mut encoded = Vec::new();
+        image
+            .write_to(&mut std::io::Cursor::new(&mut encoded), ImageFormat::Png)
+            .map_err(|source| ExportError::Encode {
+                path: path.clone(),
+                source,
+            })?;
+        write_atomically(&path, |w| w.write_all(&encoded))?;
+        names.insert(index, name);
+    }
+    Ok(names)
+}
+
+fn wrap_name(mode: WrapMode) -> &'static str {
+    match mode {
+        WrapMode::Repeat => "repeat",
+        WrapMode::ClampToEdge => "clamp",
+        WrapMode::MirroredRepeat => "mirrored",
+    }
+}
+
+/// Writes `materials.mtl`: one `newmtl` per entry of `Renderer::materials()` (in order, so
+/// a re-load keeps the indices), standard statements for other tools and `mipray_*`
+/// statements with the exact parameters.
+pub(crate) fn write_mtl(
+    renderer: &Renderer,
+    dir: &Path,
+    textures: &BTreeMap<usize, String>,
+) -> Result<(), ExportError> {
+    let scene = renderer.scene();
+    let path = dir.join(MTL_FILE);
+    write_atomically(&path, |w| {
+        writeln!(w, "# mipray export: materials indexed as the renderer's")?;
+        writeln!(
+            w,
+            "# Kd is linear RGB; mipray_* statements carry the exact parameters (other tools ignore them)"
+        )?;
+        for (i, m) in renderer.materials().iter().enumerate() {
+            let [r, g, b] = m.base_color.to_array();
+            writeln!(w, "\nnewmtl {}", material_name(i, m))?;
+            if !m.name.is_empty() {
+                writeln!(w, "mipray_name {}", m.name)?;
+            }
+            writeln!(w, "Kd {r} {g} {b}")?;
+            writeln!(w, "Ks {0} {0} {0}", m.specular)?;
+            writeln!(w, "Ns {}", m.shininess)?;
+            writeln!(w, "Ni {}", m.ior)?;
+            writeln!(w, "d {}", 1.0 - m.transmission as f64)?;
+            writeln!(w, "Tr {}", m.transmission)?;
+            let illum = if m.transmission > 0.0 {
+                7
+            } else if m.reflectance > 0.0 {
+                3
+            } else {
+                2
+            };
+            writeln!(w, "illum {illum}")?;
+            if let Some((index, file)) = m
+                .base_color_texture
+                .and_then(|t| textures.get(&t).map(|f| (t, f)))
+            {
+                let sampler = scene.textures[index].sampler;
+                let clamp = sampler.wrap_s == WrapMode::ClampToEdge
+                    && sampler.wrap_t == WrapMode::ClampToEdge;
+                let option = if clamp { "-clamp on " } else { "" };
+                writeln!(w, "map_Kd {option}{file}")?;
+                writeln!(
+                    w,
+                    "mipray_wrap {} {}",
+                    wrap_name(sampler.wrap_s),
+                    wrap_name(sampler.wrap_t)
+                )?;
+                writeln!(w, "mipray_texture_name {}", scene.textures[index].name)?;
+            }
+            writeln!(w, "mipray_reflectance {}", m.reflectance)?;
+            writeln!(w, "mipray_specular {}", m.specular)?;
+            writeln!(w, "mipray_transmission {}", m.transmission)?;
+            writeln!(w, "mipray_double_sided {}", u8::from(m.double_sided))?;
+        }
+        Ok(())
+    })
+}
+
+/// Streams the frame's triangles into `path`, grouped by material.
+pub(crate) fn write_obj(
+    renderer: &Renderer,
+    path: &Path,
+    frame: u32,
+    time_s: f32,
+) -> Result<(), ExportError> {
+    let t = renderer.triangles();
+    let materials = renderer.materials();
+    write_atomically(path, |w| {
+        writeln!(
+            w,
+            "# mipray export: frame {frame}, time {time_s} s, {} triangles",
+            t.len()
+        )?;
+        writeln!(
+            w,
+            "# world space, +Y up, -Z forward (glTF); per-corner vertices; vt = (u, 1 - v) of mipray's top-left-origin (u, v)"
+        )?;
+        writeln!(w, "# camera and lights: camera_{frame:04}.json")?;
+        writeln!(w, "mtllib {MTL_FILE}")?;
+        writeln!(w, "o frame_{frame:04}")?;
+        let mut next = 1usize;
+        for (m, material) in materials.iter().enumerate() {
+            let mut started = false;
+            for slot in 0..t.len() {
+                if t.material[slot] as usize != m {
+                    continue;
+                }
+                if !started {
+                    writeln!(w, "usemtl {}", material_name(m, material))?;
+                    started = true;
+                }
+                for p in &t.positions[slot] {
+                    writeln!(w, "v {} {} {}", p.x, p.y, p.z)?;
+                }
+                for uv in &t.uvs[slot] {
+                    writeln!(w, "vt {} {}", uv.x, 1.0 - uv.y as f64)?;
+                }
+                for n in &t.normals[slot] {
+                    writeln!(w, "vn {} {} {}", n.x, n.y, n.z)?;
+                }
+                let (a, b, c) = (next, next + 1, next + 2);
+                writeln!(w, "f {a}/{a}/{a} {b}/{b}/{b} {c}/{c}/{c}")?;
+                next += 3;
+            }
+        }
+        Ok(())
+    })
+}

@@ -1,0 +1,770 @@
+//! `mipray export`: triangle counts, the OBJ round trip (re-loaded frame renders like the
+//! animation), the PLY layout with `log2_pb` and `deformed`, the camera JSON's primary
+//! rays, and bad input.
+
+use std::collections::HashMap;
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+use glam::{Quat, Vec2, Vec3, Vec4};
+use mipray::export::{ExportFormat, ExportOptions, export_frames};
+use mipray::frame::{Motion, RenderSettings, Renderer};
+use mipray::scene::{
+    AnimationDesc, ChannelDesc, ChannelTarget, Interpolation, MaterialDesc, MeshDesc, NodeDesc,
+    PrimitiveDesc, SceneDesc, Trs,
+};
+use mipray::texture::{MipPyramid, Sampler, Texture};
+
+fn mipray(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_mipray"))
+        .args(args)
+        .current_dir(env!("CARGO_MANIFEST_DIR"))
+        .output()
+        .expect("run mipray")
+}
+
+fn default_scene() -> SceneDesc {
+    let path = mipray::cli::resolve_scene("default").expect("default scene");
+    mipray::cli::load_scene(&path).expect("load default scene")
+}
+
+fn settings(width: u32, height: u32) -> RenderSettings {
+    RenderSettings {
+        width,
+        height,
+        ..RenderSettings::default()
+    }
+}
+
+fn export(
+    renderer: &mut Renderer,
+    dir: &Path,
+    format: ExportFormat,
+    frames: std::ops::Range<u32>,
+) -> Vec<mipray::export::ExportedFrame> {
+    let options = ExportOptions {
+        format,
+        dir: dir.to_path_buf(),
+        frames,
+        clock: mipray::frame::FrameClock::Fps(30.0),
+    };
+    export_frames(renderer, &options, |_| {}).expect("export")
+}
+
+// ---------------------------------------------------------------- PLY reader (from its header)
+
+#[derive(Debug, Clone, PartialEq)]
+enum Value {
+    F(f32),
+    I(i64),
+    List(Vec<i64>),
+}
+
+#[derive(Debug)]
+enum Property {
+    Scalar {
+        ty: String,
+        name: String,
+    },
+    List {
+        count: String,
+        item: String,
+        name: String,
+    },
+}
+
+#[derive(Debug)]
+struct Element {
+    name: String,
+    count: usize,
+    properties: Vec<Property>,
+}
+
+struct Ply {
+    comments: Vec<String>,
+    /// Per element: its rows, each a map from property name to value.
+    elements: Vec<(Element, Vec<HashMap<String, Value>>)>,
+}
+
+fn read_scalar(ty: &str, bytes: &[u8], at: &mut usize) -> Value {
+    let take = |n: usize, at: &mut usize| {
+        let s = &bytes[*at..*at + n];
+        *at += n;
+        s
+    };
+    match ty {
+        "float" | "float32" => Value::F(f32::from_le_bytes(take(4, at).try_into().unwrap())),
+        "int" | "int32" => Value::I(i32::from_le_bytes(take(4, at).try_into().unwrap()) as i64),
+        "uint" | "uint32" => Value::I(u32::from_le_bytes(take(4, at).try_into().unwrap()) as i64),
+        "uchar" | "uint8" => Value::I(take(1, at)[0] as i64),
+        other => panic!("unexpected PLY type {other}"),
+    }
+}
+
+fn read_ply(path: &Path) -> Ply {
+    let bytes = std::fs::read(path).expect("read ply");
+    let end = b"end_header\n";
+    let header_len = bytes
+        .windows(end.len())
+        .position(|w| w == end)
+        .expect("end_header")
+        + end.len();
+    let header = std::str::from_utf8(&bytes[..header_len]).expect("ascii header");
+    let mut lines = header.lines();
+    assert_eq!(lines.next(), Some("ply"));
+    let mut comments = Vec::new();
+    let mut elements: Vec<Element> = Vec::new();
+    for line in lines {
+        let words: Vec<&str> = line.split_whitespace().collect();
+        match words.as_slice() {
+            ["format", f, "1.0"] => assert_eq!(*f, "binary_little_endian"),
+            ["comment", ..] => comments.push(line["comment ".len()..].to_string()),
+            ["element", name, count] => elements.push(Element {
+                name: name.to_string(),
+                count: count.parse().unwrap(),
+                properties: Vec::new(),
+            }),
+            ["property", "list", count, item, name] => elements
+                .last_mut()
+                .unwrap()
+                .properties
+                .push(Property::List {
+                    count: count.to_string(),
+                    item: item.to_string(),
+                    name: name.to_string(),
+                }),
+            ["property", ty, name] => {
+                elements
+                    .last_mut()
+                    .unwrap()
+                    .properties
+                    .push(Property::Scalar {
+                        ty: ty.to_string(),
+                        name: name.to_string(),
+                    })
+            }
+            ["end_header"] => {}
+            other => panic!("unexpected header line {other:?}"),
+        }
+    }
+    let mut at = header_len;
+    let mut out = Vec::new();
+    for element in elements {
+        let mut rows = Vec::with_capacity(element.count);
+        for _ in 0..element.count {
+            let mut row = HashMap::new();
+            for p in &element.properties {
+                match p {
+                    Property::Scalar { ty, name } => {
+                        row.insert(name.clone(), read_scalar(ty, &bytes, &mut at));
+                    }
+                    Property::List { count, item, name } => {
+                        let Value::I(n) = read_scalar(count, &bytes, &mut at) else {
+                            panic!("list count")
+                        };
+                        let items = (0..n)
+                            .map(|_| match read_scalar(item, &bytes, &mut at) {
+                                Value::I(i) => i,
+                                v => panic!("list item {v:?}"),
+                            })
+                            .collect();
+                        row.insert(name.clone(), Value::List(items));
+                    }
+                }
+            }
+            rows.push(row);
+        }
+        out.push((element, rows));
+    }
+    assert_eq!(at, bytes.len(), "body is exactly the declared layout");
+    Ply {
+        comments,
+        elements: out,
+    }
+}
+
+fn f(row: &HashMap<String, Value>, key: &str) -> f32 {
+    match row[key] {
+        Value::F(x) => x,
+        ref v => panic!("{key}: {v:?}"),
+    }
+}
+
+fn int(row: &HashMap<String, Value>, key: &str) -> i64 {
+    match row[key] {
+        Value::I(x) => x,
+        ref v => panic!("{key}: {v:?}"),
+    }
+}
+
+// ---------------------------------------------------------------- tests
+
+#[test]
+fn exported_triangle_counts_match_info_for_obj_and_ply() {
+    let info = mipray(&["info", "default"]);
+    assert!(info.status.success());
+    let text = String::from_utf8_lossy(&info.stdout).into_owned();
+    let count: usize = text
+        .lines()
+        .find_map(|l| l.strip_prefix("triangles: "))
+        .and_then(|l| l.split_whitespace().next())
+        .and_then(|n| n.parse().ok())
+        .expect("info prints the triangle count");
+    assert!(count > 100);
+
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().to_str().unwrap();
+    for format in ["obj", "ply"] {
+        let run = mipray(&[
+            "export", "default", "--frames", "7..9", "--format", format, "--out", out,
+        ]);
+        assert!(
+            run.status.success(),
+            "{}",
+            String::from_utf8_lossy(&run.stderr)
+        );
+        for frame in [7, 8] {
+            let path = dir.path().join(format!("frame_{frame:04}.{format}"));
+            let triangles = if format == "obj" {
+                let text = std::fs::read_to_string(&path).unwrap();
+                assert_eq!(
+                    text.lines().filter(|l| l.starts_with("v ")).count(),
+                    3 * count
+                );
+                text.lines().filter(|l| l.starts_with("f ")).count()
+            } else {
+                let ply = read_ply(&path);
+                assert_eq!(ply.elements[0].0.count, 3 * count);
+                ply.elements[1].0.count
+            };
+            assert_eq!(triangles, count, "{}", path.display());
+            assert!(dir.path().join(format!("camera_{frame:04}.json")).is_file());
+        }
+    }
+    assert!(dir.path().join("materials.mtl").is_file());
+    // No temporary files are left behind.
+    let leftovers: Vec<_> = std::fs::read_dir(dir.path())
+        .unwrap()
+        .flatten()
+        .filter(|e| e.file_name().to_string_lossy().ends_with(".tmp"))
+        .collect();
+    assert!(leftovers.is_empty(), "{leftovers:?}");
+}
+
+type TriangleKey = [u32; 9];
+
+fn key(p: &[glam::Vec3A; 3]) -> TriangleKey {
+    let mut k = [0; 9];
+    for (i, v) in p.iter().enumerate() {
+        for (j, c) in v.to_array().iter().enumerate() {
+            k[3 * i + j] = c.to_bits();
+        }
+    }
+    k
+}
+
+#[test]
+fn reloaded_obj_frame_renders_like_the_animation_at_that_frame() {
+    let scene = default_scene();
+    let frames = mipray::frame::FrameClock::Fps(30.0).default_frames(scene.duration());
+    let frame = (frames.start + frames.end) / 2;
+    assert!(frame > 0);
+    let time_s = (frame as f64 / 30.0) as f32;
+    let (w, h) = (96, 54);
+
+    let dir = tempfile::tempdir().unwrap();
+    let mut exporter = Renderer::new(scene, settings(w, h));
+    export(
+        &mut exporter,
+        dir.path(),
+        ExportFormat::Obj,
+        frame..frame + 1,
+    );
+    let exported: HashMap<TriangleKey, ([Vec3; 3], [Vec2; 3], u32)> = {
+        let t = exporter.triangles();
+        (0..t.len())
+            .map(|s| {
+                (
+                    key(&t.positions[s]),
+                    (t.normals[s], t.uvs[s], t.material[s]),
+                )
+            })
+            .collect()
+    };
+    assert_eq!(
+        exported.len(),
+        exporter.triangles().len(),
+        "triangles are distinct"
+    );
+
+    // Textures: decoding the exported PNG gives the original 8-bit image's bytes.
+    let original = image::open(
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("animations/default_floor_checker.png"),
+    )
+    .unwrap()
+    .to_rgb8();
+    let written: Vec<PathBuf> = std::fs::read_dir(dir.path().join("textures"))
+        .unwrap()
+        .flatten()
+        .map(|e| e.path())
+        .collect();
+    assert_eq!(written.len(), 2, "{written:?}");
+    let floor = written
+        .iter()
+        .find(|p| p.to_string_lossy().contains("floor_checker"))
+        .expect("floor texture written");
+    assert_eq!(image::open(floor).unwrap().to_rgb8(), original);
+
+    // The animated scene at that frame.
+    let mut animated = Renderer::new(default_scene(), settings(w, h));
+    let (reference, _) = animated.render_frame(frame, time_s).unwrap();
+
+    // The exported frame as a static scene.
+    let obj = dir.path().join(format!("frame_{frame:04}.obj"));
+    let reloaded_scene = mipray::cli::load_scene(&obj).expect("reload OBJ");
+    assert_eq!(reloaded_scene.animations.len(), 0);
+    assert_eq!(reloaded_scene.cameras.len(), 1);
+    assert_eq!(reloaded_scene.lights.len(), 2);
+    let mut reloaded = Renderer::new(reloaded_scene, settings(w, h));
+    let (image, _) = reloaded.render_frame(0, 0.0).unwrap();
+
+    // Positions, UVs and materials come back bit for bit, normals to rounding.
+    let t = reloaded.triangles();
+    assert_eq!(t.len(), exported.len());
+    for s in 0..t.len() {
+        let (normals, uvs, material) = exported
+            .get(&key(&t.positions[s]))
+            .expect("every re-loaded triangle is an exported one");
+        assert_eq!(t.uvs[s], *uvs);
+        assert_eq!(t.material[s], *material);
+        for (a, b) in t.normals[s].iter().zip(normals) {
+            assert!((*a - *b).length() < 1e-6, "{a} vs {b}");
+        }
+    }
+    for (m, (a, b)) in reloaded
+        .materials()
+        .iter()
+        .zip(exporter.materials())
+        .enumerate()
+    {
+        assert_eq!(a.name, b.name, "material {m}");
+        assert_eq!(a.base_color, b.base_color);
+        assert_eq!(
+            (
+                a.reflectance,
+                a.transmission,
+                a.ior,
+                a.shininess,
+                a.specular,
+                a.double_sided
+            ),
+            (
+                b.reflectance,
+                b.transmission,
+                b.ior,
+                b.shininess,
+                b.specular,
+                b.double_sided
+            )
+        );
+        assert_eq!(
+            a.base_color_texture.is_some(),
+            b.base_color_texture.is_some()
+        );
+    }
+
+    let to_rgb = |img: &mipray::render::LinearImage| {
+        image::RgbImage::from_raw(img.width, img.height, img.to_srgb8()).unwrap()
+    };
+    let (a, b) = (to_rgb(&reference), to_rgb(&image));
+    let mean_abs = a
+        .as_raw()
+        .iter()
+        .zip(b.as_raw())
+        .map(|(x, y)| (*x as f64 - *y as f64).abs())
+        .sum::<f64>()
+        / a.as_raw().len() as f64;
+    let (metrics, _) = mipray::metrics::compare(&a, &b);
+    assert!(mean_abs < 0.5, "mean abs {mean_abs}");
+    assert!(metrics.psnr_db > 40.0, "psnr {}", metrics.psnr_db);
+}
+
+/// Two textured quads: node 0 static, node 1 with a non-uniform scale animation (which the
+/// frame loop classifies as a deformation).
+fn deforming_scene() -> SceneDesc {
+    let texels: Vec<Vec4> = (0..16)
+        .map(|i| Vec4::new((i % 4) as f32 / 3.0, (i / 4) as f32 / 3.0, 0.5, 1.0))
+        .collect();
+    let texture = Texture {
+        name: "ramp".into(),
+        pyramid: MipPyramid::from_linear_rgba(4, 4, texels).unwrap(),
+        sampler: Sampler::default(),
+    };
+    let quad = PrimitiveDesc {
+        positions: vec![
+            Vec3::new(-1.0, -1.0, 0.0),
+            Vec3::new(1.0, -1.0, 0.0),
+            Vec3::new(1.0, 1.0, 0.0),
+            Vec3::new(-1.0, 1.0, 0.0),
+        ],
+        normals: Some(vec![Vec3::Z; 4]),
+        uvs: Some(vec![
+            Vec2::new(0.0, 1.0),
+            Vec2::new(2.0, 1.0),
+            Vec2::new(2.0, 0.0),
+            Vec2::new(0.0, 0.0),
+        ]),
+        indices: vec![0, 1, 2, 0, 2, 3],
+        material: Some(0),
+        ..Default::default()
+    };
+    let node = |name: &str, x: f32| NodeDesc {
+        name: name.into(),
+        local: Trs {
+            translation: Vec3::new(x, 0.0, -5.0),
+            rotation: Quat::IDENTITY,
+            scale: Vec3::ONE,
+        },
+        mesh: Some(0),
+        ..Default::default()
+    };
+    SceneDesc {
+        source: "deforming".into(),
+        meshes: vec![MeshDesc {
+            name: "quad".into(),
+            primitives: vec![quad],
+            weights: Vec::new(),
+        }],
+        nodes: vec![node("static", -1.5), node("stretched", 1.5)],
+        roots: vec![0, 1],
+        materials: vec![MaterialDesc {
+            name: "ramp".into(),
+            base_color: Vec3::ONE,
+            base_color_texture: Some(0),
+            ..Default::default()
+        }],
+        textures: vec![texture],
+        animations: vec![AnimationDesc {
+            name: "stretch".into(),
+            channels: vec![ChannelDesc {
+                node: 1,
+                target: ChannelTarget::Scale,
+                interpolation: Interpolation::Linear,
+                times: vec![0.0, 1.0],
+                values: vec![1.0, 1.0, 1.0, 3.0, 1.0, 1.0],
+                components: 3,
+            }],
+        }],
+        ..Default::default()
+    }
+}
+
+#[test]
+fn ply_parses_from_its_header_with_exact_log2_pb_and_deformed_flags() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut exporter = Renderer::new(deforming_scene(), settings(64, 48));
+    let done = export(&mut exporter, dir.path(), ExportFormat::Ply, 0..3);
+    assert_eq!(
+        done.iter().map(|d| d.deformed).collect::<Vec<_>>(),
+        [0, 2, 2]
+    );
+
+    // A second renderer walks the same frames: the PLY must hold its values.
+    let mut check = Renderer::new(deforming_scene(), settings(64, 48));
+    for frame in 0..3u32 {
+        let time_s = (frame as f64 / 30.0) as f32;
+        check.prepare(frame, time_s).unwrap();
+        let ply = read_ply(&dir.path().join(format!("frame_{frame:04}.ply")));
+        assert!(
+            ply.comments
+                .iter()
+                .any(|c| c == &format!("mipray export frame {frame}"))
+        );
+        assert!(ply.comments.iter().any(|c| c.starts_with("time_s ")));
+        let (vertex, vertices) = &ply.elements[0];
+        let (face, faces) = &ply.elements[1];
+        assert_eq!(
+            (vertex.name.as_str(), face.name.as_str()),
+            ("vertex", "face")
+        );
+        let t = check.triangles();
+        assert_eq!(t.len(), 4);
+        assert_eq!(face.count, t.len());
+        assert_eq!(vertex.count, 3 * t.len());
+        let names: Vec<&str> = vertex
+            .properties
+            .iter()
+            .map(|p| match p {
+                Property::Scalar { name, .. } => name.as_str(),
+                Property::List { name, .. } => name.as_str(),
+            })
+            .collect();
+        assert_eq!(names, ["x", "y", "z", "nx", "ny", "nz", "u", "v"]);
+        for (slot, row) in faces.iter().enumerate() {
+            let Value::List(corners) = &row["vertex_indices"] else {
+                panic!("vertex_indices is a list")
+            };
+            assert_eq!(corners.len(), 3);
+            for (k, &c) in corners.iter().enumerate() {
+                let v = &vertices[c as usize];
+                let p = t.positions[slot][k];
+                assert_eq!([f(v, "x"), f(v, "y"), f(v, "z")], p.to_array());
+                let n = t.normals[slot][k];
+                assert_eq!([f(v, "nx"), f(v, "ny"), f(v, "nz")], n.to_array());
+                assert_eq!([f(v, "u"), f(v, "v")], t.uvs[slot][k].to_array());
+            }
+            assert_eq!(f(row, "log2_pb").to_bits(), t.log2_pb[slot].to_bits());
+            assert!(
+                t.log2_pb[slot] != 0.0,
+                "textured triangles have a real log2_pb"
+            );
+            assert_eq!(int(row, "material"), t.material[slot] as i64);
+            let deformed = check.dirty().contains(slot as u32)
+                && check
+                    .dirty()
+                    .slots
+                    .iter()
+                    .zip(&check.dirty().motions)
+                    .any(|(&s, &m)| s == slot as u32 && m == Motion::Deformed);
+            assert_eq!(
+                int(row, "deformed") == 1,
+                deformed,
+                "frame {frame} slot {slot}"
+            );
+            // Only the stretched node's triangles (sources 2 and 3), and never on frame 0.
+            let expected = frame > 0 && t.source[slot] >= 2;
+            assert_eq!(
+                int(row, "deformed") == 1,
+                expected,
+                "frame {frame} slot {slot}"
+            );
+        }
+    }
+
+    // Starting at frame 2 flags the same triangles (frame 1 is prepared, not written).
+    let later = tempfile::tempdir().unwrap();
+    let mut renderer = Renderer::new(deforming_scene(), settings(64, 48));
+    let done = export(&mut renderer, later.path(), ExportFormat::Ply, 2..3);
+    assert_eq!(done[0].deformed, 2);
+    assert_eq!(
+        std::fs::read(later.path().join("frame_0002.ply")).unwrap(),
+        std::fs::read(dir.path().join("frame_0002.ply")).unwrap()
+    );
+}
+
+fn f32_field(v: &serde_json::Value, key: &str) -> f32 {
+    v[key].as_f64().unwrap_or_else(|| panic!("{key}")) as f32
+}
+
+fn vec_field(v: &serde_json::Value, key: &str) -> [f32; 3] {
+    let a = v[key].as_array().unwrap_or_else(|| panic!("{key}"));
+    assert_eq!(a.len(), 3);
+    std::array::from_fn(|i| a[i].as_f64().unwrap() as f32)
+}
+
+#[test]
+fn camera_json_reproduces_the_corner_primary_rays_bit_for_bit() {
+    for (w, h, frame) in [(640u32, 360u32, 12u32), (97, 55, 30)] {
+        let dir = tempfile::tempdir().unwrap();
+        let mut exporter = Renderer::new(default_scene(), settings(w, h));
+        export(
+            &mut exporter,
+            dir.path(),
+            ExportFormat::Ply,
+            frame..frame + 1,
+        );
+        let text =
+            std::fs::read_to_string(dir.path().join(format!("camera_{frame:04}.json"))).unwrap();
+        let json: serde_json::Value = serde_json::from_str(&text).unwrap();
+
+        let mut renderer = Renderer::new(default_scene(), settings(w, h));
+        let prepared = renderer
+            .prepare(frame, (frame as f64 / 30.0) as f32)
+            .unwrap();
+        let camera = prepared.camera;
+
+        let (forward, right, up) = (
+            vec_field(&json, "forward"),
+            vec_field(&json, "right"),
+            vec_field(&json, "up"),
+        );
+        let eye = vec_field(&json, "eye");
+        assert_eq!(eye, camera.eye.to_array());
+        assert_eq!(forward, camera.forward.to_array());
+        assert_eq!(up, camera.up.to_array());
+        assert_eq!(right, camera.right.to_array());
+        assert_eq!(json["width"].as_u64(), Some(w as u64));
+        assert_eq!(json["height"].as_u64(), Some(h as u64));
+        assert_eq!(f32_field(&json, "yfov_radians"), camera.yfov);
+        assert!((f32_field(&json, "yfov_degrees") - camera.yfov.to_degrees()).abs() < 1e-4);
+        let tan = f32_field(&json, "tan_half_fov");
+        let aspect = f32_field(&json, "aspect");
+        assert_eq!(
+            json["bits"]["tan_half_fov"].as_u64(),
+            Some(tan.to_bits() as u64)
+        );
+        assert_eq!(
+            json["primary_ray"]["pixel_centre"],
+            serde_json::json!([0.5, 0.5])
+        );
+        assert_eq!(json["primary_ray"]["y_down"], serde_json::json!(true));
+
+        // The documented formula, evaluated here from the JSON fields in f32.
+        let (wf, hf) = (w as f32, h as f32);
+        let corners = [(0u32, 0u32), (w - 1, 0), (0, h - 1), (w - 1, h - 1)];
+        for (x, y) in corners {
+            let (px, py) = (x as f32 + 0.5, y as f32 + 0.5);
+            let sx = (2.0 * px / wf - 1.0) * tan * aspect;
+            let sy = (1.0 - 2.0 * py / hf) * tan;
+            let d: [f32; 3] = std::array::from_fn(|i| forward[i] + right[i] * sx + up[i] * sy);
+            let len = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
+            let dir = d.map(|c| c / len);
+            let expected = camera.primary_direction(px, py).to_array();
+            assert_eq!(
+                dir.map(f32::to_bits),
+                expected.map(f32::to_bits),
+                "pixel ({x}, {y}) at {w}x{h}"
+            );
+        }
+        assert_ne!(
+            camera.primary_direction(0.5, 0.5),
+            camera.primary_direction(wf - 0.5, hf - 0.5)
+        );
+
+        // Lights and background as the renderer has them.
+        let lights = json["lights"].as_array().unwrap();
+        assert_eq!(lights.len(), prepared.lights.len());
+        assert_eq!(lights.len(), 2);
+        for (l, light) in lights.iter().zip(&prepared.lights) {
+            assert_eq!(vec_field(l, "position"), light.position.to_array());
+            assert_eq!(vec_field(l, "intensity"), light.intensity.to_array());
+            assert_eq!(vec_field(l, "direction"), light.direction.to_array());
+        }
+        assert_eq!(
+            vec_field(&json, "background"),
+            renderer.scene().background.to_array()
+        );
+    }
+}
+
+#[test]
+fn general_obj_without_mipray_statements_loads() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut png = Vec::new();
+    image::RgbImage::from_fn(2, 2, |x, y| {
+        image::Rgb([(x * 255) as u8, (y * 255) as u8, 128])
+    })
+    .write_to(&mut std::io::Cursor::new(&mut png), image::ImageFormat::Png)
+    .unwrap();
+    std::fs::write(dir.path().join("tex.png"), &png).unwrap();
+    std::fs::write(
+        dir.path().join("thing.mtl"),
+        "newmtl glassy\nKd 0.25 0.5 0.75\nNi 1.33\nd 0.25\nNs 64\nmap_Kd -clamp on tex.png\n\nnewmtl plain\nKd 1 0 0\n",
+    )
+    .unwrap();
+    std::fs::write(
+        dir.path().join("thing.obj"),
+        "mtllib thing.mtl\nv 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nvt 0 0\nvt 1 0\nvt 1 1\nvt 0 1\nusemtl glassy\nf 1/1 2/2 3/3 4/4\nusemtl plain\nf 1 3 4\n",
+    )
+    .unwrap();
+    let scene = mipray::cli::load_scene(&dir.path().join("thing.obj")).expect("loads");
+    assert_eq!(scene.materials.len(), 2);
+    let glassy = &scene.materials[0];
+    assert_eq!(glassy.base_color, Vec3::new(0.25, 0.5, 0.75));
+    assert_eq!(glassy.ior, 1.33);
+    assert_eq!(glassy.transmission, 0.75);
+    assert_eq!(glassy.shininess, 64.0);
+    let texture = &scene.textures[glassy.base_color_texture.expect("textured")];
+    assert_eq!(
+        texture.sampler.wrap_s,
+        mipray::texture::WrapMode::ClampToEdge
+    );
+    assert_eq!(texture.pyramid.base_size(), (2, 2));
+    assert_eq!(
+        scene.instanced_triangle_count(),
+        3,
+        "the quad is split in two"
+    );
+    let quad = &scene.meshes[0].primitives[0];
+    assert_eq!(quad.material, Some(0));
+    // vt (0, 0) is the image's bottom-left: mipray's v = 1.
+    let uvs = quad.uvs.as_ref().unwrap();
+    let at_origin = quad
+        .positions
+        .iter()
+        .position(|p| *p == Vec3::ZERO)
+        .unwrap();
+    assert_eq!(uvs[at_origin], Vec2::new(0.0, 1.0));
+    assert!(scene.cameras.is_empty() && scene.lights.is_empty());
+    let mut renderer = Renderer::new(scene, settings(16, 16));
+    let (image, _) = renderer.render_frame(0, 0.0).unwrap();
+    assert!(image.pixels.iter().all(|p| p.is_finite()));
+}
+
+#[test]
+fn bad_input_gives_errors_not_panics() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("out");
+    let missing = mipray(&[
+        "export",
+        "no_such_scene_xyz",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert!(!missing.status.success());
+    let err = String::from_utf8_lossy(&missing.stderr).into_owned();
+    assert!(err.contains("no_such_scene_xyz"), "{err}");
+    assert!(!err.contains("panicked"), "{err}");
+
+    // An output folder below a regular file cannot be created.
+    let blocker = dir.path().join("file.txt");
+    std::fs::write(&blocker, "x").unwrap();
+    let unwritable = blocker.join("sub");
+    let run = mipray(&[
+        "export",
+        "default",
+        "--frames",
+        "0",
+        "--out",
+        unwritable.to_str().unwrap(),
+    ]);
+    assert!(!run.status.success());
+    let err = String::from_utf8_lossy(&run.stderr).into_owned();
+    assert!(err.contains("file.txt"), "{err}");
+    assert!(!err.contains("panicked"), "{err}");
+    assert!(!unwritable.exists());
+
+    // The library reports the same without panicking.
+    let mut renderer = Renderer::new(deforming_scene(), settings(8, 8));
+    let options = ExportOptions {
+        format: ExportFormat::Obj,
+        dir: unwritable.clone(),
+        frames: 0..1,
+        clock: mipray::frame::FrameClock::Fps(30.0),
+    };
+    assert!(export_frames(&mut renderer, &options, |_| {}).is_err());
+
+    // Malformed OBJ / MTL: errors name the file and line.
+    let bad = dir.path().join("bad.obj");
+    std::fs::write(&bad, "v 0 0 0\nv 1 0 0\nv 0 1 zero\nf 1 2 3\n").unwrap();
+    let e = mipray::scene::obj::load(&bad).unwrap_err();
+    assert_eq!(e.line, Some(3));
+    assert!(
+        e.to_string().starts_with(&format!("{}:3:", bad.display())),
+        "{e}"
+    );
+    std::fs::write(&bad, "mtllib m.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n").unwrap();
+    std::fs::write(dir.path().join("m.mtl"), "newmtl a\nKd 0.5\n").unwrap();
+    let e = mipray::scene::obj::load(&bad).unwrap_err();
+    assert!(e.path.ends_with("m.mtl") && e.line == Some(2), "{e}");
+    std::fs::write(dir.path().join("m.mtl"), "newmtl a\nmap_Kd missing.png\n").unwrap();
+    std::fs::write(&bad, "mtllib m.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 4\n").unwrap();
+    let e = mipray::scene::obj::load(&bad).unwrap_err();
+    assert_eq!(e.line, Some(5), "{e}");
+    std::fs::write(&bad, "mtllib m.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n").unwrap();
+    let e = mipray::scene::obj::load(&bad).unwrap_err();
+    assert!(e.path.ends_with("missing.png"), "{e}");
+    let run = mipray(&["info", bad.to_str().unwrap()]);
+    assert!(!run.status.success());
+    assert!(String::from_utf8_lossy(&run.stderr).contains("missing.png"));
+}
