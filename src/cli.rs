@@ -876,6 +876,24 @@ pub fn describe(scene: &SceneDesc) -> String {
             t.sampler.wrap_t
         );
     }
+    let clock = FrameClock::for_scene(scene, None);
+    let frames = clock.default_frames(scene.duration());
+    let (first, last) = (
+        clock.time(frames.start),
+        clock.time(frames.end.saturating_sub(1)),
+    );
+    let source = if scene.frame_times.is_some() {
+        "the file's frame times"
+    } else {
+        "30 fps"
+    };
+    let _ = writeln!(
+        s,
+        "frames: {}..{} ({} frames, t = {first:.3} to {last:.3} s, {source})",
+        frames.start,
+        frames.end,
+        frames.len()
+    );
     let _ = writeln!(s, "animations: {}", scene.animations.len());
     for (i, a) in scene.animations.iter().enumerate() {
         let name = if a.name.is_empty() {
