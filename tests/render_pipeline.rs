@@ -200,3 +200,82 @@ fn degenerate_and_grazing_geometry_give_finite_pixels() {
         assert!(!probe.level.is_nan());
     }
 }
+
+/// An NFF material (AFF convention) as clear glass: no diffuse, no ambient, T = 1, ior 1.
+fn nff_clear_glass() -> mipray::scene::MaterialDesc {
+    mipray::scene::MaterialDesc {
+        name: "nff glass".into(),
+        base_color: Vec3::ZERO,
+        transmission: 1.0,
+        ior: 1.0,
+        specular: 0.0,
+        ambient: Some(Vec3::ZERO),
+        shading: mipray::scene::Shading::Nff,
+        ..Default::default()
+    }
+}
+
+#[test]
+fn nff_glass_passes_light_untinted_where_physical_glass_would_tint_it() {
+    // A textured quad 4 m away, lit by the ring light; the pane hangs 1 m from the camera
+    // (no mirror or glass behind it, so the extra bounce never meets the depth limit).
+    let base = || {
+        let mut scene = facing_quad_scene(4.0, 2.0, 64, 0.9);
+        // Its own light: added ring lights would follow the bounds, which the pane changes.
+        scene.lights.push(mipray::scene::LightDesc {
+            kind: mipray::scene::LightKind::Point,
+            color: Vec3::ONE,
+            intensity: 20.0,
+            range: None,
+            inverse_square: true,
+        });
+        add_root(
+            &mut scene,
+            mipray::scene::NodeDesc {
+                light: Some(0),
+                local: at(Vec3::new(0.5, 0.5, 0.5)),
+                ..Default::default()
+            },
+        );
+        scene
+    };
+    let plain = render_bytes(base(), 2, LodMethod::Paper);
+    let with_pane = |material: mipray::scene::MaterialDesc| {
+        let mut scene = base();
+        scene.materials.push(material);
+        let m = scene.materials.len() - 1;
+        scene.meshes.push(MeshDesc {
+            name: "pane".into(),
+            primitives: vec![quad(8.0, 1.0, m)],
+            ..Default::default()
+        });
+        let n = scene.meshes.len() - 1;
+        add_root(
+            &mut scene,
+            node("pane", at(Vec3::new(0.0, 0.0, -1.0)), Some(n)),
+        );
+        render_bytes(scene, 2, LodMethod::Paper)
+    };
+    let nff = with_pane(nff_clear_glass());
+    let max_diff = plain
+        .iter()
+        .zip(&nff)
+        .map(|(a, b)| a.abs_diff(*b))
+        .max()
+        .unwrap();
+    assert!(
+        max_diff <= 1,
+        "NFF clear glass changed the image by up to {max_diff}"
+    );
+    // The same parameters under the physical convention tint by the (black) base colour.
+    let physical = with_pane(mipray::scene::MaterialDesc {
+        shading: mipray::scene::Shading::Physical,
+        ..nff_clear_glass()
+    });
+    let dark = physical.iter().map(|&c| c as u64).sum::<u64>() * 2
+        < plain.iter().map(|&c| c as u64).sum::<u64>();
+    assert!(
+        dark,
+        "physical glass with a black base colour should darken the view"
+    );
+}

@@ -199,6 +199,12 @@ pub(crate) fn write_mtl(
             writeln!(w, "mipray_specular {}", m.specular)?;
             writeln!(w, "mipray_transmission {}", m.transmission)?;
             writeln!(w, "mipray_double_sided {}", u8::from(m.double_sided))?;
+            if m.shading == crate::scene::Shading::Nff {
+                writeln!(w, "mipray_shading nff")?;
+                if let Some(a) = m.ambient {
+                    writeln!(w, "mipray_ambient {} {} {}", a.x, a.y, a.z)?;
+                }
+            }
         }
         Ok(())
     })

@@ -693,6 +693,7 @@ impl Renderer {
             textures: &self.scene.textures,
             lights: &prepared.lights,
             background: Vec3A::from(self.scene.background),
+            nff_ambient: Vec3A::from(self.scene.ambient.unwrap_or(Vec3::ONE)),
             lod: self.settings.lod,
             max_depth: self.settings.max_depth,
         }

@@ -11,7 +11,7 @@ use crate::accel::{Accel, Hit};
 use crate::geometry::FrameTriangles;
 use crate::lod::LodMethod;
 use crate::render::light::Light;
-use crate::scene::MaterialDesc;
+use crate::scene::{MaterialDesc, Shading};
 use crate::texture::Texture;
 
 /// Histogram bins for texture lookups per integer MIP level (textures up to 32768^2).
@@ -77,6 +77,8 @@ pub struct FrameScene<'a> {
     pub textures: &'a [Texture],
     pub lights: &'a [Light],
     pub background: Vec3A,
+    /// Scene ambient light for NFF materials (AFF `am`).
+    pub nff_ambient: Vec3A,
     pub lod: LodMethod,
     pub max_depth: u32,
 }
@@ -117,6 +119,17 @@ impl FrameScene<'_> {
         let surface = self.surface_point(&hit, origin, direction);
         let material = &self.materials[self.triangles.material[slot] as usize];
         let path_length = path_length + hit.t;
+        if material.shading == Shading::Nff {
+            return self.shade_nff(
+                &hit,
+                &surface,
+                direction,
+                material,
+                path_length,
+                depth,
+                counters,
+            );
+        }
         let albedo = self.albedo(slot, hit.bary, material, path_length, counters);
 
         let opaque = 1.0 - material.transmission;
@@ -233,12 +246,79 @@ impl FrameScene<'_> {
         path_length: f32,
         counters: &mut TraceCounters,
     ) -> Vec3A {
-        let base = Vec3A::from(material.base_color);
+        Vec3A::from(material.base_color) * self.texel(slot, bary, material, path_length, counters)
+    }
+
+    /// The NFF/Whitted convention (AFF files, FORMAT.md 1.8), purely additive:
+    /// `am*amb*tex + sum_lights(diff*tex*Lc*N.L + highlight) + spec*L_reflect + T*L_refract`.
+    #[allow(clippy::too_many_arguments)]
+    fn shade_nff(
+        &self,
+        hit: &Hit,
+        surface: &SurfacePoint,
+        direction: Vec3A,
+        material: &MaterialDesc,
+        path_length: f32,
+        depth: u32,
+        counters: &mut TraceCounters,
+    ) -> Vec3A {
+        let slot = hit.triangle as usize;
+        let texel = self.texel(slot, hit.bary, material, path_length, counters);
+        let diffuse = Vec3A::from(material.base_color) * texel;
+        let ambient = Vec3A::from(material.ambient.unwrap_or(material.base_color)) * texel;
+        let mut color = self.nff_ambient * ambient;
+        color += self.direct_light(surface, direction, diffuse, material, 1.0, counters);
+        if depth >= self.max_depth {
+            return color;
+        }
+        if material.reflectance > MIN_WEIGHT {
+            let reflected = reflect(direction, surface.shading_normal, surface.face_normal);
+            color +=
+                material.reflectance * self.spawn(surface, reflected, path_length, depth, counters);
+        }
+        if material.transmission > MIN_WEIGHT {
+            let eta = if surface.entering {
+                1.0 / material.ior
+            } else {
+                material.ior
+            };
+            let n = surface.shading_normal;
+            let cos_i = (-direction.dot(n)).clamp(0.0, 1.0);
+            let traced = match refract(direction, n, cos_i, eta) {
+                Some((refracted, _)) => {
+                    let below = SurfacePoint {
+                        face_normal: -surface.face_normal,
+                        ..*surface
+                    };
+                    self.spawn(&below, refracted, path_length, depth, counters)
+                }
+                None => self.spawn(
+                    surface,
+                    reflect(direction, n, surface.face_normal),
+                    path_length,
+                    depth,
+                    counters,
+                ),
+            };
+            color += material.transmission * traced;
+        }
+        color
+    }
+
+    /// The filtered base-colour texel at a hit (white when untextured).
+    fn texel(
+        &self,
+        slot: usize,
+        bary: Vec2,
+        material: &MaterialDesc,
+        path_length: f32,
+        counters: &mut TraceCounters,
+    ) -> Vec3A {
         let Some(texture) = material
             .base_color_texture
             .and_then(|t| self.textures.get(t))
         else {
-            return base;
+            return Vec3A::ONE;
         };
         let [t0, t1, t2] = self.triangles.uvs[slot];
         let uv = t0 * (1.0 - bary.x - bary.y) + t1 * bary.x + t2 * bary.y;
@@ -255,7 +335,7 @@ impl FrameScene<'_> {
                 pyramid.sample_trilinear(uv, level, texture.sampler)
             }
         };
-        base * Vec3A::new(texel.x, texel.y, texel.z)
+        Vec3A::new(texel.x, texel.y, texel.z)
     }
 
     /// Lambert + Blinn-Phong from every light, each through a shadow ray.
@@ -340,7 +420,13 @@ impl FrameScene<'_> {
         let mut transmittance = Vec3A::ONE;
         for &(_, _, slot) in glass.iter() {
             let material = &self.materials[self.triangles.material[slot as usize] as usize];
-            transmittance *= Vec3A::from(material.base_color) * material.transmission;
+            // NFF glass attenuates by T alone; glTF transmission is tinted by the base colour.
+            let tint = if material.shading == Shading::Nff {
+                Vec3A::ONE
+            } else {
+                Vec3A::from(material.base_color)
+            };
+            transmittance *= tint * material.transmission;
         }
         if transmittance.max_element() > MIN_WEIGHT {
             transmittance

@@ -212,6 +212,21 @@ pub struct MaterialDesc {
     /// Ambient reflectance colour (AFF `fm` ambient); `None` when the file gives none (the
     /// renderer's fixed ambient model applies).
     pub ambient: Option<Vec3>,
+    /// Which shading convention the parameters follow.
+    pub shading: Shading,
+}
+
+/// How a material's parameters combine.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum Shading {
+    /// glTF-style, energy weighted: diffuse `(1 - transmission)(1 - reflectance)`, mirror
+    /// reflection tinted by the base colour (metal), transmission tinted by it with Fresnel.
+    #[default]
+    Physical,
+    /// The NFF/Whitted convention of AFF files (FORMAT.md 1.8), purely additive:
+    /// `am*amb*tex + sum_lights(diff*tex*N.L + highlight) + spec*L_reflect + T*L_refract`,
+    /// reflection and refraction untinted, no Fresnel.
+    Nff,
 }
 
 impl Default for MaterialDesc {
@@ -227,6 +242,7 @@ impl Default for MaterialDesc {
             specular: 0.0,
             double_sided: false,
             ambient: None,
+            shading: Shading::Physical,
         }
     }
 }

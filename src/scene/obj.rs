@@ -464,6 +464,15 @@ fn material(
         Some(statement) => Some(texture(m, statement, mtl_path, scene, textures)?),
         None => None,
     };
+    // mipray_shading nff (+ mipray_ambient r g b): an AFF material exported as OBJ.
+    let nff = p.get("mipray_shading").map(|s| s.trim()) == Some("nff");
+    let ambient = p.get("mipray_ambient").and_then(|s| {
+        let v: Vec<f32> = s
+            .split_whitespace()
+            .filter_map(|x| x.parse().ok())
+            .collect();
+        (v.len() == 3 && v.iter().all(|x| x.is_finite())).then(|| Vec3::new(v[0], v[1], v[2]))
+    });
     let desc = MaterialDesc {
         name,
         base_color,
@@ -474,7 +483,12 @@ fn material(
         shininess: m.shininess.map(f).unwrap_or(defaults.shininess),
         specular,
         double_sided,
-        ambient: None,
+        ambient,
+        shading: if nff {
+            crate::scene::Shading::Nff
+        } else {
+            crate::scene::Shading::Physical
+        },
     };
     let values = [
         desc.base_color.x,

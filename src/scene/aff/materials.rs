@@ -78,6 +78,7 @@ impl Fm {
             specular: spec.max(0.0),
             double_sided: true,
             ambient: Some(self.ambient.max(Vec3::ZERO)),
+            shading: crate::scene::Shading::Nff,
         }
     }
 }

@@ -91,6 +91,7 @@ pub(super) fn load_materials(
             specular: specular(roughness),
             double_sided: material.double_sided(),
             ambient: None,
+            shading: crate::scene::Shading::Physical,
         });
     }
     if ignored_maps > 0 {
