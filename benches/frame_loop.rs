@@ -169,7 +169,8 @@ fn preprocessing_share(scene: SceneDesc) -> (f64, f64) {
     let mut renderer = Renderer::new(scene, settings);
     renderer.prepare(0, 0.0).unwrap();
     let (_, r) = renderer.render_frame(1, 1.0 / 30.0).unwrap();
-    let pre = r.animate_ms + r.dirty_ms + r.refit_ms + r.build_ms + r.lod_update_ms;
+    let u = r.update;
+    let pre = u.animate_ms + u.dirty_ms + u.refit_ms + u.build_ms + u.lod_update_ms;
     (pre / r.total_ms, r.total_ms)
 }
 
