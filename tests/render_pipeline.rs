@@ -22,7 +22,11 @@ fn settings(width: u32, height: u32, lod: LodMethod) -> RenderSettings {
 
 /// Level the renderer selects at the image centre of frame 0.
 fn centre_level(scene: SceneDesc, height: u32) -> f32 {
-    let mut renderer = Renderer::new(scene, settings(height, height, LodMethod::Paper));
+    centre_level_with(scene, height, LodMethod::Paper)
+}
+
+fn centre_level_with(scene: SceneDesc, height: u32, method: LodMethod) -> f32 {
+    let mut renderer = Renderer::new(scene, settings(height, height, method));
     let prepared = renderer.prepare(0, 0.0).unwrap();
     let camera = prepared.camera;
     let dir = camera.primary_direction(height as f32 / 2.0, height as f32 / 2.0);
@@ -278,4 +282,25 @@ fn nff_glass_passes_light_untinted_where_physical_glass_would_tint_it() {
         dark,
         "physical glass with a black base colour should darken the view"
     );
+}
+
+#[test]
+fn paper_cos_adds_one_level_on_a_plane_tilted_60_degrees() {
+    let yfov = 60f32.to_radians();
+    let tilted = || {
+        let mut scene = facing_quad_scene(4.0, 2.0, 256, yfov);
+        scene.nodes[0].local.rotation = glam::Quat::from_rotation_x(60f32.to_radians());
+        scene
+    };
+    let paper = centre_level_with(tilted(), 64, LodMethod::Paper);
+    let paper_cos = centre_level_with(tilted(), 64, LodMethod::PaperCos);
+    assert!(
+        (paper_cos - paper - 1.0).abs() < 0.1,
+        "paper {paper}, paper-cos {paper_cos}"
+    );
+    // Facing the camera, the two agree.
+    let facing = facing_quad_scene(4.0, 2.0, 256, yfov);
+    let a = centre_level_with(facing, 64, LodMethod::PaperCos);
+    let b = centre_level(facing_quad_scene(4.0, 2.0, 256, yfov), 64);
+    assert!((a - b).abs() < 1e-4, "{a} vs {b}");
 }

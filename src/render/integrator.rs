@@ -130,7 +130,15 @@ impl FrameScene<'_> {
                 counters,
             );
         }
-        let albedo = self.albedo(slot, hit.bary, material, path_length, counters);
+        let cos_incidence = surface.face_normal.dot(direction).abs();
+        let albedo = self.albedo(
+            slot,
+            hit.bary,
+            material,
+            path_length,
+            cos_incidence,
+            counters,
+        );
 
         let opaque = 1.0 - material.transmission;
         let mut color = Vec3A::ZERO;
@@ -176,7 +184,10 @@ impl FrameScene<'_> {
             let material = &self.materials[self.triangles.material[slot] as usize];
             path_length += hit.t;
             if material.base_color_texture.is_some() {
-                let level = self.lod.level(path_length, self.triangles.log2_pb[slot]);
+                let cos_incidence = surface.face_normal.dot(direction).abs();
+                let level =
+                    self.lod
+                        .level(path_length, self.triangles.log2_pb[slot], cos_incidence);
                 return Some(LodProbe {
                     triangle: hit.triangle,
                     path_length,
@@ -244,9 +255,11 @@ impl FrameScene<'_> {
         bary: Vec2,
         material: &MaterialDesc,
         path_length: f32,
+        cos_incidence: f32,
         counters: &mut TraceCounters,
     ) -> Vec3A {
-        Vec3A::from(material.base_color) * self.texel(slot, bary, material, path_length, counters)
+        Vec3A::from(material.base_color)
+            * self.texel(slot, bary, material, path_length, cos_incidence, counters)
     }
 
     /// The NFF/Whitted convention (AFF files, FORMAT.md 1.8), purely additive:
@@ -263,7 +276,15 @@ impl FrameScene<'_> {
         counters: &mut TraceCounters,
     ) -> Vec3A {
         let slot = hit.triangle as usize;
-        let texel = self.texel(slot, hit.bary, material, path_length, counters);
+        let cos_incidence = surface.face_normal.dot(direction).abs();
+        let texel = self.texel(
+            slot,
+            hit.bary,
+            material,
+            path_length,
+            cos_incidence,
+            counters,
+        );
         let diffuse = Vec3A::from(material.base_color) * texel;
         let ambient = Vec3A::from(material.ambient.unwrap_or(material.base_color)) * texel;
         let mut color = self.nff_ambient * ambient;
@@ -312,6 +333,7 @@ impl FrameScene<'_> {
         bary: Vec2,
         material: &MaterialDesc,
         path_length: f32,
+        cos_incidence: f32,
         counters: &mut TraceCounters,
     ) -> Vec3A {
         let Some(texture) = material
@@ -329,8 +351,11 @@ impl FrameScene<'_> {
                 pyramid.sample_bilinear(0, uv, texture.sampler)
             }
             method => {
-                let level =
-                    pyramid.clamp_level(method.level(path_length, self.triangles.log2_pb[slot]));
+                let level = pyramid.clamp_level(method.level(
+                    path_length,
+                    self.triangles.log2_pb[slot],
+                    cos_incidence,
+                ));
                 counters.mip_histogram[(level as usize).min(MIP_LEVELS - 1)] += 1;
                 pyramid.sample_trilinear(uv, level, texture.sampler)
             }
