@@ -195,13 +195,7 @@ impl FrameScene<'_> {
                 });
             }
             let next = if material.transmission >= 0.5 {
-                let eta = if surface.entering {
-                    1.0 / material.ior
-                } else {
-                    material.ior
-                };
-                let cos_i = (-direction.dot(surface.shading_normal)).clamp(0.0, 1.0);
-                match refract(direction, surface.shading_normal, cos_i, eta) {
+                match surface.refraction(direction, material.ior).transmitted {
                     Some((refracted, _)) => (refracted, -surface.face_normal),
                     None => (
                         reflect(direction, surface.shading_normal, surface.face_normal),
@@ -298,28 +292,14 @@ impl FrameScene<'_> {
                 material.reflectance * self.spawn(surface, reflected, path_length, depth, counters);
         }
         if material.transmission > MIN_WEIGHT {
-            let eta = if surface.entering {
-                1.0 / material.ior
-            } else {
-                material.ior
-            };
-            let n = surface.shading_normal;
-            let cos_i = (-direction.dot(n)).clamp(0.0, 1.0);
-            let traced = match refract(direction, n, cos_i, eta) {
+            let traced = match surface.refraction(direction, material.ior).transmitted {
                 Some((refracted, _)) => {
-                    let below = SurfacePoint {
-                        face_normal: -surface.face_normal,
-                        ..*surface
-                    };
-                    self.spawn(&below, refracted, path_length, depth, counters)
+                    self.spawn(&surface.far_side(), refracted, path_length, depth, counters)
                 }
-                None => self.spawn(
-                    surface,
-                    reflect(direction, n, surface.face_normal),
-                    path_length,
-                    depth,
-                    counters,
-                ),
+                None => {
+                    let reflected = reflect(direction, surface.shading_normal, surface.face_normal);
+                    self.spawn(surface, reflected, path_length, depth, counters)
+                }
             };
             color += material.transmission * traced;
         }
@@ -473,37 +453,23 @@ impl FrameScene<'_> {
         depth: u32,
         counters: &mut TraceCounters,
     ) -> Vec3A {
-        let eta = if surface.entering {
-            1.0 / material.ior
-        } else {
-            material.ior
-        };
-        let n = surface.shading_normal;
-        let cos_i = (-direction.dot(n)).clamp(0.0, 1.0);
-        let reflected = reflect(direction, n, surface.face_normal);
+        let reflected = reflect(direction, surface.shading_normal, surface.face_normal);
         let weight = material.transmission;
-        match refract(direction, n, cos_i, eta) {
-            None => weight * self.spawn(surface, reflected, path_length, depth, counters),
-            Some((refracted, cos_t)) => {
-                let fresnel = dielectric_fresnel(cos_i, cos_t, eta);
-                let mut color = Vec3A::ZERO;
-                if weight * fresnel > MIN_WEIGHT {
-                    color += weight
-                        * fresnel
-                        * self.spawn(surface, reflected, path_length, depth, counters);
-                }
-                if weight * (1.0 - fresnel) > MIN_WEIGHT {
-                    let below = SurfacePoint {
-                        face_normal: -surface.face_normal,
-                        ..*surface
-                    };
-                    color += albedo
-                        * (weight * (1.0 - fresnel))
-                        * self.spawn(&below, refracted, path_length, depth, counters);
-                }
-                color
-            }
+        let r = surface.refraction(direction, material.ior);
+        let Some((refracted, cos_t)) = r.transmitted else {
+            return weight * self.spawn(surface, reflected, path_length, depth, counters);
+        };
+        let fresnel = dielectric_fresnel(r.cos_i, cos_t, r.eta);
+        let mut color = Vec3A::ZERO;
+        if weight * fresnel > MIN_WEIGHT {
+            color +=
+                weight * fresnel * self.spawn(surface, reflected, path_length, depth, counters);
         }
+        if weight * (1.0 - fresnel) > MIN_WEIGHT {
+            let through = self.spawn(&surface.far_side(), refracted, path_length, depth, counters);
+            color += albedo * (weight * (1.0 - fresnel)) * through;
+        }
+        color
     }
 
     /// Traces a secondary ray leaving the surface on the side `face_normal` points to.
@@ -517,6 +483,38 @@ impl FrameScene<'_> {
     ) -> Vec3A {
         let origin = surface.position + surface.face_normal * surface.epsilon;
         self.radiance(origin, direction, path_length, depth + 1, counters)
+    }
+}
+
+/// Snell refraction at a surface: the incident cosine, the relative index, and the
+/// transmitted direction with its cosine (`None` on total internal reflection).
+#[derive(Clone, Copy)]
+struct Refraction {
+    cos_i: f32,
+    eta: f32,
+    transmitted: Option<(Vec3A, f32)>,
+}
+
+impl SurfacePoint {
+    /// Refraction of `direction` into (or out of) a material of index `ior`, on the side the
+    /// ray arrived from.
+    fn refraction(&self, direction: Vec3A, ior: f32) -> Refraction {
+        let eta = if self.entering { 1.0 / ior } else { ior };
+        let n = self.shading_normal;
+        let cos_i = (-direction.dot(n)).clamp(0.0, 1.0);
+        Refraction {
+            cos_i,
+            eta,
+            transmitted: refract(direction, n, cos_i, eta),
+        }
+    }
+
+    /// The same point seen from the far side (where a transmitted ray leaves).
+    fn far_side(&self) -> SurfacePoint {
+        SurfacePoint {
+            face_normal: -self.face_normal,
+            ..*self
+        }
     }
 }
 
