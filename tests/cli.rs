@@ -4,13 +4,9 @@
 use std::path::Path;
 use std::process::{Command, Output};
 
-fn mipray(args: &[&str], cwd: &Path) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_mipray"))
-        .args(args)
-        .current_dir(cwd)
-        .output()
-        .expect("run mipray")
-}
+mod common;
+
+use common::mipray;
 
 fn stderr(o: &Output) -> String {
     String::from_utf8_lossy(&o.stderr).into_owned()

@@ -1,15 +1,11 @@
 //! `mipray diff` and `render --check`: the regression-testing contract.
 
 use std::path::Path;
-use std::process::{Command, Output};
+use std::process::Output;
 
-fn mipray(args: &[&str], cwd: &Path) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_mipray"))
-        .args(args)
-        .current_dir(cwd)
-        .output()
-        .expect("run mipray")
-}
+mod common;
+
+use common::mipray;
 
 fn text(o: &Output) -> String {
     format!(

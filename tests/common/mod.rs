@@ -199,3 +199,12 @@ pub fn with_embedded_buffer(mut json: Value, buffers: &BufferBuilder) -> Value {
     );
     json
 }
+
+/// Runs the `mipray` binary with `args` in `cwd` and returns its output.
+pub fn mipray(args: &[&str], cwd: &std::path::Path) -> std::process::Output {
+    std::process::Command::new(env!("CARGO_BIN_EXE_mipray"))
+        .args(args)
+        .current_dir(cwd)
+        .output()
+        .expect("run mipray")
+}
