@@ -57,14 +57,12 @@ pub enum Command {
     },
 }
 
+/// Which scene, which frames, at what size: shared by render, bench and export.
 #[derive(Args, Debug, Clone)]
-pub struct RenderArgs {
-    /// A .gltf/.glb path, or the name of a scene in animations/ (e.g. `default`).
+pub struct SequenceArgs {
+    /// A .gltf/.glb, .aff or .obj path, or the name of a scene in animations/ (e.g. `default`).
     #[arg(default_value = "default")]
     pub scene: String,
-    /// Output folder [default: out/<scene>/<lod>/].
-    #[arg(long)]
-    pub out: Option<PathBuf>,
     /// Half-open frame range `A..B` (or a single frame `A`) [default: the animation's length].
     #[arg(long)]
     pub frames: Option<String>,
@@ -72,9 +70,18 @@ pub struct RenderArgs {
     /// times when it has them (AFF `a`)].
     #[arg(long)]
     pub fps: Option<f64>,
-    /// Image size `WxH`.
+    /// Image size `WxH` (also sets the camera's aspect and the LOD footprint).
     #[arg(long, default_value = "640x360")]
     pub size: String,
+}
+
+#[derive(Args, Debug, Clone)]
+pub struct RenderArgs {
+    #[command(flatten)]
+    pub sequence: SequenceArgs,
+    /// Output folder [default: out/<scene>/<lod>/].
+    #[arg(long)]
+    pub out: Option<PathBuf>,
     /// Texture LOD selection method.
     #[arg(long, default_value = "paper")]
     pub lod: LodMethod,
@@ -126,23 +133,14 @@ pub struct RenderArgs {
 /// `mipray export` options (render's defaults: 640x360, 30 fps).
 #[derive(Args, Debug, Clone)]
 pub struct ExportArgs {
-    /// A .gltf/.glb/.obj path, or the name of a scene in animations/ (e.g. `default`).
-    pub scene: String,
-    /// Half-open frame range `A..B` (or a single frame `A`) [default: the animation's length].
-    #[arg(long)]
-    pub frames: Option<String>,
+    #[command(flatten)]
+    pub sequence: SequenceArgs,
     /// Mesh file format.
     #[arg(long, value_enum, default_value_t = crate::export::ExportFormat::Obj)]
     pub format: crate::export::ExportFormat,
     /// Output folder [default: out/<scene>/export/].
     #[arg(long)]
     pub out: Option<PathBuf>,
-    /// Image size `WxH` (sets the camera's aspect and the LOD footprint).
-    #[arg(long, default_value = "640x360")]
-    pub size: String,
-    /// Frames per second [default: 30, or the scene's own frame times (AFF `a`)].
-    #[arg(long)]
-    pub fps: Option<f64>,
     /// Play one animation clip (its name or index) instead of all clips together.
     #[arg(long)]
     pub animation: Option<String>,
@@ -187,17 +185,9 @@ pub enum BvhMode {
 
 #[derive(Args, Debug, Clone)]
 pub struct BenchArgs {
-    /// A .gltf/.glb path, or the name of a scene in animations/.
-    #[arg(default_value = "default")]
-    pub scene: String,
-    /// Half-open frame range `A..B` rendered per repeat [default: the animation's length].
-    #[arg(long)]
-    pub frames: Option<String>,
-    /// Frames per second [default: 30, or the scene's own frame times].
-    #[arg(long)]
-    pub fps: Option<f64>,
-    #[arg(long, default_value = "640x360")]
-    pub size: String,
+    /// The scene and frames rendered per repeat.
+    #[command(flatten)]
+    pub sequence: SequenceArgs,
     /// LOD methods, comma separated; ratios are against the first.
     #[arg(long, value_delimiter = ',', default_value = "none,paper")]
     pub methods: Vec<LodMethod>,
@@ -366,7 +356,7 @@ fn scene_name(path: &Path) -> String {
 }
 
 fn validated_settings(args: &RenderArgs) -> Result<RenderSettings> {
-    let (width, height) = parse_size(&args.size)?;
+    let (width, height) = parse_size(&args.sequence.size)?;
     if args.spp == 0 || args.spp > MAX_SPP {
         bail!("--spp {}: must be 1 to {MAX_SPP}", args.spp);
     }
@@ -382,7 +372,7 @@ fn validated_settings(args: &RenderArgs) -> Result<RenderSettings> {
             args.rebuild_threshold
         );
     }
-    if let Some(fps) = args.fps.filter(|f| !(f.is_finite() && *f > 0.0)) {
+    if let Some(fps) = args.sequence.fps.filter(|f| !(f.is_finite() && *f > 0.0)) {
         bail!("--fps {fps}: must be a positive number");
     }
     Ok(RenderSettings {
@@ -441,7 +431,7 @@ fn finish_report(report: &DiffReport, out: &Path, junit: Option<&Path>) -> Resul
 /// `mipray render`.
 pub fn render(args: &RenderArgs) -> Result<ExitCode> {
     let settings = validated_settings(args)?;
-    let path = resolve_scene(&args.scene)?;
+    let path = resolve_scene(&args.sequence.scene)?;
     let scene = load_scene(&path)?;
     for note in &scene.notes {
         eprintln!("note: {}: {note}", path.display());
@@ -451,8 +441,8 @@ pub fn render(args: &RenderArgs) -> Result<ExitCode> {
         settings.animation = select_animation(&scene, spec)
             .map_err(|e| anyhow::anyhow!("{}: --animation {spec}: {e}", path.display()))?;
     }
-    let clock = FrameClock::for_scene(&scene, args.fps);
-    let frames = match &args.frames {
+    let clock = FrameClock::for_scene(&scene, args.sequence.fps);
+    let frames = match &args.sequence.frames {
         Some(f) => parse_frames(f)?,
         None => clock.default_frames(settings.animation.duration(&scene)),
     };
@@ -496,21 +486,19 @@ pub fn render(args: &RenderArgs) -> Result<ExitCode> {
 /// camera and lights (see `export`).
 pub fn export(args: &ExportArgs) -> Result<()> {
     let render_args = RenderArgs {
-        scene: args.scene.clone(),
-        size: args.size.clone(),
-        fps: args.fps,
+        sequence: args.sequence.clone(),
         lights: args.lights,
         ..RenderArgs::default()
     };
     let mut settings = validated_settings(&render_args)?;
-    let path = resolve_scene(&args.scene)?;
+    let path = resolve_scene(&args.sequence.scene)?;
     let scene = load_scene(&path)?;
     if let Some(spec) = &args.animation {
         settings.animation = select_animation(&scene, spec)
             .map_err(|e| anyhow::anyhow!("{}: --animation {spec}: {e}", path.display()))?;
     }
-    let clock = FrameClock::for_scene(&scene, args.fps);
-    let frames = match &args.frames {
+    let clock = FrameClock::for_scene(&scene, args.sequence.fps);
+    let frames = match &args.sequence.frames {
         Some(f) => parse_frames(f)?,
         None => clock.default_frames(settings.animation.duration(&scene)),
     };
@@ -554,9 +542,7 @@ pub struct Check {
 /// `mipray bench`.
 pub fn bench(args: &BenchArgs) -> Result<()> {
     let render_args = RenderArgs {
-        scene: args.scene.clone(),
-        size: args.size.clone(),
-        fps: args.fps,
+        sequence: args.sequence.clone(),
         lights: args.lights,
         spp: args.spp,
         max_depth: args.max_depth,
@@ -566,10 +552,10 @@ pub fn bench(args: &BenchArgs) -> Result<()> {
     if args.repeats == 0 || args.methods.is_empty() {
         bail!("bench needs at least one repeat and one method");
     }
-    let path = resolve_scene(&args.scene)?;
+    let path = resolve_scene(&args.sequence.scene)?;
     let scene = load_scene(&path)?;
-    let clock = FrameClock::for_scene(&scene, args.fps);
-    let frames = match &args.frames {
+    let clock = FrameClock::for_scene(&scene, args.sequence.fps);
+    let frames = match &args.sequence.frames {
         Some(f) => parse_frames(f)?,
         None => clock.default_frames(scene.duration()),
     };
