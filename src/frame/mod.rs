@@ -365,7 +365,6 @@ impl Renderer {
     /// Animation produced a non-finite vertex.
     pub fn prepare(&mut self, frame: u32, time_s: f32) -> Result<PreparedFrame, FrameError> {
         let mut stats = UpdateStats::default();
-        let start = Instant::now();
         std::mem::swap(&mut self.pose, &mut self.previous_pose);
         self.pose
             .evaluate(&self.scene, self.settings.animation, time_s);
@@ -390,7 +389,6 @@ impl Renderer {
         stats.moved_triangles = self.dirty.len();
         stats.deformed_triangles = self.dirty.count(Motion::Deformed);
         stats.sah_ratio = self.accel.sah_ratio();
-        let _ = start;
         let world = &self.pose.world_from_node;
         Ok(PreparedFrame {
             camera: self.camera(world),
