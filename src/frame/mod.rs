@@ -365,10 +365,12 @@ impl Renderer {
     /// Animation produced a non-finite vertex.
     pub fn prepare(&mut self, frame: u32, time_s: f32) -> Result<PreparedFrame, FrameError> {
         let mut stats = UpdateStats::default();
+        let pose_start = Instant::now();
         std::mem::swap(&mut self.pose, &mut self.previous_pose);
         self.pose
             .evaluate(&self.scene, self.settings.animation, time_s);
         let scales = node_shapes(&self.scene, self.settings.animation, time_s);
+        let pose_ms = ms_since(pose_start);
         let accel_error = |source| FrameError::Accel {
             frame,
             time_s,
@@ -386,6 +388,8 @@ impl Renderer {
             }
             stats.lod_update_ms = ms_since(t);
         }
+        // Evaluating the animation belongs to the animate phase too.
+        stats.animate_ms += pose_ms;
         stats.moved_triangles = self.dirty.len();
         stats.deformed_triangles = self.dirty.count(Motion::Deformed);
         stats.sah_ratio = self.accel.sah_ratio();
