@@ -6,6 +6,7 @@ pub mod anim;
 pub mod authoring;
 pub mod bench;
 pub mod cli;
+pub mod compare;
 pub mod diff;
 pub mod export;
 pub mod frame;

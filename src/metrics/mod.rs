@@ -6,6 +6,9 @@
 //! infinite PSNR (written as `inf` in tables). Mean FLIP is the LDR-FLIP of Andersson et al.
 //! (2020) at 67 pixels per degree, from NVIDIA's reference implementation (`nv-flip`).
 
+pub mod ssim;
+pub mod temporal;
+
 use std::path::Path;
 
 use image::RgbImage;
