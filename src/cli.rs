@@ -85,6 +85,9 @@ pub struct RenderArgs {
     /// Texture LOD selection method.
     #[arg(long, default_value = "paper")]
     pub lod: LodMethod,
+    /// Levels added to every MIP-mapped lookup (positive: blurrier); `none` ignores it.
+    #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
+    pub lod_bias: f32,
     /// Number of lights: the scene's first N, plus point lights around the scene if it has fewer
     /// [default: all of the scene's lights, at least 1].
     #[arg(long)]
@@ -375,10 +378,12 @@ fn validated_settings(args: &RenderArgs) -> Result<RenderSettings> {
     if let Some(fps) = args.sequence.fps.filter(|f| !(f.is_finite() && *f > 0.0)) {
         bail!("--fps {fps}: must be a positive number");
     }
+    check_lod_bias(args.lod_bias)?;
     Ok(RenderSettings {
         width,
         height,
         lod: args.lod,
+        lod_bias: args.lod_bias,
         spp: args.spp,
         max_depth: args.max_depth,
         lights: args.lights,
@@ -390,6 +395,16 @@ fn validated_settings(args: &RenderArgs) -> Result<RenderSettings> {
         },
         animation: AnimationSelection::All,
     })
+}
+
+/// Largest `--lod-bias` magnitude accepted: past 16 levels every texture is at one end.
+const MAX_LOD_BIAS: f32 = 16.0;
+
+fn check_lod_bias(bias: f32) -> Result<()> {
+    if !(bias.is_finite() && bias.abs() <= MAX_LOD_BIAS) {
+        bail!("--lod-bias {bias}: must be a number from -{MAX_LOD_BIAS} to {MAX_LOD_BIAS}");
+    }
+    Ok(())
 }
 
 /// `mipray diff`.

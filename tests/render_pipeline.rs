@@ -29,10 +29,9 @@ fn centre_level_with(scene: SceneDesc, height: u32, method: LodMethod) -> f32 {
     let mut renderer = Renderer::new(scene, settings(height, height, method));
     let prepared = renderer.prepare(0, 0.0).unwrap();
     let camera = prepared.camera;
-    let dir = camera.primary_direction(height as f32 / 2.0, height as f32 / 2.0);
     renderer
         .frame_scene(&prepared)
-        .probe_lod(camera.eye, dir)
+        .probe_method(&camera, height as f32 / 2.0, height as f32 / 2.0)
         .expect("centre ray hits the quad")
         .level
 }
@@ -83,10 +82,9 @@ fn mirror_uses_total_path_length() {
     );
     let mut renderer = Renderer::new(scene, settings(64, 64, LodMethod::Paper));
     let prepared = renderer.prepare(0, 0.0).unwrap();
-    let dir = prepared.camera.primary_direction(32.0, 32.0);
     let probe = renderer
         .frame_scene(&prepared)
-        .probe_lod(prepared.camera.eye, dir)
+        .probe_method(&prepared.camera, 32.0, 32.0)
         .unwrap();
     assert!(
         (probe.path_length - 8.0).abs() < 1e-3,
@@ -196,9 +194,10 @@ fn degenerate_and_grazing_geometry_give_finite_pixels() {
     // The grazing primary rays (camera at floor height) never produce NaN either.
     let prepared = renderer.prepare(0, 0.0).unwrap();
     let frame_scene = renderer.frame_scene(&prepared);
-    let grazing = frame_scene.probe_lod(
+    let grazing = frame_scene.probe_ray(
         Vec3A::new(0.0, 1e-4, 0.0),
         Vec3A::new(0.0, -1e-6, -1.0).normalize(),
+        mipray::lod::PathLength(0.0),
     );
     if let Some(probe) = grazing {
         assert!(!probe.level.is_nan());

@@ -23,7 +23,7 @@ use serde::Serialize;
 use crate::accel::{Accel, AccelError, RefitKind};
 use crate::anim::{AnimationSelection, NodeShape, Pose, node_shapes, primitive_deforms};
 use crate::geometry::{FrameTriangles, Placement, SceneGeometry};
-use crate::lod::{LOG2_PB_LIMIT, LodMethod, PixelFootprint, log2_pb};
+use crate::lod::{LOG2_PB_LIMIT, LodCamera, LodMethod, PixelFootprint, log2_pb};
 use crate::render::light::ring_lights;
 use crate::render::{Camera, FrameScene, Light, LinearImage, TraceCounters, render_image};
 use crate::scene::SceneDesc;
@@ -96,6 +96,8 @@ pub struct RenderSettings {
     pub width: u32,
     pub height: u32,
     pub lod: LodMethod,
+    /// Levels added to every MIP-mapped lookup (`--lod-bias`; `none` ignores it).
+    pub lod_bias: f32,
     /// Samples per pixel (stratified).
     pub spp: u32,
     /// Maximum number of reflection/refraction bounces.
@@ -114,6 +116,7 @@ impl Default for RenderSettings {
             width: 640,
             height: 360,
             lod: LodMethod::Paper,
+            lod_bias: 0.0,
             spp: 1,
             max_depth: 5,
             lights: None,
@@ -697,6 +700,8 @@ impl Renderer {
             background: Vec3A::from(self.scene.background),
             nff_ambient: Vec3A::from(self.scene.ambient.unwrap_or(Vec3::ONE)),
             lod: self.settings.lod,
+            lod_bias: self.settings.lod_bias,
+            lod_camera: LodCamera::new(&prepared.camera),
             max_depth: self.settings.max_depth,
         }
     }

@@ -1,16 +1,42 @@
-//! Texture level-of-detail selection.
+//! Texture level-of-detail selection: one file per method, all behind [`RayLod`].
 //!
-//! `none` samples level 0 bilinearly (the paper's baseline). `paper` is Park & Kim (2010):
-//! a per-triangle constant `log2 P_b` precomputed from world geometry, and at a hit
-//! `lod = log2(P_l) - log2 P_b` with `P_l` the path length from the eye summed over every
-//! bounce. The constant is derived in `pb.rs` (and `README.md`).
+//! Every ray carries the state its method needs (its "LOD payload"): nothing for `none`, the
+//! path length for `paper` and `paper-cos`, a cone (width, spread angle) for `cones`, four
+//! differential vectors for `diffs` and `diffs-aniso`. The integrator is generic over the
+//! state, so each method pays only for its own payload and arithmetic (the dispatch on
+//! [`LodMethod`] happens once per primary ray).
+//!
+//! The state is created for a primary ray ([`RayLod::primary`]), carried to each hit
+//! ([`RayLod::arrive`]), turned into a texture lookup there ([`RayLod::footprint`]), and
+//! bent by mirrors and glass ([`RayLod::reflect`], [`RayLod::refract`]). Formulas per
+//! method are in the method's file and in README.md.
+//!
+//! Convention: levels are OpenGL's `log2` of the footprint's longest axis in texels (the
+//! ray-cone width, full angle); `--lod-bias` is added to every level afterwards.
 
+mod cones;
+mod diffs;
+mod diffs_aniso;
+mod none;
+mod paper;
+mod paper_cos;
 mod pb;
 
+pub use cones::RayCone;
+pub use diffs::RayDiffs;
+pub use diffs_aniso::RayDiffsAniso;
+pub use none::NoLod;
+pub use paper::PathLength;
+pub use paper_cos::PathLengthCos;
 pub use pb::{LOG2_PB_LIMIT, PixelFootprint, log2_pb};
 
 use std::fmt;
 use std::str::FromStr;
+
+use glam::{Vec2, Vec3, Vec3A};
+
+use crate::geometry::FrameTriangles;
+use crate::render::camera::Camera;
 
 /// A LOD selection method. The CLI word, the stats field and the output folder name are
 /// all `Display` of this enum.
@@ -22,41 +48,66 @@ pub enum LodMethod {
     Paper,
     /// Park & Kim plus the incidence term of ray cones: `- log2 max(|n.d|, 1/16)`.
     PaperCos,
+    /// Ray cones (Akenine-Moller et al. 2019/2021): width and spread angle, curvature
+    /// spread at mirrors, refraction of the spread.
+    Cones,
+    /// Igehy's ray differentials; isotropic level, OpenGL convention.
+    Diffs,
+    /// Ray differentials with anisotropic filtering: up to 16 trilinear taps along the
+    /// footprint's major axis.
+    DiffsAniso,
 }
 
 /// Smallest `|n.d|` the incidence term uses (anisotropy 16, as the OptiX toolkit clamps),
 /// so grazing rays add at most 4 levels instead of infinitely many.
 pub const MIN_INCIDENCE_COS: f32 = 1.0 / 16.0;
 
+/// Most taps an anisotropic lookup takes (and the largest footprint elongation honoured).
+pub const MAX_ANISOTROPY: u32 = 16;
+
+/// Stand-in level for "coarsest" (zero-area triangles hit edge-on): finite, and past the
+/// last level of any pyramid, so clamping maps it to the last level.
+pub const COARSEST_LEVEL: f32 = 1024.0;
+
 impl LodMethod {
-    pub const ALL: [LodMethod; 3] = [LodMethod::None, LodMethod::Paper, LodMethod::PaperCos];
+    pub const ALL: [LodMethod; 6] = [
+        LodMethod::None,
+        LodMethod::Paper,
+        LodMethod::PaperCos,
+        LodMethod::Cones,
+        LodMethod::Diffs,
+        LodMethod::DiffsAniso,
+    ];
 
     pub fn as_str(self) -> &'static str {
         match self {
             LodMethod::None => "none",
             LodMethod::Paper => "paper",
             LodMethod::PaperCos => "paper-cos",
+            LodMethod::Cones => "cones",
+            LodMethod::Diffs => "diffs",
+            LodMethod::DiffsAniso => "diffs-aniso",
         }
     }
 
-    /// Whether the method needs the per-triangle `log2 P_b` constants.
+    /// Whether the method needs the per-triangle `log2 P_b` constants (cones reuse them as
+    /// their texture-space triangle constant).
     pub fn needs_log2_pb(self) -> bool {
-        matches!(self, LodMethod::Paper | LodMethod::PaperCos)
+        matches!(
+            self,
+            LodMethod::Paper | LodMethod::PaperCos | LodMethod::Cones
+        )
     }
 
-    /// The (unclamped) MIP level at a hit. `path_length` is the total distance travelled
-    /// from the eye; `log2_pb` the hit triangle's constant; `cos_incidence` is `|n.d|` with
-    /// the geometric normal. A zero or non-finite path length cannot occur for a real hit,
-    /// but is mapped to a finite level rather than -inf/NaN; NaN incidence counts as grazing.
-    #[inline]
-    pub fn level(self, path_length: f32, log2_pb: f32, cos_incidence: f32) -> f32 {
-        let paper = || path_length.max(f32::MIN_POSITIVE).log2() - log2_pb;
+    /// Bytes of LOD state a ray carries (f32 components; in memory `Vec3A` pads to 16).
+    pub fn bytes_per_ray(self) -> usize {
         match self {
-            LodMethod::None => 0.0,
-            LodMethod::Paper => paper(),
-            LodMethod::PaperCos => {
-                paper() - cos_incidence.abs().max(MIN_INCIDENCE_COS).min(1.0).log2()
-            }
+            LodMethod::None => NoLod::BYTES,
+            LodMethod::Paper => PathLength::BYTES,
+            LodMethod::PaperCos => PathLengthCos::BYTES,
+            LodMethod::Cones => RayCone::BYTES,
+            LodMethod::Diffs => RayDiffs::BYTES,
+            LodMethod::DiffsAniso => RayDiffsAniso::BYTES,
         }
     }
 }
@@ -84,6 +135,193 @@ impl FromStr for LodMethod {
     }
 }
 
+/// The camera quantities primary rays' LOD state starts from.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct LodCamera {
+    /// `log2` of a pixel's width at unit distance, `log2(2 tan(fov/2) / H)`: the same
+    /// constant `log2 P_b` was computed with.
+    pub log2_pixel: f32,
+    /// Full cone angle of one pixel, `atan(2 tan(fov/2) / H)` (one value for the whole
+    /// image, as Falcor; the off-axis shrinkage by `cos theta` is ignored).
+    pub spread: f32,
+    /// Unnormalised primary direction `forward + right * sx + up * sy` and its derivatives
+    /// per film pixel in x and y.
+    forward: Vec3A,
+    right_per_pixel: Vec3A,
+    up_per_pixel: Vec3A,
+    right_origin: Vec3A,
+    up_origin: Vec3A,
+}
+
+impl LodCamera {
+    pub fn new(camera: &Camera) -> LodCamera {
+        let tan_half = (camera.yfov / 2.0).tan();
+        let (w, h) = (camera.width.max(1) as f32, camera.height.max(1) as f32);
+        let pixel = PixelFootprint::new(camera.yfov, camera.height);
+        let aspect = w / h;
+        LodCamera {
+            log2_pixel: pixel.log2_k as f32,
+            spread: (2.0 * tan_half / h).atan(),
+            forward: camera.forward,
+            right_per_pixel: camera.right * (2.0 * tan_half * aspect / w),
+            up_per_pixel: camera.up * (-2.0 * tan_half / h),
+            right_origin: camera.right * (-tan_half * aspect),
+            up_origin: camera.up * tan_half,
+        }
+    }
+
+    /// Derivatives of the unit primary direction through film point `(px, py)` with respect
+    /// to the film's x and y (Igehy eq. 8: `d(D/|D|) = (D.D dD - (D.dD) D) / (D.D)^1.5`).
+    pub fn direction_differentials(&self, px: f32, py: f32) -> (Vec3A, Vec3A) {
+        let d = self.forward
+            + self.right_origin
+            + self.up_origin
+            + self.right_per_pixel * px
+            + self.up_per_pixel * py;
+        let dd = d.dot(d);
+        let scale = 1.0 / (dd * dd.sqrt());
+        let unit_derivative = |dd_dp: Vec3A| (dd_dp * dd - d * d.dot(dd_dp)) * scale;
+        (
+            unit_derivative(self.right_per_pixel),
+            unit_derivative(self.up_per_pixel),
+        )
+    }
+}
+
+/// What a LOD method may read at a hit. Oriented towards the incoming ray: `face_normal`
+/// and `shading_normal` both face it, and `normal_sign` is the sign that turns the mesh's
+/// vertex normals to the same side.
+#[derive(Clone, Copy)]
+pub struct SurfaceHit<'a> {
+    pub triangles: &'a FrameTriangles,
+    /// Triangle slot (BVH order).
+    pub slot: usize,
+    /// Distance along the ray.
+    pub t: f32,
+    /// Unit direction of the incoming ray.
+    pub direction: Vec3A,
+    pub face_normal: Vec3A,
+    pub shading_normal: Vec3A,
+    pub normal_sign: f32,
+    /// Barycentric weights of vertices 1 and 2.
+    pub bary: Vec2,
+}
+
+impl SurfaceHit<'_> {
+    /// `|n.d|` with the geometric normal, clamped to `[1/16, 1]` (NaN counts as grazing).
+    #[inline]
+    pub fn clamped_cos(&self) -> f32 {
+        self.face_normal
+            .dot(self.direction)
+            .abs()
+            .max(MIN_INCIDENCE_COS)
+            .min(1.0)
+    }
+
+    #[inline]
+    pub fn log2_pb(&self) -> f32 {
+        self.triangles.log2_pb[self.slot]
+    }
+
+    #[inline]
+    pub fn positions(&self) -> [Vec3A; 3] {
+        self.triangles.positions[self.slot]
+    }
+
+    /// Vertex normals turned to the side the ray came from.
+    #[inline]
+    pub fn oriented_normals(&self) -> [Vec3A; 3] {
+        self.triangles.normals[self.slot].map(|n: Vec3| Vec3A::from(n) * self.normal_sign)
+    }
+
+    #[inline]
+    pub fn uvs(&self) -> [Vec2; 3] {
+        self.triangles.uvs[self.slot]
+    }
+}
+
+/// The texture lookup a method asks for at a hit.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Footprint {
+    /// No MIP-mapping: bilinear at level 0 (`none`; the bias does not apply).
+    Base,
+    /// Trilinear at this level (before bias and clamping).
+    Level(f32),
+    /// `taps` trilinear lookups at `level`, spread evenly over `axis` (a texture-coordinate
+    /// offset spanning the footprint's major axis, centred on the hit), averaged.
+    Anisotropic { level: f32, axis: Vec2, taps: u32 },
+}
+
+impl Footprint {
+    /// The level the lookup uses, before bias (0 for `Base`).
+    pub fn level(&self) -> f32 {
+        match *self {
+            Footprint::Base => 0.0,
+            Footprint::Level(level) | Footprint::Anisotropic { level, .. } => level,
+        }
+    }
+}
+
+/// The per-ray state of one LOD method (see the module doc for the life cycle).
+pub trait RayLod: Copy + Send + Sync {
+    const METHOD: LodMethod;
+    /// Bytes of payload a ray carries (the method's honest cost, not `size_of`, which
+    /// includes SIMD padding).
+    const BYTES: usize;
+
+    /// State of the primary ray through film point `(px, py)` (pixels).
+    fn primary(camera: &LodCamera, px: f32, py: f32) -> Self;
+
+    /// Carries the state along the ray to the hit at `hit.t`.
+    fn arrive(&mut self, hit: &SurfaceHit);
+
+    /// The lookup at the hit (called after `arrive`) in a texture of `texture_size`
+    /// texels at level 0. Must be finite for any hit, degenerate or grazing.
+    fn footprint(
+        &self,
+        hit: &SurfaceHit,
+        camera: &LodCamera,
+        texture_size: (u32, u32),
+    ) -> Footprint;
+
+    /// State of the ray reflected at the hit into `reflected` (unit).
+    fn reflect(&self, hit: &SurfaceHit, reflected: Vec3A) -> Self;
+
+    /// State of the ray refracted at the hit into `refracted` (unit); `eta` is
+    /// `n_incident / n_transmitted`.
+    fn refract(&self, hit: &SurfaceHit, eta: f32, refracted: Vec3A) -> Self;
+}
+
+/// Replaces a non-finite level by a finite one: NaN by 0 (finest), +inf by the coarsest.
+#[inline]
+pub fn finite_level(level: f32) -> f32 {
+    if level.is_nan() {
+        0.0
+    } else {
+        level.clamp(-COARSEST_LEVEL, COARSEST_LEVEL)
+    }
+}
+
+/// Mean edge curvature of a triangle from its (oriented) vertex normals (JCGT 2021,
+/// "TriangleCurvature_Average"): `k_ij = (n_j - n_i).(p_j - p_i) / |p_j - p_i|^2`.
+/// Positive where the surface bulges towards the normals (convex), 0 for flat shading.
+pub fn mean_edge_curvature(p: [Vec3A; 3], n: [Vec3A; 3]) -> f32 {
+    let mut sum = 0.0;
+    let mut edges = 0;
+    for (i, j) in [(0, 1), (1, 2), (2, 0)] {
+        let dp = p[j] - p[i];
+        let len2 = dp.length_squared();
+        if len2 > 0.0 && len2.is_finite() {
+            let k = (n[j] - n[i]).dot(dp) / len2;
+            if k.is_finite() {
+                sum += k;
+                edges += 1;
+            }
+        }
+    }
+    if edges == 0 { 0.0 } else { sum / edges as f32 }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -97,30 +335,50 @@ mod tests {
     }
 
     #[test]
-    fn incidence_term_adds_log2_of_one_over_cos_clamped_at_16() {
-        let (pl, pb) = (8.0, 1.0);
-        let paper = LodMethod::Paper.level(pl, pb, 0.5);
-        let tilted = LodMethod::PaperCos.level(pl, pb, 0.5);
-        assert!(
-            (tilted - paper - 1.0).abs() < 1e-6,
-            "60 degrees adds one level"
-        );
-        assert_eq!(LodMethod::PaperCos.level(pl, pb, 1.0), paper);
-        assert_eq!(LodMethod::PaperCos.level(pl, pb, 0.0) - paper, 4.0);
-        assert_eq!(LodMethod::PaperCos.level(pl, pb, f32::NAN) - paper, 4.0);
+    fn payload_sizes_are_as_documented() {
+        assert_eq!(LodMethod::None.bytes_per_ray(), 0);
+        assert_eq!(LodMethod::Paper.bytes_per_ray(), 4);
+        assert_eq!(LodMethod::Cones.bytes_per_ray(), 8);
+        assert_eq!(LodMethod::Diffs.bytes_per_ray(), 48);
     }
 
     #[test]
-    fn paper_level_never_nan() {
-        for pl in [0.0, -1.0, f32::NAN, f32::INFINITY, 1e-30, 1e30] {
-            for pb in [LOG2_PB_LIMIT, -LOG2_PB_LIMIT, 0.0, 7.5] {
-                for cos in [0.0, 1.0, -0.5, f32::NAN, 1e-30] {
-                    for m in LodMethod::ALL {
-                        let l = m.level(pl, pb, cos);
-                        assert!(!l.is_nan(), "{m}: path {pl} log2_pb {pb} cos {cos} -> NaN");
-                    }
-                }
-            }
-        }
+    fn finite_level_maps_nan_and_infinities() {
+        assert_eq!(finite_level(f32::NAN), 0.0);
+        assert_eq!(finite_level(f32::INFINITY), COARSEST_LEVEL);
+        assert_eq!(finite_level(f32::NEG_INFINITY), -COARSEST_LEVEL);
+        assert_eq!(finite_level(2.5), 2.5);
+    }
+
+    #[test]
+    fn sphere_curvature_is_one_over_radius() {
+        // Three points on a sphere of radius 2 with outward normals.
+        let n = [
+            Vec3A::new(1.0, 0.0, 0.0),
+            Vec3A::new(0.0, 1.0, 0.0),
+            Vec3A::new(0.0, 0.0, 1.0),
+        ];
+        let p = n.map(|v| v * 2.0);
+        assert!((mean_edge_curvature(p, n) - 0.5).abs() < 1e-6);
+        assert!((mean_edge_curvature(p, n.map(|v| -v)) + 0.5).abs() < 1e-6);
+        // Flat shading and a degenerate triangle: zero.
+        assert_eq!(mean_edge_curvature(p, [Vec3A::Z; 3]), 0.0);
+        assert_eq!(mean_edge_curvature([Vec3A::ONE; 3], n), 0.0);
+    }
+
+    #[test]
+    fn primary_direction_differentials_match_finite_differences() {
+        let camera = Camera::look(Vec3::ZERO, Vec3::new(0.2, -0.1, -1.0), Vec3::Y, 1.0, 64, 48);
+        let lod = LodCamera::new(&camera);
+        let (px, py) = (10.3, 40.7);
+        let (dx, dy) = lod.direction_differentials(px, py);
+        let h = 1e-2;
+        let fd_x = (camera.primary_direction(px + h, py) - camera.primary_direction(px - h, py))
+            / (2.0 * h);
+        let fd_y = (camera.primary_direction(px, py + h) - camera.primary_direction(px, py - h))
+            / (2.0 * h);
+        // f32 central differences carry ~3e-6 of rounding at this step.
+        assert!((dx - fd_x).length() < 1e-3 * dx.length(), "{dx} vs {fd_x}");
+        assert!((dy - fd_y).length() < 1e-3 * dy.length(), "{dy} vs {fd_y}");
     }
 }

@@ -8,6 +8,9 @@
 use glam::{Vec3, Vec3A};
 use rayon::prelude::*;
 
+use crate::lod::{
+    LodMethod, NoLod, PathLength, PathLengthCos, RayCone, RayDiffs, RayDiffsAniso, RayLod,
+};
 use crate::render::camera::Camera;
 use crate::render::integrator::{FrameScene, TraceCounters};
 
@@ -69,7 +72,26 @@ pub fn render_image(scene: &FrameScene, camera: &Camera, spp: u32) -> (LinearIma
     (image, counters)
 }
 
+/// One tile, with the LOD state type of `scene.lod` (chosen once here, so the per-ray code
+/// is monomorphised per method).
 fn render_tile(
+    scene: &FrameScene,
+    camera: &Camera,
+    spp: u32,
+    x0: u32,
+    y0: u32,
+) -> (Vec<Vec3>, TraceCounters) {
+    match scene.lod {
+        LodMethod::None => render_tile_with::<NoLod>(scene, camera, spp, x0, y0),
+        LodMethod::Paper => render_tile_with::<PathLength>(scene, camera, spp, x0, y0),
+        LodMethod::PaperCos => render_tile_with::<PathLengthCos>(scene, camera, spp, x0, y0),
+        LodMethod::Cones => render_tile_with::<RayCone>(scene, camera, spp, x0, y0),
+        LodMethod::Diffs => render_tile_with::<RayDiffs>(scene, camera, spp, x0, y0),
+        LodMethod::DiffsAniso => render_tile_with::<RayDiffsAniso>(scene, camera, spp, x0, y0),
+    }
+}
+
+fn render_tile_with<L: RayLod>(
     scene: &FrameScene,
     camera: &Camera,
     spp: u32,
@@ -85,8 +107,12 @@ fn render_tile(
             let mut sum = Vec3A::ZERO;
             for sample in 0..spp {
                 let (sx, sy) = sample_offset(x, y, sample, spp);
-                let direction = camera.primary_direction(x as f32 + sx, y as f32 + sy);
-                let radiance = scene.radiance(camera.eye, direction, 0.0, 0, &mut counters);
+                let radiance = scene.primary_radiance::<L>(
+                    camera,
+                    x as f32 + sx,
+                    y as f32 + sy,
+                    &mut counters,
+                );
                 if radiance.is_finite() {
                     sum += radiance.max(Vec3A::ZERO);
                 } else {

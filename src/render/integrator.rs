@@ -1,18 +1,23 @@
 //! Whitted ray tracing: ambient + Lambert / Blinn-Phong direct light from every light with
 //! shadow rays, mirror reflection, refraction with Fresnel and total internal reflection.
 //!
-//! Every ray carries the path length from the eye; at a textured hit the LOD method turns it
-//! into a MIP level (`lod::LodMethod::level`). No allocation per ray: recursion lives on the
-//! stack and per-tile counters are plain arrays.
+//! Every ray carries its LOD method's state (`lod::RayLod`: the path length for `paper`, a
+//! cone, or differentials); at a textured hit the method turns it into a texture lookup. The
+//! integrator is generic over that state, so each method pays only for its own. No
+//! allocation per ray: recursion lives on the stack and per-tile counters are plain arrays.
 
 use glam::{Vec2, Vec3A};
 
 use crate::accel::{Accel, Hit};
 use crate::geometry::FrameTriangles;
-use crate::lod::LodMethod;
+use crate::lod::{
+    Footprint, LodCamera, LodMethod, NoLod, PathLength, PathLengthCos, RayCone, RayDiffs,
+    RayDiffsAniso, RayLod, SurfaceHit, finite_level,
+};
+use crate::render::camera::Camera;
 use crate::render::light::Light;
 use crate::scene::{MaterialDesc, Shading};
-use crate::texture::Texture;
+use crate::texture::{MipPyramid, Texture};
 
 /// Histogram bins for texture lookups per integer MIP level (textures up to 32768^2).
 pub const MIP_LEVELS: usize = 16;
@@ -58,6 +63,41 @@ impl TraceCounters {
     }
 }
 
+/// Longest specular chain a probe records (mirror and glass bounces before the textured hit).
+pub const MAX_CHAIN: usize = 16;
+
+/// How a ray left one surface of a specular chain.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Bend {
+    Reflect,
+    /// Refracted with relative index `eta = n_incident / n_transmitted`.
+    Refract {
+        eta: f32,
+    },
+}
+
+/// The specular chain from the eye to a textured surface: each mirror or glass triangle
+/// hit on the way and how the ray bent there, then the textured triangle.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Chain {
+    bends: [(u32, Bend); MAX_CHAIN],
+    len: usize,
+}
+
+impl Chain {
+    fn new() -> Chain {
+        Chain {
+            bends: [(0, Bend::Reflect); MAX_CHAIN],
+            len: 0,
+        }
+    }
+
+    /// The surfaces passed before the textured one: (triangle slot, bend).
+    pub fn bends(&self) -> &[(u32, Bend)] {
+        &self.bends[..self.len]
+    }
+}
+
 /// The LOD selected at the first textured surface along a specular chain.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct LodProbe {
@@ -65,8 +105,19 @@ pub struct LodProbe {
     pub triangle: u32,
     /// Total distance from the ray's origin over every bounce.
     pub path_length: f32,
-    /// The method's level, before clamping to the texture's pyramid.
+    /// The method's level including the bias, before clamping to the texture's pyramid.
     pub level: f32,
+    /// The level the lookup used: clamped to `[0, last level]` (0 for `none`).
+    pub clamped_level: f32,
+    /// Texture coordinates at the hit.
+    pub uv: Vec2,
+    /// Index of the base-colour texture and its level-0 size.
+    pub texture: usize,
+    pub texture_size: (u32, u32),
+    /// Number of MIP levels of that texture.
+    pub texture_levels: usize,
+    /// The mirrors and glass passed on the way.
+    pub chain: Chain,
 }
 
 /// Everything the integrator reads for one frame.
@@ -80,6 +131,10 @@ pub struct FrameScene<'a> {
     /// Scene ambient light for NFF materials (AFF `am`).
     pub nff_ambient: Vec3A,
     pub lod: LodMethod,
+    /// Added to every MIP-mapped level (`--lod-bias`; not to `none`).
+    pub lod_bias: f32,
+    /// The camera constants primary rays' LOD state starts from.
+    pub lod_camera: LodCamera,
     pub max_depth: u32,
 }
 
@@ -91,6 +146,8 @@ struct SurfacePoint {
     face_normal: Vec3A,
     /// Interpolated normal, flipped to the same side as `face_normal`.
     shading_normal: Vec3A,
+    /// +1 or -1: what turns the mesh's vertex normals to the side of `shading_normal`.
+    normal_sign: f32,
     /// Whether the ray arrived on the front (counter-clockwise) side.
     entering: bool,
     /// Offset that lifts spawned rays off the surface.
@@ -98,13 +155,28 @@ struct SurfacePoint {
 }
 
 impl FrameScene<'_> {
-    /// Radiance arriving at `origin` from `direction`; `path_length` is the distance already
-    /// travelled from the eye, `depth` the number of bounces so far.
-    pub fn radiance(
+    /// Radiance of the primary ray through film point `(px, py)` of `camera`, carrying the
+    /// LOD state of method `L` (which must be `self.lod`'s; see [`Self::with_lod_state`]).
+    #[inline]
+    pub fn primary_radiance<L: RayLod>(
+        &self,
+        camera: &Camera,
+        px: f32,
+        py: f32,
+        counters: &mut TraceCounters,
+    ) -> Vec3A {
+        let direction = camera.primary_direction(px, py);
+        let lod = L::primary(&self.lod_camera, px, py);
+        self.radiance(camera.eye, direction, lod, 0, counters)
+    }
+
+    /// Radiance arriving at `origin` from `direction`; `lod` is the ray's LOD state,
+    /// `depth` the number of bounces so far.
+    pub fn radiance<L: RayLod>(
         &self,
         origin: Vec3A,
         direction: Vec3A,
-        path_length: f32,
+        mut lod: L,
         depth: u32,
         counters: &mut TraceCounters,
     ) -> Vec3A {
@@ -117,28 +189,14 @@ impl FrameScene<'_> {
         };
         let slot = hit.triangle as usize;
         let surface = self.surface_point(&hit, origin, direction);
+        let lod_hit = surface.lod_hit(self.triangles, &hit, direction);
+        lod.arrive(&lod_hit);
         let material = &self.materials[self.triangles.material[slot] as usize];
-        let path_length = path_length + hit.t;
         if material.shading == Shading::Nff {
-            return self.shade_nff(
-                &hit,
-                &surface,
-                direction,
-                material,
-                path_length,
-                depth,
-                counters,
-            );
+            return self.shade_nff(&lod_hit, &surface, material, lod, depth, counters);
         }
-        let cos_incidence = surface.face_normal.dot(direction).abs();
-        let albedo = self.albedo(
-            slot,
-            hit.bary,
-            material,
-            path_length,
-            cos_incidence,
-            counters,
-        );
+        let albedo =
+            Vec3A::from(material.base_color) * self.texel(&lod_hit, material, &lod, counters);
 
         let opaque = 1.0 - material.transmission;
         let mut color = Vec3A::ZERO;
@@ -153,67 +211,152 @@ impl FrameScene<'_> {
         let mirror = opaque * material.reflectance;
         if mirror > MIN_WEIGHT {
             let reflected = reflect(direction, surface.shading_normal, surface.face_normal);
-            color +=
-                albedo * mirror * self.spawn(&surface, reflected, path_length, depth, counters);
+            let lod = lod.reflect(&lod_hit, reflected);
+            color += albedo * mirror * self.spawn(&surface, reflected, lod, depth, counters);
         }
         if material.transmission > MIN_WEIGHT {
-            color += self.transmit(
-                &surface,
-                direction,
-                albedo,
-                material,
-                path_length,
-                depth,
-                counters,
-            );
+            color += self.transmit(&lod_hit, &surface, albedo, material, lod, depth, counters);
         }
         color
     }
 
-    /// Follows a ray through perfect mirrors and glass (the dominant specular branch) to its
-    /// first textured surface and reports the LOD the method selects there. Used by tests
-    /// and diagnostics; the integrator computes the same quantities inline.
-    pub fn probe_lod(&self, origin: Vec3A, direction: Vec3A) -> Option<LodProbe> {
-        let (mut origin, mut direction, mut path_length) = (origin, direction, 0.0f32);
-        for _ in 0..=self.max_depth {
+    /// Follows the primary ray through film point `(px, py)` along perfect mirrors and
+    /// glass (the dominant specular branch) to its first textured surface and reports the
+    /// LOD method `L` selects there. For tests, `--view lod` and `mipray compare`; the
+    /// integrator computes the same quantities inline.
+    pub fn probe<L: RayLod>(&self, camera: &Camera, px: f32, py: f32) -> Option<LodProbe> {
+        let direction = camera.primary_direction(px, py);
+        self.probe_ray(camera.eye, direction, L::primary(&self.lod_camera, px, py))
+    }
+
+    /// [`Self::probe`] with the state type of `self.lod`.
+    pub fn probe_method(&self, camera: &Camera, px: f32, py: f32) -> Option<LodProbe> {
+        match self.lod {
+            LodMethod::None => self.probe::<NoLod>(camera, px, py),
+            LodMethod::Paper => self.probe::<PathLength>(camera, px, py),
+            LodMethod::PaperCos => self.probe::<PathLengthCos>(camera, px, py),
+            LodMethod::Cones => self.probe::<RayCone>(camera, px, py),
+            LodMethod::Diffs => self.probe::<RayDiffs>(camera, px, py),
+            LodMethod::DiffsAniso => self.probe::<RayDiffsAniso>(camera, px, py),
+        }
+    }
+
+    /// [`Self::probe`] for any ray and starting state.
+    pub fn probe_ray<L: RayLod>(
+        &self,
+        origin: Vec3A,
+        direction: Vec3A,
+        mut lod: L,
+    ) -> Option<LodProbe> {
+        let (mut origin, mut direction) = (origin, direction);
+        let mut path_length = 0.0f32;
+        let mut chain = Chain::new();
+        loop {
             let hit = self
                 .accel
                 .closest_hit(self.triangles, origin, direction, f32::INFINITY)?;
             let slot = hit.triangle as usize;
             let surface = self.surface_point(&hit, origin, direction);
-            let material = &self.materials[self.triangles.material[slot] as usize];
+            let lod_hit = surface.lod_hit(self.triangles, &hit, direction);
+            lod.arrive(&lod_hit);
             path_length += hit.t;
-            if material.base_color_texture.is_some() {
-                let cos_incidence = surface.face_normal.dot(direction).abs();
-                let level =
-                    self.lod
-                        .level(path_length, self.triangles.log2_pb[slot], cos_incidence);
+            let material = &self.materials[self.triangles.material[slot] as usize];
+            if let Some((index, texture)) = material
+                .base_color_texture
+                .and_then(|t| Some((t, self.textures.get(t)?)))
+            {
+                let footprint =
+                    lod.footprint(&lod_hit, &self.lod_camera, texture.pyramid.base_size());
+                let (level, clamped_level) = self.biased_level(&footprint, &texture.pyramid);
                 return Some(LodProbe {
                     triangle: hit.triangle,
                     path_length,
                     level,
+                    clamped_level,
+                    uv: interpolate_uv(self.triangles.uvs[slot], hit.bary),
+                    texture: index,
+                    texture_size: texture.pyramid.base_size(),
+                    texture_levels: texture.pyramid.level_count(),
+                    chain,
                 });
             }
-            let next = if material.transmission >= 0.5 {
-                match surface.refraction(direction, material.ior).transmitted {
-                    Some((refracted, _)) => (refracted, -surface.face_normal),
-                    None => (
-                        reflect(direction, surface.shading_normal, surface.face_normal),
-                        surface.face_normal,
-                    ),
-                }
-            } else if material.reflectance >= 0.5 {
-                (
-                    reflect(direction, surface.shading_normal, surface.face_normal),
-                    surface.face_normal,
-                )
-            } else {
+            if chain.len == MAX_CHAIN || chain.len as u32 >= self.max_depth {
                 return None;
+            }
+            let (next, bend) = dominant_bend(&surface, direction, material)?;
+            lod = match bend {
+                Bend::Reflect => lod.reflect(&lod_hit, next),
+                Bend::Refract { eta } => lod.refract(&lod_hit, eta, next),
             };
-            direction = next.0;
-            origin = surface.position + next.1 * surface.epsilon;
+            chain.bends[chain.len] = (hit.triangle, bend);
+            chain.len += 1;
+            let side = match bend {
+                Bend::Reflect => surface.face_normal,
+                Bend::Refract { .. } => -surface.face_normal,
+            };
+            direction = next;
+            origin = surface.position + side * surface.epsilon;
         }
-        None
+    }
+
+    /// Where a ray from `origin` along `direction` lands in texture space if it follows
+    /// `chain` (the probe of a nearby ray) and then meets the plane of `textured`: each
+    /// surface is intersected as its triangle's plane, with barycentrics extrapolated
+    /// outside the triangle, and bent the same way. The finite-difference LOD reference
+    /// traces its neighbouring pixel rays with this. `None` if a plane is missed (parallel
+    /// or behind) or a refraction becomes total internal reflection.
+    pub fn follow_chain(
+        &self,
+        origin: Vec3A,
+        direction: Vec3A,
+        chain: &Chain,
+        textured: u32,
+    ) -> Option<Vec2> {
+        let (mut origin, mut direction) = (origin, direction);
+        for &(slot, bend) in chain.bends() {
+            let (position, surface) = self.plane_point(slot, origin, direction)?;
+            direction = match bend {
+                Bend::Reflect => reflect(direction, surface.shading_normal, surface.face_normal),
+                Bend::Refract { eta } => {
+                    let n = surface.shading_normal;
+                    let cos_i = (-direction.dot(n)).clamp(0.0, 1.0);
+                    refract(direction, n, cos_i, eta)?.0
+                }
+            };
+            origin = position;
+        }
+        let slot = textured as usize;
+        let (_, bary) = plane_barycentrics(self.triangles.positions[slot], origin, direction)?;
+        Some(interpolate_uv(self.triangles.uvs[slot], bary))
+    }
+
+    /// The hit of a ray with the plane of triangle `slot`, as a surface point.
+    fn plane_point(
+        &self,
+        slot: u32,
+        origin: Vec3A,
+        direction: Vec3A,
+    ) -> Option<(Vec3A, SurfacePoint)> {
+        let (t, bary) =
+            plane_barycentrics(self.triangles.positions[slot as usize], origin, direction)?;
+        let hit = Hit {
+            t,
+            triangle: slot,
+            bary,
+        };
+        let surface = self.surface_point(&hit, origin, direction);
+        Some((surface.position, surface))
+    }
+
+    /// The method's level with the bias, and the level the pyramid lookup uses.
+    fn biased_level(&self, footprint: &Footprint, pyramid: &MipPyramid) -> (f32, f32) {
+        match footprint {
+            Footprint::Base => (0.0, 0.0),
+            f => {
+                let level = finite_level(f.level() + self.lod_bias);
+                (level, pyramid.clamp_level(level))
+            }
+        }
     }
 
     fn surface_point(&self, hit: &Hit, origin: Vec3A, direction: Vec3A) -> SurfacePoint {
@@ -226,10 +369,10 @@ impl FrameScene<'_> {
             Vec3A::from(n0 * (1.0 - b1 - b2) + n1 * b1 + n2 * b2).normalize_or_zero();
         let entering = geometric.dot(direction) <= 0.0;
         let face_normal = if entering { geometric } else { -geometric };
-        let shading_normal = match interpolated.dot(face_normal) {
-            d if d > 0.0 => interpolated,
-            d if d < 0.0 => -interpolated,
-            _ => face_normal,
+        let (shading_normal, normal_sign) = match interpolated.dot(face_normal) {
+            d if d > 0.0 => (interpolated, 1.0),
+            d if d < 0.0 => (-interpolated, -1.0),
+            _ => (face_normal, if entering { 1.0 } else { -1.0 }),
         };
         let position = origin + direction * hit.t;
         let magnitude = position.abs().max_element().max(origin.abs().max_element());
@@ -237,48 +380,25 @@ impl FrameScene<'_> {
             position,
             face_normal,
             shading_normal,
+            normal_sign,
             entering,
             epsilon: 1e-5 + magnitude * 2f32.powi(-17),
         }
     }
 
-    /// Base colour at a hit: factor times the filtered texture at the method's level.
-    fn albedo(
-        &self,
-        slot: usize,
-        bary: Vec2,
-        material: &MaterialDesc,
-        path_length: f32,
-        cos_incidence: f32,
-        counters: &mut TraceCounters,
-    ) -> Vec3A {
-        Vec3A::from(material.base_color)
-            * self.texel(slot, bary, material, path_length, cos_incidence, counters)
-    }
-
     /// The NFF/Whitted convention (AFF files, FORMAT.md 1.8), purely additive:
     /// `am*amb*tex + sum_lights(diff*tex*Lc*N.L + highlight) + spec*L_reflect + T*L_refract`.
-    #[allow(clippy::too_many_arguments)]
-    fn shade_nff(
+    fn shade_nff<L: RayLod>(
         &self,
-        hit: &Hit,
+        lod_hit: &SurfaceHit,
         surface: &SurfacePoint,
-        direction: Vec3A,
         material: &MaterialDesc,
-        path_length: f32,
+        lod: L,
         depth: u32,
         counters: &mut TraceCounters,
     ) -> Vec3A {
-        let slot = hit.triangle as usize;
-        let cos_incidence = surface.face_normal.dot(direction).abs();
-        let texel = self.texel(
-            slot,
-            hit.bary,
-            material,
-            path_length,
-            cos_incidence,
-            counters,
-        );
+        let direction = lod_hit.direction;
+        let texel = self.texel(lod_hit, material, &lod, counters);
         let diffuse = Vec3A::from(material.base_color) * texel;
         let ambient = Vec3A::from(material.ambient.unwrap_or(material.base_color)) * texel;
         let mut color = self.nff_ambient * ambient;
@@ -288,17 +408,20 @@ impl FrameScene<'_> {
         }
         if material.reflectance > MIN_WEIGHT {
             let reflected = reflect(direction, surface.shading_normal, surface.face_normal);
-            color +=
-                material.reflectance * self.spawn(surface, reflected, path_length, depth, counters);
+            let lod = lod.reflect(lod_hit, reflected);
+            color += material.reflectance * self.spawn(surface, reflected, lod, depth, counters);
         }
         if material.transmission > MIN_WEIGHT {
-            let traced = match surface.refraction(direction, material.ior).transmitted {
+            let r = surface.refraction(direction, material.ior);
+            let traced = match r.transmitted {
                 Some((refracted, _)) => {
-                    self.spawn(&surface.far_side(), refracted, path_length, depth, counters)
+                    let lod = lod.refract(lod_hit, r.eta, refracted);
+                    self.spawn(&surface.far_side(), refracted, lod, depth, counters)
                 }
                 None => {
                     let reflected = reflect(direction, surface.shading_normal, surface.face_normal);
-                    self.spawn(surface, reflected, path_length, depth, counters)
+                    let lod = lod.reflect(lod_hit, reflected);
+                    self.spawn(surface, reflected, lod, depth, counters)
                 }
             };
             color += material.transmission * traced;
@@ -307,13 +430,12 @@ impl FrameScene<'_> {
     }
 
     /// The filtered base-colour texel at a hit (white when untextured).
-    fn texel(
+    #[inline]
+    fn texel<L: RayLod>(
         &self,
-        slot: usize,
-        bary: Vec2,
+        lod_hit: &SurfaceHit,
         material: &MaterialDesc,
-        path_length: f32,
-        cos_incidence: f32,
+        lod: &L,
         counters: &mut TraceCounters,
     ) -> Vec3A {
         let Some(texture) = material
@@ -322,22 +444,16 @@ impl FrameScene<'_> {
         else {
             return Vec3A::ONE;
         };
-        let [t0, t1, t2] = self.triangles.uvs[slot];
-        let uv = t0 * (1.0 - bary.x - bary.y) + t1 * bary.x + t2 * bary.y;
+        let uv = interpolate_uv(self.triangles.uvs[lod_hit.slot], lod_hit.bary);
         let pyramid = &texture.pyramid;
-        let texel = match self.lod {
-            LodMethod::None => {
-                counters.mip_histogram[0] += 1;
-                pyramid.sample_bilinear(0, uv, texture.sampler)
-            }
-            method => {
-                let level = pyramid.clamp_level(method.level(
-                    path_length,
-                    self.triangles.log2_pb[slot],
-                    cos_incidence,
-                ));
-                counters.mip_histogram[(level as usize).min(MIP_LEVELS - 1)] += 1;
-                pyramid.sample_trilinear(uv, level, texture.sampler)
+        let footprint = lod.footprint(lod_hit, &self.lod_camera, pyramid.base_size());
+        let (_, level) = self.biased_level(&footprint, pyramid);
+        counters.mip_histogram[(level as usize).min(MIP_LEVELS - 1)] += 1;
+        let texel = match footprint {
+            Footprint::Base => pyramid.sample_bilinear(0, uv, texture.sampler),
+            Footprint::Level(_) => pyramid.sample_trilinear(uv, level, texture.sampler),
+            Footprint::Anisotropic { axis, taps, .. } => {
+                pyramid.sample_anisotropic(uv, level, axis, taps, texture.sampler)
             }
         };
         Vec3A::new(texel.x, texel.y, texel.z)
@@ -443,47 +559,98 @@ impl FrameScene<'_> {
     /// Glass: Fresnel-weighted reflection plus refraction tinted by the albedo; total
     /// internal reflection sends everything to the reflection.
     #[allow(clippy::too_many_arguments)]
-    fn transmit(
+    fn transmit<L: RayLod>(
         &self,
+        lod_hit: &SurfaceHit,
         surface: &SurfacePoint,
-        direction: Vec3A,
         albedo: Vec3A,
         material: &MaterialDesc,
-        path_length: f32,
+        lod: L,
         depth: u32,
         counters: &mut TraceCounters,
     ) -> Vec3A {
+        let direction = lod_hit.direction;
         let reflected = reflect(direction, surface.shading_normal, surface.face_normal);
         let weight = material.transmission;
         let r = surface.refraction(direction, material.ior);
         let Some((refracted, cos_t)) = r.transmitted else {
-            return weight * self.spawn(surface, reflected, path_length, depth, counters);
+            let lod = lod.reflect(lod_hit, reflected);
+            return weight * self.spawn(surface, reflected, lod, depth, counters);
         };
         let fresnel = dielectric_fresnel(r.cos_i, cos_t, r.eta);
         let mut color = Vec3A::ZERO;
         if weight * fresnel > MIN_WEIGHT {
-            color +=
-                weight * fresnel * self.spawn(surface, reflected, path_length, depth, counters);
+            let lod = lod.reflect(lod_hit, reflected);
+            color += weight * fresnel * self.spawn(surface, reflected, lod, depth, counters);
         }
         if weight * (1.0 - fresnel) > MIN_WEIGHT {
-            let through = self.spawn(&surface.far_side(), refracted, path_length, depth, counters);
+            let lod = lod.refract(lod_hit, r.eta, refracted);
+            let through = self.spawn(&surface.far_side(), refracted, lod, depth, counters);
             color += albedo * (weight * (1.0 - fresnel)) * through;
         }
         color
     }
 
     /// Traces a secondary ray leaving the surface on the side `face_normal` points to.
-    fn spawn(
+    #[inline]
+    fn spawn<L: RayLod>(
         &self,
         surface: &SurfacePoint,
         direction: Vec3A,
-        path_length: f32,
+        lod: L,
         depth: u32,
         counters: &mut TraceCounters,
     ) -> Vec3A {
         let origin = surface.position + surface.face_normal * surface.epsilon;
-        self.radiance(origin, direction, path_length, depth + 1, counters)
+        self.radiance(origin, direction, lod, depth + 1, counters)
     }
+}
+
+/// The branch a probe follows at a mirror or glass surface: refraction through mostly
+/// transmissive surfaces (reflection on total internal reflection), reflection off mostly
+/// reflective ones; `None` for anything else (a diffuse surface ends the chain).
+fn dominant_bend(
+    surface: &SurfacePoint,
+    direction: Vec3A,
+    material: &MaterialDesc,
+) -> Option<(Vec3A, Bend)> {
+    let reflected = || reflect(direction, surface.shading_normal, surface.face_normal);
+    if material.transmission >= 0.5 {
+        let r = surface.refraction(direction, material.ior);
+        Some(match r.transmitted {
+            Some((refracted, _)) => (refracted, Bend::Refract { eta: r.eta }),
+            None => (reflected(), Bend::Reflect),
+        })
+    } else if material.reflectance >= 0.5 {
+        Some((reflected(), Bend::Reflect))
+    } else {
+        None
+    }
+}
+
+/// Texture coordinates at barycentrics `(b1, b2)`.
+#[inline]
+fn interpolate_uv([t0, t1, t2]: [Vec2; 3], bary: Vec2) -> Vec2 {
+    t0 * (1.0 - bary.x - bary.y) + t1 * bary.x + t2 * bary.y
+}
+
+/// Distance to, and barycentrics of, the point where a ray meets a triangle's plane, with
+/// no bounds on the barycentrics (Moller-Trumbore without the inside test). `None` when the
+/// ray is parallel to the plane, the triangle is degenerate, or the plane is behind.
+fn plane_barycentrics(p: [Vec3A; 3], origin: Vec3A, direction: Vec3A) -> Option<(f32, Vec2)> {
+    let (e1, e2) = (p[1] - p[0], p[2] - p[0]);
+    let pvec = direction.cross(e2);
+    let det = e1.dot(pvec);
+    if det == 0.0 || !det.is_finite() {
+        return None;
+    }
+    let inv = 1.0 / det;
+    let tvec = origin - p[0];
+    let b1 = tvec.dot(pvec) * inv;
+    let qvec = tvec.cross(e1);
+    let b2 = direction.dot(qvec) * inv;
+    let t = e2.dot(qvec) * inv;
+    (t > 0.0 && t.is_finite() && b1.is_finite() && b2.is_finite()).then_some((t, Vec2::new(b1, b2)))
 }
 
 /// Snell refraction at a surface: the incident cosine, the relative index, and the
@@ -506,6 +673,26 @@ impl SurfacePoint {
             cos_i,
             eta,
             transmitted: refract(direction, n, cos_i, eta),
+        }
+    }
+
+    /// What a LOD method reads at this hit.
+    #[inline]
+    fn lod_hit<'t>(
+        &self,
+        triangles: &'t FrameTriangles,
+        hit: &Hit,
+        direction: Vec3A,
+    ) -> SurfaceHit<'t> {
+        SurfaceHit {
+            triangles,
+            slot: hit.triangle as usize,
+            t: hit.t,
+            direction,
+            face_normal: self.face_normal,
+            shading_normal: self.shading_normal,
+            normal_sign: self.normal_sign,
+            bary: hit.bary,
         }
     }
 

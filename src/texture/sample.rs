@@ -96,6 +96,29 @@ impl MipPyramid {
         let b = bilinear(&self.levels[k + 1], uv, sampler);
         a * (1.0 - frac) + b * frac
     }
+
+    /// Anisotropic lookup: the mean of `taps` trilinear lookups at `lod`, placed at the
+    /// centres of `taps` equal segments of `axis` (a texture-coordinate offset spanning the
+    /// footprint's major axis, centred on `uv`). One tap is plain trilinear.
+    pub fn sample_anisotropic(
+        &self,
+        uv: Vec2,
+        lod: f32,
+        axis: Vec2,
+        taps: u32,
+        sampler: Sampler,
+    ) -> Vec4 {
+        let taps = taps.max(1);
+        if taps == 1 || !axis.is_finite() {
+            return self.sample_trilinear(uv, lod, sampler);
+        }
+        let step = axis / taps as f32;
+        let first = uv - axis * 0.5 + step * 0.5;
+        let sum = (0..taps).fold(Vec4::ZERO, |sum, i| {
+            sum + self.sample_trilinear(first + step * i as f32, lod, sampler)
+        });
+        sum / taps as f32
+    }
 }
 
 #[cfg(test)]
@@ -391,5 +414,34 @@ mod tests {
         let l0 = p.sample_bilinear(0, uv, s);
         let got = p.sample_trilinear(uv, 0.5, s);
         assert!(close(got, (l0 + l1) * 0.5, 1e-5), "{got}");
+    }
+
+    #[test]
+    fn anisotropic_averages_taps_along_the_axis() {
+        let p = grid(16, 16);
+        let s = Sampler::default();
+        let uv = Vec2::new(0.5, 0.5);
+        // Level 0 holds x in the red channel: taps across 8 texels along u average to the
+        // centre's x, while the spread along v leaves red unchanged.
+        let axis = Vec2::new(8.0 / 16.0, 0.0);
+        let one = p.sample_trilinear(uv, 0.0, s);
+        let four = p.sample_anisotropic(uv, 0.0, axis, 4, s);
+        assert!(close(four, one, 1e-5), "{four} vs {one}");
+        let taps: Vec<Vec4> = [-3.0f32, -1.0, 1.0, 3.0]
+            .iter()
+            .map(|o| p.sample_trilinear(uv + Vec2::new(o / 16.0, 0.0), 0.0, s))
+            .collect();
+        let mean = taps.iter().fold(Vec4::ZERO, |a, &b| a + b) / 4.0;
+        assert!(close(four, mean, 1e-5));
+        // One tap, or a non-finite axis, is plain trilinear.
+        assert_eq!(
+            p.sample_anisotropic(uv, 1.5, axis, 1, s),
+            p.sample_trilinear(uv, 1.5, s)
+        );
+        let nan = Vec2::new(f32::NAN, 0.0);
+        assert_eq!(
+            p.sample_anisotropic(uv, 1.5, nan, 8, s),
+            p.sample_trilinear(uv, 1.5, s)
+        );
     }
 }

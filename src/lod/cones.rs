@@ -1,0 +1,95 @@
+//! `cones`: ray cones (Akenine-Moller et al., Ray Tracing Gems ch. 20, 2019; JCGT 2021;
+//! refraction after Boksansky et al., RTG II ch. 10, and the OptiX toolkit). The ray carries
+//! the cone's width `w` and full spread angle `gamma` (8 bytes).
+//!
+//! ```text
+//! primary:     w = 0, gamma = atan(2 tan(fov/2) / H)        (one pixel)
+//! arrive:      w += gamma * t
+//! level:       log2(|w| / |n.d|) - log2(pixel) - log2 P_b
+//! reflection:  gamma += 2 beta
+//! refraction:  gamma = eta (gamma + beta) - beta            (eta = n_i / n_t)
+//! beta = kappa |w| / |n.d|                                   (surface spread)
+//! ```
+//!
+//! `log2 P_b + log2(pixel)` is the texture-space triangle constant of ray cones,
+//! `-(Delta + 0.5 log2(W H))` (LOD-ANCHORS.md 3.1), so cones reuse the per-triangle values
+//! `paper` already keeps. `kappa` is the triangle's mean edge curvature from its vertex
+//! normals (positive for convex as seen by the ray), `|n.d|` is clamped at 1/16 like
+//! `paper-cos`. A converging cone may pass through a focus (negative width): the level
+//! uses `|w|`, and a zero width clamps to level 0.
+
+use glam::Vec3A;
+
+use super::paper_cos::incidence_levels;
+use super::{
+    Footprint, LodCamera, LodMethod, RayLod, SurfaceHit, finite_level, mean_edge_curvature,
+};
+
+/// Largest spread angle kept (radians): a cone wider than a half-space has no meaning, and
+/// grazing curved mirrors could otherwise inflate it without bound.
+const MAX_SPREAD: f32 = std::f32::consts::PI;
+
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct RayCone {
+    pub width: f32,
+    pub spread: f32,
+}
+
+impl RayCone {
+    /// The surface spread angle `beta` the hit's curvature adds over the cone's footprint.
+    #[inline]
+    fn surface_spread(&self, hit: &SurfaceHit) -> f32 {
+        let kappa = mean_edge_curvature(hit.positions(), hit.oriented_normals());
+        let beta = kappa * self.width.abs() / hit.clamped_cos();
+        if beta.is_finite() { beta } else { 0.0 }
+    }
+
+    #[inline]
+    fn with_spread(self, spread: f32) -> Self {
+        let spread = if spread.is_nan() { self.spread } else { spread };
+        RayCone {
+            width: self.width,
+            spread: spread.clamp(-MAX_SPREAD, MAX_SPREAD),
+        }
+    }
+}
+
+impl RayLod for RayCone {
+    const METHOD: LodMethod = LodMethod::Cones;
+    const BYTES: usize = 8;
+
+    #[inline]
+    fn primary(camera: &LodCamera, _: f32, _: f32) -> Self {
+        RayCone {
+            width: 0.0,
+            spread: camera.spread,
+        }
+    }
+
+    #[inline]
+    fn arrive(&mut self, hit: &SurfaceHit) {
+        let width = self.width + self.spread * hit.t;
+        if width.is_finite() {
+            self.width = width;
+        }
+    }
+
+    #[inline]
+    fn footprint(&self, hit: &SurfaceHit, camera: &LodCamera, _: (u32, u32)) -> Footprint {
+        let level =
+            self.width.abs().max(f32::MIN_POSITIVE).log2() - camera.log2_pixel - hit.log2_pb()
+                + incidence_levels(hit.clamped_cos());
+        Footprint::Level(finite_level(level))
+    }
+
+    #[inline]
+    fn reflect(&self, hit: &SurfaceHit, _: Vec3A) -> Self {
+        self.with_spread(self.spread + 2.0 * self.surface_spread(hit))
+    }
+
+    #[inline]
+    fn refract(&self, hit: &SurfaceHit, eta: f32, _: Vec3A) -> Self {
+        let beta = self.surface_spread(hit);
+        self.with_spread(eta * (self.spread + beta) - beta)
+    }
+}
