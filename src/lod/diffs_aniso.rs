@@ -3,7 +3,7 @@
 //!
 //! ```text
 //! P_max, P_min = longer, shorter of |duv/dx|, |duv/dy|   (texels)
-//! N     = min(ceil(P_max / P_min), 16)                    taps
+//! N     = min(ceil(P_max / P_min - 0.001), 16)            taps
 //! level = log2(P_max / N)
 //! ```
 //!
@@ -18,6 +18,9 @@ use super::{
     finite_level,
 };
 
+/// Elongation below which a footprint counts as an exact integer ratio.
+const RATIO_TOLERANCE: f32 = 1e-3;
+
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct RayDiffsAniso(pub RayDiffs);
 
@@ -30,9 +33,11 @@ impl TexelGradients {
         } else {
             (self.dy, ly, lx)
         };
+        // A ratio a rounding error above an integer (exactly 2 at 60 degrees) must not buy
+        // a tap, and a finer level with it.
         let ratio = p_max / p_min;
         let taps = if ratio.is_finite() {
-            (ratio.ceil() as u32).clamp(1, MAX_ANISOTROPY)
+            ((ratio - RATIO_TOLERANCE).ceil() as u32).clamp(1, MAX_ANISOTROPY)
         } else {
             MAX_ANISOTROPY
         };

@@ -1,0 +1,332 @@
+//! The LOD methods side by side on scenes with closed-form answers (issue 5's tests).
+
+mod common;
+
+use common::scenes::*;
+use glam::{Quat, Vec2, Vec3};
+use image::RgbImage;
+use mipray::frame::{RenderSettings, Renderer};
+use mipray::lod::LodMethod;
+use mipray::render::integrator::LodProbe;
+use mipray::scene::{MeshDesc, PrimitiveDesc, SceneDesc, Trs};
+
+fn settings(width: u32, height: u32, lod: LodMethod) -> RenderSettings {
+    RenderSettings {
+        width,
+        height,
+        lod,
+        spp: 1,
+        max_depth: 5,
+        lights: None,
+        ..Default::default()
+    }
+}
+
+/// What method `lod` selects through film point `(px, py)` of frame 0.
+fn probe(scene: SceneDesc, size: (u32, u32), lod: LodMethod, px: f32, py: f32) -> LodProbe {
+    let mut renderer = Renderer::new(scene, settings(size.0, size.1, lod));
+    let prepared = renderer.prepare(0, 0.0).unwrap();
+    renderer
+        .frame_scene(&prepared)
+        .probe_method(&prepared.camera, px, py)
+        .unwrap_or_else(|| panic!("{lod}: the probe ray finds no textured surface"))
+}
+
+/// The closed form on a quad facing the camera: `log2(d) - log2 P_b`, with
+/// `P_b = texel width / pixel width at unit distance`.
+fn facing_closed_form(distance: f64, size: f64, texture: u32, yfov: f32, height: u32) -> f64 {
+    let k = 2.0 * (yfov as f64 / 2.0).tan() / height as f64;
+    distance.log2() - ((size / texture as f64) / k).log2()
+}
+
+const MIPMAPPED: [LodMethod; 5] = [
+    LodMethod::Paper,
+    LodMethod::PaperCos,
+    LodMethod::Cones,
+    LodMethod::Diffs,
+    LodMethod::DiffsAniso,
+];
+
+#[test]
+fn facing_quad_every_method_is_within_a_tenth_of_the_closed_form() {
+    let yfov = 60f32.to_radians();
+    for (distance, size, texture) in [(4.0, 2.0, 256), (9.0, 1.0, 1024), (2.5, 3.0, 64)] {
+        let expected = facing_closed_form(distance as f64, size as f64, texture, yfov, 64);
+        for lod in MIPMAPPED {
+            let scene = facing_quad_scene(distance, size, texture, yfov);
+            let got = probe(scene, (64, 64), lod, 32.0, 32.0).level as f64;
+            assert!(
+                (got - expected).abs() < 0.1,
+                "{lod} at d={distance}, size {size}, texture {texture}: level {got}, closed form {expected}"
+            );
+        }
+        // `none` has no MIP-mapping: always level 0.
+        let scene = facing_quad_scene(distance, size, texture, yfov);
+        assert_eq!(probe(scene, (64, 64), LodMethod::None, 32.0, 32.0).level, 0.0);
+    }
+}
+
+#[test]
+fn lod_bias_shifts_every_mipmapped_level() {
+    let yfov = 60f32.to_radians();
+    for lod in MIPMAPPED {
+        let level = |bias: f32| {
+            let mut renderer = Renderer::new(
+                facing_quad_scene(4.0, 2.0, 256, yfov),
+                RenderSettings {
+                    lod_bias: bias,
+                    ..settings(64, 64, lod)
+                },
+            );
+            let prepared = renderer.prepare(0, 0.0).unwrap();
+            let p = renderer
+                .frame_scene(&prepared)
+                .probe_method(&prepared.camera, 32.0, 32.0)
+                .unwrap();
+            p.level
+        };
+        let shift = level(1.5) - level(0.0);
+        assert!((shift - 1.5).abs() < 1e-5, "{lod}: bias 1.5 moved the level by {shift}");
+    }
+}
+
+fn tilted_quad(yfov: f32) -> SceneDesc {
+    let mut scene = facing_quad_scene(4.0, 2.0, 256, yfov);
+    scene.nodes[0].local.rotation = Quat::from_rotation_x(60f32.to_radians());
+    scene
+}
+
+#[test]
+fn plane_tilted_60_degrees_adds_one_level_to_cos_aware_methods() {
+    let yfov = 60f32.to_radians();
+    let level = |lod| probe(tilted_quad(yfov), (64, 64), lod, 32.0, 32.0);
+    let paper = level(LodMethod::Paper).level;
+    for lod in [LodMethod::PaperCos, LodMethod::Cones, LodMethod::Diffs] {
+        let got = level(lod).level;
+        assert!(
+            (got - paper - 1.0).abs() < 0.1,
+            "{lod}: {got}, paper {paper}: expected one level more"
+        );
+    }
+    // Anisotropic filtering spends the elongation (1 / cos 60 = 2) on two taps instead: its
+    // level stays at the footprint's short axis, which the tilt leaves unchanged.
+    let aniso = level(LodMethod::DiffsAniso).level;
+    assert!((aniso - paper).abs() < 0.1, "diffs-aniso {aniso}, paper {paper}");
+}
+
+/// Camera at the origin looking down -Z at a mirror 3 m away; the textured quad hangs 2 m
+/// behind the camera facing -Z, so the reflected path is 3 + 5 = 8 m.
+fn planar_mirror_scene(yfov: f32) -> SceneDesc {
+    let mut scene = facing_quad_scene(0.0, 2.0, 256, yfov);
+    scene.nodes[0].local.translation = Vec3::new(0.0, 0.0, 2.0);
+    scene.nodes[0].local.rotation = Quat::from_rotation_y(std::f32::consts::PI);
+    scene.materials.push(mirror());
+    scene.meshes.push(MeshDesc {
+        name: "mirror".into(),
+        primitives: vec![quad(4.0, 1.0, 1)],
+        ..Default::default()
+    });
+    add_root(
+        &mut scene,
+        node("mirror", at(Vec3::new(0.0, 0.0, -3.0)), Some(1)),
+    );
+    scene
+}
+
+#[test]
+fn planar_mirror_paper_and_cones_use_the_total_path_length() {
+    let yfov = 50f32.to_radians();
+    let expected = facing_closed_form(8.0, 2.0, 256, yfov, 64);
+    for lod in [LodMethod::Paper, LodMethod::Cones, LodMethod::Diffs] {
+        let p = probe(planar_mirror_scene(yfov), (64, 64), lod, 32.0, 32.0);
+        assert_eq!(p.chain.bends().len(), 1, "{lod}: one mirror on the way");
+        assert!((p.path_length - 8.0).abs() < 1e-3, "{lod}: path {}", p.path_length);
+        assert!(
+            (p.level as f64 - expected).abs() < 0.05,
+            "{lod}: level {} vs the virtual image at 8 m: {expected}",
+            p.level
+        );
+    }
+}
+
+/// A smooth mirror ball between the camera and a textured backdrop behind the camera.
+fn convex_mirror_scene(yfov: f32) -> SceneDesc {
+    let mut scene = planar_mirror_scene(yfov);
+    scene.meshes[1].primitives = vec![sphere(1, 4)];
+    let ball = scene.nodes.iter().position(|n| n.name == "mirror").unwrap();
+    scene.nodes[ball].local.translation = Vec3::new(0.0, 0.0, -4.0);
+    scene.meshes[0].primitives = vec![quad(40.0, 20.0, 0)];
+    scene
+}
+
+#[test]
+fn convex_mirror_spreads_cones_and_differentials_beyond_the_path_length() {
+    // A ball of radius 1 at 3 m: the reflected footprint grows much faster than the path
+    // length alone says (the virtual image of the backdrop is a small, far-away one).
+    let yfov = 50f32.to_radians();
+    let level = |lod| probe(convex_mirror_scene(yfov), (64, 64), lod, 32.0, 32.0).level;
+    let paper = level(LodMethod::Paper);
+    for lod in [LodMethod::Cones, LodMethod::Diffs] {
+        let got = level(lod);
+        assert!(got > paper + 1.0, "{lod}: {got}, paper {paper}");
+    }
+    // Cones and differentials model the same physics: they agree to within a level.
+    let (cones, diffs) = (level(LodMethod::Cones), level(LodMethod::Diffs));
+    eprintln!("convex mirror: paper {paper}, cones {cones}, diffs {diffs}");
+    assert!((cones - diffs).abs() < 1.0, "cones {cones}, diffs {diffs}");
+}
+
+/// A receding checker floor (camera 1 m above it looking at the horizon), plus a
+/// degenerate textured mesh: one zero-area triangle and one zero-UV-area triangle.
+fn receding_floor_scene(squares: f32) -> SceneDesc {
+    let mut scene = SceneDesc {
+        background: Vec3::new(0.3, 0.4, 0.6),
+        ..Default::default()
+    };
+    scene.textures.push(checker(256, 8));
+    scene.materials.push(textured(0));
+    scene.meshes.push(MeshDesc {
+        name: "floor".into(),
+        primitives: vec![quad(400.0, squares, 0)],
+        ..Default::default()
+    });
+    add_root(
+        &mut scene,
+        node(
+            "floor",
+            Trs {
+                rotation: Quat::from_rotation_x(-std::f32::consts::FRAC_PI_2),
+                ..Default::default()
+            },
+            Some(0),
+        ),
+    );
+    let cam = camera_node(Vec3::new(0.0, 1.0, 0.0), &mut scene, 0.8);
+    scene.roots.push(cam);
+    scene
+}
+
+fn with_degenerate_triangles(mut scene: SceneDesc) -> SceneDesc {
+    let degenerate = PrimitiveDesc {
+        positions: vec![
+            Vec3::new(-1.0, 0.5, -3.0),
+            Vec3::new(0.0, 0.5, -3.0),
+            Vec3::new(1.0, 0.5, -3.0),
+            Vec3::new(0.0, 1.5, -3.0),
+        ],
+        uvs: Some(vec![
+            Vec2::ZERO,
+            Vec2::X,
+            Vec2::new(2.0, 0.0),
+            Vec2::new(3.0, 0.0),
+        ]),
+        indices: vec![0, 1, 2, 0, 1, 3],
+        material: Some(0),
+        ..Default::default()
+    };
+    scene.meshes.push(MeshDesc {
+        name: "degenerate".into(),
+        primitives: vec![degenerate],
+        ..Default::default()
+    });
+    let n = scene.meshes.len() - 1;
+    add_root(&mut scene, node("degenerate", Default::default(), Some(n)));
+    scene
+}
+
+#[test]
+fn no_method_gives_a_nan_or_infinite_level_on_degenerate_or_grazing_hits() {
+    for lod in LodMethod::ALL {
+        assert_finite_levels(grazing_scene(), lod);
+    }
+}
+
+/// Camera at floor height: every floor hit is grazing. Also a mirror ball and a glass
+/// ball (curvature spread, refraction of cones and differentials) on the floor.
+fn grazing_scene() -> SceneDesc {
+    let mut scene = with_degenerate_triangles(receding_floor_scene(200.0));
+    scene.nodes.last_mut().unwrap().local.translation = Vec3::ZERO;
+    let camera = scene
+        .nodes
+        .iter()
+        .position(|n| n.camera.is_some())
+        .unwrap();
+    scene.nodes[camera].local.translation = Vec3::new(0.0, 1e-3, 0.0);
+    scene.materials.extend([mirror(), glass()]);
+    for (material, x) in [(1, -0.8f32), (2, 0.8)] {
+        scene.meshes.push(MeshDesc {
+            name: format!("ball{material}"),
+            primitives: vec![sphere(material, 3)],
+            ..Default::default()
+        });
+        let mesh = scene.meshes.len() - 1;
+        let mut ball = node("ball", at(Vec3::new(x, 0.5, -4.0)), Some(mesh));
+        ball.local.scale = Vec3::splat(0.5);
+        add_root(&mut scene, ball);
+    }
+    scene
+}
+
+fn assert_finite_levels(scene: SceneDesc, lod: LodMethod) {
+    {
+        let mut renderer = Renderer::new(scene, settings(48, 32, lod));
+        let (image, record) = renderer.render_frame(0, 0.0).unwrap();
+        assert!(image.pixels.iter().all(|p| p.is_finite()), "{lod}: NaN pixel");
+        assert_eq!(record.nonfinite_samples, 0, "{lod}");
+        let prepared = renderer.prepare(0, 0.0).unwrap();
+        let frame_scene = renderer.frame_scene(&prepared);
+        let mut probed = 0;
+        for y in 0..32 {
+            for x in 0..48 {
+                let Some(p) =
+                    frame_scene.probe_method(&prepared.camera, x as f32 + 0.5, y as f32 + 0.5)
+                else {
+                    continue;
+                };
+                probed += 1;
+                assert!(
+                    p.level.is_finite() && p.clamped_level.is_finite(),
+                    "{lod}: level {} at pixel ({x}, {y})",
+                    p.level
+                );
+            }
+        }
+        assert!(probed > 100, "{lod}: only {probed} textured pixels");
+    }
+}
+
+fn srgb(image: &mipray::render::film::LinearImage) -> RgbImage {
+    RgbImage::from_raw(image.width, image.height, image.to_srgb8()).unwrap()
+}
+
+#[test]
+fn on_a_receding_checker_none_has_the_largest_flip_error() {
+    let (w, h) = (96, 64);
+    let render = |lod: LodMethod, spp: u32| {
+        let mut renderer = Renderer::new(
+            receding_floor_scene(400.0),
+            RenderSettings {
+                spp,
+                ..settings(w, h, lod)
+            },
+        );
+        srgb(&renderer.render_frame(0, 0.0).unwrap().0)
+    };
+    // The ground truth: level 0, 8x8 stratified samples per pixel.
+    let reference = render(LodMethod::None, 64);
+    let flip: Vec<(LodMethod, f64)> = LodMethod::ALL
+        .iter()
+        .map(|&lod| {
+            let test = render(lod, 1);
+            (lod, mipray::metrics::compare(&reference, &test).0.mean_flip)
+        })
+        .collect();
+    let none = flip[0].1;
+    eprintln!("receding checker FLIP: {flip:?}");
+    for &(lod, error) in &flip[1..] {
+        assert!(
+            error < none,
+            "{lod}: FLIP {error:.4} is not below none's {none:.4} (all: {flip:?})"
+        );
+    }
+}
