@@ -48,6 +48,9 @@ pub enum Command {
     },
     /// Compare a rendered sequence with a reference sequence, frame by frame.
     Diff(DiffArgs),
+    /// Every LOD method on the same frames: time (interleaved) against error from a
+    /// supersampled level-0 reference; optionally the paper's Table 1 (`--lights 1..6`).
+    Compare(CompareArgs),
     /// Write each frame's world-space triangles (OBJ or PLY), camera and lights.
     Export(ExportArgs),
     /// Print what a scene contains.
@@ -179,6 +182,83 @@ pub struct DiffArgs {
     pub out: Option<PathBuf>,
 }
 
+#[derive(Args, Debug, Clone)]
+pub struct CompareArgs {
+    /// The scene, frames (default: the animation's length) and size.
+    #[command(flatten)]
+    pub sequence: SequenceArgs,
+    /// LOD methods, comma separated (`none` is always included: overheads are against it).
+    #[arg(
+        long,
+        value_delimiter = ',',
+        default_value = "none,paper,paper-cos,cones,diffs,diffs-aniso"
+    )]
+    pub methods: Vec<LodMethod>,
+    /// `N` lights for every render, or a range `A..B` (inclusive: `1..6` is 1 to 6 lights)
+    /// for the paper's Table 1, none vs paper per light count; the method comparison then
+    /// uses the scene's own lights [default: the scene's lights].
+    #[arg(long)]
+    pub lights: Option<String>,
+    /// Output folder for compare.csv, compare.md and the plots [default: out/<scene>/compare/].
+    #[arg(long)]
+    pub out: Option<PathBuf>,
+    /// Samples per pixel of the level-0 reference (a square number: 64 = 8x8 stratified).
+    #[arg(long, default_value_t = 64)]
+    pub reference_spp: u32,
+    /// Timed renders per method and frame (the median counts).
+    #[arg(long, default_value_t = 3)]
+    pub repeats: u32,
+    /// Levels added to every method's MIP level.
+    #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
+    pub lod_bias: f32,
+    #[arg(long, default_value_t = 5)]
+    pub max_depth: u32,
+    /// Play one animation clip (its name or index) instead of all clips together.
+    #[arg(long)]
+    pub animation: Option<String>,
+    /// Also write the reference's and every method's frames (OUT/frames/<method>/).
+    #[arg(long)]
+    pub save_frames: bool,
+    /// `lod`: also write every method's false-colour level images (OUT/lod/<method>/).
+    #[arg(long, value_enum)]
+    pub view: Option<View>,
+}
+
+/// Debug views written beside the frames.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum View {
+    /// False-colour MIP level of each pixel's texture lookup.
+    Lod,
+}
+
+/// `--lights` of compare: one count, or an inclusive range for Table 1.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum LightsSpec {
+    Count(usize),
+    Range(usize, usize),
+}
+
+/// Parses `N`, `A..B` or `A..=B` (both inclusive) with 1 <= A <= B <= the light limit.
+pub fn parse_lights(s: &str) -> Result<LightsSpec> {
+    let number = |t: &str| -> Result<usize> {
+        t.trim()
+            .parse::<usize>()
+            .with_context(|| format!("--lights {s}: '{t}' is not a whole number"))
+    };
+    let spec = match s.split_once("..") {
+        None => LightsSpec::Count(number(s)?),
+        Some((a, b)) => LightsSpec::Range(number(a)?, number(b.trim_start_matches('='))?),
+    };
+    let (lo, hi) = match spec {
+        LightsSpec::Count(n) => (n, n),
+        LightsSpec::Range(a, b) => (a, b),
+    };
+    if lo == 0 || lo > hi || hi > MAX_LIGHTS {
+        bail!("--lights {s}: counts must satisfy 1 <= A <= B <= {MAX_LIGHTS}");
+    }
+    Ok(spec)
+}
+
 /// `--bvh` values.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
 pub enum BvhMode {
@@ -233,6 +313,7 @@ pub fn run(cli: Cli) -> Result<ExitCode> {
         Some(Command::Render(args)) => render(&args),
         Some(Command::Bench(args)) => bench(&args).map(ok),
         Some(Command::Diff(args)) => diff(&args),
+        Some(Command::Compare(args)) => compare(&args).map(ok),
         Some(Command::Export(args)) => export(&args).map(ok),
         Some(Command::Report { dirs, svg }) => {
             let svg = svg.unwrap_or_else(|| {
@@ -612,6 +693,96 @@ pub fn bench(args: &BenchArgs) -> Result<()> {
         args.repeats,
     )?;
     print!("{}", crate::bench::bench_table(&results));
+    Ok(())
+}
+
+/// `mipray compare`.
+pub fn compare(args: &CompareArgs) -> Result<()> {
+    let lights = args.lights.as_deref().map(parse_lights).transpose()?;
+    let render_args = RenderArgs {
+        sequence: args.sequence.clone(),
+        lights: match lights {
+            Some(LightsSpec::Count(n)) => Some(n),
+            _ => None,
+        },
+        max_depth: args.max_depth,
+        lod_bias: args.lod_bias,
+        ..RenderArgs::default()
+    };
+    let mut settings = validated_settings(&render_args)?;
+    if args.reference_spp == 0 || args.reference_spp > MAX_SPP {
+        bail!(
+            "--reference-spp {}: must be 1 to {MAX_SPP}",
+            args.reference_spp
+        );
+    }
+    if args.repeats == 0 || args.repeats > 1000 {
+        bail!("--repeats {}: must be 1 to 1000", args.repeats);
+    }
+    let path = resolve_scene(&args.sequence.scene)?;
+    let scene = load_scene(&path)?;
+    for note in &scene.notes {
+        eprintln!("note: {}: {note}", path.display());
+    }
+    if let Some(spec) = &args.animation {
+        settings.animation = select_animation(&scene, spec)
+            .map_err(|e| anyhow::anyhow!("{}: --animation {spec}: {e}", path.display()))?;
+    }
+    let clock = FrameClock::for_scene(&scene, args.sequence.fps);
+    let frames = match &args.sequence.frames {
+        Some(f) => parse_frames(f)?,
+        None => clock.default_frames(settings.animation.duration(&scene)),
+    };
+    drop(scene);
+    let out = args
+        .out
+        .clone()
+        .unwrap_or_else(|| PathBuf::from("out").join(scene_name(&path)).join("compare"));
+    let options = crate::compare::CompareOptions {
+        scene_name: scene_name(&path),
+        settings,
+        frames: frames.clone().collect(),
+        clock,
+        methods: args.methods.clone(),
+        reference_spp: args.reference_spp,
+        repeats: args.repeats,
+        table1_lights: match lights {
+            Some(LightsSpec::Range(a, b)) => (a..=b).collect(),
+            _ => Vec::new(),
+        },
+        frames_dir: args.save_frames.then(|| out.join("frames")),
+        lod_view_dir: (args.view == Some(View::Lod)).then(|| out.join("lod")),
+    };
+    eprintln!(
+        "compare: {} frames {}..{} at {}x{}, reference {} spp, {} repeat(s), methods {}",
+        path.display(),
+        frames.start,
+        frames.end,
+        settings.width,
+        settings.height,
+        args.reference_spp,
+        args.repeats,
+        args.methods
+            .iter()
+            .map(|m| m.as_str())
+            .collect::<Vec<_>>()
+            .join(",")
+    );
+    let progress = progress_bar(frames.len() as u64);
+    let log = |line: &str| {
+        progress.suspend(|| eprintln!("{line}"));
+        if line.starts_with("frame") {
+            progress.inc(1);
+        }
+    };
+    let report = crate::compare::run_compare(|| load_scene(&path), &options, &log)?;
+    progress.finish_and_clear();
+    let written = crate::compare::report::write_all(&report, &out)?;
+    print!("{}", crate::compare::report::markdown(&report));
+    println!();
+    for path in written {
+        println!("wrote {}", path.display());
+    }
     Ok(())
 }
 

@@ -62,7 +62,10 @@ fn facing_quad_every_method_is_within_a_tenth_of_the_closed_form() {
         }
         // `none` has no MIP-mapping: always level 0.
         let scene = facing_quad_scene(distance, size, texture, yfov);
-        assert_eq!(probe(scene, (64, 64), LodMethod::None, 32.0, 32.0).level, 0.0);
+        assert_eq!(
+            probe(scene, (64, 64), LodMethod::None, 32.0, 32.0).level,
+            0.0
+        );
     }
 }
 
@@ -86,7 +89,10 @@ fn lod_bias_shifts_every_mipmapped_level() {
             p.level
         };
         let shift = level(1.5) - level(0.0);
-        assert!((shift - 1.5).abs() < 1e-5, "{lod}: bias 1.5 moved the level by {shift}");
+        assert!(
+            (shift - 1.5).abs() < 1e-5,
+            "{lod}: bias 1.5 moved the level by {shift}"
+        );
     }
 }
 
@@ -111,7 +117,10 @@ fn plane_tilted_60_degrees_adds_one_level_to_cos_aware_methods() {
     // Anisotropic filtering spends the elongation (1 / cos 60 = 2) on two taps instead: its
     // level stays at the footprint's short axis, which the tilt leaves unchanged.
     let aniso = level(LodMethod::DiffsAniso).level;
-    assert!((aniso - paper).abs() < 0.1, "diffs-aniso {aniso}, paper {paper}");
+    assert!(
+        (aniso - paper).abs() < 0.1,
+        "diffs-aniso {aniso}, paper {paper}"
+    );
 }
 
 /// Camera at the origin looking down -Z at a mirror 3 m away; the textured quad hangs 2 m
@@ -140,7 +149,11 @@ fn planar_mirror_paper_and_cones_use_the_total_path_length() {
     for lod in [LodMethod::Paper, LodMethod::Cones, LodMethod::Diffs] {
         let p = probe(planar_mirror_scene(yfov), (64, 64), lod, 32.0, 32.0);
         assert_eq!(p.chain.bends().len(), 1, "{lod}: one mirror on the way");
-        assert!((p.path_length - 8.0).abs() < 1e-3, "{lod}: path {}", p.path_length);
+        assert!(
+            (p.path_length - 8.0).abs() < 1e-3,
+            "{lod}: path {}",
+            p.path_length
+        );
         assert!(
             (p.level as f64 - expected).abs() < 0.05,
             "{lod}: level {} vs the virtual image at 8 m: {expected}",
@@ -246,11 +259,7 @@ fn no_method_gives_a_nan_or_infinite_level_on_degenerate_or_grazing_hits() {
 fn grazing_scene() -> SceneDesc {
     let mut scene = with_degenerate_triangles(receding_floor_scene(200.0));
     scene.nodes.last_mut().unwrap().local.translation = Vec3::ZERO;
-    let camera = scene
-        .nodes
-        .iter()
-        .position(|n| n.camera.is_some())
-        .unwrap();
+    let camera = scene.nodes.iter().position(|n| n.camera.is_some()).unwrap();
     scene.nodes[camera].local.translation = Vec3::new(0.0, 1e-3, 0.0);
     scene.materials.extend([mirror(), glass()]);
     for (material, x) in [(1, -0.8f32), (2, 0.8)] {
@@ -271,7 +280,10 @@ fn assert_finite_levels(scene: SceneDesc, lod: LodMethod) {
     {
         let mut renderer = Renderer::new(scene, settings(48, 32, lod));
         let (image, record) = renderer.render_frame(0, 0.0).unwrap();
-        assert!(image.pixels.iter().all(|p| p.is_finite()), "{lod}: NaN pixel");
+        assert!(
+            image.pixels.iter().all(|p| p.is_finite()),
+            "{lod}: NaN pixel"
+        );
         assert_eq!(record.nonfinite_samples, 0, "{lod}");
         let prepared = renderer.prepare(0, 0.0).unwrap();
         let frame_scene = renderer.frame_scene(&prepared);

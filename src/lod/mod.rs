@@ -23,7 +23,7 @@ mod paper_cos;
 mod pb;
 
 pub use cones::RayCone;
-pub use diffs::RayDiffs;
+pub use diffs::{RayDiffs, TexelGradients};
 pub use diffs_aniso::RayDiffsAniso;
 pub use none::NoLod;
 pub use paper::PathLength;

@@ -4,6 +4,7 @@ pub mod camera;
 pub mod film;
 pub mod integrator;
 pub mod light;
+pub mod lod_view;
 
 pub use camera::Camera;
 pub use film::{LinearImage, render_image};

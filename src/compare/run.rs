@@ -1,0 +1,387 @@
+//! Runs the comparison: every frame is prepared once, then rendered by the reference and by
+//! every method, timed interleaved, and measured.
+//!
+//! Timing: per frame, `repeats` rounds; each round renders every method once, starting
+//! from a different method each round so none always runs first (cache warm-up and
+//! frequency drift fall on all alike). A method's frame time is the median of its rounds
+//! plus, for methods that use `log2 P_b` (`paper`, `paper-cos`, `cones`), the frame
+//! update's `log2 P_b` refresh, which only they pay. The rest of the update (animation,
+//! refit) is the same for every method and reported once as `shared_update_ms`.
+//! `none` is always rendered (first in the report): overheads are relative to it.
+
+use std::path::PathBuf;
+use std::time::Instant;
+
+use anyhow::{Context, Result};
+use image::RgbImage;
+
+use super::lod_error::{LodErrorStats, method_error, reference_levels};
+use super::{CompareReport, FrameErrors, LightsRow, MethodSummary};
+use crate::frame::{FrameClock, PreparedFrame, RenderSettings, Renderer};
+use crate::lod::LodMethod;
+use crate::metrics;
+use crate::output::write_rgb8_atomically;
+use crate::render::integrator::{FrameScene, MIP_LEVELS};
+use crate::render::lod_view::lod_image;
+use crate::render::{Camera, LinearImage, render_image};
+use crate::scene::SceneDesc;
+
+/// What to compare.
+#[derive(Debug, Clone)]
+pub struct CompareOptions {
+    pub scene_name: String,
+    /// Size, lights, depth, bias and animation; `lod` and `spp` are set per render.
+    pub settings: RenderSettings,
+    pub frames: Vec<u32>,
+    pub clock: FrameClock,
+    pub methods: Vec<LodMethod>,
+    /// Samples per pixel of the level-0 reference (stratified).
+    pub reference_spp: u32,
+    pub repeats: u32,
+    /// Light counts of the Table 1 replication (empty: skip it).
+    pub table1_lights: Vec<usize>,
+    /// Where to write the reference's and each method's frames (`None`: not written).
+    pub frames_dir: Option<PathBuf>,
+    /// Where to write each method's `--view lod` images (`None`: not written).
+    pub lod_view_dir: Option<PathBuf>,
+}
+
+/// Per-method state carried over the frames.
+struct MethodRun {
+    method: LodMethod,
+    frames: Vec<FrameErrors>,
+    histogram: [u64; MIP_LEVELS],
+    previous: Option<RgbImage>,
+}
+
+/// Compares the methods on `load()`'s scene; `log` receives one line per frame.
+pub fn run_compare(
+    load: impl Fn() -> Result<SceneDesc>,
+    options: &CompareOptions,
+    log: &dyn Fn(&str),
+) -> Result<CompareReport> {
+    let methods = with_baseline(&options.methods);
+    let mut runs: Vec<MethodRun> = methods
+        .iter()
+        .map(|&method| MethodRun {
+            method,
+            frames: Vec::new(),
+            histogram: [0; MIP_LEVELS],
+            previous: None,
+        })
+        .collect();
+    // `paper` keeps `log2 P_b` up to date for every method that reads it.
+    let settings = RenderSettings {
+        lod: LodMethod::Paper,
+        spp: 1,
+        ..options.settings
+    };
+    let mut renderer = Renderer::new(load()?, settings);
+    let lights = renderer.light_count();
+    let mut previous_reference: Option<RgbImage> = None;
+    let mut shared_update_ms = 0.0;
+    for &frame in &options.frames {
+        let prepared = renderer.prepare(frame, options.clock.time(frame))?;
+        let u = prepared.update;
+        shared_update_ms += u.animate_ms + u.dirty_ms + u.refit_ms + u.build_ms;
+        let camera = prepared.camera;
+        let scene_with = |lod| FrameScene {
+            lod,
+            ..renderer.frame_scene(&prepared)
+        };
+        let reference_scene = scene_with(LodMethod::None);
+        let reference = srgb(&render_image(&reference_scene, &camera, options.reference_spp).0);
+        let lod_reference = reference_levels(&reference_scene, &camera);
+        let timed = time_interleaved(&methods, options.repeats, &scene_with, &camera);
+        for (run, (times, image, counters)) in runs.iter_mut().zip(timed) {
+            let scene = scene_with(run.method);
+            let test = srgb(&image);
+            let (m, _) = metrics::compare(&reference, &test);
+            let lod = method_error(&scene, &camera, &lod_reference);
+            let flicker = match (&run.previous, &previous_reference) {
+                (Some(prev), Some(prev_ref)) => Some(metrics::temporal::flicker(
+                    prev, &test, prev_ref, &reference,
+                )),
+                _ => None,
+            };
+            let update = if run.method.needs_log2_pb() {
+                u.lod_update_ms
+            } else {
+                0.0
+            };
+            run.frames.push(frame_errors(
+                frame,
+                median(times) + update,
+                &m,
+                metrics::ssim::ssim(&reference, &test),
+                lod,
+                flicker,
+            ));
+            for (a, b) in run.histogram.iter_mut().zip(counters.mip_histogram) {
+                *a += b;
+            }
+            write_extras(options, run.method, frame, &test, &scene, &camera)?;
+            run.previous = Some(test);
+        }
+        if let Some(dir) = &options.frames_dir {
+            write_png(&dir.join("reference"), frame, &reference)?;
+        }
+        log(&frame_line(frame, &runs));
+        previous_reference = Some(reference);
+    }
+    let frames = options.frames.len().max(1) as f64;
+    let table1 = options
+        .table1_lights
+        .iter()
+        .map(|&n| lights_row(&load, options, n, log))
+        .collect::<Result<Vec<_>>>()?;
+    let mut methods: Vec<MethodSummary> = runs.into_iter().map(summarise).collect();
+    let baseline = methods[0].ms_per_frame;
+    for m in &mut methods {
+        m.overhead_pct = (m.ms_per_frame / baseline - 1.0) * 100.0;
+    }
+    Ok(CompareReport {
+        scene: options.scene_name.clone(),
+        width: options.settings.width,
+        height: options.settings.height,
+        frames: options.frames.clone(),
+        reference_spp: options.reference_spp,
+        repeats: options.repeats,
+        lights,
+        shared_update_ms: shared_update_ms / frames,
+        lod_bias: options.settings.lod_bias,
+        methods,
+        table1,
+    })
+}
+
+/// `none` first (the baseline), then the requested methods in order, without repeats.
+fn with_baseline(methods: &[LodMethod]) -> Vec<LodMethod> {
+    let mut all = vec![LodMethod::None];
+    for &m in methods {
+        if !all.contains(&m) {
+            all.push(m);
+        }
+    }
+    all
+}
+
+type Timed = (Vec<f64>, LinearImage, crate::render::TraceCounters);
+
+/// Renders the frame `repeats` times with every method, rotating the order each round;
+/// returns each method's render times, its image and counters (renders are deterministic,
+/// so any round's image is the image).
+fn time_interleaved<'s>(
+    methods: &[LodMethod],
+    repeats: u32,
+    scene_with: &dyn Fn(LodMethod) -> FrameScene<'s>,
+    camera: &Camera,
+) -> Vec<Timed> {
+    let n = methods.len();
+    let mut times = vec![Vec::with_capacity(repeats as usize); n];
+    let mut outputs: Vec<Option<(LinearImage, crate::render::TraceCounters)>> = vec![None; n];
+    for round in 0..repeats.max(1) as usize {
+        for k in 0..n {
+            let m = (k + round) % n;
+            let scene = scene_with(methods[m]);
+            let start = Instant::now();
+            let output = render_image(&scene, camera, 1);
+            times[m].push(start.elapsed().as_secs_f64() * 1e3);
+            outputs[m].get_or_insert(output);
+        }
+    }
+    times
+        .into_iter()
+        .zip(outputs)
+        .map(|(t, o)| {
+            let (image, counters) = o.expect("every method rendered at least once");
+            (t, image, counters)
+        })
+        .collect()
+}
+
+fn frame_errors(
+    frame: u32,
+    ms: f64,
+    m: &metrics::FrameMetrics,
+    ssim: f64,
+    lod: LodErrorStats,
+    flicker: Option<f64>,
+) -> FrameErrors {
+    FrameErrors {
+        frame,
+        ms,
+        psnr: m.psnr_db,
+        ssim,
+        flip: m.mean_flip,
+        lod_bias: lod.bias,
+        lod_rms: lod.rms,
+        lod_under: lod.under,
+        lod_pixels: lod.pixels,
+        flicker,
+    }
+}
+
+fn summarise(run: MethodRun) -> MethodSummary {
+    let mean = |f: &dyn Fn(&FrameErrors) -> Option<f64>| {
+        let values: Vec<f64> = run
+            .frames
+            .iter()
+            .filter_map(f)
+            .filter(|v| v.is_finite())
+            .collect();
+        if values.is_empty() {
+            f64::NAN
+        } else {
+            values.iter().sum::<f64>() / values.len() as f64
+        }
+    };
+    let lookups: u64 = run.histogram.iter().sum();
+    MethodSummary {
+        method: run.method.to_string(),
+        bytes_per_ray: run.method.bytes_per_ray(),
+        ms_per_frame: mean(&|f| Some(f.ms)),
+        overhead_pct: 0.0,
+        // Identical frames have an infinite PSNR; the mean is over the finite ones, and
+        // infinite only if every frame is identical.
+        psnr: match mean(&|f| Some(f.psnr)) {
+            p if p.is_nan() && run.frames.iter().all(|f| f.psnr.is_infinite()) => f64::INFINITY,
+            p => p,
+        },
+        ssim: mean(&|f| Some(f.ssim)),
+        flip: mean(&|f| Some(f.flip)),
+        lod_bias: mean(&|f| Some(f.lod_bias)),
+        lod_rms: mean(&|f| Some(f.lod_rms)),
+        lod_under: mean(&|f| Some(f.lod_under)),
+        flicker: mean(&|f| f.flicker),
+        mip_share: run
+            .histogram
+            .iter()
+            .map(|&c| {
+                if lookups == 0 {
+                    0.0
+                } else {
+                    c as f64 / lookups as f64
+                }
+            })
+            .collect(),
+        frames: run.frames,
+    }
+}
+
+/// Table 1: `none` against `paper` with `lights` lights, timed interleaved per frame.
+fn lights_row(
+    load: &impl Fn() -> Result<SceneDesc>,
+    options: &CompareOptions,
+    lights: usize,
+    log: &dyn Fn(&str),
+) -> Result<LightsRow> {
+    let settings = RenderSettings {
+        lod: LodMethod::Paper,
+        spp: 1,
+        lights: Some(lights),
+        ..options.settings
+    };
+    let mut renderer = Renderer::new(load()?, settings);
+    let methods = [LodMethod::None, LodMethod::Paper];
+    let (mut none_ms, mut paper_ms) = (0.0, 0.0);
+    for &frame in &options.frames {
+        let prepared: PreparedFrame = renderer.prepare(frame, options.clock.time(frame))?;
+        let scene_with = |lod| FrameScene {
+            lod,
+            ..renderer.frame_scene(&prepared)
+        };
+        let timed = time_interleaved(&methods, options.repeats, &scene_with, &prepared.camera);
+        let mut medians = timed.into_iter().map(|(t, _, _)| median(t));
+        none_ms += medians.next().unwrap_or(f64::NAN);
+        paper_ms += medians.next().unwrap_or(f64::NAN) + prepared.update.lod_update_ms;
+    }
+    let frames = options.frames.len().max(1) as f64;
+    let row = LightsRow {
+        lights,
+        none_ms: none_ms / frames,
+        paper_ms: paper_ms / frames,
+        overhead_pct: (paper_ms / none_ms - 1.0) * 100.0,
+    };
+    log(&format!(
+        "table 1: {lights} light(s): none {:.2} ms, paper {:.2} ms, overhead {:+.2}%",
+        row.none_ms, row.paper_ms, row.overhead_pct
+    ));
+    Ok(row)
+}
+
+/// Middle value (mean of the two middle ones for an even count); NaN if empty.
+pub fn median(mut values: Vec<f64>) -> f64 {
+    if values.is_empty() {
+        return f64::NAN;
+    }
+    values.sort_by(f64::total_cmp);
+    let mid = values.len() / 2;
+    if values.len() % 2 == 1 {
+        values[mid]
+    } else {
+        (values[mid - 1] + values[mid]) / 2.0
+    }
+}
+
+fn srgb(image: &LinearImage) -> RgbImage {
+    RgbImage::from_raw(image.width, image.height, image.to_srgb8()).expect("w * h * 3 bytes")
+}
+
+fn write_png(dir: &std::path::Path, frame: u32, image: &RgbImage) -> Result<()> {
+    std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))?;
+    let path = dir.join(format!("frame_{frame:04}.png"));
+    write_rgb8_atomically(&path, image).with_context(|| format!("cannot write {}", path.display()))
+}
+
+/// The method's frame and level view, when asked for.
+fn write_extras(
+    options: &CompareOptions,
+    method: LodMethod,
+    frame: u32,
+    image: &RgbImage,
+    scene: &FrameScene,
+    camera: &Camera,
+) -> Result<()> {
+    if let Some(dir) = &options.frames_dir {
+        write_png(&dir.join(method.as_str()), frame, image)?;
+    }
+    if let Some(dir) = &options.lod_view_dir {
+        write_png(&dir.join(method.as_str()), frame, &lod_image(scene, camera))?;
+    }
+    Ok(())
+}
+
+fn frame_line(frame: u32, runs: &[MethodRun]) -> String {
+    let parts: Vec<String> = runs
+        .iter()
+        .filter_map(|r| {
+            let f = r.frames.last()?;
+            Some(format!(
+                "{} {:.1} ms flip {:.4} lod {:+.2}",
+                r.method, f.ms, f.flip, f.lod_bias
+            ))
+        })
+        .collect();
+    format!("frame {frame:04}: {}", parts.join(" | "))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn median_of_odd_even_and_empty() {
+        assert_eq!(median(vec![3.0, 1.0, 2.0]), 2.0);
+        assert_eq!(median(vec![4.0, 1.0, 2.0, 3.0]), 2.5);
+        assert!(median(vec![]).is_nan());
+    }
+
+    #[test]
+    fn baseline_comes_first_once() {
+        assert_eq!(
+            with_baseline(&[LodMethod::Paper, LodMethod::None, LodMethod::Paper]),
+            vec![LodMethod::None, LodMethod::Paper]
+        );
+    }
+}
