@@ -132,6 +132,10 @@ pub struct RenderArgs {
     /// With --check: stop at the first frame outside the threshold.
     #[arg(long, requires = "check")]
     pub fail_fast: bool,
+    /// `lod`: also write a false-colour image of each pixel's MIP level beside each frame
+    /// (`lod_NNNN.png`; colours in README).
+    #[arg(long, value_enum)]
+    pub view: Option<View>,
     #[command(flatten)]
     pub check_args: CheckArgs,
 }
@@ -560,6 +564,7 @@ pub fn render(args: &RenderArgs) -> Result<ExitCode> {
         format: args.format,
         shard: resolve_shard(args.shard.as_deref(), |name| std::env::var(name).ok())?,
         resume: args.resume,
+        lod_view: args.view == Some(View::Lod),
     };
     let check = args.check.as_ref().map(|reference| Check {
         reference: reference.clone(),
@@ -794,6 +799,8 @@ pub struct SequenceOutput {
     pub shard: Option<Shard>,
     /// Skip frames already complete on disk (frame file and stats record).
     pub resume: bool,
+    /// Write `lod_NNNN.png` level images beside the frames (`--view lod`).
+    pub lod_view: bool,
 }
 
 /// Renders `frames` (this shard's part of them) into the output folder, one record per
@@ -829,8 +836,13 @@ pub fn render_sequence(
     let start = Instant::now();
     for frame in todo {
         let time_s = clock.time(frame);
-        let (image, record) = renderer.render_frame(frame, time_s)?;
+        let (image, record, view) = renderer.render_frame_with_view(frame, time_s, out.lod_view)?;
         let path = output.write_frame(frame, &image)?;
+        if let Some(view) = view {
+            let view_path = output.path().join(format!("lod_{frame:04}.png"));
+            crate::output::write_rgb8_atomically(&view_path, &view)
+                .with_context(|| format!("cannot write {}", view_path.display()))?;
+        }
         output.append_record(&record)?;
         let line = format!(
             "frame {frame:04}  t={time_s:.3}s  {:>8.1} ms  {:>6.2} Mrays  moved {:>7}  lod_recomputed {:>7}{}  -> {}",

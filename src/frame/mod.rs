@@ -341,6 +341,21 @@ impl Renderer {
         frame: u32,
         time_s: f32,
     ) -> Result<(LinearImage, FrameRecord), FrameError> {
+        let (image, record, _) = self.render_frame_with_view(frame, time_s, false)?;
+        Ok((image, record))
+    }
+
+    /// [`Self::render_frame`], plus the `--view lod` false-colour level image when
+    /// `lod_view` (made after the timed render, so it does not count in the record).
+    ///
+    /// # Errors
+    /// Animation produced a non-finite vertex.
+    pub fn render_frame_with_view(
+        &mut self,
+        frame: u32,
+        time_s: f32,
+        lod_view: bool,
+    ) -> Result<(LinearImage, FrameRecord, Option<image::RgbImage>), FrameError> {
         let start = Instant::now();
         let prepared = self.prepare(frame, time_s)?;
         let t = Instant::now();
@@ -358,7 +373,10 @@ impl Renderer {
             render_ms,
             ms_since(start),
         );
-        Ok((image, record))
+        let view = lod_view.then(|| {
+            crate::render::lod_view::lod_image(&self.frame_scene(&prepared), &prepared.camera)
+        });
+        Ok((image, record, view))
     }
 
     /// The per-frame update without the render: animate, mark what moved, refit or rebuild
