@@ -15,6 +15,10 @@ use glam::{Vec2, Vec4};
 
 use super::{MipLevel, MipPyramid, Sampler, WrapMode};
 
+/// Largest `|texel index|` the integer Repeat path takes (exact in f64 and far from i64
+/// overflow); beyond it the exact f64 reduction below is used.
+const REPEAT_FAST_LIMIT: f64 = 1e15;
+
 /// The two texel indices (already wrapped into `0..n`) and the weight of the second one,
 /// for a lookup at texture coordinate `t` along an axis of `n` texels.
 #[inline]
@@ -30,6 +34,19 @@ fn axis(t: f32, n: u32, mode: WrapMode) -> (usize, usize, f32) {
     if x0 >= 0.0 && x0 + 1.0 < n_f {
         let i0 = x0 as usize;
         return (i0, i0 + 1, frac);
+    }
+    // Repeat with a moderate coordinate (tiled floors reach u = 100 and more): one integer
+    // remainder, a mask for power-of-two sizes, instead of an f64 `fmod` and two more.
+    if mode == WrapMode::Repeat && x0.abs() < REPEAT_FAST_LIMIT {
+        let (i, n) = (x0 as i64, i64::from(n));
+        let i0 = if n & (n - 1) == 0 {
+            // Two's complement: the mask is the Euclidean remainder for negative i too.
+            i & (n - 1)
+        } else {
+            i.rem_euclid(n)
+        };
+        let i1 = if i0 + 1 == n { 0 } else { i0 + 1 };
+        return (i0 as usize, i1 as usize, frac);
     }
     // Reduce x0 to a small range with the same wrapped result before converting to an
     // integer: `rem_euclid` on f64 is exact, and the bounds keep `i0 + 1` in range too.
@@ -443,5 +460,28 @@ mod tests {
             p.sample_anisotropic(uv, 1.5, nan, 8, s),
             p.sample_trilinear(uv, 1.5, s)
         );
+    }
+
+    #[test]
+    fn repeat_fast_path_matches_the_exact_reduction() {
+        for n in [1u32, 2, 3, 7, 8, 1000, 1024] {
+            for t in [
+                -100_000.37f32,
+                -3.2,
+                -0.001,
+                0.0,
+                0.999,
+                1.5,
+                123.456,
+                99_999.9,
+                3.0e6,
+            ] {
+                let x = f64::from(t) * f64::from(n) - 0.5;
+                let x0 = x.floor();
+                let i0 = x0.rem_euclid(f64::from(n)) as usize;
+                let expected = (i0, (i0 + 1) % n as usize, (x - x0) as f32);
+                assert_eq!(axis(t, n, REPEAT), expected, "t {t}, n {n}");
+            }
+        }
     }
 }
