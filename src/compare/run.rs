@@ -80,7 +80,7 @@ pub fn run_compare(
     let lights = renderer.light_count();
     let mut previous_reference: Option<RgbImage> = None;
     let mut shared_update_ms = 0.0;
-    for &frame in &options.frames {
+    for (fi, &frame) in options.frames.iter().enumerate() {
         let prepared = renderer.prepare(frame, options.clock.time(frame))?;
         let u = prepared.update;
         shared_update_ms += u.animate_ms + u.dirty_ms + u.refit_ms + u.build_ms;
@@ -92,7 +92,7 @@ pub fn run_compare(
         let reference_scene = scene_with(LodMethod::None);
         let reference = srgb(&render_image(&reference_scene, &camera, options.reference_spp).0);
         let lod_reference = reference_levels(&reference_scene, &camera);
-        let timed = time_interleaved(&methods, options.repeats, &scene_with, &camera);
+        let timed = time_interleaved(&methods, options.repeats, fi, &scene_with, &camera);
         for (run, (times, image, counters)) in runs.iter_mut().zip(timed) {
             let scene = scene_with(run.method);
             let test = srgb(&image);
@@ -168,12 +168,14 @@ fn with_baseline(methods: &[LodMethod]) -> Vec<LodMethod> {
 
 type Timed = (Vec<f64>, LinearImage, crate::render::TraceCounters);
 
-/// Renders the frame `repeats` times with every method, rotating the order each round;
-/// returns each method's render times, its image and counters (renders are deterministic,
-/// so any round's image is the image).
+/// Renders the frame `repeats` times with every method, rotating the order each round and
+/// each frame (`rotation`), so that no method always goes first (with one repeat the first
+/// render of a frame can pay for warm-up); returns each method's render times, its image
+/// and counters (renders are deterministic, so any round's image is the image).
 fn time_interleaved<'s>(
     methods: &[LodMethod],
     repeats: u32,
+    rotation: usize,
     scene_with: &dyn Fn(LodMethod) -> FrameScene<'s>,
     camera: &Camera,
 ) -> Vec<Timed> {
@@ -182,7 +184,7 @@ fn time_interleaved<'s>(
     let mut outputs: Vec<Option<(LinearImage, crate::render::TraceCounters)>> = vec![None; n];
     for round in 0..repeats.max(1) as usize {
         for k in 0..n {
-            let m = (k + round) % n;
+            let m = (k + round + rotation) % n;
             let scene = scene_with(methods[m]);
             let start = Instant::now();
             let output = render_image(&scene, camera, 1);
@@ -285,13 +287,13 @@ fn lights_row(
     let mut renderer = Renderer::new(load()?, settings);
     let methods = [LodMethod::None, LodMethod::Paper];
     let (mut none_ms, mut paper_ms) = (0.0, 0.0);
-    for &frame in &options.frames {
+    for (fi, &frame) in options.frames.iter().enumerate() {
         let prepared: PreparedFrame = renderer.prepare(frame, options.clock.time(frame))?;
         let scene_with = |lod| FrameScene {
             lod,
             ..renderer.frame_scene(&prepared)
         };
-        let timed = time_interleaved(&methods, options.repeats, &scene_with, &prepared.camera);
+        let timed = time_interleaved(&methods, options.repeats, fi, &scene_with, &prepared.camera);
         let mut medians = timed.into_iter().map(|(t, _, _)| median(t));
         none_ms += medians.next().unwrap_or(f64::NAN);
         paper_ms += medians.next().unwrap_or(f64::NAN) + prepared.update.lod_update_ms;
