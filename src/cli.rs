@@ -290,6 +290,10 @@ pub struct BenchArgs {
     /// How many times every configuration renders the frames.
     #[arg(long, default_value_t = 5)]
     pub repeats: usize,
+    /// Levels added to every MIP-mapped lookup. `-16` pins every level to 0, so `paper`
+    /// then costs its LOD selection without the second trilinear lookup.
+    #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
+    pub lod_bias: f32,
 }
 
 impl Default for RenderArgs {
@@ -647,6 +651,7 @@ pub fn bench(args: &BenchArgs) -> Result<()> {
         lights: args.lights,
         spp: args.spp,
         max_depth: args.max_depth,
+        lod_bias: args.lod_bias,
         ..RenderArgs::default()
     };
     let settings = validated_settings(&render_args)?;

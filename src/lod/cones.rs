@@ -22,7 +22,8 @@ use glam::Vec3A;
 
 use super::paper_cos::incidence_levels;
 use super::{
-    Footprint, LodCamera, LodMethod, RayLod, SurfaceHit, finite_level, mean_edge_curvature,
+    Footprint, LodCamera, LodMethod, RayLod, SurfaceHit, fast_log2, finite_level,
+    mean_edge_curvature,
 };
 
 /// Largest spread angle kept (radians): a cone wider than a half-space has no meaning, and
@@ -77,7 +78,7 @@ impl RayLod for RayCone {
     #[inline]
     fn footprint(&self, hit: &SurfaceHit, camera: &LodCamera, _: (u32, u32)) -> Footprint {
         let level =
-            self.width.abs().max(f32::MIN_POSITIVE).log2() - camera.log2_pixel - hit.log2_pb()
+            fast_log2(self.width.abs().max(f32::MIN_POSITIVE)) - camera.log2_pixel - hit.log2_pb()
                 + incidence_levels(hit.clamped_cos());
         Footprint::Level(finite_level(level))
     }

@@ -21,7 +21,7 @@ use glam::{Vec2, Vec3A};
 
 use super::{
     COARSEST_LEVEL, Footprint, LodCamera, LodMethod, MIN_INCIDENCE_COS, RayLod, SurfaceHit,
-    finite_level,
+    fast_log2, finite_level,
 };
 
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
@@ -45,7 +45,7 @@ impl TexelGradients {
     #[inline]
     pub fn isotropic_level(&self) -> f32 {
         let longest2 = self.dx.length_squared().max(self.dy.length_squared());
-        finite_level(0.5 * longest2.max(1e-30).log2())
+        finite_level(0.5 * fast_log2(longest2.max(1e-30)))
     }
 }
 

@@ -15,7 +15,7 @@ use glam::{Vec2, Vec3A};
 use super::diffs::TexelGradients;
 use super::{
     COARSEST_LEVEL, Footprint, LodCamera, LodMethod, MAX_ANISOTROPY, RayDiffs, RayLod, SurfaceHit,
-    finite_level,
+    fast_log2, finite_level,
 };
 
 /// Elongation below which a footprint counts as an exact integer ratio.
@@ -41,7 +41,7 @@ impl TexelGradients {
         } else {
             MAX_ANISOTROPY
         };
-        let level = finite_level((p_max / taps as f32).max(1e-30).log2());
+        let level = finite_level(fast_log2((p_max / taps as f32).max(1e-30)));
         (level, taps, major)
     }
 }

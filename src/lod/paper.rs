@@ -10,7 +10,7 @@
 
 use glam::Vec3A;
 
-use super::{Footprint, LodCamera, LodMethod, RayLod, SurfaceHit, finite_level};
+use super::{Footprint, LodCamera, LodMethod, RayLod, SurfaceHit, fast_log2, finite_level};
 
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct PathLength(pub f32);
@@ -20,7 +20,7 @@ impl PathLength {
     /// cannot occur for a real hit, but must not produce NaN).
     #[inline]
     pub fn paper_level(self, log2_pb: f32) -> f32 {
-        finite_level(self.0.max(f32::MIN_POSITIVE).log2() - log2_pb)
+        finite_level(fast_log2(self.0.max(f32::MIN_POSITIVE)) - log2_pb)
     }
 }
 

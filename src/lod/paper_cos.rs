@@ -9,7 +9,7 @@
 
 use glam::Vec3A;
 
-use super::{Footprint, LodCamera, LodMethod, PathLength, RayLod, SurfaceHit};
+use super::{Footprint, LodCamera, LodMethod, PathLength, RayLod, SurfaceHit, fast_log2};
 
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct PathLengthCos(pub PathLength);
@@ -17,7 +17,7 @@ pub struct PathLengthCos(pub PathLength);
 /// The incidence term `-log2 |n.d|` for a cosine already clamped to `[1/16, 1]`.
 #[inline]
 pub fn incidence_levels(clamped_cos: f32) -> f32 {
-    -clamped_cos.log2()
+    -fast_log2(clamped_cos)
 }
 
 impl RayLod for PathLengthCos {
