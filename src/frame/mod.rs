@@ -136,6 +136,9 @@ pub struct FrameRecord {
     pub width: u32,
     pub height: u32,
     pub lod_method: String,
+    /// `--lod-bias` (absent in records written before it existed).
+    #[serde(default)]
+    pub lod_bias: f32,
     pub triangles: usize,
     pub lights: usize,
     pub spp: u32,
@@ -740,6 +743,7 @@ impl Renderer {
             width: self.settings.width,
             height: self.settings.height,
             lod_method: self.settings.lod.to_string(),
+            lod_bias: self.settings.lod_bias,
             triangles: self.triangles.len(),
             lights: prepared.lights.len(),
             spp: self.settings.spp.max(1),

@@ -73,16 +73,7 @@ impl RayDiffs {
         hit: &SurfaceHit,
         texture_size: (u32, u32),
     ) -> Option<TexelGradients> {
-        let [p0, p1, p2] = hit.positions();
-        let (e1, e2) = (p1 - p0, p2 - p0);
-        let normal = e1.cross(e2);
-        let area2 = normal.length_squared();
-        if !(area2 > 0.0 && area2.is_finite()) {
-            return None;
-        }
-        // Gradients of barycentrics b1, b2 in the triangle's plane: L_u.e1 = 1, L_u.e2 = 0.
-        let lu = e2.cross(normal) / area2;
-        let lv = normal.cross(e1) / area2;
+        let (lu, lv) = barycentric_gradients(hit.positions())?;
         let [t0, t1, t2] = hit.uvs();
         let (du1, du2) = (t1 - t0, t2 - t0);
         let size = Vec2::new(texture_size.0 as f32, texture_size.1 as f32);
@@ -95,22 +86,32 @@ impl RayDiffs {
     }
 }
 
+/// Gradients `L_u`, `L_v` of the barycentrics b1, b2 in the triangle's plane (`L_u.e1 = 1`,
+/// `L_u.e2 = 0`, and the reverse): `db = L . dP` for an in-plane offset `dP`. `None` for a
+/// triangle of zero (or non-finite) area.
+fn barycentric_gradients([p0, p1, p2]: [Vec3A; 3]) -> Option<(Vec3A, Vec3A)> {
+    let (e1, e2) = (p1 - p0, p2 - p0);
+    let normal = e1.cross(e2);
+    let area2 = normal.length_squared();
+    if !(area2 > 0.0 && area2.is_finite()) {
+        return None;
+    }
+    Some((e2.cross(normal) / area2, normal.cross(e1) / area2))
+}
+
 /// The normalised interpolated normal's derivatives along the footprint (x, y), zero where
 /// the surface is flat-shaded or the shading normal fell back to the face normal.
 fn normal_differentials(hit: &SurfaceHit, dp_dx: Vec3A, dp_dy: Vec3A) -> (Vec3A, Vec3A) {
-    let [p0, p1, p2] = hit.positions();
-    let (e1, e2) = (p1 - p0, p2 - p0);
-    let face = e1.cross(e2);
-    let area2 = face.length_squared();
     let [n0, n1, n2] = hit.oriented_normals();
     let (b1, b2) = (hit.bary.x, hit.bary.y);
     let n = n0 * (1.0 - b1 - b2) + n1 * b1 + n2 * b2;
     let nn = n.length_squared();
-    if !(area2 > 0.0 && nn > 0.0) || n.dot(hit.shading_normal) <= 0.0 {
+    let Some((lu, lv)) = barycentric_gradients(hit.positions()) else {
+        return (Vec3A::ZERO, Vec3A::ZERO);
+    };
+    if !(nn > 0.0) || n.dot(hit.shading_normal) <= 0.0 {
         return (Vec3A::ZERO, Vec3A::ZERO);
     }
-    let lu = e2.cross(face) / area2;
-    let lv = face.cross(e1) / area2;
     let unit_derivative = |dp: Vec3A| {
         let dn = (n1 - n0) * lu.dot(dp) + (n2 - n0) * lv.dot(dp);
         (dn * nn - n * n.dot(dn)) / (nn * nn.sqrt())

@@ -101,14 +101,7 @@ impl LodMethod {
 
     /// Bytes of LOD state a ray carries (f32 components; in memory `Vec3A` pads to 16).
     pub fn bytes_per_ray(self) -> usize {
-        match self {
-            LodMethod::None => NoLod::BYTES,
-            LodMethod::Paper => PathLength::BYTES,
-            LodMethod::PaperCos => PathLengthCos::BYTES,
-            LodMethod::Cones => RayCone::BYTES,
-            LodMethod::Diffs => RayDiffs::BYTES,
-            LodMethod::DiffsAniso => RayDiffsAniso::BYTES,
-        }
+        with_lod_state!(self, L => L::BYTES)
     }
 }
 
@@ -134,6 +127,41 @@ impl FromStr for LodMethod {
             })
     }
 }
+
+/// Evaluates `$body` with the type alias `$L` bound to the per-ray state of `$method`: one
+/// match arm per method, so the code inside is monomorphised per method and the dispatch
+/// happens once, outside the per-ray code.
+macro_rules! with_lod_state {
+    ($method:expr, $L:ident => $body:expr) => {
+        match $method {
+            $crate::lod::LodMethod::None => {
+                type $L = $crate::lod::NoLod;
+                $body
+            }
+            $crate::lod::LodMethod::Paper => {
+                type $L = $crate::lod::PathLength;
+                $body
+            }
+            $crate::lod::LodMethod::PaperCos => {
+                type $L = $crate::lod::PathLengthCos;
+                $body
+            }
+            $crate::lod::LodMethod::Cones => {
+                type $L = $crate::lod::RayCone;
+                $body
+            }
+            $crate::lod::LodMethod::Diffs => {
+                type $L = $crate::lod::RayDiffs;
+                $body
+            }
+            $crate::lod::LodMethod::DiffsAniso => {
+                type $L = $crate::lod::RayDiffsAniso;
+                $body
+            }
+        }
+    };
+}
+pub(crate) use with_lod_state;
 
 /// The camera quantities primary rays' LOD state starts from.
 #[derive(Debug, Clone, Copy, PartialEq)]

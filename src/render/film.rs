@@ -8,9 +8,7 @@
 use glam::{Vec3, Vec3A};
 use rayon::prelude::*;
 
-use crate::lod::{
-    LodMethod, NoLod, PathLength, PathLengthCos, RayCone, RayDiffs, RayDiffsAniso, RayLod,
-};
+use crate::lod::{RayLod, with_lod_state};
 use crate::render::camera::Camera;
 use crate::render::integrator::{FrameScene, TraceCounters};
 
@@ -81,14 +79,7 @@ fn render_tile(
     x0: u32,
     y0: u32,
 ) -> (Vec<Vec3>, TraceCounters) {
-    match scene.lod {
-        LodMethod::None => render_tile_with::<NoLod>(scene, camera, spp, x0, y0),
-        LodMethod::Paper => render_tile_with::<PathLength>(scene, camera, spp, x0, y0),
-        LodMethod::PaperCos => render_tile_with::<PathLengthCos>(scene, camera, spp, x0, y0),
-        LodMethod::Cones => render_tile_with::<RayCone>(scene, camera, spp, x0, y0),
-        LodMethod::Diffs => render_tile_with::<RayDiffs>(scene, camera, spp, x0, y0),
-        LodMethod::DiffsAniso => render_tile_with::<RayDiffsAniso>(scene, camera, spp, x0, y0),
-    }
+    with_lod_state!(scene.lod, L => render_tile_with::<L>(scene, camera, spp, x0, y0))
 }
 
 fn render_tile_with<L: RayLod>(

@@ -11,8 +11,7 @@ use glam::{Vec2, Vec3A};
 use crate::accel::{Accel, Hit};
 use crate::geometry::FrameTriangles;
 use crate::lod::{
-    Footprint, LodCamera, LodMethod, NoLod, PathLength, PathLengthCos, RayCone, RayDiffs,
-    RayDiffsAniso, RayLod, SurfaceHit, finite_level,
+    Footprint, LodCamera, LodMethod, RayLod, SurfaceHit, finite_level, with_lod_state,
 };
 use crate::render::camera::Camera;
 use crate::render::light::Light;
@@ -156,7 +155,7 @@ struct SurfacePoint {
 
 impl FrameScene<'_> {
     /// Radiance of the primary ray through film point `(px, py)` of `camera`, carrying the
-    /// LOD state of method `L` (which must be `self.lod`'s; see [`Self::with_lod_state`]).
+    /// LOD state of method `L` (the film picks `L` from `self.lod` with `lod::with_lod_state!`).
     #[inline]
     pub fn primary_radiance<L: RayLod>(
         &self,
@@ -231,14 +230,7 @@ impl FrameScene<'_> {
 
     /// [`Self::probe`] with the state type of `self.lod`.
     pub fn probe_method(&self, camera: &Camera, px: f32, py: f32) -> Option<LodProbe> {
-        match self.lod {
-            LodMethod::None => self.probe::<NoLod>(camera, px, py),
-            LodMethod::Paper => self.probe::<PathLength>(camera, px, py),
-            LodMethod::PaperCos => self.probe::<PathLengthCos>(camera, px, py),
-            LodMethod::Cones => self.probe::<RayCone>(camera, px, py),
-            LodMethod::Diffs => self.probe::<RayDiffs>(camera, px, py),
-            LodMethod::DiffsAniso => self.probe::<RayDiffsAniso>(camera, px, py),
-        }
+        with_lod_state!(self.lod, L => self.probe::<L>(camera, px, py))
     }
 
     /// [`Self::probe`] for any ray and starting state.
@@ -314,7 +306,7 @@ impl FrameScene<'_> {
     ) -> Option<Vec2> {
         let (mut origin, mut direction) = (origin, direction);
         for &(slot, bend) in chain.bends() {
-            let (position, surface) = self.plane_point(slot, origin, direction)?;
+            let surface = self.plane_point(slot, origin, direction)?;
             direction = match bend {
                 Bend::Reflect => reflect(direction, surface.shading_normal, surface.face_normal),
                 Bend::Refract { eta } => {
@@ -323,7 +315,7 @@ impl FrameScene<'_> {
                     refract(direction, n, cos_i, eta)?.0
                 }
             };
-            origin = position;
+            origin = surface.position;
         }
         let slot = textured as usize;
         let (_, bary) = plane_barycentrics(self.triangles.positions[slot], origin, direction)?;
@@ -331,12 +323,7 @@ impl FrameScene<'_> {
     }
 
     /// The hit of a ray with the plane of triangle `slot`, as a surface point.
-    fn plane_point(
-        &self,
-        slot: u32,
-        origin: Vec3A,
-        direction: Vec3A,
-    ) -> Option<(Vec3A, SurfacePoint)> {
+    fn plane_point(&self, slot: u32, origin: Vec3A, direction: Vec3A) -> Option<SurfacePoint> {
         let (t, bary) =
             plane_barycentrics(self.triangles.positions[slot as usize], origin, direction)?;
         let hit = Hit {
@@ -344,8 +331,7 @@ impl FrameScene<'_> {
             triangle: slot,
             bary,
         };
-        let surface = self.surface_point(&hit, origin, direction);
-        Some((surface.position, surface))
+        Some(self.surface_point(&hit, origin, direction))
     }
 
     /// The method's level with the bias, and the level the pyramid lookup uses.
