@@ -3,12 +3,12 @@
 mod common;
 
 use common::scenes::*;
-use glam::{Quat, Vec2, Vec3};
+use glam::{Quat, Vec3};
 use image::RgbImage;
 use mipray::frame::{RenderSettings, Renderer};
 use mipray::lod::LodMethod;
 use mipray::render::integrator::LodProbe;
-use mipray::scene::{MeshDesc, PrimitiveDesc, SceneDesc, Trs};
+use mipray::scene::{MeshDesc, SceneDesc, Trs};
 
 fn settings(width: u32, height: u32, lod: LodMethod) -> RenderSettings {
     RenderSettings {
@@ -189,8 +189,7 @@ fn convex_mirror_spreads_cones_and_differentials_beyond_the_path_length() {
     assert!((cones - diffs).abs() < 1.0, "cones {cones}, diffs {diffs}");
 }
 
-/// A receding checker floor (camera 1 m above it looking at the horizon), plus a
-/// degenerate textured mesh: one zero-area triangle and one zero-UV-area triangle.
+/// A receding checker floor (camera 1 m above it looking at the horizon).
 fn receding_floor_scene(squares: f32) -> SceneDesc {
     let mut scene = SceneDesc {
         background: Vec3::new(0.3, 0.4, 0.6),
@@ -219,34 +218,6 @@ fn receding_floor_scene(squares: f32) -> SceneDesc {
     scene
 }
 
-fn with_degenerate_triangles(mut scene: SceneDesc) -> SceneDesc {
-    let degenerate = PrimitiveDesc {
-        positions: vec![
-            Vec3::new(-1.0, 0.5, -3.0),
-            Vec3::new(0.0, 0.5, -3.0),
-            Vec3::new(1.0, 0.5, -3.0),
-            Vec3::new(0.0, 1.5, -3.0),
-        ],
-        uvs: Some(vec![
-            Vec2::ZERO,
-            Vec2::X,
-            Vec2::new(2.0, 0.0),
-            Vec2::new(3.0, 0.0),
-        ]),
-        indices: vec![0, 1, 2, 0, 1, 3],
-        material: Some(0),
-        ..Default::default()
-    };
-    scene.meshes.push(MeshDesc {
-        name: "degenerate".into(),
-        primitives: vec![degenerate],
-        ..Default::default()
-    });
-    let n = scene.meshes.len() - 1;
-    add_root(&mut scene, node("degenerate", Default::default(), Some(n)));
-    scene
-}
-
 #[test]
 fn no_method_gives_a_nan_or_infinite_level_on_degenerate_or_grazing_hits() {
     for lod in LodMethod::ALL {
@@ -257,8 +228,8 @@ fn no_method_gives_a_nan_or_infinite_level_on_degenerate_or_grazing_hits() {
 /// Camera at floor height: every floor hit is grazing. Also a mirror ball and a glass
 /// ball (curvature spread, refraction of cones and differentials) on the floor.
 fn grazing_scene() -> SceneDesc {
-    let mut scene = with_degenerate_triangles(receding_floor_scene(200.0));
-    scene.nodes.last_mut().unwrap().local.translation = Vec3::ZERO;
+    let mut scene = receding_floor_scene(200.0);
+    add_degenerate_mesh(&mut scene, 0);
     let camera = scene.nodes.iter().position(|n| n.camera.is_some()).unwrap();
     scene.nodes[camera].local.translation = Vec3::new(0.0, 1e-3, 0.0);
     scene.materials.extend([mirror(), glass()]);

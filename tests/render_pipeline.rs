@@ -3,10 +3,10 @@
 mod common;
 
 use common::scenes::*;
-use glam::{Vec2, Vec3, Vec3A};
+use glam::{Vec3, Vec3A};
 use mipray::frame::{RenderSettings, Renderer};
 use mipray::lod::LodMethod;
-use mipray::scene::{MeshDesc, PrimitiveDesc, SceneDesc};
+use mipray::scene::{MeshDesc, SceneDesc};
 
 fn settings(width: u32, height: u32, lod: LodMethod) -> RenderSettings {
     RenderSettings {
@@ -153,37 +153,7 @@ fn frame_alone_equals_frame_in_sequence() {
 #[test]
 fn degenerate_and_grazing_geometry_give_finite_pixels() {
     let mut scene = showcase_scene();
-    let degenerate = PrimitiveDesc {
-        positions: vec![
-            Vec3::new(0.0, 1.0, -3.0),
-            Vec3::new(1.0, 1.0, -3.0),
-            Vec3::new(2.0, 1.0, -3.0),
-            Vec3::new(0.0, 1.5, -3.0),
-        ],
-        normals: Some(vec![
-            Vec3::ZERO,
-            Vec3::new(f32::MAX, 0.0, 0.0),
-            Vec3::Y,
-            Vec3::Z,
-        ]),
-        // Triangle 0: zero world area (collinear). Triangle 1: zero UV area.
-        uvs: Some(vec![
-            Vec2::ZERO,
-            Vec2::X,
-            Vec2::new(2.0, 0.0),
-            Vec2::new(3.0, 0.0),
-        ]),
-        indices: vec![0, 1, 2, 0, 1, 3],
-        material: Some(0),
-        ..Default::default()
-    };
-    scene.meshes.push(MeshDesc {
-        name: "degenerate".into(),
-        primitives: vec![degenerate],
-        ..Default::default()
-    });
-    let n = scene.meshes.len() - 1;
-    add_root(&mut scene, node("degenerate", Default::default(), Some(n)));
+    add_degenerate_mesh(&mut scene, 0);
     let mut renderer = Renderer::new(scene, settings(64, 40, LodMethod::Paper));
     let (image, record) = renderer.render_frame(0, 0.0).unwrap();
     assert!(image.pixels.iter().all(|p| p.is_finite()));

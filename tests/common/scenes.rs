@@ -454,3 +454,38 @@ pub fn morph_grid_scene(n: u32, lifted: &[u32]) -> SceneDesc {
     });
     scene
 }
+
+/// Adds a textured mesh (material `material`) of two degenerate triangles: one of zero world
+/// area (collinear) and one of zero UV area, with a zero and a huge vertex normal.
+pub fn add_degenerate_mesh(scene: &mut SceneDesc, material: usize) {
+    let degenerate = PrimitiveDesc {
+        positions: vec![
+            Vec3::new(0.0, 1.0, -3.0),
+            Vec3::new(1.0, 1.0, -3.0),
+            Vec3::new(2.0, 1.0, -3.0),
+            Vec3::new(0.0, 1.5, -3.0),
+        ],
+        normals: Some(vec![
+            Vec3::ZERO,
+            Vec3::new(f32::MAX, 0.0, 0.0),
+            Vec3::Y,
+            Vec3::Z,
+        ]),
+        uvs: Some(vec![
+            Vec2::ZERO,
+            Vec2::X,
+            Vec2::new(2.0, 0.0),
+            Vec2::new(3.0, 0.0),
+        ]),
+        indices: vec![0, 1, 2, 0, 1, 3],
+        material: Some(material),
+        ..Default::default()
+    };
+    scene.meshes.push(MeshDesc {
+        name: "degenerate".into(),
+        primitives: vec![degenerate],
+        ..Default::default()
+    });
+    let n = scene.meshes.len() - 1;
+    add_root(scene, node("degenerate", Default::default(), Some(n)));
+}
