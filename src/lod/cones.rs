@@ -3,7 +3,7 @@
 //! the cone's width `w` and full spread angle `gamma` (8 bytes).
 //!
 //! ```text
-//! primary:     w = 0, gamma = atan(2 tan(fov/2) / H)        (one pixel)
+//! primary:     w = 0, gamma = atan(2 tan(fov/2) / H) cos(theta)   (one pixel)
 //! arrive:      w += gamma * t
 //! level:       log2(|w| / |n.d|) - log2(pixel) - log2 P_b
 //! reflection:  gamma += 2 beta
@@ -11,6 +11,9 @@
 //! beta = kappa |w| / |n.d|                                   (surface spread)
 //! ```
 //!
+//! `theta` is the primary ray's angle to the optical axis: an off-axis pixel subtends
+//! `k cos(theta)` across the ray (the OptiX toolkit's correction; Falcor uses one angle for
+//! the whole image, which over-blurs towards the corners by `-log2 cos(theta)`).
 //! `log2 P_b + log2(pixel)` is the texture-space triangle constant of ray cones,
 //! `-(Delta + 0.5 log2(W H))` (LOD-ANCHORS.md 3.1), so cones reuse the per-triangle values
 //! `paper` already keeps. `kappa` is the triangle's mean edge curvature from its vertex
@@ -60,10 +63,10 @@ impl RayLod for RayCone {
     const BYTES: usize = 8;
 
     #[inline]
-    fn primary(camera: &LodCamera, _: f32, _: f32) -> Self {
+    fn primary(camera: &LodCamera, px: f32, py: f32) -> Self {
         RayCone {
             width: 0.0,
-            spread: camera.spread,
+            spread: camera.spread * camera.off_axis_cos(px, py),
         }
     }
 

@@ -169,8 +169,7 @@ pub struct LodCamera {
     /// `log2` of a pixel's width at unit distance, `log2(2 tan(fov/2) / H)`: the same
     /// constant `log2 P_b` was computed with.
     pub log2_pixel: f32,
-    /// Full cone angle of one pixel, `atan(2 tan(fov/2) / H)` (one value for the whole
-    /// image, as Falcor; the off-axis shrinkage by `cos theta` is ignored).
+    /// Full cone angle of a pixel on the optical axis, `atan(2 tan(fov/2) / H)`.
     pub spread: f32,
     /// Unnormalised primary direction `forward + right * sx + up * sy` and its derivatives
     /// per film pixel in x and y.
@@ -196,6 +195,27 @@ impl LodCamera {
             right_origin: camera.right * (-tan_half * aspect),
             up_origin: camera.up * tan_half,
         }
+    }
+
+    /// Unnormalised primary direction through film point `(px, py)`: `forward` plus offsets
+    /// in the film plane at unit distance.
+    #[inline]
+    fn film_direction(&self, px: f32, py: f32) -> Vec3A {
+        self.forward
+            + self.right_origin
+            + self.up_origin
+            + self.right_per_pixel * px
+            + self.up_per_pixel * py
+    }
+
+    /// `cos theta` of the primary ray through `(px, py)` with the optical axis: a pixel off
+    /// the axis subtends `k cos theta` across the ray (and `k cos^2 theta` along the
+    /// radius), not `k`.
+    #[inline]
+    pub fn off_axis_cos(&self, px: f32, py: f32) -> f32 {
+        // `forward` is unit and the film offsets are perpendicular to it: cos = 1 / |D|.
+        let cos = self.film_direction(px, py).length_recip();
+        if cos.is_finite() { cos.min(1.0) } else { 1.0 }
     }
 
     /// Derivatives of the unit primary direction through film point `(px, py)` with respect
