@@ -10,18 +10,6 @@ use mipray::lod::LodMethod;
 use mipray::render::integrator::LodProbe;
 use mipray::scene::{MeshDesc, SceneDesc, Trs};
 
-fn settings(width: u32, height: u32, lod: LodMethod) -> RenderSettings {
-    RenderSettings {
-        width,
-        height,
-        lod,
-        spp: 1,
-        max_depth: 5,
-        lights: None,
-        ..Default::default()
-    }
-}
-
 /// What method `lod` selects through film point `(px, py)` of frame 0.
 fn probe(scene: SceneDesc, size: (u32, u32), lod: LodMethod, px: f32, py: f32) -> LodProbe {
     let mut renderer = Renderer::new(scene, settings(size.0, size.1, lod));

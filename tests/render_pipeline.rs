@@ -4,21 +4,9 @@ mod common;
 
 use common::scenes::*;
 use glam::{Vec3, Vec3A};
-use mipray::frame::{RenderSettings, Renderer};
+use mipray::frame::Renderer;
 use mipray::lod::LodMethod;
 use mipray::scene::{MeshDesc, SceneDesc};
-
-fn settings(width: u32, height: u32, lod: LodMethod) -> RenderSettings {
-    RenderSettings {
-        width,
-        height,
-        lod,
-        spp: 1,
-        max_depth: 5,
-        lights: None,
-        ..Default::default()
-    }
-}
 
 /// Level the renderer selects at the image centre of frame 0.
 fn centre_level(scene: SceneDesc, height: u32) -> f32 {

@@ -38,6 +38,7 @@ use plotters::prelude::*;
 
 use super::{CompareReport, LightsRow, MethodSummary};
 use crate::output::write_text_atomically;
+use crate::report::plot::PALETTE;
 
 /// Why the compare report could not be written; every variant names the file.
 #[derive(Debug, thiserror::Error)]
@@ -380,18 +381,8 @@ fn write_file(path: &Path, text: &str) -> Result<(), CompareReportError> {
     })
 }
 
-/// Method colours, by index in the report, so a method looks the same in every plot.
-const PALETTE: [RGBColor; 8] = [
-    RGBColor(31, 119, 180),
-    RGBColor(255, 127, 14),
-    RGBColor(44, 160, 44),
-    RGBColor(214, 39, 40),
-    RGBColor(148, 103, 189),
-    RGBColor(140, 86, 75),
-    RGBColor(227, 119, 194),
-    RGBColor(0, 0, 0),
-];
-
+/// Method colours, by index in the report, so a method looks the same in every plot (the
+/// palette of `mipray report`).
 fn method_color(index: usize) -> RGBColor {
     PALETTE[index % PALETTE.len()]
 }

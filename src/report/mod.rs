@@ -12,7 +12,7 @@ mod error;
 mod load;
 mod metrics;
 mod percentiles;
-mod plot;
+pub(crate) mod plot;
 mod record;
 mod stats;
 mod summary;

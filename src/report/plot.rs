@@ -27,14 +27,16 @@ use super::record::Record;
 /// Size of the whole plot in pixels.
 pub const SVG_SIZE: (u32, u32) = (1000, 900);
 
-/// Line colours, one per quantity of a panel (a panel has at most 7).
-const COLORS: [RGBColor; 7] = [
+/// Line colours: one per quantity of a panel (a panel has at most 7), or per method in the
+/// `mipray compare` plots.
+pub(crate) const PALETTE: [RGBColor; 8] = [
     RGBColor(31, 119, 180),
     RGBColor(255, 127, 14),
     RGBColor(44, 160, 44),
     RGBColor(214, 39, 40),
     RGBColor(148, 103, 189),
     RGBColor(140, 86, 75),
+    RGBColor(227, 119, 194),
     RGBColor(0, 0, 0),
 ];
 
@@ -211,7 +213,7 @@ where
     Y: Ranged<ValueType = f64>,
 {
     for (i, (metric, runs)) in lines.iter().enumerate() {
-        let color = COLORS[i % COLORS.len()];
+        let color = PALETTE[i % PALETTE.len()];
         let style = color.stroke_width(2);
         chart
             .draw_series(runs.iter().map(|run| PathElement::new(run.clone(), style)))

@@ -489,3 +489,20 @@ pub fn add_degenerate_mesh(scene: &mut SceneDesc, material: usize) {
     let n = scene.meshes.len() - 1;
     add_root(scene, node("degenerate", Default::default(), Some(n)));
 }
+
+/// Render settings for the end-to-end tests: `width x height`, one sample, depth 5.
+pub fn settings(
+    width: u32,
+    height: u32,
+    lod: mipray::lod::LodMethod,
+) -> mipray::frame::RenderSettings {
+    mipray::frame::RenderSettings {
+        width,
+        height,
+        lod,
+        spp: 1,
+        max_depth: 5,
+        lights: None,
+        ..Default::default()
+    }
+}
