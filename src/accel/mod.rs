@@ -20,6 +20,10 @@ use obvhs::{
 
 use crate::geometry::FrameTriangles;
 
+mod policy;
+
+pub use policy::{BvhPolicy, TreeStep};
+
 /// The closest intersection along a ray.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Hit {

@@ -32,7 +32,8 @@ pub struct CompareOptions {
     pub scene_name: String,
     /// Size, lights, depth, bias and animation; `lod` and `spp` are set per render.
     pub settings: RenderSettings,
-    pub frames: Vec<u32>,
+    /// Iterated, never collected up front: memory grows with the frames compared.
+    pub frames: std::ops::Range<u32>,
     pub clock: FrameClock,
     pub methods: Vec<LodMethod>,
     /// Samples per pixel of the level-0 reference (stratified).
@@ -80,7 +81,7 @@ pub fn run_compare(
     let lights = renderer.light_count();
     let mut previous_reference: Option<RgbImage> = None;
     let mut shared_update_ms = 0.0;
-    for (fi, &frame) in options.frames.iter().enumerate() {
+    for (fi, frame) in options.frames.clone().enumerate() {
         let prepared = renderer.prepare(frame, options.clock.time(frame))?;
         let u = prepared.update;
         shared_update_ms += u.animate_ms + u.dirty_ms + u.refit_ms + u.build_ms;
@@ -144,7 +145,7 @@ pub fn run_compare(
         scene: options.scene_name.clone(),
         width: options.settings.width,
         height: options.settings.height,
-        frames: options.frames.clone(),
+        frames: options.frames.clone().collect(),
         reference_spp: options.reference_spp,
         repeats: options.repeats,
         lights,
@@ -287,7 +288,7 @@ fn lights_row(
     let mut renderer = Renderer::new(load()?, settings);
     let methods = [LodMethod::None, LodMethod::Paper];
     let (mut none_ms, mut paper_ms) = (0.0, 0.0);
-    for (fi, &frame) in options.frames.iter().enumerate() {
+    for (fi, frame) in options.frames.clone().enumerate() {
         let prepared: PreparedFrame = renderer.prepare(frame, options.clock.time(frame))?;
         let scene_with = |lod| FrameScene {
             lod,

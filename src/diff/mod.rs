@@ -10,9 +10,11 @@
 
 mod junit;
 mod stats;
+mod verdict;
 
 pub use junit::junit_xml;
 pub use stats::{StatsDelta, compare_stats};
+pub use verdict::{Verdict, finish_report};
 
 use std::collections::BTreeMap;
 use std::fmt::Write as _;

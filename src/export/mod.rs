@@ -169,7 +169,7 @@ pub fn export_frames(
         let textures = obj::write_textures(renderer, &options.dir)?;
         obj::write_mtl(renderer, &options.dir, &textures)?;
     }
-    let mut done = Vec::with_capacity(options.frames.len());
+    let mut done = Vec::new(); // grows with the frames written, not the range asked for
     for frame in options.frames.clone() {
         let time_s = time_of(frame);
         let prepared = renderer.prepare(frame, time_s)?;

@@ -8,6 +8,26 @@ use crate::anim::{Pose, VertexSpace, deform_primitive};
 use crate::geometry::{FrameTriangles, Placement, SceneGeometry};
 use crate::scene::SceneDesc;
 
+/// Where an instance's vertices come from.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum VertexSource {
+    /// The mesh's rest vertices placed by the node.
+    Placed,
+    /// Vertices skinned and/or morphed this frame.
+    Deformed,
+}
+
+impl VertexSource {
+    /// `Deformed` for a skinned or morphed primitive.
+    pub fn of(deforms: bool) -> VertexSource {
+        if deforms {
+            VertexSource::Deformed
+        } else {
+            VertexSource::Placed
+        }
+    }
+}
+
 /// Reused vertex buffers for deformed primitives.
 #[derive(Debug, Default)]
 pub struct DeformScratch {
@@ -15,19 +35,19 @@ pub struct DeformScratch {
     pub normals: Vec<Vec3>,
 }
 
-/// The placement and vertex arrays of instance `i` for `pose`. `deforms` says whether the
-/// instance's primitive is skinned or morphed (then `scratch` receives its vertices).
+/// The placement and vertex arrays of instance `i` for `pose`; a `Deformed` source has its
+/// vertices written into `scratch`.
 pub fn instance_vertices<'a>(
     scene: &'a SceneDesc,
     geometry: &SceneGeometry,
     pose: &Pose,
     i: usize,
-    deforms: bool,
+    source: VertexSource,
     scratch: &'a mut DeformScratch,
 ) -> (Placement, &'a [Vec3], Option<&'a [Vec3]>) {
     let instance = geometry.instances[i];
     let world_from_node = pose.world_from_node[instance.node as usize];
-    if !deforms {
+    if source == VertexSource::Placed {
         let primitive = geometry.primitive(scene, i);
         return (
             Placement::new(world_from_node),
@@ -57,7 +77,7 @@ pub fn write_all_triangles(
     scene: &SceneDesc,
     geometry: &SceneGeometry,
     pose: &Pose,
-    deforms: &[bool],
+    deforms: &[VertexSource],
     scratch: &mut DeformScratch,
     out: &mut FrameTriangles,
 ) {

@@ -70,6 +70,15 @@ pub fn log2_pb(
     (value as f32).clamp(-LOG2_PB_LIMIT, LOG2_PB_LIMIT)
 }
 
+/// `log2 P_b` of a similarity-placed triangle: the object-space constant plus `log2 s`
+/// (world area scales by `s^2`, and `log2 P_b` holds half the log of the area).
+pub fn shift_log2_pb(object: f32, log2_scale: f64) -> f32 {
+    if object.abs() >= LOG2_PB_LIMIT {
+        return object; // degenerate stand-ins stay at their limit
+    }
+    ((object as f64 + log2_scale) as f32).clamp(-LOG2_PB_LIMIT, LOG2_PB_LIMIT)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -193,5 +202,15 @@ mod tests {
             log2_pb(quad_triangle(1.0, 0.0), UV, (0, 0), fp),
             LOG2_PB_LIMIT
         );
+    }
+
+    #[test]
+    fn uniform_scale_shifts_the_constant_by_log2_s_and_keeps_degenerate_limits() {
+        assert_eq!(shift_log2_pb(3.0, 1.0), 4.0);
+        assert_eq!(shift_log2_pb(-2.5, -0.5), -3.0);
+        // Degenerate stand-ins (at the limit) never move, and shifts clamp at the limit.
+        assert_eq!(shift_log2_pb(LOG2_PB_LIMIT, -3.0), LOG2_PB_LIMIT);
+        assert_eq!(shift_log2_pb(-LOG2_PB_LIMIT, 3.0), -LOG2_PB_LIMIT);
+        assert_eq!(shift_log2_pb(LOG2_PB_LIMIT - 1.0, 10.0), LOG2_PB_LIMIT);
     }
 }

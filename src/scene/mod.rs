@@ -19,7 +19,10 @@
 
 pub mod aff;
 pub mod gltf;
+mod load;
 pub mod obj;
+
+pub use load::load;
 
 use std::path::PathBuf;
 

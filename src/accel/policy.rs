@@ -1,0 +1,119 @@
+//! When the tree is refitted and when it is rebuilt: the one policy decision of the per-frame
+//! BVH update (kajiya / Embree habit: the update step and its policy in one small function).
+//!
+//! Refitting keeps the topology and only widens or narrows boxes, so it is cheap but lets the
+//! tree decay as things move apart; the surface-area-heuristic cost measured against its
+//! value right after the last build says when the decay is worth a rebuild.
+
+use std::time::Instant;
+
+use super::{Accel, RefitKind};
+use crate::geometry::FrameTriangles;
+
+/// How the BVH follows the animation.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum BvhPolicy {
+    /// Refit every frame; rebuild when the SAH cost exceeds `rebuild_threshold` times its
+    /// value right after the last build.
+    Refit { rebuild_threshold: f32 },
+    /// Rebuild every frame that anything moved (for comparison).
+    Rebuild,
+}
+
+impl BvhPolicy {
+    /// Default rebuild threshold: a refitted tree 50% costlier than fresh is rebuilt.
+    pub const DEFAULT_REBUILD_THRESHOLD: f32 = 1.5;
+
+    /// Whether the tree should be rebuilt given its current SAH ratio (a NaN ratio rebuilds).
+    pub fn wants_rebuild(self, sah_ratio: f32) -> bool {
+        match self {
+            BvhPolicy::Rebuild => true,
+            BvhPolicy::Refit { rebuild_threshold } => !(sah_ratio <= rebuild_threshold),
+        }
+    }
+}
+
+/// What [`Accel::refit_or_rebuild`] decided for this frame.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum TreeStep {
+    /// Nothing moved: the tree is used as it is.
+    Unchanged,
+    /// The tree was refitted and is good enough.
+    Refitted { refit_ms: f64 },
+    /// The caller must rebuild (after a refit whose quality fell past the threshold, with
+    /// its cost, or at once under [`BvhPolicy::Rebuild`] with `refit_ms` 0). The rebuild is
+    /// the caller's because it reorders the caller's triangle arrays.
+    Rebuild { refit_ms: f64 },
+}
+
+impl Accel {
+    /// The refit-or-rebuild decision for a frame in which `moved_slots` changed: nothing
+    /// moved -> unchanged; `Rebuild` policy -> rebuild; otherwise refit, then rebuild when
+    /// the refitted tree's SAH ratio passes the policy's threshold.
+    pub fn refit_or_rebuild(
+        &mut self,
+        triangles: &FrameTriangles,
+        moved_slots: &[u32],
+        policy: BvhPolicy,
+    ) -> TreeStep {
+        if moved_slots.is_empty() {
+            return TreeStep::Unchanged;
+        }
+        if policy == BvhPolicy::Rebuild {
+            return TreeStep::Rebuild { refit_ms: 0.0 };
+        }
+        let t = Instant::now();
+        let kind = self.refit(triangles, moved_slots);
+        let refit_ms = t.elapsed().as_secs_f64() * 1e3;
+        debug_assert_ne!(kind, RefitKind::None);
+        if policy.wants_rebuild(self.sah_ratio()) {
+            TreeStep::Rebuild { refit_ms }
+        } else {
+            TreeStep::Refitted { refit_ms }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn refit_policy_rebuilds_past_the_threshold_and_on_nan() {
+        let policy = BvhPolicy::Refit {
+            rebuild_threshold: 1.5,
+        };
+        assert!(!policy.wants_rebuild(1.0));
+        assert!(!policy.wants_rebuild(1.5));
+        assert!(policy.wants_rebuild(1.51));
+        assert!(policy.wants_rebuild(f32::NAN));
+        assert!(BvhPolicy::Rebuild.wants_rebuild(1.0));
+    }
+
+    #[test]
+    fn nothing_moved_keeps_the_tree_under_either_policy() {
+        let mut accel = Accel::default();
+        let triangles = FrameTriangles::default();
+        for policy in [
+            BvhPolicy::Rebuild,
+            BvhPolicy::Refit {
+                rebuild_threshold: 1.5,
+            },
+        ] {
+            assert_eq!(
+                accel.refit_or_rebuild(&triangles, &[], policy),
+                TreeStep::Unchanged
+            );
+        }
+    }
+
+    #[test]
+    fn rebuild_policy_asks_for_a_rebuild_without_refitting() {
+        let mut accel = Accel::default();
+        let triangles = FrameTriangles::default();
+        assert_eq!(
+            accel.refit_or_rebuild(&triangles, &[0], BvhPolicy::Rebuild),
+            TreeStep::Rebuild { refit_ms: 0.0 }
+        );
+    }
+}

@@ -1,0 +1,217 @@
+//! Flag groups shared by several commands (each declared once and flattened where used),
+//! their validation, and the limits that keep a typo from allocating the machine away.
+
+use std::ops::Range;
+
+use anyhow::{Context, Result, bail};
+use clap::Args;
+
+use crate::anim::AnimationSelection;
+use crate::frame::RenderSettings;
+
+/// Largest image: width x height.
+pub const MAX_PIXELS: u64 = 16384 * 16384;
+/// Most samples per pixel.
+pub const MAX_SPP: u32 = 65536;
+/// Deepest reflection/refraction chain.
+pub const MAX_DEPTH: u32 = 64;
+/// Most lights.
+pub const MAX_LIGHTS: usize = 1024;
+/// Largest `--lod-bias` magnitude accepted: past 16 levels every texture is at one end.
+pub const MAX_LOD_BIAS: f32 = 16.0;
+
+/// Which scene, which frames, at what size, playing which clip: every command that renders
+/// or exports frames.
+#[derive(Args, Debug, Clone)]
+pub struct SequenceArgs {
+    /// A .gltf/.glb, .aff or .obj path, or the name of a scene in animations/ (e.g. `default`).
+    #[arg(default_value = "default")]
+    pub scene: String,
+    /// Half-open frame range `A..B` (or a single frame `A`) [default: the animation's length].
+    #[arg(long)]
+    pub frames: Option<String>,
+    /// Frames per second: frame i is at time i / fps [default: 30, or the scene's own frame
+    /// times when it has them (AFF `a`)].
+    #[arg(long)]
+    pub fps: Option<f64>,
+    /// Image size `WxH` (also sets the camera's aspect and the LOD footprint).
+    #[arg(long, default_value = "640x360")]
+    pub size: String,
+    /// Play one animation clip (its name or index) instead of all clips together.
+    #[arg(long)]
+    pub animation: Option<String>,
+}
+
+/// How rays are traced: render, bench and compare.
+#[derive(Args, Debug, Clone)]
+pub struct TraceArgs {
+    /// Levels added to every MIP-mapped lookup (positive: blurrier); `none` ignores it.
+    #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
+    pub lod_bias: f32,
+    /// Maximum reflection/refraction depth.
+    #[arg(long, default_value_t = 5)]
+    pub max_depth: u32,
+}
+
+/// How many lights: render, bench and export.
+#[derive(Args, Debug, Clone, Default)]
+pub struct LightArgs {
+    /// Number of lights: the scene's first N, plus point lights around the scene if it has
+    /// fewer [default: all of the scene's lights, at least 1].
+    #[arg(long)]
+    pub lights: Option<usize>,
+}
+
+/// Debug views written beside the frames.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum View {
+    /// False-colour MIP level of each pixel's texture lookup.
+    Lod,
+}
+
+/// Settings from the shared flag groups, every value checked against its limit.
+pub fn render_settings(
+    sequence: &SequenceArgs,
+    trace: &TraceArgs,
+    lights: Option<usize>,
+    spp: u32,
+) -> Result<RenderSettings> {
+    let (width, height) = parse_size(&sequence.size)?;
+    if spp == 0 || spp > MAX_SPP {
+        bail!("--spp {spp}: must be 1 to {MAX_SPP}");
+    }
+    if trace.max_depth > MAX_DEPTH {
+        bail!("--max-depth {}: at most {MAX_DEPTH}", trace.max_depth);
+    }
+    if lights.is_some_and(|n| n > MAX_LIGHTS) {
+        bail!("--lights: at most {MAX_LIGHTS}");
+    }
+    if let Some(fps) = sequence.fps.filter(|f| !(f.is_finite() && *f > 0.0)) {
+        bail!("--fps {fps}: must be a positive number");
+    }
+    check_lod_bias(trace.lod_bias)?;
+    Ok(RenderSettings {
+        width,
+        height,
+        lod_bias: trace.lod_bias,
+        spp,
+        max_depth: trace.max_depth,
+        lights,
+        animation: AnimationSelection::All,
+        ..RenderSettings::default()
+    })
+}
+
+fn check_lod_bias(bias: f32) -> Result<()> {
+    if !(bias.is_finite() && bias.abs() <= MAX_LOD_BIAS) {
+        bail!("--lod-bias {bias}: must be a number from -{MAX_LOD_BIAS} to {MAX_LOD_BIAS}");
+    }
+    Ok(())
+}
+
+/// Parses `WxH`.
+pub fn parse_size(s: &str) -> Result<(u32, u32)> {
+    let (w, h) = s
+        .split_once(['x', 'X'])
+        .with_context(|| format!("--size {s}: expected WxH, e.g. 640x360"))?;
+    let w: u32 = w
+        .trim()
+        .parse()
+        .with_context(|| format!("--size {s}: bad width"))?;
+    let h: u32 = h
+        .trim()
+        .parse()
+        .with_context(|| format!("--size {s}: bad height"))?;
+    if w == 0 || h == 0 || w as u64 * h as u64 > MAX_PIXELS {
+        bail!(
+            "--size {s}: width and height must be at least 1 and at most {MAX_PIXELS} pixels in all"
+        );
+    }
+    Ok((w, h))
+}
+
+/// Parses a half-open frame range `A..B`, or a single frame `A`. The range is only ever
+/// iterated, so its length costs no memory.
+pub fn parse_frames(s: &str) -> Result<Range<u32>> {
+    let range = match s.split_once("..") {
+        Some((a, b)) => {
+            let a: u32 = a
+                .trim()
+                .parse()
+                .with_context(|| format!("--frames {s}: bad start"))?;
+            let b: u32 = b
+                .trim()
+                .parse()
+                .with_context(|| format!("--frames {s}: bad end"))?;
+            a..b
+        }
+        None => {
+            let a: u32 = s
+                .trim()
+                .parse()
+                .with_context(|| format!("--frames {s}: expected A..B or A"))?;
+            a..a.saturating_add(1)
+        }
+    };
+    if range.is_empty() {
+        bail!("--frames {s}: empty range (the end is exclusive)");
+    }
+    Ok(range)
+}
+
+/// `--lights` of compare: one count, or an inclusive range for Table 1.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum LightsSpec {
+    Count(usize),
+    Range(usize, usize),
+}
+
+/// Parses `N`, `A..B` or `A..=B` (both inclusive) with 1 <= A <= B <= the light limit.
+pub fn parse_lights(s: &str) -> Result<LightsSpec> {
+    let number = |t: &str| -> Result<usize> {
+        t.trim()
+            .parse::<usize>()
+            .with_context(|| format!("--lights {s}: '{t}' is not a whole number"))
+    };
+    let spec = match s.split_once("..") {
+        None => LightsSpec::Count(number(s)?),
+        Some((a, b)) => LightsSpec::Range(number(a)?, number(b.trim_start_matches('='))?),
+    };
+    let (lo, hi) = match spec {
+        LightsSpec::Count(n) => (n, n),
+        LightsSpec::Range(a, b) => (a, b),
+    };
+    if lo == 0 || lo > hi || hi > MAX_LIGHTS {
+        bail!("--lights {s}: counts must satisfy 1 <= A <= B <= {MAX_LIGHTS}");
+    }
+    Ok(spec)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn parses_sizes_and_ranges() {
+        assert_eq!(parse_size("640x360").unwrap(), (640, 360));
+        assert!(parse_size("0x10").is_err());
+        assert!(parse_size("100000x100000").is_err());
+        assert!(parse_size("abc").is_err());
+        assert_eq!(parse_frames("3..7").unwrap(), 3..7);
+        assert_eq!(parse_frames("5").unwrap(), 5..6);
+        assert!(parse_frames("7..3").is_err());
+        assert!(parse_frames("x..3").is_err());
+        // A huge range is accepted: it is iterated, never collected.
+        assert_eq!(parse_frames("0..4000000000").unwrap().len(), 4_000_000_000);
+    }
+
+    #[test]
+    fn parses_light_counts_and_table_ranges() {
+        assert_eq!(parse_lights("3").unwrap(), LightsSpec::Count(3));
+        assert_eq!(parse_lights("1..6").unwrap(), LightsSpec::Range(1, 6));
+        assert_eq!(parse_lights("1..=6").unwrap(), LightsSpec::Range(1, 6));
+        assert!(parse_lights("0").is_err());
+        assert!(parse_lights("4..2").is_err());
+        assert!(parse_lights("1..5000").is_err());
+    }
+}

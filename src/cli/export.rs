@@ -1,0 +1,64 @@
+//! `mipray export`: each frame's world-space triangles (OBJ or PLY), camera and lights.
+
+use std::path::PathBuf;
+
+use anyhow::Result;
+use clap::Args;
+
+use super::args::{LightArgs, SequenceArgs, TraceArgs, render_settings};
+use super::scene::open_scene;
+use crate::export::{ExportFormat, ExportOptions, export_frames};
+use crate::frame::Renderer;
+
+/// `mipray export` options (render's defaults: 640x360, 30 fps).
+#[derive(Args, Debug, Clone)]
+pub struct ExportArgs {
+    #[command(flatten)]
+    pub sequence: SequenceArgs,
+    #[command(flatten)]
+    pub lights: LightArgs,
+    /// Mesh file format.
+    #[arg(long, value_enum, default_value_t = ExportFormat::Obj)]
+    pub format: ExportFormat,
+    /// Output folder [default: out/<scene>/export/].
+    #[arg(long)]
+    pub out: Option<PathBuf>,
+}
+
+/// `mipray export`: prepares each frame with render's settings and writes its triangles,
+/// camera and lights (see `export`).
+pub fn export(args: &ExportArgs) -> Result<()> {
+    let trace = TraceArgs {
+        lod_bias: 0.0,
+        max_depth: crate::frame::RenderSettings::default().max_depth,
+    };
+    let mut settings = render_settings(&args.sequence, &trace, args.lights.lights, 1)?;
+    let scene = open_scene(&args.sequence)?;
+    settings.animation = scene.animation;
+    let options = ExportOptions {
+        format: args.format,
+        dir: args
+            .out
+            .clone()
+            .unwrap_or_else(|| PathBuf::from("out").join(&scene.name).join("export")),
+        frames: scene.frames.clone(),
+        clock: scene.clock,
+    };
+    let mut renderer = Renderer::new(scene.desc, settings);
+    let done = export_frames(&mut renderer, &options, |f| {
+        println!(
+            "frame {:04}  t={:.3}s  {} triangles  {} deformed  -> {}",
+            f.frame,
+            f.time_s,
+            f.triangles,
+            f.deformed,
+            f.mesh.display()
+        );
+    })?;
+    println!(
+        "exported {} frame(s) into {}",
+        done.len(),
+        options.dir.display()
+    );
+    Ok(())
+}

@@ -1,0 +1,102 @@
+//! The command line: argument structs (shared flag groups in `args`, flattened once where
+//! used), one file per command, and the dispatch. No arguments = render the default
+//! animation. The frame loop itself is in `crate::frame` (`frame::sequence` for a whole
+//! sequence); this module only turns arguments into settings and calls it.
+
+mod args;
+mod bench;
+mod compare;
+mod diff;
+mod export;
+mod info;
+mod render;
+mod scene;
+
+use std::path::{Path, PathBuf};
+use std::process::ExitCode;
+
+use anyhow::Result;
+use clap::{Parser, Subcommand};
+
+pub use args::{
+    LightArgs, LightsSpec, SequenceArgs, TraceArgs, View, parse_frames, parse_lights, parse_size,
+};
+pub use bench::BenchArgs;
+pub use compare::CompareArgs;
+pub use diff::{CheckArgs, DiffArgs};
+pub use export::ExportArgs;
+pub use info::{InfoArgs, TriangleMotion, describe};
+pub use render::{BvhMode, RenderArgs, resolve_shard};
+pub use scene::{OpenedScene, load_scene, open_scene, resolve_scene};
+
+#[derive(Parser, Debug)]
+#[command(
+    name = "mipray",
+    version,
+    about = "Ray-traced animations with ray-length MIP-map level selection"
+)]
+pub struct Cli {
+    #[command(subcommand)]
+    pub command: Option<Command>,
+}
+
+#[derive(Subcommand, Debug)]
+pub enum Command {
+    /// Render an animation to an image sequence with per-frame stats.
+    Render(RenderArgs),
+    /// Time LOD methods and thread counts side by side (interleaved, repeated, median).
+    Bench(BenchArgs),
+    /// Per-phase statistics and an SVG plot of rendered sequences (shards merged).
+    Report(ReportArgs),
+    /// Compare a rendered sequence with a reference sequence, frame by frame.
+    Diff(DiffArgs),
+    /// Every LOD method on the same frames: time (interleaved) against error from a
+    /// supersampled level-0 reference; optionally the paper's Table 1 (`--lights 1..6`).
+    Compare(CompareArgs),
+    /// Write each frame's world-space triangles (OBJ or PLY), camera and lights.
+    Export(ExportArgs),
+    /// Print what a scene contains.
+    Info(InfoArgs),
+}
+
+#[derive(clap::Args, Debug, Clone)]
+pub struct ReportArgs {
+    /// Output folders (or stats files) of one sequence.
+    #[arg(required = true)]
+    pub dirs: Vec<PathBuf>,
+    /// Where to write the plot [default: report.svg in the first folder].
+    #[arg(long)]
+    pub svg: Option<PathBuf>,
+}
+
+/// Runs the parsed command line. `Ok(FAILURE)` means a regression check found frames outside
+/// the threshold; errors are bad input (see `main.rs` for the exit codes).
+pub fn run(cli: Cli) -> Result<ExitCode> {
+    let ok = |()| ExitCode::SUCCESS;
+    match cli.command {
+        None => render::render(&RenderArgs::default()),
+        Some(Command::Render(args)) => render::render(&args),
+        Some(Command::Bench(args)) => bench::bench(&args).map(ok),
+        Some(Command::Diff(args)) => diff::diff(&args),
+        Some(Command::Compare(args)) => compare::compare(&args).map(ok),
+        Some(Command::Export(args)) => export::export(&args).map(ok),
+        Some(Command::Report(args)) => report(&args).map(ok),
+        Some(Command::Info(args)) => info::info(&args).map(ok),
+    }
+}
+
+/// `mipray report`: merges the records of the folders, prints the table, writes the plot.
+fn report(args: &ReportArgs) -> Result<()> {
+    let svg = args.svg.clone().unwrap_or_else(|| {
+        let first = &args.dirs[0];
+        let folder = if first.is_dir() {
+            first.clone()
+        } else {
+            first.parent().map(Path::to_path_buf).unwrap_or_default()
+        };
+        folder.join("report.svg")
+    });
+    let summary = crate::report::report(&args.dirs, &svg)?;
+    print!("{summary}");
+    Ok(())
+}

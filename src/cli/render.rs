@@ -1,0 +1,261 @@
+//! `mipray render` (and no arguments at all): an animation to an image sequence.
+
+use std::path::PathBuf;
+use std::process::ExitCode;
+
+use anyhow::{Context, Result, bail};
+use clap::Args;
+
+use super::args::{LightArgs, SequenceArgs, TraceArgs, View, render_settings};
+use super::diff::CheckArgs;
+use super::scene::open_scene;
+use crate::accel::BvhPolicy;
+use crate::diff::{DiffOptions, Verdict};
+use crate::frame::{
+    Check, LevelImage, Renderer, Resume, SequenceOutcome, SequenceOutput, render_sequence,
+};
+use crate::lod::LodMethod;
+use crate::output::{FrameFormat, Shard};
+
+#[derive(Args, Debug, Clone)]
+pub struct RenderArgs {
+    #[command(flatten)]
+    pub sequence: SequenceArgs,
+    #[command(flatten)]
+    pub trace: TraceArgs,
+    #[command(flatten)]
+    pub lights: LightArgs,
+    /// Output folder [default: out/<scene>/<lod>/].
+    #[arg(long)]
+    pub out: Option<PathBuf>,
+    /// Texture LOD selection method.
+    #[arg(long, default_value = "paper")]
+    pub lod: LodMethod,
+    /// Samples per pixel (stratified; a square number fills the strata grid exactly).
+    #[arg(long, default_value_t = 1)]
+    pub spp: u32,
+    /// Worker threads [default: all cores].
+    #[arg(long)]
+    pub threads: Option<usize>,
+    /// Frame file format.
+    #[arg(long, value_enum, default_value_t = FrameFormat::Png)]
+    pub format: FrameFormat,
+    /// BVH update: `refit` every frame (rebuild past --rebuild-threshold) or `rebuild`
+    /// every frame (for comparison).
+    #[arg(long, value_enum, default_value_t = BvhMode::Refit)]
+    pub bvh: BvhMode,
+    /// Rebuild when the refitted tree's SAH cost exceeds this multiple of its cost right
+    /// after the last build.
+    #[arg(long, default_value_t = BvhPolicy::DEFAULT_REBUILD_THRESHOLD)]
+    pub rebuild_threshold: f32,
+    /// Render only shard I of N (a contiguous block of the frames); default: from Slurm or
+    /// Kubernetes Indexed Job variables when set (see README).
+    #[arg(long)]
+    pub shard: Option<String>,
+    /// Skip frames already complete in the output folder.
+    #[arg(long)]
+    pub resume: bool,
+    /// Compare each frame as it finishes with the same frame in this reference folder
+    /// (results in OUT/check/).
+    #[arg(long)]
+    pub check: Option<PathBuf>,
+    /// With --check: stop at the first frame outside the threshold.
+    #[arg(long, requires = "check")]
+    pub fail_fast: bool,
+    /// `lod`: also write a false-colour image of each pixel's MIP level beside each frame
+    /// (`lod_NNNN.png`; colours in README).
+    #[arg(long, value_enum)]
+    pub view: Option<View>,
+    #[command(flatten)]
+    pub check_args: CheckArgs,
+}
+
+/// `--bvh` values.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum BvhMode {
+    Refit,
+    Rebuild,
+}
+
+impl Default for RenderArgs {
+    fn default() -> Self {
+        use clap::Parser;
+        match super::Cli::parse_from(["mipray", "render"]).command {
+            Some(super::Command::Render(args)) => args,
+            _ => unreachable!("`mipray render` parses to the render command"),
+        }
+    }
+}
+
+/// `mipray render`. `Ok(FAILURE)` when a `--check` found frames outside the threshold.
+pub fn render(args: &RenderArgs) -> Result<ExitCode> {
+    let mut settings = render_settings(&args.sequence, &args.trace, args.lights.lights, args.spp)?;
+    settings.lod = args.lod;
+    settings.bvh = bvh_policy(args.bvh, args.rebuild_threshold)?;
+    let output = SequenceOutput {
+        dir: PathBuf::new(),
+        format: args.format,
+        shard: resolve_shard(args.shard.as_deref(), |name| std::env::var(name).ok())?,
+        resume: if args.resume {
+            Resume::SkipComplete
+        } else {
+            Resume::Restart
+        },
+        level_image: match args.view {
+            Some(View::Lod) => LevelImage::Make,
+            None => LevelImage::Skip,
+        },
+    };
+    let pool = thread_pool(args.threads)?;
+    let scene = open_scene(&args.sequence)?;
+    settings.animation = scene.animation;
+    let output = SequenceOutput {
+        dir: args.out.clone().unwrap_or_else(|| {
+            PathBuf::from("out")
+                .join(&scene.name)
+                .join(args.lod.to_string())
+        }),
+        ..output
+    };
+    let check = args.check.as_ref().map(|reference| Check {
+        reference: reference.clone(),
+        options: DiffOptions {
+            metric: args.check_args.metric,
+            threshold: args.check_args.threshold(),
+            out: output.dir.join("check"),
+        },
+        fail_fast: args.fail_fast,
+        junit: args.check_args.junit.clone(),
+    });
+    let (frames, clock) = (scene.frames.clone(), scene.clock);
+    let mut renderer = Renderer::new(scene.desc, settings);
+    let outcome =
+        pool.install(|| render_sequence(&mut renderer, frames, clock, &output, check.as_ref()))?;
+    Ok(match outcome {
+        SequenceOutcome::Checked(Verdict::Failed) => ExitCode::FAILURE,
+        _ => ExitCode::SUCCESS,
+    })
+}
+
+fn bvh_policy(mode: BvhMode, rebuild_threshold: f32) -> Result<BvhPolicy> {
+    if !(rebuild_threshold.is_finite() && rebuild_threshold >= 1.0) {
+        bail!("--rebuild-threshold {rebuild_threshold}: must be a number >= 1");
+    }
+    Ok(match mode {
+        BvhMode::Refit => BvhPolicy::Refit { rebuild_threshold },
+        BvhMode::Rebuild => BvhPolicy::Rebuild,
+    })
+}
+
+fn thread_pool(threads: Option<usize>) -> Result<rayon::ThreadPool> {
+    let mut builder = rayon::ThreadPoolBuilder::new();
+    if let Some(n) = threads {
+        if n == 0 {
+            bail!("--threads must be at least 1");
+        }
+        builder = builder.num_threads(n);
+    }
+    builder.build().context("cannot start worker threads")
+}
+
+/// The shard to render: `--shard I/N`, else a Slurm job array (`SLURM_ARRAY_TASK_ID`,
+/// minus `SLURM_ARRAY_TASK_MIN` when set, of `SLURM_ARRAY_TASK_COUNT`), else a Kubernetes
+/// Indexed Job (`JOB_COMPLETION_INDEX` of `MIPRAY_SHARD_COUNT`, which the Job sets to its
+/// `completions`), else none.
+pub fn resolve_shard(
+    arg: Option<&str>,
+    env: impl Fn(&str) -> Option<String>,
+) -> Result<Option<Shard>> {
+    let parse = |name: &str, v: &str| -> Result<u32> {
+        v.trim()
+            .parse()
+            .with_context(|| format!("{name}={v}: not a whole number"))
+    };
+    let (index, count) = if let Some(spec) = arg {
+        let (i, n) = spec
+            .split_once('/')
+            .with_context(|| format!("--shard {spec}: expected I/N, e.g. 0/4"))?;
+        (parse("--shard index", i)?, parse("--shard count", n)?)
+    } else if let (Some(id), Some(count)) =
+        (env("SLURM_ARRAY_TASK_ID"), env("SLURM_ARRAY_TASK_COUNT"))
+    {
+        let min = match env("SLURM_ARRAY_TASK_MIN") {
+            Some(m) => parse("SLURM_ARRAY_TASK_MIN", &m)?,
+            None => 0,
+        };
+        let id = parse("SLURM_ARRAY_TASK_ID", &id)?;
+        (
+            id.checked_sub(min)
+                .context("SLURM_ARRAY_TASK_ID is below SLURM_ARRAY_TASK_MIN")?,
+            parse("SLURM_ARRAY_TASK_COUNT", &count)?,
+        )
+    } else if let Some(index) = env("JOB_COMPLETION_INDEX") {
+        let count = env("MIPRAY_SHARD_COUNT").context(
+            "JOB_COMPLETION_INDEX is set but MIPRAY_SHARD_COUNT (the Job's completions) is not",
+        )?;
+        (
+            parse("JOB_COMPLETION_INDEX", &index)?,
+            parse("MIPRAY_SHARD_COUNT", &count)?,
+        )
+    } else {
+        return Ok(None);
+    };
+    if count == 0 || index >= count {
+        bail!("shard {index} of {count}: the index must be below the count");
+    }
+    Ok(Some(Shard { index, count }))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn shards_come_from_flag_slurm_or_kubernetes() {
+        let env = |vars: &'static [(&'static str, &'static str)]| {
+            move |name: &str| {
+                vars.iter()
+                    .find(|(k, _)| *k == name)
+                    .map(|(_, v)| v.to_string())
+            }
+        };
+        assert_eq!(
+            resolve_shard(Some("1/4"), env(&[])).unwrap(),
+            Some(Shard { index: 1, count: 4 })
+        );
+        assert_eq!(resolve_shard(None, env(&[])).unwrap(), None);
+        let slurm = env(&[
+            ("SLURM_ARRAY_TASK_ID", "7"),
+            ("SLURM_ARRAY_TASK_MIN", "5"),
+            ("SLURM_ARRAY_TASK_COUNT", "3"),
+        ]);
+        assert_eq!(
+            resolve_shard(None, slurm).unwrap(),
+            Some(Shard { index: 2, count: 3 })
+        );
+        let k8s = env(&[("JOB_COMPLETION_INDEX", "0"), ("MIPRAY_SHARD_COUNT", "2")]);
+        assert_eq!(
+            resolve_shard(None, k8s).unwrap(),
+            Some(Shard { index: 0, count: 2 })
+        );
+        assert!(resolve_shard(None, env(&[("JOB_COMPLETION_INDEX", "0")])).is_err());
+        assert!(resolve_shard(Some("4/4"), env(&[])).is_err());
+        assert!(resolve_shard(Some("x"), env(&[])).is_err());
+        // The flag wins over the environment.
+        assert_eq!(
+            resolve_shard(Some("0/1"), env(&[("JOB_COMPLETION_INDEX", "3")])).unwrap(),
+            Some(Shard { index: 0, count: 1 })
+        );
+    }
+
+    #[test]
+    fn shard_blocks_cover_the_frames_once() {
+        for count in 1..7u32 {
+            let mut covered = Vec::new();
+            for index in 0..count {
+                covered.extend(Shard { index, count }.frames(3..50));
+            }
+            assert_eq!(covered, (3..50).collect::<Vec<_>>(), "{count} shards");
+        }
+    }
+}

@@ -1,0 +1,88 @@
+//! From a scene argument to a loaded, clocked scene: the one path every command takes
+//! (name lookup in animations/, loader by extension, notes, clip selection, frame range).
+
+use std::ops::Range;
+use std::path::{Path, PathBuf};
+
+use anyhow::{Result, bail};
+
+use super::args::{SequenceArgs, parse_frames};
+use crate::anim::{AnimationSelection, select_animation};
+use crate::frame::FrameClock;
+use crate::scene::SceneDesc;
+
+pub use crate::scene::load as load_scene;
+
+/// A scene ready for the frame loop.
+pub struct OpenedScene {
+    pub path: PathBuf,
+    /// The file's stem: names the default output folder.
+    pub name: String,
+    pub desc: SceneDesc,
+    pub clock: FrameClock,
+    /// The frames asked for (`--frames`), else the selected clips once.
+    pub frames: Range<u32>,
+    /// Which clips play (`--animation`).
+    pub animation: AnimationSelection,
+}
+
+/// Resolves, loads and clocks the scene of `args`; prints the loader's notes on stderr.
+pub fn open_scene(args: &SequenceArgs) -> Result<OpenedScene> {
+    // Cheap argument errors first, before a possibly long load.
+    let asked_frames = args.frames.as_deref().map(parse_frames).transpose()?;
+    let path = resolve_scene(&args.scene)?;
+    let desc = load_scene(&path)?;
+    for note in &desc.notes {
+        eprintln!("note: {}: {note}", path.display());
+    }
+    let animation = match &args.animation {
+        Some(spec) => select_animation(&desc, spec)
+            .map_err(|e| anyhow::anyhow!("{}: --animation {spec}: {e}", path.display()))?,
+        None => AnimationSelection::All,
+    };
+    let clock = FrameClock::for_scene(&desc, args.fps);
+    let frames = asked_frames.unwrap_or_else(|| clock.default_frames(animation.duration(&desc)));
+    Ok(OpenedScene {
+        name: scene_name(&path),
+        path,
+        desc,
+        clock,
+        frames,
+        animation,
+    })
+}
+
+/// Finds a scene: an existing file path, or `NAME` in `animations/` (as `.gltf` or `.glb`),
+/// looked up in the current folder and then in the crate's own `animations/`.
+pub fn resolve_scene(scene: &str) -> Result<PathBuf> {
+    let direct = PathBuf::from(scene);
+    if direct.is_file() {
+        return Ok(direct);
+    }
+    let folders = [
+        PathBuf::from("animations"),
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("animations"),
+    ];
+    for folder in &folders {
+        for ext in ["gltf", "glb"] {
+            let candidate = folder.join(format!("{scene}.{ext}"));
+            if candidate.is_file() {
+                return Ok(candidate);
+            }
+        }
+    }
+    bail!(
+        "{scene}: no such file, and no scene of that name in animations/ (looked in {})",
+        folders
+            .iter()
+            .map(|f| f.display().to_string())
+            .collect::<Vec<_>>()
+            .join(", ")
+    )
+}
+
+fn scene_name(path: &Path) -> String {
+    path.file_stem()
+        .map(|s| s.to_string_lossy().into_owned())
+        .unwrap_or_else(|| "scene".into())
+}

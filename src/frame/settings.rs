@@ -1,0 +1,43 @@
+//! How frames are rendered: the options every command turns into a [`RenderSettings`].
+
+use crate::accel::BvhPolicy;
+use crate::anim::AnimationSelection;
+use crate::lod::LodMethod;
+
+/// How frames are rendered (the CLI's render options).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct RenderSettings {
+    pub width: u32,
+    pub height: u32,
+    pub lod: LodMethod,
+    /// Levels added to every MIP-mapped lookup (`--lod-bias`; `none` ignores it).
+    pub lod_bias: f32,
+    /// Samples per pixel (stratified).
+    pub spp: u32,
+    /// Maximum number of reflection/refraction bounces.
+    pub max_depth: u32,
+    /// Number of lights: the scene's first N, plus ring lights when it has fewer.
+    /// `None`: all of the scene's lights (at least one).
+    pub lights: Option<usize>,
+    pub bvh: BvhPolicy,
+    /// Which clips play (`--animation`).
+    pub animation: AnimationSelection,
+}
+
+impl Default for RenderSettings {
+    fn default() -> Self {
+        RenderSettings {
+            width: 640,
+            height: 360,
+            lod: LodMethod::Paper,
+            lod_bias: 0.0,
+            spp: 1,
+            max_depth: 5,
+            lights: None,
+            bvh: BvhPolicy::Refit {
+                rebuild_threshold: BvhPolicy::DEFAULT_REBUILD_THRESHOLD,
+            },
+            animation: AnimationSelection::All,
+        }
+    }
+}

@@ -1,0 +1,25 @@
+//! The loader for a scene file, chosen by its extension.
+
+use std::path::Path;
+
+use anyhow::{Result, bail};
+
+/// Loads a `.gltf`/`.glb`, `.aff` (BART) or `.obj` scene.
+///
+/// # Errors
+/// An unsupported extension, or the loader's error (naming the file and the element).
+pub fn load(path: &Path) -> Result<super::SceneDesc> {
+    let ext = path
+        .extension()
+        .and_then(|e| e.to_str())
+        .map(str::to_ascii_lowercase);
+    match ext.as_deref() {
+        Some("gltf") | Some("glb") => Ok(super::gltf::load(path)?),
+        Some("aff") => Ok(super::aff::load(path)?),
+        Some("obj") => Ok(super::obj::load(path)?),
+        _ => bail!(
+            "{}: unsupported scene format (expected .gltf, .glb, .aff or .obj)",
+            path.display()
+        ),
+    }
+}
