@@ -74,7 +74,9 @@ fn top_level_items(group: &str) -> impl Iterator<Item = &str> {
 
 /// `file:line: text` of every place under `src/<layer>` that names `crate::<module>`.
 fn imports(layer: &str, module: &str) -> Vec<String> {
-    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("src").join(layer);
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("src")
+        .join(layer);
     assert!(root.is_dir(), "{} is not a directory", root.display());
     let mut found = Vec::new();
     for file in rust_files(&root) {
@@ -127,7 +129,9 @@ fn import_check_finds_direct_and_grouped_paths() {
     assert!(finds("use crate::scene::{LightDesc, LightKind};"));
     assert!(finds("    kind: crate::scene::LightKind::Point,"));
     assert!(finds("use crate::{geometry::FrameTriangles, scene};"));
-    assert!(finds("use crate::{\n    geometry::{A, B},\n    scene::MaterialDesc,\n};"));
+    assert!(finds(
+        "use crate::{\n    geometry::{A, B},\n    scene::MaterialDesc,\n};"
+    ));
     assert!(!finds("use crate::scenery::Thing;"));
     assert!(!finds("use crate::render::FrameScene;"));
     assert!(!finds("use crate::{geometry::{scene_like, X}, render};"));

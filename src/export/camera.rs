@@ -6,9 +6,7 @@
 use glam::{Vec3, Vec3A};
 
 use crate::render::{Camera, Light, LightKind};
-use crate::scene::camera_file::{
-    CameraBits, CameraFile, LightFile, RAY_CONVENTION, RayConvention,
-};
+use crate::scene::camera_file::{CameraBits, CameraFile, LightFile, RAY_CONVENTION, RayConvention};
 
 fn arr(v: Vec3A) -> [f32; 3] {
     v.to_array()

@@ -120,7 +120,8 @@ impl FrameScene<'_> {
         lod.arrive(&lod_hit);
         let material = &self.materials[self.triangles.material[slot] as usize];
         if let ShadingModel::Additive { ambient } = material.model {
-            return self.shade_additive(&lod_hit, &surface, material, ambient, lod, depth, counters);
+            return self
+                .shade_additive(&lod_hit, &surface, material, ambient, lod, depth, counters);
         }
         let albedo =
             Vec3A::from(material.base_color) * self.texel(&lod_hit, material, &lod, counters);

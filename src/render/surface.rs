@@ -14,6 +14,7 @@ use crate::lod::SurfaceHit;
 /// Surface data at a hit, oriented towards the incoming ray.
 #[derive(Clone, Copy)]
 pub(super) struct SurfacePoint {
+    /// World-space hit point.
     pub(super) position: Vec3A,
     /// Geometric normal on the side the ray came from.
     pub(super) face_normal: Vec3A,
@@ -152,7 +153,6 @@ pub(super) fn dielectric_fresnel(cos_i: f32, cos_t: f32, eta: f32) -> f32 {
         1.0
     }
 }
-
 
 /// Texture coordinates at barycentrics `(b1, b2)`.
 #[inline]
