@@ -37,12 +37,11 @@ fn module_mentions(text: &str, module: &str) -> Vec<usize> {
     let mut found = Vec::new();
     for (i, m) in text.match_indices("crate::") {
         let rest = &text[i + m.len()..];
-        if starts_with_module(rest) {
+        let grouped = rest.strip_prefix('{').is_some_and(|group| {
+            top_level_items(group).any(|item| starts_with_module(item.trim_start()))
+        });
+        if starts_with_module(rest) || grouped {
             found.push(i);
-        } else if let Some(group) = rest.strip_prefix('{') {
-            if top_level_items(group).any(|item| starts_with_module(item.trim_start())) {
-                found.push(i);
-            }
         }
     }
     found
