@@ -9,6 +9,7 @@ use std::process::{Command, Output};
 use glam::{Quat, Vec2, Vec3, Vec4};
 use mipray::export::{ExportFormat, ExportOptions, export_frames};
 use mipray::frame::{Motion, RenderSettings, Renderer};
+use mipray::geometry::appearance::material_descs;
 use mipray::scene::{
     AnimationDesc, ChannelDesc, ChannelTarget, Interpolation, MaterialDesc, MeshDesc, NodeDesc,
     PrimitiveDesc, SceneDesc, Trs,
@@ -341,10 +342,12 @@ fn reloaded_obj_frame_renders_like_the_animation_at_that_frame() {
             assert!((*a - *b).length() < 1e-6, "{a} vs {b}");
         }
     }
-    for (m, (a, b)) in reloaded
-        .materials()
+    // The descriptions behind the renderer's material indices (names and flags included).
+    let reloaded_materials = material_descs(reloaded.scene());
+    let exported_materials = material_descs(exporter.scene());
+    for (m, (a, b)) in reloaded_materials
         .iter()
-        .zip(exporter.materials())
+        .zip(&exported_materials)
         .enumerate()
     {
         assert_eq!(a.name, b.name, "material {m}");

@@ -7,7 +7,7 @@ use glam::{Quat, Vec3};
 use image::RgbImage;
 use mipray::frame::{RenderSettings, Renderer};
 use mipray::lod::LodMethod;
-use mipray::render::integrator::LodProbe;
+use mipray::render::LodProbe;
 use mipray::scene::{MeshDesc, SceneDesc, Trs};
 
 /// What method `lod` selects through film point `(px, py)` of frame 0.

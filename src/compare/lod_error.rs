@@ -16,7 +16,8 @@ use rayon::prelude::*;
 
 use crate::lod::{LodMethod, NoLod, TexelGradients};
 use crate::render::Camera;
-use crate::render::integrator::{FrameScene, LodProbe};
+use crate::render::integrator::FrameScene;
+use crate::render::probe::LodProbe;
 
 /// The reference levels of one pixel, clamped to its texture's pyramid.
 #[derive(Debug, Clone, Copy, PartialEq)]

@@ -23,7 +23,7 @@ use std::path::{Path, PathBuf};
 
 use crate::frame::{FrameError, Motion, Renderer};
 
-pub use camera::{CameraFile, LightFile};
+pub use crate::scene::camera_file::{CameraFile, LightFile};
 pub use obj::{MTL_FILE, texture_file_name};
 
 /// Mesh file format of an export.

@@ -15,6 +15,7 @@ use image::{DynamicImage, ImageFormat, RgbImage, RgbaImage};
 
 use super::{ExportError, io_error, write_atomically};
 use crate::frame::Renderer;
+use crate::geometry::appearance::material_descs;
 use crate::render::film::encode_srgb8;
 use crate::scene::MaterialDesc;
 use crate::texture::{Texture, WrapMode};
@@ -142,9 +143,9 @@ fn wrap_name(mode: WrapMode) -> &'static str {
     }
 }
 
-/// Writes `materials.mtl`: one `newmtl` per entry of `Renderer::materials()` (in order, so
-/// a re-load keeps the indices), standard statements for other tools and `mipray_*`
-/// statements with the exact parameters.
+/// Writes `materials.mtl`: one `newmtl` per entry of `Renderer::materials()`, described by
+/// `geometry::appearance::material_descs` (in order, so a re-load keeps the indices),
+/// standard statements for other tools and `mipray_*` statements with the exact parameters.
 pub(crate) fn write_mtl(
     renderer: &Renderer,
     dir: &Path,
@@ -158,7 +159,7 @@ pub(crate) fn write_mtl(
             w,
             "# Kd is linear RGB; mipray_* statements carry the exact parameters (other tools ignore them)"
         )?;
-        for (i, m) in renderer.materials().iter().enumerate() {
+        for (i, m) in material_descs(scene).iter().enumerate() {
             let [r, g, b] = m.base_color.to_array();
             writeln!(w, "\nnewmtl {}", material_name(i, m))?;
             if !m.name.is_empty() {
@@ -218,7 +219,7 @@ pub(crate) fn write_obj(
     time_s: f32,
 ) -> Result<(), ExportError> {
     let t = renderer.triangles();
-    let materials = renderer.materials();
+    let materials = material_descs(renderer.scene());
     write_atomically(path, |w| {
         writeln!(
             w,

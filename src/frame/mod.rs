@@ -238,7 +238,7 @@ impl Renderer {
     }
 
     /// Materials indexed by `FrameTriangles::material` (the scene's, plus a default last).
-    pub fn materials(&self) -> &[crate::scene::MaterialDesc] {
+    pub fn materials(&self) -> &[crate::render::Material] {
         &self.geometry.materials
     }
 
@@ -353,10 +353,10 @@ impl Renderer {
             textures: &self.scene.textures,
             lights: &prepared.lights,
             background: Vec3A::from(self.scene.background),
-            nff_ambient: Vec3A::from(self.scene.ambient.unwrap_or(Vec3::ONE)),
+            additive_ambient: Vec3A::from(self.scene.ambient.unwrap_or(Vec3::ONE)),
             lod: self.settings.lod,
             lod_bias: self.settings.lod_bias,
-            lod_camera: LodCamera::new(&prepared.camera),
+            lod_camera: LodCamera::new(&prepared.camera.view_frame()),
             max_depth: self.settings.max_depth,
         }
     }
@@ -417,7 +417,7 @@ impl Renderer {
             .take(wanted)
             .map(|node| {
                 Light::placed(
-                    &self.scene.lights[self.scene.nodes[node].light.unwrap_or(0)],
+                    &self.geometry.lights[self.scene.nodes[node].light.unwrap_or(0)],
                     world[node],
                 )
             })

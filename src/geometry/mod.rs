@@ -8,10 +8,18 @@
 //! Invariants: all arrays of a `FrameTriangles` have the same length; triangles are wound
 //! counter-clockwise about their geometric normal in world space (a node with a negative
 //! determinant has its winding flipped, as glTF requires).
+//!
+//! The renderer's materials and lights are built here too (`appearance`), so `render` reads
+//! only its own types.
+
+pub mod appearance;
 
 use glam::{Mat3, Mat4, Vec2, Vec3, Vec3A};
 
-use crate::scene::{MaterialDesc, PrimitiveDesc, SceneDesc};
+pub use appearance::Appearance;
+
+use crate::render::{LightSource, Material};
+use crate::scene::{PrimitiveDesc, SceneDesc};
 use crate::texture::WrapMode;
 
 /// One drawn primitive: a mesh primitive placed by a node.
@@ -37,8 +45,11 @@ pub struct SceneGeometry {
     /// Per source triangle: texture coordinates, rebased by whole periods of the texture's
     /// wrap mode so they stay near [0, 1] (f32 precision of `u * width` for large u).
     pub triangle_uvs: Vec<[Vec2; 3]>,
-    /// The scene's materials plus a default one at the end (for primitives without one).
-    pub materials: Vec<MaterialDesc>,
+    /// The scene's materials plus a default one at the end (for primitives without one),
+    /// in the renderer's terms.
+    pub materials: Vec<Material>,
+    /// The scene's lights (indexed like `SceneDesc::lights`), before placement.
+    pub lights: Vec<LightSource>,
 }
 
 /// One frame's world-space triangles, in BVH order once `accel` has permuted them.
@@ -82,12 +93,14 @@ impl FrameTriangles {
 impl SceneGeometry {
     /// Flattens the scene's node hierarchy into instances and source triangles.
     pub fn new(scene: &SceneDesc) -> Self {
+        let Appearance { materials, lights } = Appearance::new(scene);
         let mut geometry = SceneGeometry {
-            materials: scene.materials.clone(),
+            materials,
+            lights,
             ..Default::default()
         };
-        let default_material = geometry.materials.len() as u32;
-        geometry.materials.push(MaterialDesc::default());
+        // The default material is the last one (see `appearance`).
+        let default_material = geometry.materials.len() as u32 - 1;
         for node in scene.traversal_order() {
             let Some(mesh) = scene.nodes[node].mesh else {
                 continue;
@@ -200,7 +213,7 @@ impl Placement {
     }
 }
 
-fn wrap_modes(scene: &SceneDesc, material: &MaterialDesc) -> [WrapMode; 2] {
+fn wrap_modes(scene: &SceneDesc, material: &Material) -> [WrapMode; 2] {
     match material
         .base_color_texture
         .and_then(|t| scene.textures.get(t))

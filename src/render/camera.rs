@@ -8,6 +8,8 @@
 
 use glam::{Mat4, Vec3, Vec3A};
 
+use crate::lod::ViewFrame;
+
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Camera {
     pub eye: Vec3A,
@@ -84,6 +86,18 @@ impl Camera {
         )
     }
 
+    /// What LOD selection needs of this camera (`lod::LodCamera` is built from it).
+    pub fn view_frame(&self) -> ViewFrame {
+        ViewFrame {
+            forward: self.forward,
+            right: self.right,
+            up: self.up,
+            yfov: self.yfov,
+            width: self.width,
+            height: self.height,
+        }
+    }
+
     /// Unit direction through film point `(px, py)` in pixels (see the module doc).
     #[inline]
     pub fn primary_direction(&self, px: f32, py: f32) -> Vec3A {
@@ -133,5 +147,21 @@ mod tests {
         assert!(cam.primary_direction(3.0, 7.0).is_finite());
         let framed = Camera::framing(Vec3::splat(f32::INFINITY), Vec3::ZERO, 10, 10);
         assert!(framed.primary_direction(0.0, 0.0).is_finite());
+    }
+
+    #[test]
+    fn lod_direction_differentials_match_finite_differences_of_primary_directions() {
+        let camera = Camera::look(Vec3::ZERO, Vec3::new(0.2, -0.1, -1.0), Vec3::Y, 1.0, 64, 48);
+        let lod = crate::lod::LodCamera::new(&camera.view_frame());
+        let (px, py) = (10.3, 40.7);
+        let (dx, dy) = lod.direction_differentials(px, py);
+        let h = 1e-2;
+        let fd_x = (camera.primary_direction(px + h, py) - camera.primary_direction(px - h, py))
+            / (2.0 * h);
+        let fd_y = (camera.primary_direction(px, py + h) - camera.primary_direction(px, py - h))
+            / (2.0 * h);
+        // f32 central differences carry ~3e-6 of rounding at this step.
+        assert!((dx - fd_x).length() < 1e-3 * dx.length(), "{dx} vs {fd_x}");
+        assert!((dy - fd_y).length() < 1e-3 * dy.length(), "{dy} vs {fd_y}");
     }
 }

@@ -5,11 +5,36 @@
 //! extension's recommended window `clamp(1 - (d/range)^4, 0, 1)`. A light whose description
 //! has `inverse_square: false` (AFF/NFF point lights) skips the `1 / d^2`: its irradiance is
 //! `color * intensity` at any distance (range window and spot cone still apply).
+//!
+//! A [`LightSource`] is what a scene light emits, built once from the scene description by
+//! `geometry::appearance`; [`Light::placed`] puts it at its node's world transform each frame.
 
 use glam::{Mat4, Vec3, Vec3A};
 
-use crate::scene::{LightDesc, LightKind};
+/// The shape of a light's emission.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum LightKind {
+    /// Radiates from its origin; intensity in candela.
+    Point,
+    /// Shines along its -Z; intensity in lux.
+    Directional,
+    /// Point light restricted to a cone along -Z (angles in radians).
+    Spot { inner_cone: f32, outer_cone: f32 },
+}
 
+/// A light before placement: what it emits, in its own frame (origin, shining along -Z).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct LightSource {
+    pub kind: LightKind,
+    /// Linear RGB colour times intensity (non-negative).
+    pub intensity: Vec3,
+    /// Distance past which the light has no effect (`None`: unlimited; always positive).
+    pub range: Option<f32>,
+    /// Whether irradiance falls off as `1 / d^2` (`false`: AFF/NFF point lights).
+    pub inverse_square: bool,
+}
+
+/// A light placed in world space for one frame.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Light {
     pub kind: LightKind,
@@ -19,7 +44,7 @@ pub struct Light {
     /// Colour times intensity.
     pub intensity: Vec3A,
     pub range: Option<f32>,
-    /// Whether irradiance falls off as `1 / d^2` (see `LightDesc::inverse_square`).
+    /// Whether irradiance falls off as `1 / d^2` (see [`LightSource::inverse_square`]).
     pub inverse_square: bool,
 }
 
@@ -33,8 +58,8 @@ pub struct Incident {
 }
 
 impl Light {
-    /// Places a light description at a node's world transform.
-    pub fn placed(desc: &LightDesc, world_from_light: Mat4) -> Light {
+    /// Places a light source at its node's world transform.
+    pub fn placed(source: &LightSource, world_from_light: Mat4) -> Light {
         let position = world_from_light.transform_point3(Vec3::ZERO).into();
         let direction = world_from_light
             .transform_vector3(Vec3::NEG_Z)
@@ -42,12 +67,12 @@ impl Light {
             .unwrap_or(Vec3::NEG_Y)
             .into();
         Light {
-            kind: desc.kind,
+            kind: source.kind,
             position,
             direction,
-            intensity: (desc.color * desc.intensity.max(0.0)).into(),
-            range: desc.range.filter(|r| *r > 0.0),
-            inverse_square: desc.inverse_square,
+            intensity: source.intensity.into(),
+            range: source.range,
+            inverse_square: source.inverse_square,
         }
     }
 
@@ -149,31 +174,29 @@ mod tests {
 
     #[test]
     fn spot_light_cuts_off_outside_cone() {
-        let desc = LightDesc {
+        let source = LightSource {
             kind: LightKind::Spot {
                 inner_cone: 0.2,
                 outer_cone: 0.4,
             },
-            color: Vec3::ONE,
-            intensity: 10.0,
+            intensity: Vec3::splat(10.0),
             range: None,
             inverse_square: true,
         };
-        let light = Light::placed(&desc, Mat4::from_translation(Vec3::new(0.0, 0.0, 5.0)));
+        let light = Light::placed(&source, Mat4::from_translation(Vec3::new(0.0, 0.0, 5.0)));
         assert!(light.incident(Vec3A::ZERO).is_some());
         assert!(light.incident(Vec3A::new(10.0, 0.0, 0.0)).is_none());
     }
 
     #[test]
     fn light_without_inverse_square_has_no_distance_falloff() {
-        let desc = LightDesc {
+        let source = LightSource {
             kind: LightKind::Point,
-            color: Vec3::new(0.5, 0.25, 1.0),
-            intensity: 2.0,
+            intensity: Vec3::new(1.0, 0.5, 2.0),
             range: None,
             inverse_square: false,
         };
-        let light = Light::placed(&desc, Mat4::from_translation(Vec3::new(0.0, 10.0, 0.0)));
+        let light = Light::placed(&source, Mat4::from_translation(Vec3::new(0.0, 10.0, 0.0)));
         for y in [0.0, 5.0, 9.0, -100.0] {
             let i = light.incident(Vec3A::new(0.0, y, 0.0)).unwrap();
             assert_eq!(i.irradiance, Vec3A::new(1.0, 0.5, 2.0));

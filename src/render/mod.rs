@@ -1,12 +1,22 @@
-//! Rendering one frame: camera, lights, the Whitted integrator and the tiled film.
+//! Rendering one frame: camera, materials, lights, the Whitted integrator and the tiled
+//! film; the LOD probe for `--view lod` and `mipray compare`.
+//!
+//! `render` knows materials and lights only in its own terms (`Material`, `LightSource`):
+//! `geometry::appearance` builds them from the scene description, so nothing here names
+//! a loader's type.
 
 pub mod camera;
 pub mod film;
 pub mod integrator;
 pub mod light;
 pub mod lod_view;
+pub mod material;
+pub mod probe;
+mod surface;
 
 pub use camera::Camera;
 pub use film::{LinearImage, render_image};
-pub use integrator::{FrameScene, LodProbe, MIP_LEVELS, TraceCounters};
-pub use light::Light;
+pub use integrator::{FrameScene, MIP_LEVELS, TraceCounters};
+pub use light::{Light, LightKind, LightSource};
+pub use material::{Material, ShadingModel};
+pub use probe::{Bend, Chain, LodProbe};

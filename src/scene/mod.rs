@@ -18,6 +18,7 @@
 //! and skins are applied per frame by `anim::deform_primitive`.
 
 pub mod aff;
+pub mod camera_file;
 pub mod gltf;
 mod load;
 pub mod obj;

@@ -26,7 +26,7 @@ use std::path::{Path, PathBuf};
 
 use glam::{Mat4, Vec2, Vec3, Vec4};
 
-use crate::export::CameraFile;
+use crate::scene::camera_file::CameraFile;
 use crate::scene::{
     CameraDesc, LightDesc, MaterialDesc, MeshDesc, NodeDesc, PrimitiveDesc, SceneDesc, Trs,
 };
