@@ -18,6 +18,7 @@ use std::collections::BTreeMap;
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
+use crate::csv::csv_field;
 use crate::metrics::{FrameMetrics, MetricsError, compare, format_psnr, heat_map, read_srgb8};
 
 /// The metric that decides pass or fail.
@@ -421,10 +422,3 @@ fn format_value(metric: DiffMetric, v: f64) -> String {
     }
 }
 
-fn csv_field(s: &str) -> String {
-    if s.contains([',', '"', '\n']) {
-        format!("\"{}\"", s.replace('"', "\"\""))
-    } else {
-        s.to_string()
-    }
-}
