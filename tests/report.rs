@@ -148,7 +148,11 @@ fn shard_files_in_one_folder_merge() {
     fs::write(dir.join("notes.jsonl"), "not a record\n").unwrap();
     let sequence = load_sequence(std::slice::from_ref(&dir)).unwrap();
     assert_eq!(
-        sequence.records.iter().map(|r| r.frame()).collect::<Vec<_>>(),
+        sequence
+            .records
+            .iter()
+            .map(|r| r.frame())
+            .collect::<Vec<_>>(),
         [0, 1, 2, 3]
     );
     assert_eq!(
@@ -291,7 +295,11 @@ fn old_format_records_load_with_new_fields_absent() {
     assert_eq!(loaded.len(), 4);
     let phase = |p| loaded[0].value(&Metric::phase(p));
     assert_eq!(
-        (phase(Phase::Dirty), phase(Phase::Refit), loaded[0].rebuilt()),
+        (
+            phase(Phase::Dirty),
+            phase(Phase::Refit),
+            loaded[0].rebuilt()
+        ),
         (None, None, None)
     );
     assert_eq!(loaded[0].value(&MOVED_TRIANGLES), None);

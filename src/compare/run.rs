@@ -21,10 +21,10 @@ use crate::frame::{FrameClock, Phase, PreparedFrame, RenderSettings, Renderer};
 use crate::lod::LodMethod;
 use crate::metrics;
 use crate::output::write_rgb8_atomically;
-use crate::report::median;
 use crate::render::integrator::{FrameScene, MIP_LEVELS};
 use crate::render::lod_view::lod_image;
 use crate::render::{Camera, LinearImage, render_image};
+use crate::report::median;
 use crate::scene::SceneDesc;
 
 /// What to compare.

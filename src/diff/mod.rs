@@ -421,4 +421,3 @@ fn format_value(metric: DiffMetric, v: f64) -> String {
         DiffMetric::MaxAbs => format!("{v:.0}"),
     }
 }
-

@@ -122,7 +122,10 @@ mod tests {
             draw_legend(&mut chart, 1).unwrap();
             root.present().unwrap();
         }
-        assert!(svg.contains("\ncaption\n") && svg.contains("\nseries_ms\n"), "{svg}");
+        assert!(
+            svg.contains("\ncaption\n") && svg.contains("\nseries_ms\n"),
+            "{svg}"
+        );
         // The lone point of the second run is a dot.
         assert!(svg.contains("<circle"), "{svg}");
     }

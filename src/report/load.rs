@@ -175,7 +175,10 @@ mod tests {
             record(2, 3.0),
         ];
         let (kept, dropped) = sort_keeping_last(input);
-        let frames: Vec<(u32, f64)> = kept.iter().map(|r| (r.frame(), r.values.render_ms)).collect();
+        let frames: Vec<(u32, f64)> = kept
+            .iter()
+            .map(|r| (r.frame(), r.values.render_ms))
+            .collect();
         assert_eq!(frames, [(0, 1.0), (1, 1.0), (2, 3.0)]);
         assert_eq!(dropped, 2);
     }

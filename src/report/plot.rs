@@ -21,9 +21,9 @@ use plotters::prelude::*;
 
 use super::chart::{Run, chart_on, draw_legend, draw_runs, series_color, text};
 use super::error::ReportError;
-use crate::atomic_file::write_bytes_atomically;
 use super::metrics::{Metric, PLOTTED_COUNTS, Quantities, TIMING_PHASES};
 use super::record::Record;
+use crate::atomic_file::write_bytes_atomically;
 
 /// Size of the whole plot in pixels.
 pub const SVG_SIZE: (u32, u32) = (1000, 900);

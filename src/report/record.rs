@@ -222,7 +222,11 @@ mod tests {
             (0.25, 0.5, false)
         );
         assert_eq!(
-            (v.update.moved_triangles, v.update.deformed_triangles, v.update.lod_shifted),
+            (
+                v.update.moved_triangles,
+                v.update.deformed_triangles,
+                v.update.lod_shifted
+            ),
             (10, 5, 3)
         );
         assert_eq!(v.mip_histogram, [1, 2, 3]);

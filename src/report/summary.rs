@@ -184,7 +184,9 @@ mod tests {
     #[test]
     fn partial_quantities_say_over_how_many_frames() {
         let mut seq = sequence();
-        let mark = |r: &Record, name| Record::new(r.values.clone(), ["animate_ms", "total_ms", "rays", name]);
+        let mark = |r: &Record, name| {
+            Record::new(r.values.clone(), ["animate_ms", "total_ms", "rays", name])
+        };
         seq.records[0].values.update.rebuild = true;
         seq.records[0] = mark(&seq.records[0], "rebuild");
         seq.records[1].values.update.lod_recomputed = 3;

@@ -9,7 +9,7 @@
 use serde::ser::{Serialize, SerializeMap, Serializer};
 
 use super::metrics::{
-    DEFORMED_TRIANGLES, LOD_RECOMPUTED, Metric, MOVED_TRIANGLES, RAYS, RENDER_MS, TOTAL_MS,
+    DEFORMED_TRIANGLES, LOD_RECOMPUTED, MOVED_TRIANGLES, Metric, RAYS, RENDER_MS, TOTAL_MS,
     TRIANGLES,
 };
 use super::percentiles::Percentiles;
@@ -142,7 +142,11 @@ mod tests {
     fn fields_in_file_order_with_phases_after_triangles() {
         let summary = Summary::of(&[record(0, 1.0, true)]);
         let text = serde_json::to_string(&summary).unwrap();
-        let fields = serde_json::to_value(&summary).unwrap().as_object().unwrap().len();
+        let fields = serde_json::to_value(&summary)
+            .unwrap()
+            .as_object()
+            .unwrap()
+            .len();
         let expected = [
             "frames",
             "width",
@@ -181,7 +185,11 @@ mod tests {
 
     #[test]
     fn totals_share_and_spreads_on_known_data() {
-        let records = [record(0, 1.0, true), record(1, 2.0, false), record(2, 3.0, false)];
+        let records = [
+            record(0, 1.0, true),
+            record(1, 2.0, false),
+            record(2, 3.0, false),
+        ];
         let s = Summary::of(&records);
         assert_eq!((s.frames, s.width, s.lod_method.as_str()), (3, 8, "paper"));
         assert_eq!((s.total_rays, s.rebuilds), (3000, 1));

@@ -108,4 +108,3 @@ pub(super) fn svg_texts(path: &Path) -> Vec<String> {
         })
         .collect()
 }
-

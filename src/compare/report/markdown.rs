@@ -164,7 +164,6 @@ pub(super) fn share(m: &MethodSummary, level: usize) -> f64 {
         .unwrap_or(0.0)
 }
 
-
 #[cfg(test)]
 mod tests {
     use super::super::fixtures::{METHODS, sample_report};

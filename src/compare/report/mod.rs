@@ -33,11 +33,11 @@
 //! Files: `table.rs` (the two CSV files), `markdown.rs` (`compare.md`), `plots.rs` (the
 //! three SVGs, with the chart setup shared with `mipray report` in `report::chart`).
 
+#[cfg(test)]
+mod fixtures;
 mod markdown;
 mod plots;
 mod table;
-#[cfg(test)]
-mod fixtures;
 
 use std::path::{Path, PathBuf};
 
@@ -125,7 +125,6 @@ pub(super) fn write_file(path: &Path, text: &str) -> Result<(), CompareReportErr
         source,
     })
 }
-
 
 #[cfg(test)]
 mod tests {

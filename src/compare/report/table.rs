@@ -2,8 +2,8 @@
 //! frame); see the parent module for the columns and number formats.
 
 use super::{
-    FLICKER_DECIMALS, FLIP_DECIMALS, LOD_DECIMALS, MS_DECIMALS, OVERHEAD_DECIMALS,
-    PSNR_DECIMALS, SSIM_DECIMALS, fixed,
+    FLICKER_DECIMALS, FLIP_DECIMALS, LOD_DECIMALS, MS_DECIMALS, OVERHEAD_DECIMALS, PSNR_DECIMALS,
+    SSIM_DECIMALS, fixed,
 };
 use crate::compare::{CompareReport, MethodSummary};
 use crate::csv::csv_field;
@@ -75,7 +75,6 @@ pub(super) fn summary_numbers(m: &MethodSummary, number: fn(f64, usize) -> Strin
         number(m.flicker, FLICKER_DECIMALS),
     ]
 }
-
 
 #[cfg(test)]
 mod tests {
