@@ -3,10 +3,12 @@
 
 pub mod accel;
 pub mod anim;
+pub mod atomic_file;
 pub mod authoring;
 pub mod bench;
 pub mod cli;
 pub mod compare;
+pub mod csv;
 pub mod diff;
 pub mod export;
 pub mod frame;

@@ -2,19 +2,21 @@
 //! `summary.json`.
 //!
 //! Invariant: a file in the folder is either absent or complete. Frames and the summary are
-//! written to a hidden temporary file in the same folder and renamed into place (atomic on
-//! one file system); a stats line is written with one `write_all` and flushed.
+//! written through [`crate::atomic_file`] (a hidden temporary file in the same folder,
+//! renamed into place); a stats line is written with one `write_all` and flushed. The
+//! record is [`FrameRecord`]; the summary is [`Summary`], built from a slice of records.
 
 use std::fs::{self, File, OpenOptions};
 use std::io::Write;
 use std::path::{Path, PathBuf};
 
 use image::{ImageBuffer, ImageFormat, Rgb};
-use serde::Serialize;
 
+use crate::atomic_file::{AtomicWriteError, write_atomically, write_bytes_atomically};
 use crate::frame::FrameRecord;
 use crate::render::LinearImage;
-use crate::report::Percentiles;
+/// `summary.json`'s type lives with the statistics it shares with `mipray report`.
+pub use crate::report::Summary;
 
 /// Output image format of frames.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, clap::ValueEnum)]
@@ -130,7 +132,8 @@ impl OutputDir {
                 })?);
                 text.push('\n');
             }
-            write_bytes_atomically(&stats_path, text.as_bytes())?;
+            write_bytes_atomically(&stats_path, text.as_bytes())
+                .map_err(|(path, source)| OutputError::Io { path, source })?;
         }
         let stats = OpenOptions::new()
             .create(true)
@@ -189,12 +192,14 @@ impl OutputDir {
                 path: path.clone(),
                 source: e.into(),
             })?;
-        write_bytes_atomically(&path, text.as_bytes())?;
+        write_bytes_atomically(&path, text.as_bytes())
+            .map_err(|(path, source)| OutputError::Io { path, source })?;
         Ok(path)
     }
 }
 
-/// Removes `.NAME.tmp` files an interrupted run left behind (never complete outputs).
+/// Removes `.NAME.PID.tmp` (and older `.NAME.tmp`) files an interrupted run left behind
+/// (never complete outputs).
 fn remove_stale_temporaries(dir: &Path) {
     let Ok(entries) = fs::read_dir(dir) else {
         return;
@@ -226,19 +231,18 @@ fn read_complete_records(path: &Path) -> Result<Vec<FrameRecord>, OutputError> {
         .collect())
 }
 
-/// Writes `image` to `path` in `format` through a temporary file in the same folder.
+/// Writes `image` to `path` in `format` atomically (see [`crate::atomic_file`]).
 pub fn write_image_atomically(
     path: &Path,
     image: &LinearImage,
     format: FrameFormat,
 ) -> Result<(), OutputError> {
-    let tmp = temporary_sibling(path);
-    let encoded = match format {
+    match format {
         FrameFormat::Png => {
             let buffer: ImageBuffer<Rgb<u8>, Vec<u8>> =
                 ImageBuffer::from_raw(image.width, image.height, image.to_srgb8())
                     .expect("buffer length matches the image size");
-            buffer.save_with_format(&tmp, ImageFormat::Png)
+            write_encoded(path, &buffer, ImageFormat::Png)
         }
         FrameFormat::Exr => {
             let data: Vec<f32> = image
@@ -249,145 +253,39 @@ pub fn write_image_atomically(
             let buffer: ImageBuffer<Rgb<f32>, Vec<f32>> =
                 ImageBuffer::from_raw(image.width, image.height, data)
                     .expect("buffer length matches the image size");
-            buffer.save_with_format(&tmp, ImageFormat::OpenExr)
+            write_encoded(path, &buffer, ImageFormat::OpenExr)
         }
-    };
-    if let Err(source) = encoded {
-        let _ = fs::remove_file(&tmp);
-        return Err(OutputError::Encode {
-            path: path.to_path_buf(),
-            source,
-        });
     }
-    fs::rename(&tmp, path).map_err(io_error(path))
 }
 
-/// Writes an 8-bit RGB PNG through a temporary file in the same folder.
+/// Writes an 8-bit RGB PNG atomically.
 pub fn write_rgb8_atomically(path: &Path, image: &image::RgbImage) -> Result<(), OutputError> {
-    let tmp = temporary_sibling(path);
-    if let Err(source) = image.save_with_format(&tmp, ImageFormat::Png) {
-        let _ = fs::remove_file(&tmp);
-        return Err(OutputError::Encode {
+    write_encoded(path, image, ImageFormat::Png)
+}
+
+/// Writes a text file atomically.
+pub fn write_text_atomically(path: &Path, text: &str) -> std::io::Result<()> {
+    write_bytes_atomically(path, text.as_bytes()).map_err(|(_, source)| source)
+}
+
+/// Encodes `image` as `format` into `path` atomically.
+fn write_encoded<P, C>(
+    path: &Path,
+    image: &ImageBuffer<P, C>,
+    format: ImageFormat,
+) -> Result<(), OutputError>
+where
+    P: image::PixelWithColorType,
+    [P::Subpixel]: image::EncodableLayout,
+    C: std::ops::Deref<Target = [P::Subpixel]>,
+{
+    write_atomically(path, |w| image.write_to(w, format)).map_err(|e| match e {
+        AtomicWriteError::Io { path, source } => OutputError::Io { path, source },
+        AtomicWriteError::Write(source) => OutputError::Encode {
             path: path.to_path_buf(),
             source,
-        });
-    }
-    fs::rename(&tmp, path).map_err(io_error(path))
-}
-
-/// Writes a text file through a temporary file in the same folder.
-pub fn write_text_atomically(path: &Path, text: &str) -> std::io::Result<()> {
-    write_bytes_atomically(path, text.as_bytes()).map_err(|e| match e {
-        OutputError::Io { source, .. } => source,
-        other => std::io::Error::other(other.to_string()),
+        },
     })
-}
-
-fn write_bytes_atomically(path: &Path, bytes: &[u8]) -> Result<(), OutputError> {
-    let tmp = temporary_sibling(path);
-    fs::write(&tmp, bytes).map_err(io_error(&tmp))?;
-    fs::rename(&tmp, path).map_err(io_error(path))
-}
-
-/// `dir/.name.tmp`: hidden, same folder (so the rename stays on one file system).
-fn temporary_sibling(path: &Path) -> PathBuf {
-    let name = path
-        .file_name()
-        .map(|n| n.to_string_lossy().into_owned())
-        .unwrap_or_default();
-    path.with_file_name(format!(".{name}.tmp"))
-}
-
-/// `summary.json`: totals over the sequence, the preprocessing share of frame time, and
-/// min / median / p95 / max of every per-frame phase and count.
-#[derive(Debug, Clone, Serialize)]
-pub struct Summary {
-    pub frames: usize,
-    pub width: u32,
-    pub height: u32,
-    pub lod_method: String,
-    pub total_rays: u64,
-    pub total_render_ms: f64,
-    pub total_ms: f64,
-    pub total_lod_recomputed: u64,
-    pub total_nonfinite_samples: u64,
-    pub rebuilds: usize,
-    /// (animate + dirty + refit + build + lod_update) / total, over the sequence.
-    pub preprocessing_share: f64,
-    pub mip_histogram: Vec<u64>,
-    pub triangles: Percentiles,
-    pub animate_ms: Percentiles,
-    pub dirty_ms: Percentiles,
-    pub refit_ms: Percentiles,
-    pub build_ms: Percentiles,
-    pub lod_update_ms: Percentiles,
-    pub render_ms: Percentiles,
-    pub frame_total_ms: Percentiles,
-    pub moved_triangles: Percentiles,
-    pub deformed_triangles: Percentiles,
-    pub lod_recomputed: Percentiles,
-    pub rays: Percentiles,
-    /// Rays per second of render time over the whole sequence.
-    pub rays_per_second: f64,
-}
-
-impl Summary {
-    pub fn of(records: &[FrameRecord]) -> Summary {
-        let first = records.first();
-        let spread = |f: fn(&FrameRecord) -> f64| Percentiles::of(records.iter().map(f));
-        let sum = |f: fn(&FrameRecord) -> f64| records.iter().map(f).sum::<f64>();
-        let mut histogram = vec![0u64; first.map_or(0, |r| r.mip_histogram.len())];
-        for r in records {
-            for (a, b) in histogram.iter_mut().zip(&r.mip_histogram) {
-                *a += b;
-            }
-        }
-        let total_rays = records.iter().map(|r| r.rays).sum();
-        let total_render_ms = sum(|r| r.render_ms);
-        let total_ms = sum(|r| r.total_ms);
-        let preprocessing = sum(|r| {
-            r.update.animate_ms
-                + r.update.dirty_ms
-                + r.update.refit_ms
-                + r.update.build_ms
-                + r.update.lod_update_ms
-        });
-        Summary {
-            frames: records.len(),
-            width: first.map_or(0, |r| r.width),
-            height: first.map_or(0, |r| r.height),
-            lod_method: first.map_or(String::new(), |r| r.lod_method.clone()),
-            total_rays,
-            total_render_ms,
-            total_ms,
-            total_lod_recomputed: records.iter().map(|r| r.update.lod_recomputed as u64).sum(),
-            total_nonfinite_samples: records.iter().map(|r| r.nonfinite_samples).sum(),
-            rebuilds: records.iter().filter(|r| r.update.rebuild).count(),
-            preprocessing_share: if total_ms > 0.0 {
-                preprocessing / total_ms
-            } else {
-                0.0
-            },
-            mip_histogram: histogram,
-            triangles: spread(|r| r.triangles as f64),
-            animate_ms: spread(|r| r.update.animate_ms),
-            dirty_ms: spread(|r| r.update.dirty_ms),
-            refit_ms: spread(|r| r.update.refit_ms),
-            build_ms: spread(|r| r.update.build_ms),
-            lod_update_ms: spread(|r| r.update.lod_update_ms),
-            render_ms: spread(|r| r.render_ms),
-            frame_total_ms: spread(|r| r.total_ms),
-            moved_triangles: spread(|r| r.update.moved_triangles as f64),
-            deformed_triangles: spread(|r| r.update.deformed_triangles as f64),
-            lod_recomputed: spread(|r| r.update.lod_recomputed as f64),
-            rays: spread(|r| r.rays as f64),
-            rays_per_second: if total_render_ms > 0.0 {
-                total_rays as f64 / (total_render_ms / 1e3)
-            } else {
-                0.0
-            },
-        }
-    }
 }
 
 #[cfg(test)]

@@ -5,8 +5,10 @@
 use std::fs;
 use std::path::{Path, PathBuf};
 
+use mipray::frame::Phase;
 use mipray::report::{
-    Percentiles, ReportError, TIMING_PHASES, load_records, load_sequence, report,
+    LOD_RECOMPUTED, MOVED_TRIANGLES, Metric, Percentiles, Quantities, RENDER_MS, ReportError,
+    TIMING_PHASES, load_records, load_sequence, report,
 };
 use serde_json::json;
 
@@ -117,7 +119,7 @@ fn frames_of(dirs: &[PathBuf]) -> Vec<u32> {
     load_records(dirs)
         .unwrap()
         .iter()
-        .map(|r| r.frame)
+        .map(|r| r.frame())
         .collect()
 }
 
@@ -126,9 +128,9 @@ fn shards_merge_sorted_keeping_the_last_duplicate() {
     let tmp = tempfile::tempdir().unwrap();
     let dirs = two_shards(tmp.path());
     let sequence = load_sequence(&dirs).unwrap();
-    let frames: Vec<u32> = sequence.records.iter().map(|r| r.frame).collect();
+    let frames: Vec<u32> = sequence.records.iter().map(|r| r.frame()).collect();
     assert_eq!(frames, (0..20).collect::<Vec<_>>());
-    assert_eq!(sequence.records[4].render_ms, Some(5.0));
+    assert_eq!(sequence.records[4].value(&RENDER_MS), Some(5.0));
     assert_eq!(sequence.duplicates_dropped, 1);
     assert_eq!(
         sequence.files,
@@ -146,7 +148,11 @@ fn shard_files_in_one_folder_merge() {
     fs::write(dir.join("notes.jsonl"), "not a record\n").unwrap();
     let sequence = load_sequence(std::slice::from_ref(&dir)).unwrap();
     assert_eq!(
-        sequence.records.iter().map(|r| r.frame).collect::<Vec<_>>(),
+        sequence
+            .records
+            .iter()
+            .map(|r| r.frame())
+            .collect::<Vec<_>>(),
         [0, 1, 2, 3]
     );
     assert_eq!(
@@ -287,14 +293,19 @@ fn old_format_records_load_with_new_fields_absent() {
     );
     let loaded = load_records(std::slice::from_ref(&dir)).unwrap();
     assert_eq!(loaded.len(), 4);
+    let phase = |p| loaded[0].value(&Metric::phase(p));
     assert_eq!(
-        (loaded[0].dirty_ms, loaded[0].refit_ms, loaded[0].rebuild),
+        (
+            phase(Phase::Dirty),
+            phase(Phase::Refit),
+            loaded[0].rebuilt()
+        ),
         (None, None, None)
     );
-    assert_eq!(loaded[0].moved_triangles, None);
+    assert_eq!(loaded[0].value(&MOVED_TRIANGLES), None);
     assert_eq!(
-        (loaded[0].build_ms, loaded[0].lod_recomputed),
-        (Some(3.0), Some(100))
+        (phase(Phase::Build), loaded[0].value(&LOD_RECOMPUTED)),
+        (Some(3.0), Some(100.0))
     );
 
     let svg_path = tmp.path().join("old.svg");

@@ -6,5 +6,5 @@ pub mod report;
 mod run;
 mod types;
 
-pub use run::{CompareOptions, median, run_compare};
+pub use run::{CompareOptions, run_compare};
 pub use types::{CompareReport, FrameErrors, LightsRow, MethodSummary};

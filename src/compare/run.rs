@@ -17,13 +17,14 @@ use image::RgbImage;
 
 use super::lod_error::{LodErrorStats, method_error, reference_levels};
 use super::{CompareReport, FrameErrors, LightsRow, MethodSummary};
-use crate::frame::{FrameClock, PreparedFrame, RenderSettings, Renderer};
+use crate::frame::{FrameClock, Phase, PreparedFrame, RenderSettings, Renderer};
 use crate::lod::LodMethod;
 use crate::metrics;
 use crate::output::write_rgb8_atomically;
 use crate::render::integrator::{FrameScene, MIP_LEVELS};
 use crate::render::lod_view::lod_image;
 use crate::render::{Camera, LinearImage, render_image};
+use crate::report::median;
 use crate::scene::SceneDesc;
 
 /// What to compare.
@@ -84,7 +85,11 @@ pub fn run_compare(
     for (fi, frame) in options.frames.clone().enumerate() {
         let prepared = renderer.prepare(frame, options.clock.time(frame))?;
         let u = prepared.update;
-        shared_update_ms += u.animate_ms + u.dirty_ms + u.refit_ms + u.build_ms;
+        shared_update_ms += Phase::ALL
+            .into_iter()
+            .filter(|p| p.is_shared())
+            .map(|p| u.phase_ms(p))
+            .sum::<f64>();
         let camera = prepared.camera;
         let scene_with = |lod| FrameScene {
             lod,
@@ -105,11 +110,12 @@ pub fn run_compare(
                 )),
                 _ => None,
             };
-            let update = if run.method.needs_log2_pb() {
-                u.lod_update_ms
-            } else {
-                0.0
-            };
+            // The phases only methods reading `log2 P_b` pay.
+            let update: f64 = Phase::ALL
+                .into_iter()
+                .filter(|p| !p.is_shared() && run.method.needs_log2_pb())
+                .map(|p| u.phase_ms(p))
+                .sum();
             run.frames.push(frame_errors(
                 frame,
                 median(times) + update,
@@ -313,20 +319,6 @@ fn lights_row(
     Ok(row)
 }
 
-/// Middle value (mean of the two middle ones for an even count); NaN if empty.
-pub fn median(mut values: Vec<f64>) -> f64 {
-    if values.is_empty() {
-        return f64::NAN;
-    }
-    values.sort_by(f64::total_cmp);
-    let mid = values.len() / 2;
-    if values.len() % 2 == 1 {
-        values[mid]
-    } else {
-        (values[mid - 1] + values[mid]) / 2.0
-    }
-}
-
 fn srgb(image: &LinearImage) -> RgbImage {
     RgbImage::from_raw(image.width, image.height, image.to_srgb8()).expect("w * h * 3 bytes")
 }
@@ -372,13 +364,6 @@ fn frame_line(frame: u32, runs: &[MethodRun]) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn median_of_odd_even_and_empty() {
-        assert_eq!(median(vec![3.0, 1.0, 2.0]), 2.0);
-        assert_eq!(median(vec![4.0, 1.0, 2.0, 3.0]), 2.5);
-        assert!(median(vec![]).is_nan());
-    }
 
     #[test]
     fn baseline_comes_first_once() {

@@ -20,6 +20,7 @@ use std::collections::BTreeMap;
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
+use crate::csv::csv_field;
 use crate::metrics::{FrameMetrics, MetricsError, compare, format_psnr, heat_map, read_srgb8};
 
 /// The metric that decides pass or fail.
@@ -420,13 +421,5 @@ fn format_value(metric: DiffMetric, v: f64) -> String {
         DiffMetric::Psnr => format!("{} dB", format_psnr(v)),
         DiffMetric::Flip => format!("{v:.5}"),
         DiffMetric::MaxAbs => format!("{v:.0}"),
-    }
-}
-
-fn csv_field(s: &str) -> String {
-    if s.contains([',', '"', '\n']) {
-        format!("\"{}\"", s.replace('"', "\"\""))
-    } else {
-        s.to_string()
     }
 }

@@ -3,7 +3,7 @@
 use std::path::Path;
 
 use super::FrameDiff;
-use crate::report::{Record, load_records};
+use crate::report::{Quantities, Record, TOTAL_MS, load_records};
 
 /// How a frame's render record changed from reference to test.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -28,8 +28,8 @@ pub fn compare_stats(
     let reference = load_records(&[reference_dir.to_path_buf()]).map_err(|e| e.to_string())?;
     let test = load_records(&[test_dir.to_path_buf()]).map_err(|e| e.to_string())?;
     for f in frames.iter_mut() {
-        let a = reference.iter().find(|r| r.frame == f.frame);
-        let b = test.iter().find(|r| r.frame == f.frame);
+        let a = reference.iter().find(|r| r.frame() == f.frame);
+        let b = test.iter().find(|r| r.frame() == f.frame);
         if let (Some(a), Some(b)) = (a, b) {
             f.stats = Some(delta(a, b));
         }
@@ -38,18 +38,24 @@ pub fn compare_stats(
 }
 
 fn delta(a: &Record, b: &Record) -> StatsDelta {
-    let ratio = match (a.total_ms, b.total_ms) {
+    let ratio = match (a.value(&TOTAL_MS), b.value(&TOTAL_MS)) {
         (Some(x), Some(y)) if x > 0.0 => y / x,
         _ => f64::NAN,
     };
-    let diff = |x: Option<u64>, y: Option<u64>| y.unwrap_or(0) as i64 - x.unwrap_or(0) as i64;
+    // An absent count counts as 0 (the difference says what the other side has).
+    let count = |r: &Record, name: &str, value: u64| r.if_present(name, value).unwrap_or(0) as i64;
     StatsDelta {
         time_ratio: ratio,
-        rays_delta: diff(a.rays, b.rays),
-        lod_recomputed_delta: diff(a.lod_recomputed, b.lod_recomputed),
-        mip_level_shift: mean_level(b.mip_histogram.as_deref())
-            - mean_level(a.mip_histogram.as_deref()),
+        rays_delta: count(b, "rays", b.values.rays) - count(a, "rays", a.values.rays),
+        lod_recomputed_delta: count(b, "lod_recomputed", b.values.update.lod_recomputed as u64)
+            - count(a, "lod_recomputed", a.values.update.lod_recomputed as u64),
+        mip_level_shift: mean_level(histogram(b)) - mean_level(histogram(a)),
     }
+}
+
+/// The record's MIP histogram, `None` when its line had none.
+fn histogram(r: &Record) -> Option<&[u64]> {
+    r.if_present("mip_histogram", &r.values.mip_histogram[..])
 }
 
 /// Mean integer level of a MIP histogram (0 for an empty one).

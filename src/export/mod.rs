@@ -21,6 +21,7 @@ use std::io::{self, BufWriter, Write};
 use std::ops::Range;
 use std::path::{Path, PathBuf};
 
+use crate::atomic_file::{self, AtomicWriteError};
 use crate::frame::{FrameError, Motion, Renderer};
 
 pub use crate::scene::camera_file::{CameraFile, LightFile};
@@ -97,33 +98,15 @@ pub fn camera_file_name(index: u32) -> String {
     format!("camera_{index:04}.json")
 }
 
-/// `dir/.name.tmp`: hidden, same folder (so the rename stays on one file system).
-fn temporary_sibling(path: &Path) -> PathBuf {
-    let name = path
-        .file_name()
-        .map(|n| n.to_string_lossy().into_owned())
-        .unwrap_or_default();
-    path.with_file_name(format!(".{name}.tmp"))
-}
-
-/// Streams a file through a `BufWriter` into a temporary sibling, then renames it into
-/// place; on any error the temporary file is removed and `path` is untouched.
+/// Streams a file through a `BufWriter` into place atomically ([`crate::atomic_file`]); on
+/// any error `path` is untouched and the error names it (or the temporary file).
 pub(crate) fn write_atomically(
     path: &Path,
     write: impl FnOnce(&mut BufWriter<File>) -> io::Result<()>,
 ) -> Result<(), ExportError> {
-    let tmp = temporary_sibling(path);
-    let file = File::create(&tmp).map_err(io_error(&tmp))?;
-    let mut writer = BufWriter::with_capacity(1 << 20, file);
-    let written = write(&mut writer).and_then(|()| writer.flush());
-    drop(writer);
-    if let Err(e) = written {
-        let _ = fs::remove_file(&tmp);
-        return Err(io_error(path)(e));
-    }
-    fs::rename(&tmp, path).map_err(|e| {
-        let _ = fs::remove_file(&tmp);
-        io_error(path)(e)
+    atomic_file::write_atomically(path, write).map_err(|e| match e {
+        AtomicWriteError::Io { path, source } => ExportError::Io { path, source },
+        AtomicWriteError::Write(source) => io_error(path)(source),
     })
 }
 

@@ -14,6 +14,7 @@ mod clock;
 mod dirty;
 mod log2_pb;
 mod posed;
+mod record;
 pub mod sequence;
 mod settings;
 mod update;
@@ -21,13 +22,13 @@ mod update;
 pub use crate::accel::BvhPolicy;
 pub use clock::FrameClock;
 pub use dirty::{DirtySet, Motion};
+pub use record::{FrameRecord, Phase, UpdateStats};
 pub use sequence::{Check, Resume, SequenceOutcome, SequenceOutput, render_sequence};
 pub use settings::RenderSettings;
 
 use std::time::Instant;
 
 use glam::{Mat4, Vec3, Vec3A};
-use serde::Serialize;
 
 use crate::accel::{Accel, AccelError};
 use crate::anim::{NodeShape, Pose, node_shapes, primitive_deforms};
@@ -39,34 +40,6 @@ use crate::scene::SceneDesc;
 use log2_pb::object_space_log2_pb;
 use posed::{DeformScratch, VertexSource, write_all_triangles};
 
-/// What one frame cost and produced: one line of `stats.jsonl`.
-#[derive(Debug, Clone, PartialEq, Serialize, serde::Deserialize)]
-pub struct FrameRecord {
-    pub frame: u32,
-    pub time_s: f32,
-    pub width: u32,
-    pub height: u32,
-    pub lod_method: String,
-    /// `--lod-bias` (absent in records written before it existed).
-    #[serde(default)]
-    pub lod_bias: f32,
-    pub triangles: usize,
-    pub lights: usize,
-    pub spp: u32,
-    /// The per-frame update: what moved and what each step cost.
-    #[serde(flatten)]
-    pub update: UpdateStats,
-    pub render_ms: f64,
-    /// Everything above plus camera/light placement (not the file write).
-    pub total_ms: f64,
-    /// All rays traced: primary, shadow, reflection, refraction.
-    pub rays: u64,
-    /// Texture lookups per integer level (floor of the clamped level), index 0 = level 0.
-    pub mip_histogram: Vec<u64>,
-    /// Samples that came out NaN/inf and were written as black (expected 0).
-    pub nonfinite_samples: u64,
-}
-
 /// Errors that stop a frame.
 #[derive(Debug, thiserror::Error)]
 pub enum FrameError {
@@ -76,33 +49,6 @@ pub enum FrameError {
         time_s: f32,
         source: AccelError,
     },
-}
-
-/// What the per-frame update did and cost (flattened into each `stats.jsonl` line).
-#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize, serde::Deserialize)]
-pub struct UpdateStats {
-    /// Animation evaluated at the frame time and moved vertices written.
-    pub animate_ms: f64,
-    /// Classifying instances and triangles into the dirty set.
-    pub dirty_ms: f64,
-    /// Refitting the BVH to the moved triangles (0 when nothing moved or it was rebuilt).
-    pub refit_ms: f64,
-    /// Building the BVH (first frame, or a rebuild), including the reorder into BVH order.
-    pub build_ms: f64,
-    /// Whether the BVH was built this frame.
-    pub rebuild: bool,
-    /// SAH cost of the tree used for this frame over its cost right after its last build.
-    pub sah_ratio: f32,
-    /// Updating `log2 P_b` for the dirty triangles (0 for methods that do not use it).
-    pub lod_update_ms: f64,
-    /// Triangles whose box moved this frame (rigid + scaled + deformed).
-    pub moved_triangles: usize,
-    /// Triangles whose shape changed this frame.
-    pub deformed_triangles: usize,
-    /// Textured triangles whose `log2 P_b` was computed this frame (all on the first frame).
-    pub lod_recomputed: usize,
-    /// Textured triangles whose `log2 P_b` was shifted by a new uniform scale.
-    pub lod_shifted: usize,
 }
 
 /// One frame after its update: camera, lights and what the update cost.

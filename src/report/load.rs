@@ -130,11 +130,11 @@ fn read_stats_file(path: &Path) -> Result<Vec<Record>, ReportError> {
 /// Sorts by frame (stable), keeps the last record of each frame; returns how many dropped.
 fn sort_keeping_last(mut records: Vec<Record>) -> (Vec<Record>, usize) {
     let read = records.len();
-    records.sort_by_key(|r| r.frame);
+    records.sort_by_key(Record::frame);
     let mut kept: Vec<Record> = Vec::with_capacity(read);
     for record in records {
         match kept.last_mut() {
-            Some(last) if last.frame == record.frame => *last = record,
+            Some(last) if last.frame() == record.frame() => *last = record,
             _ => kept.push(record),
         }
     }
@@ -154,13 +154,15 @@ fn describe(dirs: &[PathBuf]) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::frame::FrameRecord;
 
     fn record(frame: u32, render_ms: f64) -> Record {
-        Record {
+        let values = FrameRecord {
             frame,
-            render_ms: Some(render_ms),
-            ..Record::default()
-        }
+            render_ms,
+            ..FrameRecord::default()
+        };
+        Record::new(values, ["render_ms"])
     }
 
     #[test]
@@ -173,8 +175,11 @@ mod tests {
             record(2, 3.0),
         ];
         let (kept, dropped) = sort_keeping_last(input);
-        let frames: Vec<(u32, Option<f64>)> = kept.iter().map(|r| (r.frame, r.render_ms)).collect();
-        assert_eq!(frames, [(0, Some(1.0)), (1, Some(1.0)), (2, Some(3.0))]);
+        let frames: Vec<(u32, f64)> = kept
+            .iter()
+            .map(|r| (r.frame(), r.values.render_ms))
+            .collect();
+        assert_eq!(frames, [(0, 1.0), (1, 1.0), (2, 3.0)]);
         assert_eq!(dropped, 2);
     }
 

@@ -1,13 +1,14 @@
 //! `mipray report`: statistics and a plot of a rendered sequence from its `stats.jsonl`.
 //!
-//! [`report`] loads the records of one or more output folders ([`load_sequence`]: shards
+//! The record itself is the frame loop's [`crate::frame::FrameRecord`]; [`Record`] is one
+//! read back, with the fields its line had. [`report`] loads the records of one or more output folders ([`load_sequence`]: shards
 //! merged, sorted by frame, duplicates dropped), summarises every timing phase and count
 //! with [`Percentiles`] (min / median / nearest-rank p95 / max), computes the preprocessing
 //! share of frame time and the rebuild count, and writes an SVG plot ([`write_svg`]).
 //! Fields missing from older records are absent, never 0: a quantity no record has is left
 //! out of the table and the plot.
 
-mod atomic;
+pub(crate) mod chart;
 mod error;
 mod load;
 mod metrics;
@@ -16,17 +17,22 @@ pub(crate) mod plot;
 mod record;
 mod stats;
 mod summary;
+mod summary_json;
 
 use std::path::{Path, PathBuf};
 
 pub use error::ReportError;
 pub use load::{Sequence, is_stats_file_name, load_records, load_sequence};
-pub use metrics::{COUNTS, Metric, PLOTTED_COUNTS, PREPROCESSING_PHASES, TIMING_PHASES};
-pub use percentiles::{Percentiles, nearest_rank};
+pub use metrics::{
+    COUNTS, DEFORMED_TRIANGLES, LOD_RECOMPUTED, MOVED_TRIANGLES, Metric, PLOTTED_COUNTS,
+    PREPROCESSING_PHASES, Quantities, RAYS, RENDER_MS, TIMING_PHASES, TOTAL_MS, TRIANGLES,
+};
+pub use percentiles::{Percentiles, median, nearest_rank};
 pub use plot::{SVG_SIZE, render_svg, write_svg};
-pub use record::Record;
+pub use record::{Record, RecordError};
 pub use stats::{PhaseRow, PreprocessingShare, rebuild_count};
 pub use summary::ReportSummary;
+pub use summary_json::{PhasePercentiles, Summary};
 
 /// Loads the records of `dirs`, writes the plot to `svg_out` (atomically, creating its
 /// folder) and returns the statistics (`Display`: a Markdown table and summary lines).

@@ -35,7 +35,7 @@ impl Percentiles {
         };
         Percentiles {
             min,
-            median: median(&sorted),
+            median: median_of_sorted(&sorted),
             p95: nearest_rank(&sorted, 95),
             max,
         }
@@ -47,8 +47,19 @@ impl Percentiles {
     }
 }
 
+/// The median of `values` (any order): the middle value, or the mean of the two middle
+/// ones for an even count; NaN when empty. Unlike [`Percentiles::of`] it keeps non-finite
+/// values (NaN sorts last).
+pub fn median(mut values: Vec<f64>) -> f64 {
+    if values.is_empty() {
+        return f64::NAN;
+    }
+    values.sort_by(f64::total_cmp);
+    median_of_sorted(&values)
+}
+
 /// Median of ascending, non-empty `sorted`: the middle value, or the mean of the two.
-fn median(sorted: &[f64]) -> f64 {
+fn median_of_sorted(sorted: &[f64]) -> f64 {
     let mid = sorted.len() / 2;
     if sorted.len() % 2 == 1 {
         sorted[mid]
@@ -92,6 +103,13 @@ mod tests {
         assert_eq!(nearest_rank(&twenty_one, 95), 20.0);
         assert_eq!(nearest_rank(&[7.0], 95), 7.0);
         assert_eq!(nearest_rank(&[1.0, 2.0], 0), 1.0);
+    }
+
+    #[test]
+    fn median_of_odd_even_and_empty() {
+        assert_eq!(median(vec![3.0, 1.0, 2.0]), 2.0);
+        assert_eq!(median(vec![4.0, 1.0, 2.0, 3.0]), 2.5);
+        assert!(median(vec![]).is_nan());
     }
 
     #[test]

@@ -19,32 +19,17 @@ use plotters::coord::Shift;
 use plotters::coord::types::RangedCoordi64;
 use plotters::prelude::*;
 
-use super::atomic::write_atomically;
+use super::chart::{Run, chart_on, draw_legend, draw_runs, series_color, text};
 use super::error::ReportError;
-use super::metrics::{Metric, PLOTTED_COUNTS, TIMING_PHASES};
+use super::metrics::{Metric, PLOTTED_COUNTS, Quantities, TIMING_PHASES};
 use super::record::Record;
+use crate::atomic_file::write_bytes_atomically;
 
 /// Size of the whole plot in pixels.
 pub const SVG_SIZE: (u32, u32) = (1000, 900);
 
-/// Line colours: one per quantity of a panel (a panel has at most 7), or per method in the
-/// `mipray compare` plots.
-pub(crate) const PALETTE: [RGBColor; 8] = [
-    RGBColor(31, 119, 180),
-    RGBColor(255, 127, 14),
-    RGBColor(44, 160, 44),
-    RGBColor(214, 39, 40),
-    RGBColor(148, 103, 189),
-    RGBColor(140, 86, 75),
-    RGBColor(227, 119, 194),
-    RGBColor(0, 0, 0),
-];
-
 /// Share of the time panel's height kept above the data for the legend.
 const LEGEND_HEADROOM: f64 = 0.4;
-
-/// Points of one line segment: (frame, value).
-type Run = Vec<(i64, f64)>;
 
 /// Draws the plot of ascending `records` and writes it to `path` atomically.
 pub fn write_svg(records: &[Record], path: &Path) -> Result<(), ReportError> {
@@ -52,7 +37,11 @@ pub fn write_svg(records: &[Record], path: &Path) -> Result<(), ReportError> {
         path: path.to_path_buf(),
         message,
     })?;
-    write_atomically(path, svg.as_bytes())
+    if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
+        std::fs::create_dir_all(dir).map_err(ReportError::io(dir))?;
+    }
+    write_bytes_atomically(path, svg.as_bytes())
+        .map_err(|(path, source)| ReportError::Io { path, source })
 }
 
 /// The plot of ascending `records` as SVG text.
@@ -70,14 +59,10 @@ pub fn render_svg(records: &[Record]) -> Result<String, String> {
     Ok(svg)
 }
 
-fn text(e: impl std::fmt::Display) -> String {
-    e.to_string()
-}
-
 /// The x range: first to last frame (widened by one when there is a single frame).
 fn frame_range(records: &[Record]) -> Range<i64> {
-    let first = records.first().map_or(0, |r| i64::from(r.frame));
-    let last = records.last().map_or(0, |r| i64::from(r.frame));
+    let first = records.first().map_or(0, |r| i64::from(r.frame()));
+    let last = records.last().map_or(0, |r| i64::from(r.frame()));
     first..last.max(first + 1)
 }
 
@@ -87,8 +72,8 @@ fn runs(records: &[Record], metric: &Metric, keep: fn(f64) -> bool) -> Vec<Run> 
     let mut runs: Vec<Run> = Vec::new();
     let mut open = false;
     for r in records {
-        let frame = i64::from(r.frame);
-        match (metric.get)(r).filter(|v| v.is_finite() && keep(*v)) {
+        let frame = i64::from(r.frame());
+        match r.value(metric).filter(|v| v.is_finite() && keep(*v)) {
             Some(v) => {
                 let run = match runs.last_mut() {
                     Some(run) if open && run.last().is_some_and(|p| p.0 + 1 == frame) => run,
@@ -125,14 +110,8 @@ fn times_panel(
     let (lo, hi) = (lo / 1.5, hi * 1.5);
     // Free the top ~40 % (in log space) for the legend of up to seven lines.
     let top = hi * (hi / lo).powf(LEGEND_HEADROOM / (1.0 - LEGEND_HEADROOM));
-    let mut chart = ChartBuilder::on(area)
-        .caption(
-            format!("Per-frame phase times ({} frames)", records.len()),
-            ("sans-serif", 22),
-        )
-        .margin(12)
-        .x_label_area_size(40)
-        .y_label_area_size(70)
+    let caption = format!("Per-frame phase times ({} frames)", records.len());
+    let mut chart = chart_on(area, caption, 22)
         .build_cartesian_2d(frames, (lo..top).log_scale())
         .map_err(text)?;
     chart
@@ -153,11 +132,7 @@ fn counts_panel(
 ) -> Result<(), String> {
     let lines: Vec<(&Metric, Vec<Run>)> = present(&PLOTTED_COUNTS, records, any);
     let hi = value_bounds(&lines).map_or(1.0, |(_, hi)| hi.max(1.0));
-    let mut chart = ChartBuilder::on(area)
-        .caption("Per-frame update counts", ("sans-serif", 22))
-        .margin(12)
-        .x_label_area_size(40)
-        .y_label_area_size(70)
+    let mut chart = chart_on(area, "Per-frame update counts", 22)
         .build_cartesian_2d(frames, 0.0..hi * 1.3)
         .map_err(text)?;
     chart
@@ -213,41 +188,26 @@ where
     Y: Ranged<ValueType = f64>,
 {
     for (i, (metric, runs)) in lines.iter().enumerate() {
-        let color = PALETTE[i % PALETTE.len()];
-        let style = color.stroke_width(2);
-        chart
-            .draw_series(runs.iter().map(|run| PathElement::new(run.clone(), style)))
-            .map_err(text)?
-            .label(metric.name)
-            .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], style));
-        let dots = runs.iter().filter(|run| run.len() == 1).flatten();
-        chart
-            .draw_series(dots.map(|&p| Circle::new(p, 3, color.filled())))
-            .map_err(text)?;
+        draw_runs(chart, metric.name, runs, series_color(i))?;
     }
-    if !lines.is_empty() {
-        chart
-            .configure_series_labels()
-            .position(SeriesLabelPosition::UpperRight)
-            .background_style(WHITE.mix(0.85))
-            .border_style(BLACK)
-            .draw()
-            .map_err(text)?;
-    }
-    Ok(())
+    draw_legend(chart, lines.len())
 }
 
 #[cfg(test)]
 mod tests {
-    use super::super::metrics::{DIRTY_MS, RENDER_MS};
+    use super::super::metrics::RENDER_MS;
     use super::*;
+    use crate::frame::{FrameRecord, Phase};
+
+    const DIRTY_MS: Metric = Metric::phase(Phase::Dirty);
 
     fn record(frame: u32, dirty_ms: Option<f64>) -> Record {
-        Record {
+        let mut values = FrameRecord {
             frame,
-            dirty_ms,
-            ..Record::default()
-        }
+            ..FrameRecord::default()
+        };
+        values.update.dirty_ms = dirty_ms.unwrap_or_default();
+        Record::new(values, dirty_ms.map(|_| "dirty_ms"))
     }
 
     #[test]

@@ -1,42 +1,33 @@
-//! One line of `stats.jsonl`, read tolerantly.
+//! One line of `stats.jsonl`, read tolerantly into the frame loop's [`FrameRecord`].
 //!
 //! Every field but `frame` is optional: records written before a field existed load with
-//! that field `None` (absent), never 0, so the report does not invent data. `null` (how
+//! that field absent (the record holds its default, and [`Record::has`] says it is not
+//! there), never reported as 0, so the report does not invent data. `null` (how
 //! serde_json writes a NaN) is absent too. Unknown fields are ignored, so newer files load.
 //! A field of the wrong type is an error that names the field.
 
 use serde_json::{Map, Value};
 
-/// One frame's record as read back from a stats file.
+use crate::frame::{FrameRecord, UpdateStats};
+
+/// One frame's record as read back from a stats file, and which fields the line had.
 #[derive(Debug, Clone, PartialEq, Default)]
 pub struct Record {
-    pub frame: u32,
-    pub time_s: Option<f64>,
-    pub width: Option<u32>,
-    pub height: Option<u32>,
-    pub lod_method: Option<String>,
-    pub triangles: Option<u64>,
-    pub lights: Option<u64>,
-    pub spp: Option<u32>,
-    pub animate_ms: Option<f64>,
-    pub dirty_ms: Option<f64>,
-    pub refit_ms: Option<f64>,
-    pub build_ms: Option<f64>,
-    /// Whether the BVH was rebuilt (rather than refitted) this frame.
-    pub rebuild: Option<bool>,
-    pub sah_ratio: Option<f64>,
-    pub lod_update_ms: Option<f64>,
-    pub moved_triangles: Option<u64>,
-    pub deformed_triangles: Option<u64>,
-    pub lod_recomputed: Option<u64>,
-    pub render_ms: Option<f64>,
-    pub total_ms: Option<f64>,
-    pub rays: Option<u64>,
-    pub mip_histogram: Option<Vec<u64>>,
-    pub nonfinite_samples: Option<u64>,
+    /// The line's values; a field the line lacked holds its default.
+    pub values: FrameRecord,
+    /// `stats.jsonl` names of the fields the line had (non-null).
+    present: Vec<&'static str>,
 }
 
 impl Record {
+    /// A record whose fields named in `present` were read (the rest count as absent).
+    pub fn new(values: FrameRecord, present: impl IntoIterator<Item = &'static str>) -> Record {
+        Record {
+            values,
+            present: present.into_iter().collect(),
+        }
+    }
+
     /// Parses one non-blank line. The error is a message without file or line (the
     /// caller adds them): invalid JSON, not an object, no integer `frame`, a field of the
     /// wrong type.
@@ -48,33 +39,101 @@ impl Record {
         Record::from_object(o).map_err(RecordError::Invalid)
     }
 
+    /// The frame number (always present).
+    pub fn frame(&self) -> u32 {
+        self.values.frame
+    }
+
+    /// Whether the line had the field `name` (a `stats.jsonl` name).
+    pub fn has(&self, name: &str) -> bool {
+        self.present.contains(&name)
+    }
+
+    /// `value` when the line had the field `name`, else `None`.
+    pub fn if_present<T>(&self, name: &str, value: T) -> Option<T> {
+        self.has(name).then_some(value)
+    }
+
     fn from_object(o: &Map<String, Value>) -> Result<Record, String> {
         let frame = integer(o, "frame")?.ok_or("missing `frame`")?;
-        Ok(Record {
+        let mut f = Fields {
+            o,
+            present: vec!["frame"],
+        };
+        let values = FrameRecord {
             frame,
-            time_s: number(o, "time_s")?,
-            width: integer(o, "width")?,
-            height: integer(o, "height")?,
-            lod_method: string(o, "lod_method")?,
-            triangles: integer(o, "triangles")?,
-            lights: integer(o, "lights")?,
-            spp: integer(o, "spp")?,
-            animate_ms: number(o, "animate_ms")?,
-            dirty_ms: number(o, "dirty_ms")?,
-            refit_ms: number(o, "refit_ms")?,
-            build_ms: number(o, "build_ms")?,
-            rebuild: boolean(o, "rebuild")?,
-            sah_ratio: number(o, "sah_ratio")?,
-            lod_update_ms: number(o, "lod_update_ms")?,
-            moved_triangles: integer(o, "moved_triangles")?,
-            deformed_triangles: integer(o, "deformed_triangles")?,
-            lod_recomputed: integer(o, "lod_recomputed")?,
-            render_ms: number(o, "render_ms")?,
-            total_ms: number(o, "total_ms")?,
-            rays: integer(o, "rays")?,
-            mip_histogram: counts(o, "mip_histogram")?,
-            nonfinite_samples: integer(o, "nonfinite_samples")?,
+            time_s: f.number("time_s")? as f32,
+            width: f.integer("width")?,
+            height: f.integer("height")?,
+            lod_method: f.string("lod_method")?,
+            lod_bias: f.number("lod_bias")? as f32,
+            triangles: f.integer("triangles")?,
+            lights: f.integer("lights")?,
+            spp: f.integer("spp")?,
+            update: UpdateStats {
+                animate_ms: f.number("animate_ms")?,
+                dirty_ms: f.number("dirty_ms")?,
+                refit_ms: f.number("refit_ms")?,
+                build_ms: f.number("build_ms")?,
+                rebuild: f.boolean("rebuild")?,
+                sah_ratio: f.number("sah_ratio")? as f32,
+                lod_update_ms: f.number("lod_update_ms")?,
+                moved_triangles: f.integer("moved_triangles")?,
+                deformed_triangles: f.integer("deformed_triangles")?,
+                lod_recomputed: f.integer("lod_recomputed")?,
+                lod_shifted: f.integer("lod_shifted")?,
+            },
+            render_ms: f.number("render_ms")?,
+            total_ms: f.number("total_ms")?,
+            rays: f.integer("rays")?,
+            mip_histogram: f.counts("mip_histogram")?,
+            nonfinite_samples: f.integer("nonfinite_samples")?,
+        };
+        Ok(Record {
+            values,
+            present: f.present,
         })
+    }
+}
+
+/// The fields of one line, read one by one: each read returns the value (the default when
+/// absent) and remembers whether it was there.
+struct Fields<'a> {
+    o: &'a Map<String, Value>,
+    present: Vec<&'static str>,
+}
+
+impl Fields<'_> {
+    fn mark<T: Default>(&mut self, name: &'static str, value: Option<T>) -> T {
+        if value.is_some() {
+            self.present.push(name);
+        }
+        value.unwrap_or_default()
+    }
+
+    fn number(&mut self, name: &'static str) -> Result<f64, String> {
+        let value = number(self.o, name)?;
+        Ok(self.mark(name, value))
+    }
+
+    fn integer<T: TryFrom<u64> + Default>(&mut self, name: &'static str) -> Result<T, String> {
+        let value = integer(self.o, name)?;
+        Ok(self.mark(name, value))
+    }
+
+    fn boolean(&mut self, name: &'static str) -> Result<bool, String> {
+        let value = boolean(self.o, name)?;
+        Ok(self.mark(name, value))
+    }
+
+    fn string(&mut self, name: &'static str) -> Result<String, String> {
+        let value = string(self.o, name)?;
+        Ok(self.mark(name, value))
+    }
+
+    fn counts(&mut self, name: &'static str) -> Result<Vec<u64>, String> {
+        let value = counts(self.o, name)?;
+        Ok(self.mark(name, value))
     }
 }
 
@@ -149,39 +208,65 @@ mod tests {
     #[test]
     fn current_format_loads_every_field() {
         let line = r#"{"frame":2,"time_s":0.5,"width":64,"height":32,"lod_method":"paper",
-            "triangles":100,"lights":2,"spp":4,"animate_ms":1.0,"dirty_ms":0.25,"refit_ms":0.5,
-            "build_ms":0.0,"rebuild":false,"sah_ratio":1.1,"lod_update_ms":0.75,
-            "moved_triangles":10,"deformed_triangles":5,"lod_recomputed":15,"render_ms":20.0,
-            "total_ms":23.0,"rays":4096,"mip_histogram":[1,2,3],"nonfinite_samples":0}"#;
+            "lod_bias":0.5,"triangles":100,"lights":2,"spp":4,"animate_ms":1.0,"dirty_ms":0.25,
+            "refit_ms":0.5,"build_ms":0.0,"rebuild":false,"sah_ratio":1.1,"lod_update_ms":0.75,
+            "moved_triangles":10,"deformed_triangles":5,"lod_recomputed":15,"lod_shifted":3,
+            "render_ms":20.0,"total_ms":23.0,"rays":4096,"mip_histogram":[1,2,3],
+            "nonfinite_samples":0}"#;
         let r = Record::parse(line).unwrap();
-        assert_eq!(r.lod_method.as_deref(), Some("paper"));
-        assert_eq!((r.width, r.height, r.spp), (Some(64), Some(32), Some(4)));
+        let v = &r.values;
+        assert_eq!(v.lod_method, "paper");
+        assert_eq!((v.width, v.height, v.spp, v.lod_bias), (64, 32, 4, 0.5));
         assert_eq!(
-            (r.dirty_ms, r.refit_ms, r.rebuild),
-            (Some(0.25), Some(0.5), Some(false))
+            (v.update.dirty_ms, v.update.refit_ms, v.update.rebuild),
+            (0.25, 0.5, false)
         );
         assert_eq!(
-            (r.moved_triangles, r.deformed_triangles),
-            (Some(10), Some(5))
+            (
+                v.update.moved_triangles,
+                v.update.deformed_triangles,
+                v.update.lod_shifted
+            ),
+            (10, 5, 3)
         );
-        assert_eq!(r.mip_histogram, Some(vec![1, 2, 3]));
-        assert_eq!((r.rays, r.nonfinite_samples), (Some(4096), Some(0)));
+        assert_eq!(v.mip_histogram, [1, 2, 3]);
+        assert_eq!((v.rays, v.nonfinite_samples), (4096, 0));
+        // Every field of the line is present, `false` and 0 included.
+        let all = serde_json::to_value(FrameRecord::default()).unwrap();
+        for name in all.as_object().unwrap().keys() {
+            assert!(r.has(name), "{name}");
+        }
+    }
+
+    #[test]
+    fn written_record_reads_back_equal() {
+        let mut values = FrameRecord {
+            frame: 7,
+            lod_method: "cones".into(),
+            total_ms: 3.5,
+            mip_histogram: vec![4, 5],
+            ..FrameRecord::default()
+        };
+        values.update.rebuild = true;
+        let line = serde_json::to_string(&values).unwrap();
+        assert_eq!(Record::parse(&line).unwrap().values, values);
     }
 
     #[test]
     fn missing_fields_are_absent() {
         let r = Record::parse(r#"{"frame": 3, "render_ms": 2.5, "future_field": [1]}"#).unwrap();
-        assert_eq!(r.frame, 3);
-        assert_eq!(r.render_ms, Some(2.5));
-        assert_eq!(r.dirty_ms, None);
-        assert_eq!(r.rebuild, None);
+        assert_eq!(r.frame(), 3);
+        assert_eq!(r.if_present("render_ms", r.values.render_ms), Some(2.5));
+        assert!(!r.has("dirty_ms"));
+        assert!(!r.has("rebuild"));
+        assert!(!r.has("future_field"));
     }
 
     #[test]
     fn null_is_absent() {
         // serde_json writes a NaN f64 as null.
         let r = Record::parse(r#"{"frame": 0, "total_ms": null}"#).unwrap();
-        assert_eq!(r.total_ms, None);
+        assert!(!r.has("total_ms"));
     }
 
     #[test]

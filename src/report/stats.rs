@@ -3,10 +3,11 @@
 //!
 //! Quantities absent from every record are left out (not reported as 0). A quantity present
 //! in only some records is summarised over those, and the row says over how many frames.
+//! The same functions summarise records read back (`mipray report`) and records the frame
+//! loop just made (`summary.json`), which have every quantity.
 
-use super::metrics::{Metric, PREPROCESSING_PHASES, TOTAL_MS};
+use super::metrics::{Metric, PREPROCESSING_PHASES, Quantities, TOTAL_MS};
 use super::percentiles::Percentiles;
-use super::record::Record;
 
 /// The spread of one quantity over the frames that have it.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -19,7 +20,7 @@ pub struct PhaseRow {
 
 impl PhaseRow {
     /// The row of `metric`, `None` when no record has it.
-    pub fn of(metric: &Metric, records: &[Record]) -> Option<PhaseRow> {
+    pub fn of<R: Quantities>(metric: &Metric, records: &[R]) -> Option<PhaseRow> {
         if !metric.present_in(records) {
             return None;
         }
@@ -32,7 +33,7 @@ impl PhaseRow {
     }
 
     /// The rows of those of `metrics` that some record has, in order.
-    pub fn all_present(metrics: &[Metric], records: &[Record]) -> Vec<PhaseRow> {
+    pub fn all_present<R: Quantities>(metrics: &[Metric], records: &[R]) -> Vec<PhaseRow> {
         metrics
             .iter()
             .filter_map(|m| PhaseRow::of(m, records))
@@ -52,12 +53,12 @@ pub struct PreprocessingShare {
 
 impl PreprocessingShare {
     /// `None` when no frame has a finite, positive `total_ms` sum.
-    pub fn of(records: &[Record]) -> Option<PreprocessingShare> {
-        let timed: Vec<&Record> = records
+    pub fn of<R: Quantities>(records: &[R]) -> Option<PreprocessingShare> {
+        let timed: Vec<&R> = records
             .iter()
-            .filter(|r| (TOTAL_MS.get)(r).is_some_and(f64::is_finite))
+            .filter(|r| r.value(&TOTAL_MS).is_some_and(f64::is_finite))
             .collect();
-        let total: f64 = timed.iter().filter_map(|r| (TOTAL_MS.get)(r)).sum();
+        let total: f64 = timed.iter().filter_map(|r| r.value(&TOTAL_MS)).sum();
         if total <= 0.0 {
             return None;
         }
@@ -66,7 +67,7 @@ impl PreprocessingShare {
         for metric in &PREPROCESSING_PHASES {
             let values: Vec<f64> = timed
                 .iter()
-                .filter_map(|r| (metric.get)(r))
+                .filter_map(|r| r.value(metric))
                 .filter(|v| v.is_finite())
                 .collect();
             if !values.is_empty() {
@@ -82,28 +83,45 @@ impl PreprocessingShare {
 }
 
 /// Frames whose BVH was rebuilt; `None` when no record has `rebuild`.
-pub fn rebuild_count(records: &[Record]) -> Option<usize> {
-    let flags: Vec<bool> = records.iter().filter_map(|r| r.rebuild).collect();
+pub fn rebuild_count<R: Quantities>(records: &[R]) -> Option<usize> {
+    let flags: Vec<bool> = records.iter().filter_map(Quantities::rebuilt).collect();
     (!flags.is_empty()).then(|| flags.iter().filter(|&&rebuilt| rebuilt).count())
 }
 
 #[cfg(test)]
 mod tests {
-    use super::super::metrics::{DIRTY_MS, RENDER_MS};
+    use super::super::metrics::RENDER_MS;
+    use super::super::record::Record;
     use super::*;
+    use crate::frame::{FrameRecord, Phase};
 
+    /// A record of `frame` with the given phase times (in `Phase::ALL` order) and total;
+    /// `None` fields are absent.
     fn timed(frame: u32, pre: [Option<f64>; 5], total: Option<f64>) -> Record {
-        let [animate_ms, dirty_ms, refit_ms, build_ms, lod_update_ms] = pre;
-        Record {
+        let mut values = FrameRecord {
             frame,
-            animate_ms,
-            dirty_ms,
-            refit_ms,
-            build_ms,
-            lod_update_ms,
-            total_ms: total,
-            ..Record::default()
+            total_ms: total.unwrap_or_default(),
+            ..FrameRecord::default()
+        };
+        let mut present: Vec<&'static str> = total.map(|_| "total_ms").into_iter().collect();
+        for (phase, ms) in Phase::ALL.into_iter().zip(pre) {
+            if let Some(ms) = ms {
+                set_phase(&mut values, phase, ms);
+                present.push(phase.field_name());
+            }
         }
+        Record::new(values, present)
+    }
+
+    fn set_phase(values: &mut FrameRecord, phase: Phase, ms: f64) {
+        let u = &mut values.update;
+        *match phase {
+            Phase::Animate => &mut u.animate_ms,
+            Phase::Dirty => &mut u.dirty_ms,
+            Phase::Refit => &mut u.refit_ms,
+            Phase::Build => &mut u.build_ms,
+            Phase::LodUpdate => &mut u.lod_update_ms,
+        } = ms;
     }
 
     #[test]
@@ -149,10 +167,13 @@ mod tests {
 
     #[test]
     fn rebuilds_count_true_flags_only() {
-        let flag = |frame, rebuild| Record {
-            frame,
-            rebuild,
-            ..Record::default()
+        let flag = |frame, rebuild: Option<bool>| {
+            let mut values = FrameRecord {
+                frame,
+                ..FrameRecord::default()
+            };
+            values.update.rebuild = rebuild.unwrap_or_default();
+            Record::new(values, rebuild.map(|_| "rebuild"))
         };
         assert_eq!(
             rebuild_count(&[flag(0, Some(true)), flag(1, Some(false)), flag(2, None)]),
@@ -163,20 +184,19 @@ mod tests {
 
     #[test]
     fn rows_only_for_present_quantities() {
+        let render = |frame, render_ms| FrameRecord {
+            frame,
+            render_ms,
+            ..FrameRecord::default()
+        };
+        let mut second = render(1, 2.0);
+        second.update.dirty_ms = 1.0;
         let records = [
-            Record {
-                frame: 0,
-                render_ms: Some(4.0),
-                ..Record::default()
-            },
-            Record {
-                frame: 1,
-                render_ms: Some(2.0),
-                dirty_ms: Some(1.0),
-                ..Record::default()
-            },
+            Record::new(render(0, 4.0), ["render_ms"]),
+            Record::new(second, ["render_ms", "dirty_ms"]),
         ];
-        let rows = PhaseRow::all_present(&[DIRTY_MS, RENDER_MS, TOTAL_MS], &records);
+        let dirty_ms = Metric::phase(Phase::Dirty);
+        let rows = PhaseRow::all_present(&[dirty_ms, RENDER_MS, TOTAL_MS], &records);
         let names: Vec<(&str, usize)> = rows.iter().map(|r| (r.name, r.frames)).collect();
         assert_eq!(names, [("dirty_ms", 1), ("render_ms", 2)]);
         assert_eq!(rows[1].percentiles.median, 3.0);

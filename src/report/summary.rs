@@ -6,6 +6,7 @@ use std::path::PathBuf;
 
 use super::load::Sequence;
 use super::metrics::{COUNTS, TIMING_PHASES};
+use super::record::Record;
 use super::stats::{PhaseRow, PreprocessingShare, rebuild_count};
 
 /// The result of [`super::report`]; `Display` renders it as Markdown.
@@ -36,8 +37,8 @@ impl ReportSummary {
         let records = &sequence.records;
         ReportSummary {
             frames: records.len(),
-            first_frame: records.first().map_or(0, |r| r.frame),
-            last_frame: records.last().map_or(0, |r| r.frame),
+            first_frame: records.first().map_or(0, Record::frame),
+            last_frame: records.last().map_or(0, Record::frame),
             stats_files: sequence.files.clone(),
             duplicates_dropped: sequence.duplicates_dropped,
             timings: PhaseRow::all_present(&TIMING_PHASES, records),
@@ -136,16 +137,19 @@ impl fmt::Display for ReportSummary {
 
 #[cfg(test)]
 mod tests {
-    use super::super::record::Record;
     use super::*;
+    use crate::frame::FrameRecord;
 
     fn sequence() -> Sequence {
-        let record = |frame: u32, ms: f64| Record {
-            frame,
-            animate_ms: Some(ms),
-            total_ms: Some(4.0 * ms),
-            rays: Some(u64::from(frame) + 1),
-            ..Record::default()
+        let record = |frame: u32, ms: f64| {
+            let mut values = FrameRecord {
+                frame,
+                total_ms: 4.0 * ms,
+                rays: u64::from(frame) + 1,
+                ..FrameRecord::default()
+            };
+            values.update.animate_ms = ms;
+            Record::new(values, ["animate_ms", "total_ms", "rays"])
         };
         Sequence {
             records: vec![record(0, 1.0), record(1, 2.0), record(3, 3.0)],
@@ -180,9 +184,15 @@ mod tests {
     #[test]
     fn partial_quantities_say_over_how_many_frames() {
         let mut seq = sequence();
-        seq.records[0].rebuild = Some(true);
-        seq.records[1].lod_recomputed = Some(3);
-        seq.records[2].lod_recomputed = Some(4);
+        let mark = |r: &Record, name| {
+            Record::new(r.values.clone(), ["animate_ms", "total_ms", "rays", name])
+        };
+        seq.records[0].values.update.rebuild = true;
+        seq.records[0] = mark(&seq.records[0], "rebuild");
+        seq.records[1].values.update.lod_recomputed = 3;
+        seq.records[1] = mark(&seq.records[1], "lod_recomputed");
+        seq.records[2].values.update.lod_recomputed = 4;
+        seq.records[2] = mark(&seq.records[2], "lod_recomputed");
         let text = ReportSummary::of(&seq, PathBuf::from("p.svg")).to_string();
         assert!(
             text.contains("| lod_recomputed (2 of 3 frames) | 3 | 3.5 | 4 | 4 |\n"),

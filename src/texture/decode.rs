@@ -96,15 +96,45 @@ fn decode_error(e: impl std::fmt::Display) -> TextureError {
     TextureError::Decode(e.to_string())
 }
 
-/// Decodes an encoded image (PNG, JPEG, PPM, ...) into linear RGBA texels.
-/// `srgb`: colour channels are sRGB-encoded (base colour) and are decoded to linear;
-/// alpha is always linear.
+/// How an image's colour channels are encoded (alpha is always linear).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ColorEncoding {
+    /// sRGB-encoded colour (base colour textures): decoded to linear.
+    Srgb,
+    /// Already linear data (normal maps, roughness): taken as is.
+    Linear,
+}
+
+/// Decodes an encoded image (PNG, JPEG, PPM, ...) whose colour channels are
+/// `srgb`-encoded or not; transitional form of [`decode_texels`].
+///
+/// The loaders in `src/scene` still call this with a bare `bool`; they switch to
+/// `decode_texels(bytes, ColorEncoding::Srgb)` when the restructuring that owns
+/// `src/scene` merges, and then this wrapper goes.
+///
+/// # Errors
+/// As [`decode_texels`].
+pub fn decode_image(bytes: &[u8], srgb: bool) -> Result<(u32, u32, Vec<Vec4>), TextureError> {
+    let encoding = if srgb {
+        ColorEncoding::Srgb
+    } else {
+        ColorEncoding::Linear
+    };
+    decode_texels(bytes, encoding)
+}
+
+/// Decodes an encoded image (PNG, JPEG, PPM, ...) into linear RGBA texels; colour channels
+/// in `encoding` ([`ColorEncoding::Srgb`] ones are converted to linear), alpha linear.
 ///
 /// Returns `(width, height, texels)` with row 0 = top row = v = 0. Any decoder failure
 /// (unknown format, truncated or corrupt data) is [`TextureError::Decode`] with the
 /// decoder's message; a zero or over-[`MAX_SIZE`] side is rejected from the header, before
 /// the pixel buffer is allocated.
-pub fn decode_image(bytes: &[u8], srgb: bool) -> Result<(u32, u32, Vec<Vec4>), TextureError> {
+pub fn decode_texels(
+    bytes: &[u8],
+    encoding: ColorEncoding,
+) -> Result<(u32, u32, Vec<Vec4>), TextureError> {
+    let srgb = encoding == ColorEncoding::Srgb;
     let mut limits = Limits::default();
     limits.max_alloc = Some(MAX_DECODE_ALLOC);
     let reader = |limits: Limits| {
@@ -203,7 +233,7 @@ mod tests {
         let buf = ImageBuffer::from_fn(3, 2, |x, y| Rgba(px[(y * 3 + x) as usize]));
         let png = encode(&buf, ImageFormat::Png);
 
-        let (w, h, t) = decode_image(&png, true).unwrap();
+        let (w, h, t) = decode_texels(&png, ColorEncoding::Srgb).unwrap();
         assert_eq!((w, h, t.len()), (3, 2, 6));
         assert_eq!(t[0], Vec4::new(1.0, 0.0, 0.0, 1.0));
         assert_eq!(t[1], Vec4::new(0.0, 1.0, 0.0, 1.0));
@@ -218,7 +248,7 @@ mod tests {
         // Alpha stays linear even with srgb.
         assert!(close(t[5], Vec4::new(1.0, 1.0, 1.0, 128.0 / 255.0), 1e-7));
 
-        let (_, _, lin) = decode_image(&png, false).unwrap();
+        let (_, _, lin) = decode_texels(&png, ColorEncoding::Linear).unwrap();
         let half = 128.0 / 255.0;
         assert!(close(
             lin[3],
@@ -231,7 +261,8 @@ mod tests {
     #[test]
     fn png_gray_and_gray_alpha() {
         let buf = ImageBuffer::from_fn(2, 2, |x, y| Luma([(x * 255 + y * 10) as u8]));
-        let (w, h, t) = decode_image(&encode(&buf, ImageFormat::Png), true).unwrap();
+        let (w, h, t) =
+            decode_texels(&encode(&buf, ImageFormat::Png), ColorEncoding::Srgb).unwrap();
         assert_eq!((w, h), (2, 2));
         assert_eq!(t[0], Vec4::new(0.0, 0.0, 0.0, 1.0));
         assert_eq!(t[1], Vec4::ONE);
@@ -239,7 +270,8 @@ mod tests {
         assert_eq!(t[2], Vec4::new(g, g, g, 1.0));
 
         let buf = ImageBuffer::from_fn(2, 1, |x, _| LumaA([128u8, 51 * x as u8]));
-        let (_, _, t) = decode_image(&encode(&buf, ImageFormat::Png), true).unwrap();
+        let (_, _, t) =
+            decode_texels(&encode(&buf, ImageFormat::Png), ColorEncoding::Srgb).unwrap();
         assert!(close(
             t[1],
             Vec4::new(0.2158605, 0.2158605, 0.2158605, 0.2),
@@ -254,7 +286,7 @@ mod tests {
         let rows = [[65535u16, 0, 32768], [1000, 2000, 3000]];
         let buf = ImageBuffer::from_fn(1, 2, |_, y| Rgb(rows[y as usize]));
         let png = encode(&buf, ImageFormat::Png);
-        let (w, h, t) = decode_image(&png, false).unwrap();
+        let (w, h, t) = decode_texels(&png, ColorEncoding::Linear).unwrap();
         assert_eq!((w, h), (1, 2));
         assert!(close(
             t[0],
@@ -266,7 +298,7 @@ mod tests {
             Vec4::new(1000.0, 2000.0, 3000.0, 65535.0) / 65535.0,
             1e-7
         ));
-        let (_, _, s) = decode_image(&png, true).unwrap();
+        let (_, _, s) = decode_texels(&png, ColorEncoding::Srgb).unwrap();
         let exact = |v: u16| srgb_eotf(f64::from(v) / 65535.0) as f32;
         assert_eq!(s[0], Vec4::new(1.0, 0.0, exact(32768), 1.0));
         // 32768/65535 is just above 0.5: its linear value is just above 0.2140411.
@@ -274,7 +306,8 @@ mod tests {
         assert_eq!(s[1], Vec4::new(exact(1000), exact(2000), exact(3000), 1.0));
 
         let buf = ImageBuffer::from_fn(1, 1, |_, _| Rgba([65535u16, 65535, 65535, 13107]));
-        let (_, _, t) = decode_image(&encode(&buf, ImageFormat::Png), true).unwrap();
+        let (_, _, t) =
+            decode_texels(&encode(&buf, ImageFormat::Png), ColorEncoding::Srgb).unwrap();
         assert!(close(t[0], Vec4::new(1.0, 1.0, 1.0, 0.2), 1e-7), "{}", t[0]);
     }
 
@@ -283,12 +316,12 @@ mod tests {
         // Binary PPM, 2x1: (255, 0, 128), (0, 64, 255).
         let mut ppm = b"P6\n2 1\n255\n".to_vec();
         ppm.extend_from_slice(&[255, 0, 128, 0, 64, 255]);
-        let (w, h, t) = decode_image(&ppm, false).unwrap();
+        let (w, h, t) = decode_texels(&ppm, ColorEncoding::Linear).unwrap();
         assert_eq!((w, h), (2, 1));
         assert!(close(t[0], Vec4::new(1.0, 0.0, 128.0 / 255.0, 1.0), 1e-7));
         assert!(close(t[1], Vec4::new(0.0, 64.0 / 255.0, 1.0, 1.0), 1e-7));
         // ASCII PGM, 1x2, gray rows 0 then 255: row order is top first.
-        let (w, h, t) = decode_image(b"P2\n1 2\n255\n0\n255\n", true).unwrap();
+        let (w, h, t) = decode_texels(b"P2\n1 2\n255\n0\n255\n", ColorEncoding::Srgb).unwrap();
         assert_eq!((w, h), (1, 2));
         assert_eq!(t, [Vec4::new(0.0, 0.0, 0.0, 1.0), Vec4::ONE]);
     }
@@ -297,7 +330,7 @@ mod tests {
     fn jpeg_decodes_roughly() {
         let buf = ImageBuffer::from_fn(8, 8, |_, _| Rgb([200u8, 100, 50]));
         let jpg = encode(&buf, ImageFormat::Jpeg);
-        let (w, h, t) = decode_image(&jpg, false).unwrap();
+        let (w, h, t) = decode_texels(&jpg, ColorEncoding::Linear).unwrap();
         assert_eq!((w, h, t.len()), (8, 8, 64));
         let want = Vec4::new(200.0, 100.0, 50.0, 255.0) / 255.0;
         assert!(t.iter().all(|&p| close(p, want, 0.03)), "{}", t[0]);
@@ -308,17 +341,17 @@ mod tests {
         let buf = ImageBuffer::from_fn(16, 16, |x, y| Rgba([x as u8 * 16, y as u8 * 16, 7, 255]));
         let png = encode(&buf, ImageFormat::Png);
         for cut in [png.len() / 2, png.len() - 20, 40, 8] {
-            match decode_image(&png[..cut], false) {
+            match decode_texels(&png[..cut], ColorEncoding::Linear) {
                 Err(TextureError::Decode(msg)) => assert!(!msg.is_empty()),
                 other => panic!("cut at {cut}: expected Decode error, got {other:?}"),
             }
         }
         assert!(matches!(
-            decode_image(b"not an image at all", false),
+            decode_texels(b"not an image at all", ColorEncoding::Linear),
             Err(TextureError::Decode(_))
         ));
         assert!(matches!(
-            decode_image(&[], false),
+            decode_texels(&[], ColorEncoding::Linear),
             Err(TextureError::Decode(_))
         ));
     }
@@ -327,11 +360,11 @@ mod tests {
     fn zero_and_absurd_sizes_are_rejected() {
         // PNM headers allow any size; none of these may panic or allocate.
         for header in [&b"P6\n0 0\n255\n"[..], b"P6\n0 5\n255\n", b"P5\n4 0\n255\n"] {
-            assert!(decode_image(header, false).is_err());
+            assert!(decode_texels(header, ColorEncoding::Linear).is_err());
         }
         let huge = b"P6\n100000 100000\n255\n";
         assert!(matches!(
-            decode_image(huge, false),
+            decode_texels(huge, ColorEncoding::Linear),
             Err(TextureError::TooLarge {
                 width: 100000,
                 height: 100000,
@@ -340,7 +373,7 @@ mod tests {
         ));
         let wide = b"P5\n20000 1\n255\n";
         assert!(matches!(
-            decode_image(wide, false),
+            decode_texels(wide, ColorEncoding::Linear),
             Err(TextureError::TooLarge {
                 width: 20000,
                 height: 1,

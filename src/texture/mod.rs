@@ -1,7 +1,7 @@
 //! Textures: decoded images, box-filtered MIP pyramids built once at load, filtered lookup.
 //!
 //! The module is split by concept:
-//! - [`decode`](decode_image): encoded bytes (PNG, JPEG, PNM) -> linear RGBA texels;
+//! - [`decode`](decode_texels): encoded bytes (PNG, JPEG, PNM) -> linear RGBA texels;
 //! - `pyramid`: level 0 -> the full box-filtered pyramid ([`MipPyramid::from_linear_rgba`]);
 //! - `sample`: wrap modes, bilinear and trilinear lookup (the renderer's hot path).
 //!
@@ -17,7 +17,7 @@ mod decode;
 mod pyramid;
 mod sample;
 
-pub use decode::{decode_image, srgb_to_linear};
+pub use decode::{ColorEncoding, decode_image, decode_texels, srgb_to_linear};
 
 use glam::Vec4;
 

@@ -1,0 +1,129 @@
+//! Writing a file so that it is either absent, the old version or complete.
+//!
+//! The bytes go to a hidden temporary sibling (`dir/.name.PID.tmp`: same folder, so the
+//! rename stays on one file system, and distinct per process), which is renamed into place
+//! once fully written and flushed; on any error the temporary file is removed and `path` is
+//! untouched. This is the one implementation: frames, stats summaries, plots, reports and
+//! exported meshes all go through [`write_atomically`]. A resumed render removes stale
+//! `.*.tmp` files an interrupted run left behind (`output`).
+
+use std::fs::{self, File};
+use std::io::{self, BufWriter, Write};
+use std::path::{Path, PathBuf};
+
+/// Why an atomic write failed: the temporary file could not be created, written or renamed
+/// (`Io`, naming the path), or the caller's writer failed (`Write`).
+#[derive(Debug)]
+pub enum AtomicWriteError<E> {
+    Io { path: PathBuf, source: io::Error },
+    Write(E),
+}
+
+impl<E> AtomicWriteError<E> {
+    /// The error as one type, for callers whose writer fails with I/O errors only.
+    pub fn into_io(self) -> io::Error
+    where
+        E: Into<io::Error>,
+    {
+        match self {
+            AtomicWriteError::Io { source, .. } => source,
+            AtomicWriteError::Write(e) => e.into(),
+        }
+    }
+}
+
+/// Streams a file through `write` (a buffered writer on a temporary sibling of `path`),
+/// then renames it into place.
+///
+/// # Errors
+/// The temporary file cannot be created, flushed or renamed ([`AtomicWriteError::Io`], with
+/// the path), or `write` fails ([`AtomicWriteError::Write`]). `path` is then untouched.
+pub fn write_atomically<E>(
+    path: &Path,
+    write: impl FnOnce(&mut BufWriter<File>) -> Result<(), E>,
+) -> Result<(), AtomicWriteError<E>> {
+    let tmp = temporary_sibling(path);
+    let io_error = |path: &Path| {
+        let path = path.to_path_buf();
+        move |source| AtomicWriteError::Io { path, source }
+    };
+    let file = File::create(&tmp).map_err(io_error(&tmp))?;
+    let mut writer = BufWriter::with_capacity(1 << 20, file);
+    let written = match write(&mut writer) {
+        Ok(()) => writer.flush().map_err(io_error(path)),
+        Err(e) => Err(AtomicWriteError::Write(e)),
+    };
+    drop(writer);
+    if let Err(e) = written {
+        let _ = fs::remove_file(&tmp);
+        return Err(e);
+    }
+    fs::rename(&tmp, path).map_err(|e| {
+        let _ = fs::remove_file(&tmp);
+        io_error(path)(e)
+    })
+}
+
+/// Writes `bytes` to `path` atomically; the error names the file that failed.
+///
+/// # Errors
+/// As [`write_atomically`]; the `io::Error` is returned with the path it concerns.
+pub fn write_bytes_atomically(path: &Path, bytes: &[u8]) -> Result<(), (PathBuf, io::Error)> {
+    write_atomically(path, |w| w.write_all(bytes)).map_err(|e| match e {
+        AtomicWriteError::Io { path, source } => (path, source),
+        AtomicWriteError::Write(source) => (path.to_path_buf(), source),
+    })
+}
+
+/// `dir/.name.PID.tmp`: hidden, same folder, distinct per process.
+fn temporary_sibling(path: &Path) -> PathBuf {
+    let name = path
+        .file_name()
+        .map(|n| n.to_string_lossy().into_owned())
+        .unwrap_or_default();
+    path.with_file_name(format!(".{name}.{}.tmp", std::process::id()))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn names(dir: &Path) -> Vec<std::ffi::OsString> {
+        fs::read_dir(dir)
+            .unwrap()
+            .map(|e| e.unwrap().file_name())
+            .collect()
+    }
+
+    #[test]
+    fn replaces_the_file_and_leaves_no_temporary() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("plot.svg");
+        write_bytes_atomically(&path, b"old").unwrap();
+        write_bytes_atomically(&path, b"new").unwrap();
+        assert_eq!(fs::read(&path).unwrap(), b"new");
+        assert_eq!(names(dir.path()), ["plot.svg"]);
+    }
+
+    #[test]
+    fn failed_write_keeps_the_old_file_and_removes_the_temporary() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("mesh.obj");
+        write_bytes_atomically(&path, b"complete").unwrap();
+        let result = write_atomically(&path, |w| {
+            w.write_all(b"half")?;
+            Err(io::Error::other("encoder failed"))
+        });
+        assert!(matches!(result, Err(AtomicWriteError::Write(_))));
+        assert_eq!(fs::read(&path).unwrap(), b"complete");
+        assert_eq!(names(dir.path()), ["mesh.obj"]);
+    }
+
+    #[test]
+    fn missing_folder_names_the_temporary_path() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("absent").join("a.txt");
+        let (failed, _) = write_bytes_atomically(&path, b"x").unwrap_err();
+        assert_eq!(failed.parent(), path.parent());
+    }
+}

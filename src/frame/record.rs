@@ -1,0 +1,194 @@
+//! The record every frame leaves: one line of `stats.jsonl`, and the preprocessing phases
+//! it times.
+//!
+//! This is the only declaration of the per-frame record. The frame loop fills it, the output
+//! folder appends it to `stats.jsonl` and summarises a slice of it into `summary.json`
+//! (`report::Summary`), and `mipray report` / `mipray diff` read it back (`report::Record`
+//! adds which fields a line had, since older files lack some). The JSON field names are the
+//! Rust field names; `update` is flattened, so a line is one flat object.
+//!
+//! [`Phase`] is the one list of the preprocessing phases (the update steps before the
+//! render, in frame-loop order): the summary, the report table, its plot and `compare`
+//! iterate over [`Phase::ALL`] rather than naming the fields again.
+
+use serde::{Deserialize, Serialize};
+
+/// What one frame cost and produced: one line of `stats.jsonl`.
+#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
+pub struct FrameRecord {
+    pub frame: u32,
+    pub time_s: f32,
+    pub width: u32,
+    pub height: u32,
+    pub lod_method: String,
+    /// `--lod-bias` (absent in records written before it existed).
+    #[serde(default)]
+    pub lod_bias: f32,
+    pub triangles: usize,
+    pub lights: usize,
+    pub spp: u32,
+    /// The per-frame update: what moved and what each step cost.
+    #[serde(flatten)]
+    pub update: UpdateStats,
+    pub render_ms: f64,
+    /// Everything above plus camera/light placement (not the file write).
+    pub total_ms: f64,
+    /// All rays traced: primary, shadow, reflection, refraction.
+    pub rays: u64,
+    /// Texture lookups per integer level (floor of the clamped level), index 0 = level 0.
+    pub mip_histogram: Vec<u64>,
+    /// Samples that came out NaN/inf and were written as black (expected 0).
+    pub nonfinite_samples: u64,
+}
+
+/// What the per-frame update did and cost (flattened into each `stats.jsonl` line).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize, Deserialize)]
+pub struct UpdateStats {
+    /// Animation evaluated at the frame time and moved vertices written.
+    pub animate_ms: f64,
+    /// Classifying instances and triangles into the dirty set.
+    pub dirty_ms: f64,
+    /// Refitting the BVH to the moved triangles (0 when nothing moved or it was rebuilt).
+    pub refit_ms: f64,
+    /// Building the BVH (first frame, or a rebuild), including the reorder into BVH order.
+    pub build_ms: f64,
+    /// Whether the BVH was built this frame.
+    pub rebuild: bool,
+    /// SAH cost of the tree used for this frame over its cost right after its last build.
+    pub sah_ratio: f32,
+    /// Updating `log2 P_b` for the dirty triangles (0 for methods that do not use it).
+    pub lod_update_ms: f64,
+    /// Triangles whose box moved this frame (rigid + scaled + deformed).
+    pub moved_triangles: usize,
+    /// Triangles whose shape changed this frame.
+    pub deformed_triangles: usize,
+    /// Textured triangles whose `log2 P_b` was computed this frame (all on the first frame).
+    pub lod_recomputed: usize,
+    /// Textured triangles whose `log2 P_b` was shifted by a new uniform scale.
+    pub lod_shifted: usize,
+}
+
+/// One timed step of the per-frame update, before the render.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum Phase {
+    /// Animation sampled and moved vertices written.
+    Animate,
+    /// The dirty set classified.
+    Dirty,
+    /// The BVH refitted.
+    Refit,
+    /// The BVH built (first frame or rebuild).
+    Build,
+    /// `log2 P_b` refreshed for the dirty triangles.
+    LodUpdate,
+}
+
+impl Phase {
+    /// Every phase, in frame-loop order.
+    pub const ALL: [Phase; 5] = [
+        Phase::Animate,
+        Phase::Dirty,
+        Phase::Refit,
+        Phase::Build,
+        Phase::LodUpdate,
+    ];
+
+    /// Its field in `stats.jsonl` and `summary.json` (milliseconds).
+    pub const fn field_name(self) -> &'static str {
+        match self {
+            Phase::Animate => "animate_ms",
+            Phase::Dirty => "dirty_ms",
+            Phase::Refit => "refit_ms",
+            Phase::Build => "build_ms",
+            Phase::LodUpdate => "lod_update_ms",
+        }
+    }
+
+    /// Its name for people (progress lines, benchmark tables).
+    pub const fn label(self) -> &'static str {
+        match self {
+            Phase::Animate => "animate",
+            Phase::Dirty => "dirty",
+            Phase::Refit => "refit",
+            Phase::Build => "build",
+            Phase::LodUpdate => "LOD update",
+        }
+    }
+
+    /// Whether every LOD method pays it; only the `log2 P_b` refresh is paid by the methods
+    /// that read `log2 P_b` alone (see `compare`).
+    pub const fn is_shared(self) -> bool {
+        !matches!(self, Phase::LodUpdate)
+    }
+}
+
+impl UpdateStats {
+    /// Milliseconds spent in `phase`.
+    pub fn phase_ms(&self, phase: Phase) -> f64 {
+        match phase {
+            Phase::Animate => self.animate_ms,
+            Phase::Dirty => self.dirty_ms,
+            Phase::Refit => self.refit_ms,
+            Phase::Build => self.build_ms,
+            Phase::LodUpdate => self.lod_update_ms,
+        }
+    }
+
+    /// Milliseconds of the whole update: the sum of every phase.
+    pub fn preprocessing_ms(&self) -> f64 {
+        Phase::ALL.iter().map(|&p| self.phase_ms(p)).sum()
+    }
+}
+
+impl FrameRecord {
+    /// Milliseconds spent in `phase` this frame.
+    pub fn phase_ms(&self, phase: Phase) -> f64 {
+        self.update.phase_ms(phase)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn phase_accessor_reads_the_field_its_name_says() {
+        let update = UpdateStats {
+            animate_ms: 1.0,
+            dirty_ms: 2.0,
+            refit_ms: 3.0,
+            build_ms: 4.0,
+            lod_update_ms: 5.0,
+            ..UpdateStats::default()
+        };
+        let json = serde_json::to_value(update).unwrap();
+        for phase in Phase::ALL {
+            assert_eq!(
+                json[phase.field_name()].as_f64(),
+                Some(update.phase_ms(phase)),
+                "{phase:?}"
+            );
+        }
+        assert_eq!(update.preprocessing_ms(), 15.0);
+    }
+
+    #[test]
+    fn line_is_flat_and_in_declaration_order() {
+        let line = serde_json::to_string(&FrameRecord::default()).unwrap();
+        let expected = r#"{"frame":0,"time_s":0.0,"width":0,"height":0,"lod_method":"","lod_bias":0.0,"triangles":0,"lights":0,"spp":0,"animate_ms":0.0,"dirty_ms":0.0,"refit_ms":0.0,"build_ms":0.0,"rebuild":false,"sah_ratio":0.0,"lod_update_ms":0.0,"moved_triangles":0,"deformed_triangles":0,"lod_recomputed":0,"lod_shifted":0,"render_ms":0.0,"total_ms":0.0,"rays":0,"mip_histogram":[],"nonfinite_samples":0}"#;
+        assert_eq!(line, expected);
+    }
+
+    #[test]
+    fn records_without_lod_bias_load() {
+        let mut json = serde_json::to_value(FrameRecord {
+            frame: 3,
+            lod_bias: 0.5,
+            ..FrameRecord::default()
+        })
+        .unwrap();
+        json.as_object_mut().unwrap().remove("lod_bias");
+        let record: FrameRecord = serde_json::from_value(json).unwrap();
+        assert_eq!((record.frame, record.lod_bias), (3, 0.0));
+    }
+}
