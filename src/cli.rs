@@ -335,6 +335,15 @@ pub fn run(cli: Cli) -> Result<ExitCode> {
             });
             let summary = crate::report::report(&dirs, &svg)?;
             print!("{summary}");
+            println!(
+                "page: {}",
+                crate::pages::write_render_page(
+                    &dirs,
+                    svg.parent().unwrap_or(Path::new(".")),
+                    Some(&svg)
+                )?
+                .display()
+            );
             Ok(ExitCode::SUCCESS)
         }
         Some(Command::Info { scene }) => {
@@ -525,6 +534,16 @@ fn finish_report(report: &DiffReport, out: &Path, junit: Option<&Path>) -> Resul
     }
     println!("{}", report.verdict());
     println!("report: {}", out.join("diff.md").display());
+    println!(
+        "page: {}",
+        crate::pages::write_diff_page(
+            out,
+            report.metric.name(),
+            report.threshold,
+            &report.verdict()
+        )?
+        .display()
+    );
     Ok(if report.failed() == 0 {
         ExitCode::SUCCESS
     } else {
@@ -787,7 +806,8 @@ pub fn compare(args: &CompareArgs) -> Result<()> {
     };
     let report = crate::compare::run_compare(|| load_scene(&path), &options, &log)?;
     progress.finish_and_clear();
-    let written = crate::compare::report::write_all(&report, &out)?;
+    let mut written = crate::compare::report::write_all(&report, &out)?;
+    written.push(crate::pages::write_compare_page(&out)?);
     print!("{}", crate::compare::report::markdown(&report));
     println!();
     for path in written {
@@ -898,6 +918,10 @@ pub fn render_sequence(
             .file_name()
             .map(|n| n.to_string_lossy().into_owned())
             .unwrap_or_default()
+    );
+    println!(
+        "page: {}",
+        crate::pages::write_render_page(std::slice::from_ref(&out.dir), &out.dir, None)?.display()
     );
     match check {
         None => Ok(ExitCode::SUCCESS),
