@@ -72,7 +72,7 @@ pub fn write_diff_page(
     let shown: Vec<usize> = (0..rows[0].len())
         .filter(|&i| !matches!(rows[0][i].as_str(), "reference" | "test"))
         .collect();
-    let pick = |row: &Vec<String>| shown.iter().map(|&i| row[i].clone()).collect::<Vec<_>>();
+    let pick = |row: &Vec<String>| shown.iter().map(|&i| readable(&row[i])).collect::<Vec<_>>();
     let table_rows: Vec<Vec<String>> = std::iter::once(pick(&rows[0]))
         .chain(keyed.iter().map(|(_, r)| pick(r)))
         .collect();
@@ -100,6 +100,21 @@ pub fn write_diff_page(
         json_data("diff-data", &json!({ "frames": frames })),
     );
     write_page(out, &document(&title, &body, DIFF_JS))
+}
+
+/// A CSV cell for people: fractions to 5 decimals below 1, 2 above (the CSV keeps every
+/// digit); integers, words and `inf` as they are.
+fn readable(cell: &str) -> String {
+    match cell.parse::<f64>() {
+        Ok(v) if v.is_finite() && cell.contains('.') => {
+            if v.abs() < 1.0 {
+                format!("{v:.5}")
+            } else {
+                format!("{v:.2}")
+            }
+        }
+        _ => cell.to_string(),
+    }
 }
 
 /// The `diff.csv` column a metric's verdict reads.
@@ -184,6 +199,15 @@ mod tests {
         assert!(
             by_max_abs.find("data-key=\"1\"").unwrap() < by_max_abs.find("data-key=\"2\"").unwrap()
         );
+    }
+
+    #[test]
+    fn table_cells_are_rounded_for_reading() {
+        assert_eq!(readable("18.52378326969016"), "18.52");
+        assert_eq!(readable("0.046419791877269745"), "0.04642");
+        assert_eq!(readable("3479"), "3479");
+        assert_eq!(readable("inf"), "inf");
+        assert_eq!(readable("false"), "false");
     }
 
     #[test]

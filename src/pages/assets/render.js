@@ -118,7 +118,8 @@
     add("line", { x1: left, y1: top, x2: left, y2: H - bottom, stroke: "#999" });
     const ticks = logScale ? Array.from({ length: hi - lo + 1 }, (_, k) => Math.pow(10, lo + k)) : [0, hi / 2, hi];
     for (const t of ticks) {
-      add("text", { x: left - 4, y: y(logScale ? t : t) + 4, "text-anchor": "end" }, formatNumber(t));
+      const tick = logScale && t < 1 ? t.toExponential(0) : formatNumber(t);
+      add("text", { x: left - 4, y: y(t) + 4, "text-anchor": "end" }, tick);
     }
     add("text", { x: left, y: H - 8 }, "frame " + frames[0].frame);
     add("text", { x: W - right, y: H - 8, "text-anchor": "end" }, "frame " + frames[frames.length - 1].frame);
