@@ -127,8 +127,12 @@ impl Loaded {
     }
 }
 
-/// Runs the browser on `args` with a deadline; returns its output.
+/// Runs the browser on `args` with a deadline; returns its output. Output goes to files,
+/// not pipes: a DOM dump larger than a pipe's buffer would block the browser while this
+/// waits for it to exit.
 fn browser(name: &str, profile: &Path, args: &[String]) -> Output {
+    let (out_path, err_path) = (profile.join("stdout.txt"), profile.join("stderr.txt"));
+    let file = |p: &Path| std::fs::File::create(p).expect("create a browser output file");
     let mut child = Command::new(name)
         .args([
             "--headless",
@@ -136,14 +140,20 @@ fn browser(name: &str, profile: &Path, args: &[String]) -> Output {
             "--no-sandbox",
             "--hide-scrollbars",
         ])
-        .arg(format!("--user-data-dir={}", profile.display()))
+        .arg(format!(
+            "--user-data-dir={}",
+            profile.join("profile").display()
+        ))
         .args(args)
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
+        .stdout(file(&out_path))
+        .stderr(file(&err_path))
         .spawn()
         .expect("start the browser");
     let start = Instant::now();
-    while child.try_wait().expect("poll the browser").is_none() {
+    let status = loop {
+        if let Some(status) = child.try_wait().expect("poll the browser") {
+            break status;
+        }
         if start.elapsed() > BROWSER_TIMEOUT {
             let _ = child.kill();
             panic!(
@@ -152,8 +162,13 @@ fn browser(name: &str, profile: &Path, args: &[String]) -> Output {
             );
         }
         std::thread::sleep(Duration::from_millis(50));
+    };
+    let read = |p: &Path| std::fs::read(p).expect("read the browser output");
+    Output {
+        status,
+        stdout: read(&out_path),
+        stderr: read(&err_path),
     }
-    child.wait_with_output().expect("browser output")
 }
 
 fn load(name: &str, profile: &Path, url: &str) -> Loaded {

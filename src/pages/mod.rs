@@ -50,12 +50,29 @@ impl PageError {
     }
 }
 
-/// Writes `html` as `dir/index.html` (temporary file, then rename) and returns its path.
+/// Writes `html` as `dir/index.html` through a temporary file named after this process (so
+/// shards finishing at once in one folder never share a temporary file), then renames it.
 fn write_page(dir: &Path, html: &str) -> Result<PathBuf, PageError> {
+    let dir = non_empty(dir);
     let path = dir.join(PAGE_NAME);
-    crate::output::write_text_atomically(&path, html).map_err(|source| PageError::Io {
+    let tmp = dir.join(format!(".{PAGE_NAME}.{}.tmp", std::process::id()));
+    let io = |source| PageError::Io {
         path: path.clone(),
         source,
+    };
+    std::fs::write(&tmp, html).map_err(io)?;
+    std::fs::rename(&tmp, &path).map_err(|source| {
+        let _ = std::fs::remove_file(&tmp);
+        io(source)
     })?;
     Ok(path)
+}
+
+/// `.` for the empty path (the parent of a bare file name such as `report.svg`).
+fn non_empty(dir: &Path) -> &Path {
+    if dir.as_os_str().is_empty() {
+        Path::new(".")
+    } else {
+        dir
+    }
 }

@@ -38,6 +38,7 @@ pub fn write_render_page(
     page_dir: &Path,
     plot: Option<&Path>,
 ) -> Result<PathBuf, PageError> {
+    let page_dir = super::non_empty(page_dir);
     let records = merged_records(dirs)?;
     let folders: Vec<PathBuf> = dirs.iter().map(|d| frame_folder(d)).collect();
     let mut frames = Vec::with_capacity(records.len());
