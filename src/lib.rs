@@ -16,6 +16,7 @@ pub mod geometry;
 pub mod lod;
 pub mod metrics;
 pub mod output;
+pub mod pages;
 pub mod render;
 pub mod report;
 pub mod scene;

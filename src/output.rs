@@ -167,6 +167,11 @@ impl OutputDir {
     pub fn write_frame(&self, index: u32, image: &LinearImage) -> Result<PathBuf, OutputError> {
         let path = self.frame_path(index);
         write_image_atomically(&path, image, self.format)?;
+        if self.format == FrameFormat::Exr {
+            // Browsers cannot show EXR: the HTML page plays these sRGB previews instead.
+            let preview = self.dir.join(format!("preview_{index:04}.png"));
+            write_image_atomically(&preview, image, FrameFormat::Png)?;
+        }
         Ok(path)
     }
 

@@ -115,7 +115,8 @@ pub fn compare(args: &CompareArgs) -> Result<()> {
     };
     let report = run_compare(|| load_scene(&path), &options, &log)?;
     progress.finish_and_clear();
-    let written = report::write_all(&report, &out)?;
+    let mut written = report::write_all(&report, &out)?;
+    written.push(crate::pages::write_compare_page(&out)?);
     print!("{}", report::markdown(&report));
     println!();
     for path in written {

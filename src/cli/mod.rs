@@ -98,5 +98,8 @@ fn report(args: &ReportArgs) -> Result<()> {
     });
     let summary = crate::report::report(&args.dirs, &svg)?;
     print!("{summary}");
+    let page_dir = svg.parent().unwrap_or(Path::new("."));
+    let page = crate::pages::write_render_page(&args.dirs, page_dir, Some(&svg))?;
+    println!("page: {}", page.display());
     Ok(())
 }

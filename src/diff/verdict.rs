@@ -29,6 +29,13 @@ pub fn finish_report(report: &DiffReport, out: &Path, junit: Option<&Path>) -> R
     }
     println!("{}", report.verdict());
     println!("report: {}", out.join("diff.md").display());
+    let page = crate::pages::write_diff_page(
+        out,
+        report.metric.name(),
+        report.threshold,
+        &report.verdict(),
+    )?;
+    println!("page: {}", page.display());
     Ok(if report.failed() == 0 {
         Verdict::Passed
     } else {

@@ -135,6 +135,8 @@ pub fn render_sequence(
             .map(|n| n.to_string_lossy().into_owned())
             .unwrap_or_default()
     );
+    let page = crate::pages::write_render_page(std::slice::from_ref(&out.dir), &out.dir, None)?;
+    println!("page: {}", page.display());
     match check {
         None => Ok(SequenceOutcome::Rendered),
         Some(check) => {

@@ -1,0 +1,362 @@
+//! The render page: a player for the sequence (play/pause, slider, fps, arrow keys), the
+//! per-frame phase times and triangle counts as a chart with the current frame marked, the
+//! current frame's stats record, and the summary (preprocessing share, rebuilds, rays/s).
+//!
+//! Records come from every `stats*.jsonl` in the given folders (shards merged; when a frame
+//! has several records, the last one read wins, as in `mipray report`). Each frame shows
+//! `frame_NNNN.png`, or for EXR sequences the `preview_NNNN.png` written beside it, and
+//! `lod_NNNN.png` when `--view lod` wrote one.
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+
+use serde_json::{Map, Value, json};
+
+use super::html::{document, escape, json_data, relative_url};
+use super::{PageError, write_page};
+
+const RENDER_JS: &str = include_str!("assets/render.js");
+
+/// Phase times (ms) that sum to the frame's preprocessing, as in `summary.json`.
+const PREPROCESSING_FIELDS: [&str; 5] = [
+    "animate_ms",
+    "dirty_ms",
+    "refit_ms",
+    "build_ms",
+    "lod_update_ms",
+];
+
+/// Writes `page_dir/index.html` for the sequence whose stats files and frames are in `dirs`
+/// (folders, or stats files whose folder holds the frames); frames are linked relative to
+/// `page_dir`, and `plot` (the `mipray report` SVG) is shown when given.
+///
+/// # Errors
+/// No stats record is found, a stats line (other than a torn last one) is not a JSON object
+/// with a `frame` number, or a file cannot be read or written.
+pub fn write_render_page(
+    dirs: &[PathBuf],
+    page_dir: &Path,
+    plot: Option<&Path>,
+) -> Result<PathBuf, PageError> {
+    let page_dir = super::non_empty(page_dir);
+    let records = merged_records(dirs)?;
+    let folders: Vec<PathBuf> = dirs.iter().map(|d| frame_folder(d)).collect();
+    let mut frames = Vec::with_capacity(records.len());
+    for (&frame, record) in &records {
+        frames.push(json!({
+            "frame": frame,
+            "image": find_image(&folders, page_dir, &[&format!("frame_{frame:04}.png"), &format!("preview_{frame:04}.png")])?,
+            "lod": find_image(&folders, page_dir, &[&format!("lod_{frame:04}.png")])?,
+            "stats": record,
+        }));
+    }
+    let records: Vec<&Map<String, Value>> = records.values().collect();
+    let summary = summary_of(&records);
+    let plot = match plot {
+        Some(p) if p.is_file() => Some(relative_url(page_dir, p)?),
+        _ => None,
+    };
+    let title = format!("mipray render: {}", page_dir.display());
+    let body = render_body(&title, &summary, plot.as_deref())
+        + &json_data(
+            "render-data",
+            &json!({ "frames": frames, "fps": playback_fps(&records) }),
+        );
+    write_page(page_dir, &document(&title, &body, RENDER_JS))
+}
+
+/// A folder given directly, or the folder of a stats file.
+fn frame_folder(path: &Path) -> PathBuf {
+    if path.is_dir() {
+        path.to_path_buf()
+    } else {
+        path.parent().map(Path::to_path_buf).unwrap_or_default()
+    }
+}
+
+/// Every record of the stats files in `dirs` by frame; a later record of a frame replaces
+/// an earlier one.
+fn merged_records(dirs: &[PathBuf]) -> Result<BTreeMap<u64, Map<String, Value>>, PageError> {
+    let mut records = BTreeMap::new();
+    for path in dirs
+        .iter()
+        .map(|d| stats_files(d))
+        .collect::<Result<Vec<_>, _>>()?
+        .concat()
+    {
+        for record in read_stats(&path)? {
+            let frame = record
+                .get("frame")
+                .and_then(Value::as_u64)
+                .unwrap_or_default();
+            records.insert(frame, record);
+        }
+    }
+    if records.is_empty() {
+        let dir = dirs.first().cloned().unwrap_or_default();
+        return Err(PageError::input(
+            &dir,
+            "no frame records (stats*.jsonl) to show",
+        ));
+    }
+    Ok(records)
+}
+
+/// `stats.jsonl` and `stats.shard-I-of-N.jsonl` in a folder (sorted by name), or the file.
+fn stats_files(path: &Path) -> Result<Vec<PathBuf>, PageError> {
+    if !path.is_dir() {
+        return Ok(vec![path.to_path_buf()]);
+    }
+    let entries = std::fs::read_dir(path).map_err(|source| PageError::Io {
+        path: path.to_path_buf(),
+        source,
+    })?;
+    let mut files: Vec<PathBuf> = entries
+        .flatten()
+        .map(|e| e.path())
+        .filter(|p| {
+            let name = p
+                .file_name()
+                .map(|n| n.to_string_lossy().into_owned())
+                .unwrap_or_default();
+            name.starts_with("stats") && name.ends_with(".jsonl")
+        })
+        .collect();
+    files.sort();
+    Ok(files)
+}
+
+/// The JSON objects of a stats file; a torn last line (an interrupted run) is skipped.
+fn read_stats(path: &Path) -> Result<Vec<Map<String, Value>>, PageError> {
+    let text = std::fs::read_to_string(path).map_err(|source| PageError::Io {
+        path: path.to_path_buf(),
+        source,
+    })?;
+    let lines: Vec<&str> = text.lines().filter(|l| !l.trim().is_empty()).collect();
+    let mut records = Vec::with_capacity(lines.len());
+    for (i, line) in lines.iter().enumerate() {
+        match serde_json::from_str::<Value>(line) {
+            Ok(Value::Object(record)) if record.get("frame").is_some_and(Value::is_u64) => {
+                records.push(record)
+            }
+            _ if i + 1 == lines.len() && !text.ends_with('\n') => {}
+            _ => {
+                return Err(PageError::input(
+                    path,
+                    format!(
+                        "line {}: not a frame record (a JSON object with a \"frame\" number)",
+                        i + 1
+                    ),
+                ));
+            }
+        }
+    }
+    Ok(records)
+}
+
+/// The first of `names` found in `folders`, as a URL relative to the page; `null` if none.
+fn find_image(folders: &[PathBuf], page_dir: &Path, names: &[&str]) -> Result<Value, PageError> {
+    for name in names {
+        for folder in folders {
+            let path = folder.join(name);
+            if path.is_file() {
+                return Ok(Value::String(relative_url(page_dir, &path)?));
+            }
+        }
+    }
+    Ok(Value::Null)
+}
+
+/// The sequence's summary, as `summary.json` defines it, over the merged records.
+#[derive(Debug, Clone, PartialEq)]
+struct PageSummary {
+    frames: usize,
+    preprocessing_share: f64,
+    rebuilds: usize,
+    rays_per_second: f64,
+    mean_frame_ms: f64,
+    size: String,
+    lod_method: String,
+}
+
+fn summary_of(records: &[&Map<String, Value>]) -> PageSummary {
+    let number =
+        |r: &Map<String, Value>, key: &str| r.get(key).and_then(Value::as_f64).unwrap_or(0.0);
+    let sum = |key: &str| records.iter().map(|r| number(r, key)).sum::<f64>();
+    let total_ms = sum("total_ms");
+    let render_ms = sum("render_ms");
+    let preprocessing: f64 = PREPROCESSING_FIELDS.iter().map(|k| sum(k)).sum();
+    let text = |key: &str| {
+        records
+            .first()
+            .and_then(|r| r.get(key))
+            .map_or(String::new(), |v| {
+                v.as_str().map_or(v.to_string(), str::to_string)
+            })
+    };
+    PageSummary {
+        frames: records.len(),
+        preprocessing_share: if total_ms > 0.0 {
+            preprocessing / total_ms
+        } else {
+            0.0
+        },
+        rebuilds: records
+            .iter()
+            .filter(|r| r.get("rebuild").and_then(Value::as_bool) == Some(true))
+            .count(),
+        rays_per_second: if render_ms > 0.0 {
+            sum("rays") / (render_ms / 1e3)
+        } else {
+            0.0
+        },
+        mean_frame_ms: total_ms / records.len().max(1) as f64,
+        size: format!("{}x{}", text("width"), text("height")),
+        lod_method: text("lod_method"),
+    }
+}
+
+/// Playback speed: the sequence's own frame rate from its frame times, else 30.
+fn playback_fps(records: &[&Map<String, Value>]) -> f64 {
+    let time = |r: &Map<String, Value>| r.get("time_s").and_then(Value::as_f64);
+    let frame = |r: &Map<String, Value>| r.get("frame").and_then(Value::as_f64);
+    match records {
+        [a, b, ..] => match (time(a), time(b), frame(a), frame(b)) {
+            (Some(ta), Some(tb), Some(fa), Some(fb)) if tb > ta => {
+                ((fb - fa) / (tb - ta)).round().clamp(1.0, 240.0)
+            }
+            _ => 30.0,
+        },
+        _ => 30.0,
+    }
+}
+
+fn render_body(title: &str, s: &PageSummary, plot: Option<&str>) -> String {
+    let plot = plot.map_or(String::new(), |url| {
+        format!(
+            "<h2>Report plot</h2>\n<p class=\"note\">Written by <code>mipray report</code>.</p>\n\
+             <img src=\"{}\" alt=\"report plot\" style=\"max-width:100%\">\n",
+            escape(url)
+        )
+    });
+    format!(
+        r#"<h1>{title}</h1>
+<p class="note">{frames} frame(s), {size}, LOD method <code>{lod}</code>. Keys: space play/pause, left/right arrow step.</p>
+<h2>Summary</h2>
+<dl class="stats" id="summary">
+<dt>preprocessing share</dt><dd>{share:.1}%</dd>
+<dt>BVH rebuilds</dt><dd>{rebuilds}</dd>
+<dt>rays per second (render time)</dt><dd>{rays:.3e}</dd>
+<dt>mean frame time</dt><dd>{mean:.2} ms</dd>
+</dl>
+<h2>Sequence</h2>
+<div class="controls">
+<button id="play">play</button>
+<input type="range" id="slider" min="0" max="0" value="0" aria-label="frame">
+<span id="frame-label"></span>
+<label>fps <input type="number" id="fps" min="1" max="240" value="30" style="width:4em"></label>
+<label id="lod-toggle-label"><input type="checkbox" id="lod-toggle"> LOD view</label>
+</div>
+<div class="row">
+<figure class="player"><img id="frame-image" alt="current frame"><figcaption id="frame-caption"></figcaption></figure>
+<div><h3 style="margin-top:0">Frame stats</h3><dl class="stats" id="frame-stats"></dl></div>
+</div>
+<h2>Per-frame phases</h2>
+<p class="note">Times per phase (ms, log scale) and triangle counts per frame; the marked line is the current frame. Click to jump.</p>
+<div id="charts"></div>
+{plot}"#,
+        title = escape(title),
+        frames = s.frames,
+        size = escape(&s.size),
+        lod = escape(&s.lod_method),
+        share = s.preprocessing_share * 100.0,
+        rebuilds = s.rebuilds,
+        rays = s.rays_per_second,
+        mean = s.mean_frame_ms,
+    )
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn record(frame: u64, total: f64, rebuild: bool) -> Map<String, Value> {
+        let Value::Object(map) = json!({
+            "frame": frame, "time_s": frame as f64 / 24.0, "width": 8, "height": 4,
+            "lod_method": "paper", "animate_ms": 1.0, "dirty_ms": 0.5, "refit_ms": 0.5,
+            "build_ms": 0.0, "lod_update_ms": 0.0, "render_ms": total - 2.0,
+            "total_ms": total, "rays": 1000, "rebuild": rebuild,
+        }) else {
+            unreachable!()
+        };
+        map
+    }
+
+    #[test]
+    fn summary_follows_the_summary_json_definitions() {
+        let (a, b) = (record(0, 10.0, true), record(1, 6.0, false));
+        let s = summary_of(&[&a, &b]);
+        assert_eq!(s.frames, 2);
+        assert_eq!(s.rebuilds, 1);
+        assert!((s.preprocessing_share - 4.0 / 16.0).abs() < 1e-12);
+        assert!((s.rays_per_second - 2000.0 / 0.012).abs() < 1e-6);
+        assert_eq!(s.size, "8x4");
+        assert_eq!(s.lod_method, "paper");
+        assert_eq!(playback_fps(&[&a, &b]), 24.0);
+    }
+
+    #[test]
+    fn shards_merge_and_a_later_record_of_a_frame_wins() {
+        let dir = tempfile::tempdir().unwrap();
+        let line = |r: Map<String, Value>| Value::Object(r).to_string() + "\n";
+        std::fs::write(
+            dir.path().join("stats.shard-0-of-2.jsonl"),
+            line(record(0, 10.0, true)),
+        )
+        .unwrap();
+        std::fs::write(
+            dir.path().join("stats.shard-1-of-2.jsonl"),
+            line(record(1, 6.0, false)) + &line(record(1, 7.0, false)) + "{\"frame\": 2, \"tor",
+        )
+        .unwrap();
+        let records = merged_records(&[dir.path().to_path_buf()]).unwrap();
+        assert_eq!(
+            records.keys().copied().collect::<Vec<_>>(),
+            [0, 1],
+            "torn line skipped"
+        );
+        assert_eq!(records[&1]["total_ms"], 7.0);
+    }
+
+    #[test]
+    fn a_bad_stats_line_names_the_file_and_line() {
+        let dir = tempfile::tempdir().unwrap();
+        std::fs::write(dir.path().join("stats.jsonl"), "[1]\n{\"frame\": 1}\n").unwrap();
+        let message = merged_records(&[dir.path().to_path_buf()])
+            .unwrap_err()
+            .to_string();
+        assert!(message.contains("stats.jsonl: line 1"), "{message}");
+        let empty = tempfile::tempdir().unwrap();
+        assert!(merged_records(&[empty.path().to_path_buf()]).is_err());
+    }
+
+    #[test]
+    fn the_page_links_pngs_or_exr_previews_relative_to_itself() {
+        let dir = tempfile::tempdir().unwrap();
+        let frames = dir.path().join("frames");
+        std::fs::create_dir_all(&frames).unwrap();
+        std::fs::write(
+            frames.join("stats.jsonl"),
+            Value::Object(record(3, 5.0, false)).to_string() + "\n",
+        )
+        .unwrap();
+        std::fs::write(frames.join("preview_0003.png"), b"png").unwrap();
+        let page = write_render_page(&[frames.clone()], dir.path(), None).unwrap();
+        let html = std::fs::read_to_string(page).unwrap();
+        assert!(
+            html.contains("\"image\":\"frames/preview_0003.png\""),
+            "{html}"
+        );
+        assert!(html.contains("\"lod\":null"));
+    }
+}
