@@ -68,7 +68,16 @@ fn error(path: &Path, line: Option<usize>, message: impl Into<String>) -> ObjErr
 pub fn load(path: &Path) -> Result<SceneDesc, ObjError> {
     let text = std::fs::read_to_string(path)
         .map_err(|e| error(path, None, format!("cannot read file: {e}")))?;
-    if let Some((line, message)) = first_bad_obj_line(&text) {
+    load_from_text(path, &text)
+}
+
+/// [`load`] on OBJ text already read from `path` (for fuzzing); its MTL, textures and
+/// camera JSON are still looked up beside `path`.
+///
+/// # Errors
+/// As [`load`].
+pub fn load_from_text(path: &Path, text: &str) -> Result<SceneDesc, ObjError> {
+    if let Some((line, message)) = first_bad_obj_line(text) {
         return Err(error(path, Some(line), message));
     }
     let dir = path.parent().unwrap_or(Path::new(".")).to_path_buf();
