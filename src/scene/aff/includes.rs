@@ -1,4 +1,5 @@
-//! Files: include and texture path resolution, a byte cache, include-cycle detection.
+//! Files: include and texture path resolution, a byte cache (or files held in memory, for
+//! fuzzing: [`Files::in_memory`]), include-cycle detection.
 //!
 //! Path rules (SOURCE.md, "Path resolution"): names in `i <detail> <file>` are bare file
 //! names relative to the scene's `aff/` directory; they are looked up next to the including
