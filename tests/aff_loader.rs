@@ -4,6 +4,8 @@
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
+mod common;
+
 use glam::{DQuat, DVec3, Quat, Vec3, Vec4};
 use mipray::anim::{AnimationSelection, Pose, sample_channel, sample_rotation, sample_vec3};
 use mipray::scene::aff::tracks::{
@@ -696,13 +698,7 @@ fn squad_equals_keys_clamps_and_is_continuous_past_360() {
 // ---------------------------------------------------------------- the BART scenes
 
 fn bart_dir() -> Option<PathBuf> {
-    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/bart");
-    if dir.is_dir() {
-        Some(dir)
-    } else {
-        println!("skipping: ../shared/bart not present");
-        None
-    }
+    common::shared_data::shared_path("bart")
 }
 
 fn load_bart(dir: &Path, file: &str) -> (SceneDesc, AffStats) {

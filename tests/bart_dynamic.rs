@@ -3,21 +3,15 @@
 //! museum recomputes exactly its morphing triangles.
 
 use std::collections::BTreeSet;
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 
 use mipray::frame::{FrameClock, Motion, RenderSettings, Renderer};
 use mipray::scene::SceneDesc;
 
+mod common;
+
 fn bart(relative: &str) -> Option<PathBuf> {
-    let path = Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("../shared/bart")
-        .join(relative);
-    if path.is_file() {
-        Some(path)
-    } else {
-        println!("skipping: ../shared/bart not present");
-        None
-    }
+    common::shared_data::shared_path(&format!("bart/{relative}"))
 }
 
 /// Source triangles drawn by `node` or its descendants.

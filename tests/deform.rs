@@ -650,13 +650,7 @@ fn corrupted_deformation_files_never_panic_or_deform_to_non_finite_vertices() {
 // ---------------------------------------------------------------------------------------
 
 fn shared_gltf() -> Option<PathBuf> {
-    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/gltf");
-    if root.is_dir() {
-        Some(root)
-    } else {
-        println!("skipping: ../shared/gltf not present");
-        None
-    }
+    common::shared_data::shared_path("gltf")
 }
 
 fn load_model(root: &Path, name: &str) -> SceneDesc {

@@ -437,11 +437,9 @@ fn triangle_counts_are_read_from_the_table_cells() {
 
 #[test]
 fn shared_sample_models_load_with_documented_triangle_counts() {
-    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/gltf");
-    if !root.is_dir() {
-        println!("skipping: ../shared/gltf not present");
+    let Some(root) = common::shared_data::shared_path("gltf") else {
         return;
-    }
+    };
     let rows = parse_model_table(&std::fs::read_to_string(root.join("SOURCE.md")).unwrap());
     assert!(rows.len() >= 25, "parsed only {} model rows", rows.len());
     let mut dirs: Vec<PathBuf> = std::fs::read_dir(&root)
@@ -497,12 +495,11 @@ fn shared_sample_models_load_with_documented_triangle_counts() {
 
 #[test]
 fn texture_transform_multi_test_needs_the_extension_and_loads() {
-    let file = Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("../shared/gltf/TextureTransformMultiTest/TextureTransformMultiTest.glb");
-    if !file.exists() {
-        println!("skipping: ../shared/gltf not present");
+    let Some(file) = common::shared_data::shared_path(
+        "gltf/TextureTransformMultiTest/TextureTransformMultiTest.glb",
+    ) else {
         return;
-    }
+    };
     let scene = load(&file).unwrap_or_else(|e| panic!("{e}"));
     assert!(!scene.textures.is_empty());
     assert!(

@@ -30,7 +30,7 @@ use crate::scene::camera_file::CameraFile;
 use crate::scene::{
     CameraDesc, LightDesc, MaterialDesc, MeshDesc, NodeDesc, PrimitiveDesc, SceneDesc, Trs,
 };
-use crate::texture::{MipPyramid, Sampler, Texture, WrapMode, decode_image};
+use crate::texture::{ColorEncoding, MipPyramid, Sampler, Texture, WrapMode, decode_texels};
 
 /// Why an OBJ scene could not be loaded: the file (OBJ, MTL, texture or camera JSON), the
 /// line when one is at fault, and what is wrong.
@@ -68,7 +68,16 @@ fn error(path: &Path, line: Option<usize>, message: impl Into<String>) -> ObjErr
 pub fn load(path: &Path) -> Result<SceneDesc, ObjError> {
     let text = std::fs::read_to_string(path)
         .map_err(|e| error(path, None, format!("cannot read file: {e}")))?;
-    if let Some((line, message)) = first_bad_obj_line(&text) {
+    load_from_text(path, &text)
+}
+
+/// [`load`] on OBJ text already read from `path` (for fuzzing); its MTL, textures and
+/// camera JSON are still looked up beside `path`.
+///
+/// # Errors
+/// As [`load`].
+pub fn load_from_text(path: &Path, text: &str) -> Result<SceneDesc, ObjError> {
+    if let Some((line, message)) = first_bad_obj_line(text) {
         return Err(error(path, Some(line), message));
     }
     let dir = path.parent().unwrap_or(Path::new(".")).to_path_buf();
@@ -573,7 +582,7 @@ fn texture(
             ),
         )
     })?;
-    let (width, height, texels): (u32, u32, Vec<Vec4>) = decode_image(&bytes, true)
+    let (width, height, texels): (u32, u32, Vec<Vec4>) = decode_texels(&bytes, ColorEncoding::Srgb)
         .map_err(|e| error(&texture_path, None, format!("cannot decode texture: {e}")))?;
     let pyramid = MipPyramid::from_linear_rgba(width, height, texels)
         .map_err(|e| error(&texture_path, None, format!("bad texture: {e}")))?;

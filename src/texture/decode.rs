@@ -92,6 +92,99 @@ fn expand_f32(raw: &[f32], channels: usize, srgb: bool) -> Vec<Vec4> {
     }
 }
 
+/// Pixels a compressed image (PNG, JPEG, ...) may declare per byte of file: deflate's
+/// largest expansion is 1032:1, times 8 pixels per byte at 1 bit per pixel. JPEG's is
+/// lower (at best ~2 bits per 8x8 block per component).
+const MAX_PIXELS_PER_COMPRESSED_BYTE: u64 = 8 * 1032;
+
+/// The header of a binary or ASCII PNM file (P1-P6): its sample layout.
+struct PnmHeader {
+    /// `P1`..`P6` as 1..6.
+    kind: u8,
+    /// The largest sample value (1 for bitmaps).
+    max_value: u32,
+    /// Byte offset of the first sample.
+    data_offset: usize,
+}
+
+/// Parses the header of a PNM file; `None` when `bytes` is not one (or is malformed: the
+/// decoder then reports it).
+fn pnm_header(bytes: &[u8]) -> Option<PnmHeader> {
+    let kind = match bytes {
+        [b'P', k @ b'1'..=b'6', ..] => k - b'0',
+        _ => return None,
+    };
+    let fields = if matches!(kind, 1 | 4) { 2 } else { 3 };
+    let mut values = Vec::with_capacity(3);
+    let mut i = 2;
+    while values.len() < fields {
+        match bytes.get(i)? {
+            b'#' => {
+                while *bytes.get(i)? != b'\n' {
+                    i += 1;
+                }
+            }
+            c if c.is_ascii_whitespace() => i += 1,
+            c if c.is_ascii_digit() => {
+                let start = i;
+                while bytes.get(i).is_some_and(u8::is_ascii_digit) {
+                    i += 1;
+                }
+                values.push(
+                    std::str::from_utf8(&bytes[start..i])
+                        .ok()?
+                        .parse::<u32>()
+                        .ok()?,
+                );
+            }
+            _ => return None,
+        }
+    }
+    Some(PnmHeader {
+        kind,
+        max_value: if fields == 3 { values[2] } else { 1 },
+        // One whitespace byte ends the header.
+        data_offset: i + 1,
+    })
+}
+
+/// Checks that `width x height` pixels can be backed by `bytes`, before anything is
+/// allocated for them: exactly for binary PNM (P4-P6: packed samples), at least one digit
+/// and a separator per sample for ASCII PNM (P1-P3), and at most
+/// [`MAX_PIXELS_PER_COMPRESSED_BYTE`] pixels per byte for compressed formats.
+fn check_size_backed_by_bytes(bytes: &[u8], width: u32, height: u32) -> Result<(), TextureError> {
+    let pixels = width as u64 * height as u64;
+    let len = bytes.len() as u64;
+    let short = |needed: u64, what: &str| {
+        TextureError::Decode(format!(
+            "the header declares {width}x{height} pixels, which need {needed} bytes of {what}, \
+             but the file has {len} bytes"
+        ))
+    };
+    let Some(header) = pnm_header(bytes) else {
+        let needed = pixels.div_ceil(MAX_PIXELS_PER_COMPRESSED_BYTE);
+        return if len < needed {
+            Err(short(needed, "compressed data at the least"))
+        } else {
+            Ok(())
+        };
+    };
+    let channels: u64 = if matches!(header.kind, 3 | 6) { 3 } else { 1 };
+    let samples = pixels * channels;
+    let data = len.saturating_sub(header.data_offset as u64);
+    let needed = match header.kind {
+        4 => (width as u64).div_ceil(8) * height as u64,
+        5 | 6 => samples * if header.max_value > 255 { 2 } else { 1 },
+        // ASCII: a digit per sample and separators between them (P1 may omit those).
+        1 => samples,
+        _ => 2 * samples - 1,
+    };
+    if data < needed {
+        return Err(short(needed, "pixel data"));
+    }
+    Ok(())
+}
+
 fn decode_error(e: impl std::fmt::Display) -> TextureError {
     TextureError::Decode(e.to_string())
 }
@@ -105,31 +198,14 @@ pub enum ColorEncoding {
     Linear,
 }
 
-/// Decodes an encoded image (PNG, JPEG, PPM, ...) whose colour channels are
-/// `srgb`-encoded or not; transitional form of [`decode_texels`].
-///
-/// The loaders in `src/scene` still call this with a bare `bool`; they switch to
-/// `decode_texels(bytes, ColorEncoding::Srgb)` when the restructuring that owns
-/// `src/scene` merges, and then this wrapper goes.
-///
-/// # Errors
-/// As [`decode_texels`].
-pub fn decode_image(bytes: &[u8], srgb: bool) -> Result<(u32, u32, Vec<Vec4>), TextureError> {
-    let encoding = if srgb {
-        ColorEncoding::Srgb
-    } else {
-        ColorEncoding::Linear
-    };
-    decode_texels(bytes, encoding)
-}
-
 /// Decodes an encoded image (PNG, JPEG, PPM, ...) into linear RGBA texels; colour channels
 /// in `encoding` ([`ColorEncoding::Srgb`] ones are converted to linear), alpha linear.
 ///
 /// Returns `(width, height, texels)` with row 0 = top row = v = 0. Any decoder failure
 /// (unknown format, truncated or corrupt data) is [`TextureError::Decode`] with the
-/// decoder's message; a zero or over-[`MAX_SIZE`] side is rejected from the header, before
-/// the pixel buffer is allocated.
+/// decoder's message; a zero or over-[`MAX_SIZE`] side, or a size the file's bytes cannot
+/// hold (see `check_size_backed_by_bytes`), is rejected from the header, before the pixel
+/// buffer is allocated.
 pub fn decode_texels(
     bytes: &[u8],
     encoding: ColorEncoding,
@@ -150,6 +226,7 @@ pub fn decode_texels(
         .into_dimensions()
         .map_err(decode_error)?;
     check_size(width, height)?;
+    check_size_backed_by_bytes(bytes, width, height)?;
 
     // The side limits again inside the decoder, for formats whose header could disagree
     // with what they then decode.
@@ -380,5 +457,63 @@ mod tests {
                 ..
             })
         ));
+    }
+
+    #[test]
+    fn pnm_sizes_the_bytes_cannot_hold_are_refused_before_decoding() {
+        for file in [
+            &b"P6\n16000 16000\n255\n\x00\x01"[..],
+            b"P5 # comment\n4 4\n65535\n0123456789abcdef",
+            b"P3\n100 100\n255\n1 2 3",
+            b"P4\n64 64\n\xff",
+        ] {
+            let e = decode_texels(file, ColorEncoding::Srgb)
+                .unwrap_err()
+                .to_string();
+            assert!(e.contains("declares") && e.contains("bytes"), "{e}");
+        }
+    }
+
+    #[test]
+    fn pnm_sizes_backed_by_their_bytes_decode() {
+        let ok = decode_texels(
+            b"P6\n2 1\n255\n\x00\x01\x02\x03\x04\x05",
+            ColorEncoding::Srgb,
+        )
+        .unwrap();
+        assert_eq!((ok.0, ok.1), (2, 1));
+        let ascii = decode_texels(b"P3 1 1 255 0 0 255\n", ColorEncoding::Linear).unwrap();
+        assert_eq!(ascii.2[0], Vec4::new(0.0, 0.0, 1.0, 1.0));
+    }
+
+    #[test]
+    fn compressed_images_may_not_claim_more_pixels_than_deflate_can_expand_to() {
+        // A valid 16x16 PNG with IHDR patched to 16384x16384 (and its CRC fixed): a few
+        // hundred bytes cannot inflate to 268M pixels.
+        let mut png = encode(&ImageBuffer::<Luma<u8>, _>::new(16, 16), ImageFormat::Png);
+        png[16..20].copy_from_slice(&16384u32.to_be_bytes());
+        png[20..24].copy_from_slice(&16384u32.to_be_bytes());
+        let crc = crc32(&png[12..29]);
+        png[29..33].copy_from_slice(&crc.to_be_bytes());
+        let e = decode_texels(&png, ColorEncoding::Srgb)
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("declares 16384x16384"), "{e}");
+    }
+
+    /// CRC-32 (ISO-HDLC), as PNG chunks use.
+    fn crc32(bytes: &[u8]) -> u32 {
+        let mut crc = !0u32;
+        for &b in bytes {
+            crc ^= u32::from(b);
+            for _ in 0..8 {
+                crc = if crc & 1 != 0 {
+                    (crc >> 1) ^ 0xEDB8_8320
+                } else {
+                    crc >> 1
+                };
+            }
+        }
+        !crc
     }
 }

@@ -17,7 +17,7 @@ mod decode;
 mod pyramid;
 mod sample;
 
-pub use decode::{ColorEncoding, decode_image, decode_texels, srgb_to_linear};
+pub use decode::{ColorEncoding, decode_texels, srgb_to_linear};
 
 use glam::Vec4;
 

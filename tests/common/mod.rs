@@ -7,6 +7,7 @@ pub mod deform_scenes;
 pub mod invariants;
 pub mod round_trip;
 pub mod scenes;
+pub mod shared_data;
 
 use std::io::Cursor;
 

@@ -32,6 +32,8 @@ pub struct MorphTriangle {
 #[derive(Debug, Clone)]
 pub struct MorphGroup {
     pub node: usize,
+    /// The node's mesh (one primitive: base positions and normals, one target per sample).
+    pub mesh: usize,
     pub times: Vec<f32>,
 }
 
@@ -94,7 +96,8 @@ impl Builder {
                 ..Default::default()
             });
         }
-        let p = primitives.last_mut().expect("just ensured");
+        let last = primitives.len() - 1;
+        let p = &mut primitives[last];
         let base = p.positions.len() as u32;
         p.positions.extend_from_slice(&g.positions);
         if let (Some(dst), Some(src)) = (p.normals.as_mut(), g.normals.as_ref()) {
@@ -132,15 +135,14 @@ impl Builder {
                 let g = self.morph_groups.len();
                 self.morph_groups.push(MorphGroup {
                     node,
+                    mesh,
                     times: tri.times.clone(),
                 });
                 self.open_group = Some((parent, material, bits, g));
                 g
             }
         };
-        let node = self.morph_groups[group].node;
-        let mesh = self.nodes[node].mesh.expect("group node has a mesh");
-        let p = &mut self.meshes[mesh].primitives[0];
+        let p = &mut self.meshes[self.morph_groups[group].mesh].primitives[0];
         let base = p.positions.len() as u32;
         let geometric = {
             let [a, b, c] = tri.samples[0].map(|(pos, _)| pos);
@@ -150,14 +152,14 @@ impl Builder {
         for v in 0..3 {
             let (p0, n0) = tri.samples[0][v];
             p.positions.push(p0);
-            p.normals.as_mut().expect("tpa has normals").push(unit(n0));
+            // The group's primitive and targets were created with normals and positions.
+            p.normals.get_or_insert_default().push(unit(n0));
             for (target, sample) in p.morph_targets.iter_mut().zip(&tri.samples[1..]) {
                 let (pi, ni) = sample[v];
-                target.positions.as_mut().expect("set").push(pi - p0);
+                target.positions.get_or_insert_default().push(pi - p0);
                 target
                     .normals
-                    .as_mut()
-                    .expect("set")
+                    .get_or_insert_default()
                     .push(unit(ni) - unit(n0));
             }
         }

@@ -1,4 +1,5 @@
-//! Files: include and texture path resolution, a byte cache, include-cycle detection.
+//! Files: include and texture path resolution, a byte cache (or files held in memory, for
+//! fuzzing: [`Files::in_memory`]), include-cycle detection.
 //!
 //! Path rules (SOURCE.md, "Path resolution"): names in `i <detail> <file>` are bare file
 //! names relative to the scene's `aff/` directory; they are looked up next to the including
@@ -40,6 +41,8 @@ pub fn texture_candidates(current_dir: &Path, main_dir: &Path, name: &str) -> Ve
 #[derive(Default)]
 pub struct Files {
     cache: HashMap<PathBuf, Arc<[u8]>>,
+    /// In-memory mode (fuzzing, tests): the only files there are; the disk is never read.
+    in_memory: bool,
     /// Files being parsed, outermost first: (canonical path, display name).
     chain: Vec<(PathBuf, String)>,
     /// Files parsed so far, includes counted each time they are expanded.
@@ -47,11 +50,32 @@ pub struct Files {
 }
 
 impl Files {
+    /// Files held in memory, keyed by path; nothing else exists.
+    pub fn in_memory(files: impl IntoIterator<Item = (PathBuf, Vec<u8>)>) -> Files {
+        Files {
+            cache: files.into_iter().map(|(p, b)| (p, b.into())).collect(),
+            in_memory: true,
+            ..Default::default()
+        }
+    }
+
+    /// Whether `path` names a readable file.
+    pub fn exists(&self, path: &Path) -> bool {
+        if self.in_memory {
+            self.cache.contains_key(path)
+        } else {
+            path.is_file()
+        }
+    }
+
     /// Reads `path` (cached).
     pub fn read(&mut self, path: &Path) -> Result<Arc<[u8]>, String> {
-        let key = canonical(path);
+        let key = self.canonical(path);
         if let Some(bytes) = self.cache.get(&key) {
             return Ok(bytes.clone());
+        }
+        if self.in_memory {
+            return Err(format!("cannot read '{}': not found", path.display()));
         }
         let bytes: Arc<[u8]> = std::fs::read(path)
             .map_err(|e| format!("cannot read '{}': {e}", path.display()))?
@@ -62,7 +86,7 @@ impl Files {
 
     /// Enters `path`: an error naming the chain when it is already being parsed.
     pub fn enter(&mut self, path: &Path, name: &str) -> Result<(), String> {
-        let key = canonical(path);
+        let key = self.canonical(path);
         if self.chain.iter().any(|(p, _)| *p == key) {
             let mut names: Vec<&str> = self.chain.iter().map(|(_, n)| n.as_str()).collect();
             names.push(name);
@@ -76,8 +100,12 @@ impl Files {
     pub fn leave(&mut self) {
         self.chain.pop();
     }
-}
 
-fn canonical(path: &Path) -> PathBuf {
-    std::fs::canonicalize(path).unwrap_or_else(|_| path.to_path_buf())
+    /// The key of `path` in the cache and the include chain.
+    fn canonical(&self, path: &Path) -> PathBuf {
+        if self.in_memory {
+            return path.to_path_buf();
+        }
+        std::fs::canonicalize(path).unwrap_or_else(|_| path.to_path_buf())
+    }
 }

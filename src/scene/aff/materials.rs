@@ -21,8 +21,9 @@ use std::path::PathBuf;
 
 use glam::Vec3;
 
+use super::includes::Files;
 use crate::scene::MaterialDesc;
-use crate::texture::{MipPyramid, Sampler, Texture, WrapMode, decode_image};
+use crate::texture::{ColorEncoding, MipPyramid, Sampler, Texture, WrapMode, decode_texels};
 
 /// An `fm` state: ambient, diffuse, specular, shine, T, ior.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -122,21 +123,27 @@ impl Materials {
 
     /// The texture named `name` (a bare file name), loaded on first use from the first of
     /// `candidates` that exists.
-    pub fn texture(&mut self, name: &str, candidates: &[PathBuf]) -> Result<usize, String> {
+    pub fn texture(
+        &mut self,
+        name: &str,
+        candidates: &[PathBuf],
+        files: &mut Files,
+    ) -> Result<usize, String> {
         if let Some(&i) = self.texture_by_name.get(name) {
             return Ok(i);
         }
-        let Some(path) = candidates.iter().find(|p| p.is_file()) else {
+        let Some(path) = candidates.iter().find(|p| files.exists(p)) else {
             let looked: Vec<String> = candidates.iter().map(|p| p.display().to_string()).collect();
             return Err(format!(
                 "texture '{name}' not found (looked in {})",
                 looked.join(", ")
             ));
         };
-        let bytes = std::fs::read(path)
-            .map_err(|e| format!("cannot read texture '{}': {e}", path.display()))?;
-        let (width, height, texels) =
-            decode_image(&bytes, true).map_err(|e| format!("texture '{}': {e}", path.display()))?;
+        let bytes = files
+            .read(path)
+            .map_err(|e| format!("texture '{name}': {e}"))?;
+        let (width, height, texels) = decode_texels(&bytes, ColorEncoding::Srgb)
+            .map_err(|e| format!("texture '{}': {e}", path.display()))?;
         let pyramid = MipPyramid::from_linear_rgba(width, height, texels)
             .map_err(|e| format!("texture '{}': {e}", path.display()))?;
         let i = self.textures.len();

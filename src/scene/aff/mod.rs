@@ -48,7 +48,7 @@ mod reader;
 mod shapes;
 pub mod tracks;
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 use glam::Vec3;
 
@@ -130,6 +130,40 @@ pub fn load_with_stats(path: &Path) -> Result<(SceneDesc, AffStats), LoadError> 
     })
 }
 
+/// [`load_with_stats`] on files held in memory: `files` maps paths to contents, `main` is
+/// one of them; includes and textures resolve by the usual rules among `files` only (the
+/// disk is never read). For fuzzing and tests.
+///
+/// # Errors
+/// As [`load`].
+pub fn load_from_memory(
+    main: &Path,
+    files: impl IntoIterator<Item = (PathBuf, Vec<u8>)>,
+) -> Result<(SceneDesc, AffStats), LoadError> {
+    let files = includes::Files::in_memory(files);
+    let error = |message| LoadError {
+        path: main.to_path_buf(),
+        message,
+    };
+    if !files.exists(main) {
+        return Err(error("cannot read file: not found".into()));
+    }
+    let mut p = new_parser(main);
+    p.files = files;
+    p.parse_file(main, &display_name(main)).map_err(error)?;
+    finish(main, p).map_err(error)
+}
+
+/// A parser for the scene whose main file is `path`.
+fn new_parser(path: &Path) -> Parser {
+    let main_dir = path.parent().unwrap_or(Path::new("")).to_path_buf();
+    let root_name = path
+        .file_stem()
+        .map(|s| s.to_string_lossy().into_owned())
+        .unwrap_or_else(|| "aff".into());
+    Parser::new(main_dir, root_name)
+}
+
 fn display_name(path: &Path) -> String {
     path.file_name()
         .map(|n| n.to_string_lossy().into_owned())
@@ -140,14 +174,8 @@ fn load_scene(path: &Path) -> Result<(SceneDesc, AffStats), String> {
     if !path.is_file() {
         return Err("cannot read file: not found".into());
     }
-    let name = display_name(path);
-    let main_dir = path.parent().unwrap_or(Path::new("")).to_path_buf();
-    let root_name = path
-        .file_stem()
-        .map(|s| s.to_string_lossy().into_owned())
-        .unwrap_or_else(|| "aff".into());
-    let mut p = Parser::new(main_dir, root_name);
-    p.parse_file(path, &name)?;
+    let mut p = new_parser(path);
+    p.parse_file(path, &display_name(path))?;
     finish(path, p)
 }
 

@@ -25,6 +25,11 @@ use crate::scene::{FrameTimes, Trs};
 /// absurd allocations in malformed files).
 const MAX_ITEMS: usize = 1 << 24;
 
+/// Largest sample count of one `tpa` (BART's museum uses 5). A run of `tpa`s with `k`
+/// samples becomes one morphing mesh whose weights channel holds `k (k - 1)` values, so
+/// this bounds that channel to 256 KB however few bytes declare it.
+pub const MAX_MORPH_SAMPLES: usize = 256;
+
 /// A point light from `l` (or `la`, whose name is kept).
 #[derive(Debug, Clone)]
 pub struct PointLight {
@@ -114,7 +119,8 @@ impl Parser {
     }
 
     fn scope(&self) -> usize {
-        *self.scopes.last().expect("root scope is never popped")
+        // `}` never pops the root scope (index 0), so this is the root at worst.
+        self.scopes.last().copied().unwrap_or(0)
     }
 
     /// Parses one file (the caller has checked it exists); `name` is used in messages.
@@ -137,7 +143,7 @@ impl Parser {
     fn texture(&mut self, r: &Reader, name: &str, line: u32, dir: &Path) -> Result<usize, String> {
         let candidates = texture_candidates(dir, &self.main_dir, name);
         self.materials
-            .texture(name, &candidates)
+            .texture(name, &candidates, &mut self.files)
             .map_err(|e| r.error_at(line, e))
     }
 
@@ -244,19 +250,20 @@ impl Parser {
                 let (name, name_line) = r.name(cmd)?;
                 let texture = self.texture(r, &name, name_line, dir)?;
                 let mut g = Geometry {
-                    uvs: Some(Vec::new()),
                     normals: (cmd == "ttp").then(Vec::new),
                     indices: vec![0, 1, 2],
                     ..Default::default()
                 };
+                let mut uvs = Vec::with_capacity(3);
                 for _ in 0..3 {
                     g.positions.push(r.vec3(cmd)?);
                     if let Some(n) = g.normals.as_mut() {
                         n.push(r.vec3(cmd)?.try_normalize().unwrap_or(Vec3::Z));
                     }
                     let uv: Vec2 = r.vec2(cmd)?;
-                    g.uvs.as_mut().expect("set").push(uv);
+                    uvs.push(uv);
                 }
+                g.uvs = Some(uvs);
                 let material = self.material(Some(texture));
                 self.stats.textured_triangles += self.add(material, g);
             }
@@ -276,7 +283,7 @@ impl Parser {
                 let (name, name_line) = r.name("i")?;
                 if detail <= self.detail {
                     let candidates = include_candidates(dir, &self.main_dir, &name);
-                    let Some(path) = candidates.iter().find(|p| p.is_file()) else {
+                    let Some(path) = candidates.iter().find(|p| self.files.exists(p)) else {
                         let looked: Vec<String> =
                             candidates.iter().map(|p| p.display().to_string()).collect();
                         return Err(r.error_at(
@@ -405,7 +412,7 @@ impl Parser {
     }
 
     fn tpa(&mut self, r: &mut Reader, line: u32) -> Result<(), String> {
-        let k = r.count("tpa", MAX_ITEMS)?;
+        let k = r.count("tpa", MAX_MORPH_SAMPLES)?;
         if k == 0 {
             return Err(r.error_at(line, "'tpa' needs at least one sample"));
         }

@@ -49,11 +49,8 @@ pub fn cone(base: Vec3, r0: f32, apex: Vec3, r1: f32) -> Geometry {
         return Geometry::default();
     }
     let (u, v) = basis(w);
-    let mut g = Geometry {
-        normals: Some(Vec::new()),
-        ..Default::default()
-    };
-    let normals = g.normals.as_mut().expect("set");
+    let mut g = Geometry::default();
+    let mut normals = Vec::with_capacity(2 * CONE_SEGMENTS as usize);
     for i in 0..CONE_SEGMENTS {
         let angle = std::f32::consts::TAU * i as f32 / CONE_SEGMENTS as f32;
         let radial = u * angle.cos() + v * angle.sin();
@@ -70,6 +67,7 @@ pub fn cone(base: Vec3, r0: f32, apex: Vec3, r1: f32) -> Geometry {
         // Counter-clockwise seen from outside (normal = radial).
         g.indices.extend([b0, b1, a1, b0, a1, a0]);
     }
+    g.normals = Some(normals);
     g
 }
 
@@ -79,11 +77,8 @@ pub fn sphere(centre: Vec3, radius: f32) -> Geometry {
     if radius == 0.0 {
         return Geometry::default();
     }
-    let mut g = Geometry {
-        normals: Some(Vec::new()),
-        ..Default::default()
-    };
-    let normals = g.normals.as_mut().expect("set");
+    let mut g = Geometry::default();
+    let mut normals = Vec::new();
     for ring in 0..=SPHERE_RINGS {
         let theta = std::f32::consts::PI * ring as f32 / SPHERE_RINGS as f32;
         for seg in 0..=SPHERE_SEGMENTS {
@@ -110,6 +105,7 @@ pub fn sphere(centre: Vec3, radius: f32) -> Geometry {
             }
         }
     }
+    g.normals = Some(normals);
     g
 }
 

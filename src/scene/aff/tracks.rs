@@ -155,6 +155,11 @@ impl<T: Copy> KeyPlan<T> {
         self.times.push(time as f32);
         self.keys.push((incoming, value, outgoing));
     }
+
+    /// The last key's time and value, `None` while the plan is empty.
+    fn end(&self) -> Option<(f64, T)> {
+        Some((*self.times.last()? as f64, self.keys.last()?.1))
+    }
 }
 
 /// Converts a KB position/scale track (n >= 4 keys) into a CUBICSPLINE channel on `node`
@@ -205,10 +210,9 @@ pub fn position_channel(
         let continues = previous.is_some_and(|p| {
             p.segment + 1 == s.segment && s.u0 == 0.0 && p.u1 == 1.0 && p.hi == s.lo
         });
-        if continues {
-            plan.keys.last_mut().expect("previous piece").2 = Some(d0 * scale);
-        } else {
-            plan.push(s.lo, None, v0, Some(d0 * scale));
+        match plan.keys.last_mut() {
+            Some(last) if continues => last.2 = Some(d0 * scale),
+            _ => plan.push(s.lo, None, v0, Some(d0 * scale)),
         }
         plan.push(s.hi, Some(d1 * scale), v1, None);
         previous = Some(*s);
@@ -216,21 +220,21 @@ pub fn position_channel(
     // Clamp values: t <= t_1 is segment 0 at u = 0, t >= t_n-2 the last segment at u = 1.
     let first = (times[1] as f64, value(1));
     let last = (times[n - 2] as f64, value(n - 2));
-    if plan.keys.is_empty() {
-        plan.push(first.0, None, first.1, None);
-        if last.0 > first.0 || last.1 != first.1 {
-            plan.push(last.0.max(first.0), None, last.1, None);
+    match plan.end() {
+        None => {
+            plan.push(first.0, None, first.1, None);
+            if last.0 > first.0 || last.1 != first.1 {
+                plan.push(last.0.max(first.0), None, last.1, None);
+            }
         }
-    } else {
-        if plan.times[0] as f64 != first.0 || plan.keys[0].1 != first.1 {
-            plan.times.insert(0, first.0 as f32);
-            plan.keys.insert(0, (None, first.1, None));
-        }
-        if *plan.times.last().expect("non-empty") as f64 != last.0
-            || plan.keys.last().expect("non-empty").1 != last.1
-        {
-            let t = last.0.max(*plan.times.last().expect("non-empty") as f64);
-            plan.push(t, None, last.1, None);
+        Some((end_t, end_v)) => {
+            if plan.times[0] as f64 != first.0 || plan.keys[0].1 != first.1 {
+                plan.times.insert(0, first.0 as f32);
+                plan.keys.insert(0, (None, first.1, None));
+            }
+            if end_t != last.0 || end_v != last.1 {
+                plan.push(last.0.max(end_t), None, last.1, None);
+            }
         }
     }
     let mut values = Vec::with_capacity(plan.keys.len() * 9);
@@ -332,10 +336,9 @@ pub fn rotation_channel(keys: &[RotationKey], node: usize) -> Option<(ChannelDes
         let (q1, q2, a, b) = segments[s.segment];
         approximated |= s.u0 != 0.0 || s.u1 != 1.0;
         let continues = previous.is_some_and(|p| p.segment + 1 == s.segment && p.hi == s.lo);
-        if continues && s.u0 == 0.0 {
-            plan.keys.last_mut().expect("previous piece").2 = Some(a);
-        } else {
-            plan.push(s.lo, None, q1, Some(a));
+        match plan.keys.last_mut() {
+            Some(last) if continues && s.u0 == 0.0 => last.2 = Some(a),
+            _ => plan.push(s.lo, None, q1, Some(a)),
         }
         plan.push(s.hi, Some(b), q2, None);
         previous = Some(s);
@@ -343,17 +346,19 @@ pub fn rotation_channel(keys: &[RotationKey], node: usize) -> Option<(ChannelDes
     let first_q = segments[0].0;
     let last_q = segments[segments.len() - 1].1;
     let (first_t, last_t) = (times[1] as f64, times[n - 2] as f64);
-    if plan.keys.is_empty() {
-        plan.push(first_t, None, first_q, None);
-        plan.push(last_t.max(first_t), None, last_q, None);
-    } else {
-        if plan.times[0] as f64 != first_t || plan.keys[0].1 != first_q {
-            plan.times.insert(0, first_t as f32);
-            plan.keys.insert(0, (None, first_q, None));
+    match plan.end() {
+        None => {
+            plan.push(first_t, None, first_q, None);
+            plan.push(last_t.max(first_t), None, last_q, None);
         }
-        let end = *plan.times.last().expect("non-empty") as f64;
-        if end != last_t || plan.keys.last().expect("non-empty").1 != last_q {
-            plan.push(last_t.max(end), None, last_q, None);
+        Some((end, end_q)) => {
+            if plan.times[0] as f64 != first_t || plan.keys[0].1 != first_q {
+                plan.times.insert(0, first_t as f32);
+                plan.keys.insert(0, (None, first_q, None));
+            }
+            if end != last_t || end_q != last_q {
+                plan.push(last_t.max(end), None, last_q, None);
+            }
         }
     }
     let mut values = Vec::with_capacity(plan.keys.len() * 12);

@@ -23,7 +23,7 @@ use glam::{Vec2, Vec3};
 
 use super::buffers::{Buffers, image_bytes};
 use crate::scene::MaterialDesc;
-use crate::texture::{MipPyramid, Sampler, Texture, WrapMode, decode_image};
+use crate::texture::{ColorEncoding, MipPyramid, Sampler, Texture, WrapMode, decode_texels};
 
 /// Largest index of refraction kept; also what the spec's "infinite" IOR (0) becomes.
 const MAX_IOR: f32 = 4.0;
@@ -234,7 +234,7 @@ impl TextureLoader<'_> {
         let (bytes, name) = image_bytes(image, self.buffers, self.base_dir)?;
         let what = format!("image {} ('{name}')", image.index());
         let (width, height, texels) =
-            decode_image(&bytes, true).map_err(|e| format!("{what}: {e}"))?;
+            decode_texels(&bytes, ColorEncoding::Srgb).map_err(|e| format!("{what}: {e}"))?;
         let pyramid = MipPyramid::from_linear_rgba(width, height, texels)
             .map_err(|e| format!("{what}: {e}"))?;
         Ok((pyramid, name))

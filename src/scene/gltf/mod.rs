@@ -54,12 +54,28 @@ pub fn load(path: &Path) -> Result<SceneDesc, LoadError> {
     })
 }
 
+/// [`load`] on the bytes of a `.gltf` or `.glb` file already read from `path` (for
+/// fuzzing); external buffers and images are still looked up beside `path`.
+///
+/// # Errors
+/// As [`load`].
+pub fn load_from_bytes(path: &Path, bytes: &[u8]) -> Result<SceneDesc, LoadError> {
+    scene_from_bytes(path, bytes).map_err(|message| LoadError {
+        path: path.to_path_buf(),
+        message,
+    })
+}
+
 fn load_scene(path: &Path) -> Result<SceneDesc, String> {
     let bytes = std::fs::read(path).map_err(|e| format!("cannot read file: {e}"))?;
+    scene_from_bytes(path, &bytes)
+}
+
+fn scene_from_bytes(path: &Path, bytes: &[u8]) -> Result<SceneDesc, String> {
     if bytes.is_empty() {
         return Err("file is empty".into());
     }
-    let gltf::Gltf { document, blob } = parse(&bytes)?;
+    let gltf::Gltf { document, blob } = parse(bytes)?;
     let base_dir = path.parent().unwrap_or(Path::new(""));
     let buffers = buffers::Buffers::load(&document, blob, base_dir)?;
 
