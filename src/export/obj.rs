@@ -169,8 +169,7 @@ pub(crate) fn write_mtl(
             writeln!(w, "Ks {0} {0} {0}", m.specular)?;
             writeln!(w, "Ns {}", m.shininess)?;
             writeln!(w, "Ni {}", m.ior)?;
-            writeln!(w, "d {}", 1.0 - m.transmission as f64)?;
-            writeln!(w, "Tr {}", m.transmission)?;
+            write_transmission(w, m)?;
             let illum = if m.transmission > 0.0 {
                 7
             } else if m.reflectance > 0.0 {
@@ -209,6 +208,23 @@ pub(crate) fn write_mtl(
         }
         Ok(())
     })
+}
+
+/// The transmission statements. mipray's transmission is refraction, not dissolve: the
+/// surface stays fully there (`d 1`; Blender's importer reads `d` as alpha, so `d 0` made
+/// glass invisible) and passes light through its transmission filter `Tf`, which Blender
+/// 3.4's importer (*File > Import > Wavefront (.obj)*) turns into the Principled BSDF's
+/// Transmission. Its PBR extension statements `Pm 0` and `Pr 0` keep glass from becoming
+/// metal (`illum 7` implies reflection, i.e. metallic 1) and make it smooth, as mipray's
+/// refraction is.
+fn write_transmission(w: &mut impl Write, m: &MaterialDesc) -> std::io::Result<()> {
+    writeln!(w, "d 1")?;
+    if m.transmission > 0.0 {
+        writeln!(w, "Tf {0} {0} {0}", m.transmission)?;
+        writeln!(w, "Pm 0")?;
+        writeln!(w, "Pr 0")?;
+    }
+    Ok(())
 }
 
 /// Streams the frame's triangles into `path`, grouped by material.
@@ -260,4 +276,29 @@ pub(crate) fn write_obj(
         }
         Ok(())
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn transmission_lines(transmission: f32) -> String {
+        let material = MaterialDesc {
+            transmission,
+            ..MaterialDesc::default()
+        };
+        let mut out = Vec::new();
+        write_transmission(&mut out, &material).unwrap();
+        String::from_utf8(out).unwrap()
+    }
+
+    #[test]
+    fn glass_is_opaque_to_dissolve_and_transmits_through_tf() {
+        assert_eq!(transmission_lines(1.0), "d 1\nTf 1 1 1\nPm 0\nPr 0\n");
+        assert_eq!(
+            transmission_lines(0.25),
+            "d 1\nTf 0.25 0.25 0.25\nPm 0\nPr 0\n"
+        );
+        assert_eq!(transmission_lines(0.0), "d 1\n");
+    }
 }

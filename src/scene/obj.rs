@@ -7,7 +7,8 @@
 //!   of `(s, t)` becomes `(u, v) = (s, 1 - t)` (in f64, so an exported frame's UVs come
 //!   back bit for bit);
 //! - materials: `Kd` (linear base colour), `map_Kd` (sRGB texture; options `-clamp on` and
-//!   any others skipped), `Ni` (ior), `d` / `Tr` (transmission = 1 - d, or Tr), `Ns`
+//!   any others skipped), `Ni` (ior), `Tf` / `d` / `Tr` (transmission = mean of Tf, else
+//!   1 - d, else Tr), `Ns`
 //!   (shininess), `Ks` (mean = highlight strength), and mipray's exact statements
 //!   `mipray_name`, `mipray_reflectance`, `mipray_specular`, `mipray_transmission`,
 //!   `mipray_double_sided`, `mipray_wrap S T` (`repeat`/`clamp`/`mirrored`),
@@ -381,6 +382,34 @@ fn number(
     Ok(Some(x))
 }
 
+/// The mean of a `Tf r g b` (or `Tf g`) transmission filter. The `Tf xyz ...` and
+/// `Tf spectral ...` forms are not read (None: transmission falls back to `d` / `Tr`).
+fn transmission_filter(
+    value: Option<&String>,
+    path: &Path,
+    name: &str,
+) -> Result<Option<f32>, ObjError> {
+    let Some(value) = value else {
+        return Ok(None);
+    };
+    let words: Vec<&str> = value.split_whitespace().collect();
+    if matches!(words.first(), Some(&"xyz") | Some(&"spectral")) {
+        return Ok(None);
+    }
+    let numbers: Option<Vec<f64>> = words.iter().map(|w| w.parse().ok()).collect();
+    match numbers.as_deref() {
+        Some([g]) if g.is_finite() => Ok(Some(*g as f32)),
+        Some([r, g, b]) if [r, g, b].iter().all(|x| x.is_finite()) => {
+            Ok(Some(((r + g + b) / 3.0) as f32))
+        }
+        _ => Err(error(
+            path,
+            None,
+            format!("material {name}: Tf {value}: expected r g b"),
+        )),
+    }
+}
+
 fn wrap_mode(word: &str) -> Option<WrapMode> {
     match word {
         "repeat" => Some(WrapMode::Repeat),
@@ -439,12 +468,19 @@ fn material(
         .diffuse
         .map(|[r, g, b]| Vec3::new(f(r), f(g), f(b)))
         .unwrap_or(defaults.base_color);
+    // Refraction is `Tf` (what `mipray export` writes, with `d 1`); files that mean
+    // see-through by dissolve say `d` or `Tr`.
     let transmission = match num("mipray_transmission")? {
         Some(t) => t,
-        None => match (m.dissolve, num("Tr")?) {
-            (Some(d), _) => f(1.0 - d),
-            (None, Some(tr)) => tr,
-            (None, None) => 0.0,
+        None => match (
+            transmission_filter(p.get("Tf"), mtl_path, &m.name)?,
+            m.dissolve,
+            num("Tr")?,
+        ) {
+            (Some(tf), _, _) => tf,
+            (None, Some(d), _) => f(1.0 - d),
+            (None, None, Some(tr)) => tr,
+            (None, None, None) => 0.0,
         },
     };
     let specular = match num("mipray_specular")? {
@@ -743,6 +779,20 @@ mod tests {
         assert_eq!(
             first_bad_mtl_line("newmtl a\nKd 0.5\n").map(|(l, _)| l),
             Some(2)
+        );
+    }
+
+    #[test]
+    fn tf_is_read_as_transmission() {
+        let tf = |v: &str| transmission_filter(Some(&v.to_string()), Path::new("a.mtl"), "m");
+        assert_eq!(tf("1 1 1"), Ok(Some(1.0)));
+        assert_eq!(tf("0.25 0.5 0.75"), Ok(Some(0.5)));
+        assert_eq!(tf("0.5"), Ok(Some(0.5)));
+        assert_eq!(tf("spectral glass.rfl"), Ok(None));
+        let e = tf("1 x 1").unwrap_err();
+        assert!(
+            e.to_string().contains("a.mtl") && e.to_string().contains("Tf 1 x 1"),
+            "{e}"
         );
     }
 
