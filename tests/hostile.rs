@@ -185,10 +185,9 @@ fn the_last_shard_of_a_huge_frame_range_renders_its_frames() {
 }
 
 /// Without shards, a 4e9-frame range must start rendering at once, not build a list of
-/// 4e9 frames first (16 GB: an abort under the limit). On this branch the list is still
-/// collected (the frame-range iteration is the CLI rework's); un-ignore once it lands.
+/// 4e9 frames first (16 GB: an abort under the limit). The sequence loop iterates the
+/// range (`frame::sequence`).
 #[test]
-#[ignore = "passes once `--frames` ranges are iterated (CLI rework)"]
 fn a_huge_frame_range_starts_rendering_without_a_frame_list() {
     let out = tempfile::tempdir().unwrap();
     let mut child = Command::new(env!("CARGO_BIN_EXE_mipray"));
