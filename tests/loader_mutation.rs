@@ -113,7 +113,9 @@ fn latin1_decode(bytes: &[u8]) -> String {
 }
 
 fn latin1_encode(text: &str) -> Vec<u8> {
-    text.chars().map(|c| u8::try_from(c).unwrap_or(b'?')).collect()
+    text.chars()
+        .map(|c| u8::try_from(c).unwrap_or(b'?'))
+        .collect()
 }
 
 /// Loads the AFF scene `main` (as `scene.aff`) with `parts` as its `parts.aff`.
