@@ -8,7 +8,7 @@
 //! level:       log2(|w| / |n.d|) - log2(pixel) - log2 P_b
 //! reflection:  gamma += 2 beta
 //! refraction:  gamma = eta (gamma + beta) - beta            (eta = n_i / n_t)
-//! beta = kappa |w| / |n.d|                                   (surface spread)
+//! beta = kappa w / |n.d|                                     (surface spread, signed w)
 //! ```
 //!
 //! `theta` is the primary ray's angle to the optical axis: an off-axis pixel subtends
@@ -19,7 +19,10 @@
 //! `paper` already keeps. `kappa` is the triangle's mean edge curvature from its vertex
 //! normals (positive for convex as seen by the ray), `|n.d|` is clamped at 1/16 like
 //! `paper-cos`. A converging cone may pass through a focus (negative width): the level
-//! uses `|w|`, and a zero width clamps to level 0.
+//! uses `|w|`, and a zero width clamps to level 0. The surface spread keeps the sign of `w`
+//! (JCGT 2021's rule): past a focus the cone is inverted, so a convex mirror must push the
+//! (negative) spread further negative, which `|w|` would turn into a false convergence
+//! (3.7 levels too sharp on issue 15's two-mirror chain, `tests/lod_methods.rs`).
 
 use glam::Vec3A;
 
@@ -40,11 +43,12 @@ pub struct RayCone {
 }
 
 impl RayCone {
-    /// The surface spread angle `beta` the hit's curvature adds over the cone's footprint.
+    /// The surface spread angle `beta` the hit's curvature adds over the cone's footprint,
+    /// signed like the width (an inverted cone past a focus is spread the other way).
     #[inline]
     fn surface_spread(&self, hit: &SurfaceHit) -> f32 {
         let kappa = mean_edge_curvature(hit.positions(), hit.oriented_normals());
-        let beta = kappa * self.width.abs() / hit.clamped_cos();
+        let beta = kappa * self.width / hit.clamped_cos();
         if beta.is_finite() { beta } else { 0.0 }
     }
 
