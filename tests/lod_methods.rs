@@ -498,3 +498,54 @@ fn cones_match_the_exact_trace_through_a_focus_and_a_convex_mirror() {
         p.level
     );
 }
+
+#[test]
+fn a_wide_field_of_view_renders_and_selects_levels_with_the_same_value() {
+    // yfov 3.12 rad: tan(yfov / 2) = 92.6. The camera used to render such a camera at
+    // 0.8 rad while `log2 P_b` took 3.12 (issue 15, fix 2).
+    let yfov = 3.12f32;
+    let (distance, size, side) = (0.02f32, 2.0f32, 64u32);
+    let mut renderer = Renderer::new(
+        facing_quad_scene(distance, size, 256, yfov),
+        settings(side, side, LodMethod::Paper),
+    );
+    let prepared = renderer.prepare(0, 0.0).unwrap();
+    assert_eq!(
+        prepared.camera.yfov, yfov,
+        "the render camera's field of view"
+    );
+    // The level on the optical axis is the closed form of the same field of view.
+    for lod in [LodMethod::Paper, LodMethod::Cones, LodMethod::Diffs] {
+        let p = probe(
+            facing_quad_scene(distance, size, 256, yfov),
+            (side, side),
+            lod,
+            32.0,
+            32.0,
+        );
+        let expected = facing_closed_form(distance as f64, size as f64, 256, yfov, side);
+        assert!(
+            (p.level as f64 - expected).abs() < 0.02,
+            "{lod}: level {} vs {expected}",
+            p.level
+        );
+    }
+    // And the image shows the quad at the size that field of view gives it: half-width
+    // 1 m at 2 cm is tan = 50 of the film's 92.6, i.e. 34.6 of 64 pixels across.
+    let (image, _) = renderer.render_frame(0, 0.0).unwrap();
+    let row = side / 2;
+    let background = Vec3::splat(0.1);
+    let covered = (0..side)
+        .filter(|&x| {
+            (image.pixels[(row * side + x) as usize] - background)
+                .abs()
+                .max_element()
+                > 1e-3
+        })
+        .count() as f64;
+    let expected = side as f64 * (size as f64 / 2.0 / distance as f64) / (yfov as f64 / 2.0).tan();
+    assert!(
+        (covered - expected).abs() <= 1.0,
+        "{covered} pixels of the middle row show the quad; a {yfov} rad film shows {expected:.1}"
+    );
+}

@@ -3,7 +3,7 @@
 //! the cone's width `w` and full spread angle `gamma` (8 bytes).
 //!
 //! ```text
-//! primary:     w = 0, gamma = atan(2 tan(fov/2) / H) cos(theta)   (one pixel)
+//! primary:     w = 0, gamma = k cos(theta), k = 2 tan(fov/2) / H    (one pixel)
 //! arrive:      w += gamma * t
 //! level:       log2(|w| / |n.d|) - log2(pixel) - log2 P_b
 //! reflection:  gamma += 2 beta
