@@ -21,6 +21,8 @@ mod none;
 mod paper;
 mod paper_cos;
 mod pb;
+#[cfg(test)]
+mod test_support;
 
 pub use cones::RayCone;
 pub use diffs::{RayDiffs, TexelGradients};
