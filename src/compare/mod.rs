@@ -4,6 +4,7 @@
 pub mod lod_error;
 pub mod report;
 mod run;
+pub mod subpixel_reference;
 mod types;
 
 pub use run::{CompareOptions, median, run_compare};
