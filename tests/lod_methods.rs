@@ -738,3 +738,103 @@ fn non_square_texture_levels_use_width_times_height() {
         assert_level(&format!("{lod} on 1024 x 64"), p.level, expected);
     }
 }
+
+/// A method's errors against the sub-pixel reference (longest axis, area) over frame 0,
+/// and the reference's undefined share.
+fn subpixel_error(
+    scene: SceneDesc,
+    lod: LodMethod,
+) -> (
+    mipray::compare::lod_error::LodErrorStats,
+    mipray::compare::lod_error::LodErrorStats,
+    f64,
+) {
+    use mipray::compare::lod_error::method_error;
+    use mipray::compare::subpixel_reference::subpixel_reference;
+    let mut renderer = Renderer::new(scene, settings(64, 64, lod));
+    let prepared = renderer.prepare(0, 0.0).unwrap();
+    let frame_scene = renderer.frame_scene(&prepared);
+    let reference = subpixel_reference(&frame_scene, &prepared.camera);
+    (
+        method_error(&frame_scene, &prepared.camera, &reference.longest_axis),
+        method_error(&frame_scene, &prepared.camera, &reference.area),
+        reference.undefined_share(),
+    )
+}
+
+#[test]
+fn subpixel_reference_agrees_with_the_closed_forms_under_both_conventions() {
+    let yfov = 60f32.to_radians();
+    // Facing: both conventions give the same level. `diffs` matches it everywhere; the
+    // others pay the off-axis term `-log2 cos theta` (up to 0.085 levels at the quad's
+    // corners), `paper-cos` twice over.
+    let facing = |lod| subpixel_error(facing_quad_scene(4.0, 2.0, 256, yfov), lod);
+    let mut bias = std::collections::HashMap::new();
+    for lod in MIPMAPPED {
+        let (longest, area, _) = facing(lod);
+        assert!(longest.pixels > 100, "{lod}: {} pixels", longest.pixels);
+        assert!(
+            (longest.bias - area.bias).abs() < 0.01,
+            "{lod}: {longest:?} {area:?}"
+        );
+        bias.insert(lod, longest.bias);
+    }
+    assert!(
+        bias[&LodMethod::Diffs].abs() < 0.02,
+        "diffs facing {bias:?}"
+    );
+    assert!((0.01..0.085).contains(&bias[&LodMethod::Paper]), "{bias:?}");
+    assert!(
+        (bias[&LodMethod::Cones] - bias[&LodMethod::Paper]).abs() < 0.01,
+        "{bias:?}"
+    );
+    assert!(
+        (bias[&LodMethod::PaperCos] - 2.0 * bias[&LodMethod::Paper]).abs() < 0.01,
+        "{bias:?}"
+    );
+    // Tilted 60 degrees: the footprint is 1 x 2 on the axis; longest axis charges paper a
+    // full level, area half of one (and charges the cos-aware methods the other half).
+    // Means over the whole quad, where perspective varies the tilt: within 0.15.
+    let (longest, area, _) = subpixel_error(tilted_quad(yfov), LodMethod::Paper);
+    assert!(
+        (longest.bias + 1.0).abs() < 0.15,
+        "paper longest {longest:?}"
+    );
+    assert!((area.bias + 0.5).abs() < 0.15, "paper area {area:?}");
+    assert!(
+        (longest.bias - area.bias + 0.5).abs() < 0.05,
+        "{longest:?} {area:?}"
+    );
+    let (longest, area, _) = subpixel_error(tilted_quad(yfov), LodMethod::Diffs);
+    assert!(longest.bias.abs() < 0.05, "diffs longest {longest:?}");
+    assert!((area.bias - 0.5).abs() < 0.05, "diffs area {area:?}");
+    // A second quad of the same material right of the first: the texture restarts at
+    // the shared edge (u jumps from 1 to 0, 256 texels against a 9-texel footprint), so
+    // the pixels straddling it have no affine fit and count as undefined.
+    let seam = || {
+        let mut scene = facing_quad_scene(4.0, 2.0, 256, yfov);
+        add_root(
+            &mut scene,
+            node("right", at(Vec3::new(2.0, 0.0, -4.0)), Some(0)),
+        );
+        scene
+    };
+    let (_, _, undefined) = subpixel_error(seam(), LodMethod::Paper);
+    // 28 rows of the seam against about 28 x 36 textured pixels.
+    assert!(
+        undefined > 0.01 && undefined < 0.06,
+        "undefined share {undefined}"
+    );
+    // Through the convex mirror the real rays see the ball's spread: cones and diffs
+    // within a quarter level, paper about 2.25 levels too sharp on axis.
+    let scene = || {
+        let mut scene = convex_mirror_scene(50f32.to_radians());
+        scene.meshes[1].primitives = vec![sphere(1, 6)];
+        scene
+    };
+    let (paper, _, _) = subpixel_error(scene(), LodMethod::Paper);
+    let (cones, _, _) = subpixel_error(scene(), LodMethod::Cones);
+    eprintln!("convex mirror vs sub-pixel reference: paper {paper:?}, cones {cones:?}");
+    assert!(paper.bias < -1.5, "paper {paper:?}");
+    assert!(cones.bias.abs() < 0.25, "cones {cones:?}");
+}

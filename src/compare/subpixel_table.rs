@@ -33,12 +33,27 @@ fn md_number(v: f64, decimals: usize) -> String {
     if v.is_nan() {
         "n/a".into()
     } else {
-        format!("{v:+.decimals$}")
+        format!("{v:.decimals$}")
     }
 }
 
-fn error_fields(e: &LevelError, number: fn(f64, usize) -> String) -> [String; 3] {
-    [number(e.bias, 3), number(e.rms, 3), number(e.under, 3)]
+/// Bias, RMS and under-filtered share as CSV fields.
+fn csv_fields(e: &LevelError) -> [String; 3] {
+    [
+        csv_number(e.bias, 3),
+        csv_number(e.rms, 3),
+        csv_number(e.under, 3),
+    ]
+}
+
+/// The same as Markdown cells, the bias with its sign.
+fn md_cells(e: &LevelError) -> [String; 3] {
+    let bias = if e.bias >= 0.0 {
+        format!("+{}", md_number(e.bias, 3))
+    } else {
+        md_number(e.bias, 3)
+    };
+    [bias, md_number(e.rms, 3), md_number(e.under, 3)]
 }
 
 /// The CSV text (header and one row per method).
@@ -46,8 +61,8 @@ pub fn csv(rows: &[SubpixelSummary]) -> String {
     let mut text = format!("{CSV_HEADER}\n");
     for r in rows {
         let mut fields = vec![r.method.replace([',', '"', '\n', '\r'], "_")];
-        fields.extend(error_fields(&r.longest_axis, csv_number));
-        fields.extend(error_fields(&r.area, csv_number));
+        fields.extend(csv_fields(&r.longest_axis));
+        fields.extend(csv_fields(&r.area));
         fields.push(csv_number(r.undefined_share, 4));
         text.push_str(&fields.join(","));
         text.push('\n');
@@ -74,7 +89,8 @@ pub fn markdown(rows: &[SubpixelSummary]) -> String {
              `longest` is the OpenGL convention the methods aim at; `area` the square of the \
              same area (it does not charge the incidence elongation in full). Bias: mean \
              level minus reference (positive: blurrier); under: share more than half a level \
-             too sharp. The `lod` columns of the table above use the probe's \
+             too sharp. `diffs-aniso` is compared with the anisotropic level of the same \
+             fit under both. The `lod` columns of the table above use the probe's \
              finite-difference reference instead.",
             n = super::subpixel_reference::GRID
         ),
@@ -85,8 +101,8 @@ pub fn markdown(rows: &[SubpixelSummary]) -> String {
     ];
     for r in rows {
         let mut cells = vec![r.method.replace('|', "\\|")];
-        cells.extend(error_fields(&r.longest_axis, md_number));
-        cells.extend(error_fields(&r.area, md_number));
+        cells.extend(md_cells(&r.longest_axis));
+        cells.extend(md_cells(&r.area));
         lines.push(format!("| {} |", cells.join(" | ")));
     }
     if let Some(first) = rows.first() {
@@ -139,7 +155,7 @@ mod tests {
     fn markdown_names_every_method_and_the_undefined_share() {
         let text = markdown(&[row("none", -1.0), row("cones", 0.5)]);
         assert!(
-            text.contains("| none | -1.000 | +1.000 | +0.250 | n/a |"),
+            text.contains("| none | -1.000 | 1.000 | 0.250 | n/a |"),
             "{text}"
         );
         assert!(text.contains("| cones | +0.500"));
