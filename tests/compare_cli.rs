@@ -539,3 +539,36 @@ fn compare_twice_gives_identical_quality_numbers() {
         }
     }
 }
+
+#[test]
+fn compare_supersampled_none_and_the_subpixel_reference_have_their_rows() {
+    let (_dir, out) = out_dir();
+    let output = compare("default", &out, &["--methods", "none@4,paper,diffs"]);
+    assert_success(&output, "compare --methods none@4,paper,diffs");
+    let rows = read_csv(&out.join("compare.csv"));
+    assert_eq!(methods(&rows), ["none", "none@4", "paper", "diffs"]);
+    // Four samples per pixel: closer to the 4-spp reference than one, and slower.
+    let flip = |i: usize| number(&rows[i], "flip");
+    assert!(
+        flip(1) < flip(0),
+        "none@4 FLIP {} vs none {}",
+        flip(1),
+        flip(0)
+    );
+    let sub = read_csv(&out.join("subpixel_reference.csv"));
+    assert_eq!(methods(&sub), ["none", "none@4", "paper", "diffs"]);
+    for row in &sub {
+        for column in ["subpixel_longest_bias", "subpixel_area_bias"] {
+            assert!(number(row, column).is_finite(), "{column}: {row:?}");
+        }
+        let share = number(row, "subpixel_undefined_share");
+        assert!((0.0..0.5).contains(&share), "undefined share {share}");
+    }
+    // `none` reads level 0: sharper than the reference under both conventions.
+    assert!(number(&sub[0], "subpixel_longest_bias") < 0.0);
+    for bad in ["none@0", "paper@x"] {
+        let output = compare("default", &out, &["--methods", bad]);
+        assert!(!output.status.success(), "--methods {bad} was accepted");
+        assert!(stderr(&output).contains(bad), "{}", stderr(&output));
+    }
+}

@@ -3,7 +3,7 @@
 
 use std::path::PathBuf;
 
-use anyhow::{Result, bail};
+use anyhow::{Context, Result, bail};
 use clap::Args;
 
 use super::args::{
@@ -11,9 +11,8 @@ use super::args::{
 };
 use super::bench::MAX_REPEATS;
 use super::scene::{load_scene, open_scene};
-use crate::compare::{CompareOptions, report, run_compare};
+use crate::compare::{CompareOptions, MethodSpec, report, run_compare, subpixel_table};
 use crate::frame::sequence::progress_bar;
-use crate::lod::LodMethod;
 
 #[derive(Args, Debug, Clone)]
 pub struct CompareArgs {
@@ -22,13 +21,15 @@ pub struct CompareArgs {
     pub sequence: SequenceArgs,
     #[command(flatten)]
     pub trace: TraceArgs,
-    /// LOD methods, comma separated (`none` is always included: overheads are against it).
+    /// LOD methods, comma separated (`none` is always included: overheads are against it);
+    /// `METHOD@N` renders the method with N samples per pixel (`none@4,none@16`), so
+    /// supersampling sits on the same time-error chart as the LOD methods.
     #[arg(
         long,
         value_delimiter = ',',
         default_value = "none,paper,paper-cos,cones,diffs,diffs-aniso"
     )]
-    pub methods: Vec<LodMethod>,
+    pub methods: Vec<MethodSpec>,
     /// `N` lights for every render, or a range `A..B` (inclusive: `1..6` is 1 to 6 lights)
     /// for the paper's Table 1, none vs paper per light count; the method comparison then
     /// uses the scene's own lights [default: the scene's lights].
@@ -102,7 +103,7 @@ pub fn compare(args: &CompareArgs) -> Result<()> {
         args.repeats,
         args.methods
             .iter()
-            .map(|m| m.as_str())
+            .map(|m| m.to_string())
             .collect::<Vec<_>>()
             .join(",")
     );
@@ -113,11 +114,22 @@ pub fn compare(args: &CompareArgs) -> Result<()> {
             progress.inc(1);
         }
     };
-    let report = run_compare(|| load_scene(&path), &options, &log)?;
+    let results = run_compare(|| load_scene(&path), &options, &log)?;
     progress.finish_and_clear();
-    let mut written = report::write_all(&report, &out)?;
+    let report = &results.report;
+    let mut written = report::write_all(report, &out)?;
+    written.push(subpixel_table::write_csv(&results.subpixel, &out)?);
+    // compare.md carries both references: the probe's table above, the sub-pixel one after.
+    let markdown = format!(
+        "{}\n{}",
+        report::markdown(report),
+        subpixel_table::markdown(&results.subpixel)
+    );
+    let md_path = out.join("compare.md");
+    crate::output::write_text_atomically(&md_path, &markdown)
+        .with_context(|| format!("cannot write {}", md_path.display()))?;
     written.push(crate::pages::write_compare_page(&out)?);
-    print!("{}", report::markdown(&report));
+    print!("{markdown}");
     println!();
     for path in written {
         println!("wrote {}", path.display());

@@ -77,7 +77,8 @@ fn reference_at(scene: &FrameScene, camera: &Camera, px: f32, py: f32) -> Option
     })
 }
 
-fn clamp_to_pyramid(level: f32, probe: &LodProbe) -> f32 {
+/// `level` clamped to the levels `probe`'s texture has.
+pub(super) fn clamp_to_pyramid(level: f32, probe: &LodProbe) -> f32 {
     level
         .max(0.0)
         .min(probe.texture_levels.saturating_sub(1) as f32)

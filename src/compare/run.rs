@@ -7,7 +7,13 @@
 //! plus, for methods that use `log2 P_b` (`paper`, `paper-cos`, `cones`), the frame
 //! update's `log2 P_b` refresh, which only they pay. The rest of the update (animation,
 //! refit) is the same for every method and reported once as `shared_update_ms`.
-//! `none` is always rendered (first in the report): overheads are relative to it.
+//! `none` is always rendered (first in the report): overheads are relative to it. A method
+//! may be asked for at N samples per pixel (`none@16`, [`MethodSpec`]): its renders, and so
+//! its times, use N jittered samples, placing supersampling on the same chart.
+//!
+//! LOD error is measured against two references computed once per frame: the probe's
+//! finite-difference reference (`lod_error.rs`, in `FrameErrors`) and the independent
+//! sub-pixel reference (`subpixel_reference.rs`, in [`CompareResults::subpixel`]).
 
 use std::path::PathBuf;
 use std::time::Instant;
@@ -16,7 +22,11 @@ use anyhow::{Context, Result};
 use image::RgbImage;
 
 use super::lod_error::{LodErrorStats, method_error, reference_levels};
-use super::{CompareReport, FrameErrors, LightsRow, MethodSummary};
+use super::subpixel_reference::{SubpixelReference, subpixel_reference};
+use super::{
+    CompareReport, FrameErrors, LevelError, LightsRow, MethodSpec, MethodSummary,
+    SubpixelFrameErrors, SubpixelSummary,
+};
 use crate::frame::{FrameClock, Phase, PreparedFrame, RenderSettings, Renderer};
 use crate::lod::LodMethod;
 use crate::metrics;
@@ -36,7 +46,8 @@ pub struct CompareOptions {
     /// Iterated, never collected up front: memory grows with the frames compared.
     pub frames: std::ops::Range<u32>,
     pub clock: FrameClock,
-    pub methods: Vec<LodMethod>,
+    /// Methods and their samples per pixel (`none` at 1 is added first if absent).
+    pub methods: Vec<MethodSpec>,
     /// Samples per pixel of the level-0 reference (stratified).
     pub reference_spp: u32,
     pub repeats: u32,
@@ -50,10 +61,20 @@ pub struct CompareOptions {
 
 /// Per-method state carried over the frames.
 struct MethodRun {
-    method: LodMethod,
+    method: MethodSpec,
     frames: Vec<FrameErrors>,
+    subpixel: Vec<SubpixelFrameErrors>,
     histogram: [u64; MIP_LEVELS],
     previous: Option<RgbImage>,
+}
+
+/// What `run_compare` measured: the report (errors against the supersampled image and the
+/// probe's finite-difference LOD reference) and, per method in the same order, the LOD
+/// errors against the sub-pixel reference.
+#[derive(Debug, Clone, PartialEq)]
+pub struct CompareResults {
+    pub report: CompareReport,
+    pub subpixel: Vec<SubpixelSummary>,
 }
 
 /// Compares the methods on `load()`'s scene; `log` receives one line per frame.
@@ -61,13 +82,14 @@ pub fn run_compare(
     load: impl Fn() -> Result<SceneDesc>,
     options: &CompareOptions,
     log: &dyn Fn(&str),
-) -> Result<CompareReport> {
+) -> Result<CompareResults> {
     let methods = with_baseline(&options.methods);
     let mut runs: Vec<MethodRun> = methods
         .iter()
         .map(|&method| MethodRun {
             method,
             frames: Vec::new(),
+            subpixel: Vec::new(),
             histogram: [0; MIP_LEVELS],
             previous: None,
         })
@@ -98,12 +120,15 @@ pub fn run_compare(
         let reference_scene = scene_with(LodMethod::None);
         let reference = srgb(&render_image(&reference_scene, &camera, options.reference_spp).0);
         let lod_reference = reference_levels(&reference_scene, &camera);
+        let subpixel = subpixel_reference(&reference_scene, &camera);
         let timed = time_interleaved(&methods, options.repeats, fi, &scene_with, &camera);
         for (run, (times, image, counters)) in runs.iter_mut().zip(timed) {
-            let scene = scene_with(run.method);
+            let scene = scene_with(run.method.method);
             let test = srgb(&image);
             let (m, _) = metrics::compare(&reference, &test);
             let lod = method_error(&scene, &camera, &lod_reference);
+            run.subpixel
+                .push(subpixel_errors(frame, &scene, &camera, &subpixel));
             let flicker = match (&run.previous, &previous_reference) {
                 (Some(prev), Some(prev_ref)) => Some(metrics::temporal::flicker(
                     prev, &test, prev_ref, &reference,
@@ -113,7 +138,7 @@ pub fn run_compare(
             // The phases only methods reading `log2 P_b` pay.
             let update: f64 = Phase::ALL
                 .into_iter()
-                .filter(|p| !p.is_shared() && run.method.needs_log2_pb())
+                .filter(|p| !p.is_shared() && run.method.method.needs_log2_pb())
                 .map(|p| u.phase_ms(p))
                 .sum();
             run.frames.push(frame_errors(
@@ -142,12 +167,13 @@ pub fn run_compare(
         .iter()
         .map(|&n| lights_row(&load, options, n, log))
         .collect::<Result<Vec<_>>>()?;
+    let subpixel = runs.iter().map(summarise_subpixel).collect();
     let mut methods: Vec<MethodSummary> = runs.into_iter().map(summarise).collect();
     let baseline = methods[0].ms_per_frame;
     for m in &mut methods {
         m.overhead_pct = (m.ms_per_frame / baseline - 1.0) * 100.0;
     }
-    Ok(CompareReport {
+    let report = CompareReport {
         scene: options.scene_name.clone(),
         width: options.settings.width,
         height: options.settings.height,
@@ -159,12 +185,61 @@ pub fn run_compare(
         lod_bias: options.settings.lod_bias,
         methods,
         table1,
-    })
+    };
+    Ok(CompareResults { report, subpixel })
 }
 
-/// `none` first (the baseline), then the requested methods in order, without repeats.
-fn with_baseline(methods: &[LodMethod]) -> Vec<LodMethod> {
-    let mut all = vec![LodMethod::None];
+/// The error of `scene.lod` against the sub-pixel reference under both conventions.
+fn subpixel_errors(
+    frame: u32,
+    scene: &FrameScene,
+    camera: &Camera,
+    reference: &SubpixelReference,
+) -> SubpixelFrameErrors {
+    let level_error = |e: LodErrorStats| LevelError {
+        bias: e.bias,
+        rms: e.rms,
+        under: e.under,
+    };
+    let longest_axis = method_error(scene, camera, &reference.longest_axis);
+    let area = method_error(scene, camera, &reference.area);
+    SubpixelFrameErrors {
+        frame,
+        longest_axis: level_error(longest_axis),
+        area: level_error(area),
+        pixels: longest_axis.pixels,
+        undefined_share: reference.undefined_share(),
+    }
+}
+
+fn summarise_subpixel(run: &MethodRun) -> SubpixelSummary {
+    let mean = |f: &dyn Fn(&SubpixelFrameErrors) -> f64| mean_finite(run.subpixel.iter().map(f));
+    let mean_error = |pick: fn(&SubpixelFrameErrors) -> LevelError| LevelError {
+        bias: mean(&|f| pick(f).bias),
+        rms: mean(&|f| pick(f).rms),
+        under: mean(&|f| pick(f).under),
+    };
+    SubpixelSummary {
+        method: run.method.to_string(),
+        longest_axis: mean_error(|f| f.longest_axis),
+        area: mean_error(|f| f.area),
+        undefined_share: mean(&|f| f.undefined_share),
+        frames: run.subpixel.clone(),
+    }
+}
+
+/// Mean of the finite values (NaN if there are none).
+fn mean_finite(values: impl Iterator<Item = f64>) -> f64 {
+    let (sum, n) = values
+        .filter(|v| v.is_finite())
+        .fold((0.0, 0usize), |(s, n), v| (s + v, n + 1));
+    if n == 0 { f64::NAN } else { sum / n as f64 }
+}
+
+/// `none` at one sample first (the baseline), then the requested methods in order,
+/// without repeats.
+fn with_baseline(methods: &[MethodSpec]) -> Vec<MethodSpec> {
+    let mut all = vec![MethodSpec::single(LodMethod::None)];
     for &m in methods {
         if !all.contains(&m) {
             all.push(m);
@@ -180,7 +255,7 @@ type Timed = (Vec<f64>, LinearImage, crate::render::TraceCounters);
 /// render of a frame can pay for warm-up); returns each method's render times, its image
 /// and counters (renders are deterministic, so any round's image is the image).
 fn time_interleaved<'s>(
-    methods: &[LodMethod],
+    methods: &[MethodSpec],
     repeats: u32,
     rotation: usize,
     scene_with: &dyn Fn(LodMethod) -> FrameScene<'s>,
@@ -192,9 +267,9 @@ fn time_interleaved<'s>(
     for round in 0..repeats.max(1) as usize {
         for k in 0..n {
             let m = (k + round + rotation) % n;
-            let scene = scene_with(methods[m]);
+            let scene = scene_with(methods[m].method);
             let start = Instant::now();
-            let output = render_image(&scene, camera, 1);
+            let output = render_image(&scene, camera, methods[m].spp);
             times[m].push(start.elapsed().as_secs_f64() * 1e3);
             outputs[m].get_or_insert(output);
         }
@@ -248,7 +323,7 @@ fn summarise(run: MethodRun) -> MethodSummary {
     let lookups: u64 = run.histogram.iter().sum();
     MethodSummary {
         method: run.method.to_string(),
-        bytes_per_ray: run.method.bytes_per_ray(),
+        bytes_per_ray: run.method.method.bytes_per_ray(),
         ms_per_frame: mean(&|f| Some(f.ms)),
         overhead_pct: 0.0,
         // Identical frames have an infinite PSNR; the mean is over the finite ones, and
@@ -292,7 +367,7 @@ fn lights_row(
         ..options.settings
     };
     let mut renderer = Renderer::new(load()?, settings);
-    let methods = [LodMethod::None, LodMethod::Paper];
+    let methods = [LodMethod::None, LodMethod::Paper].map(MethodSpec::single);
     let (mut none_ms, mut paper_ms) = (0.0, 0.0);
     for (fi, frame) in options.frames.clone().enumerate() {
         let prepared: PreparedFrame = renderer.prepare(frame, options.clock.time(frame))?;
@@ -332,17 +407,21 @@ fn write_png(dir: &std::path::Path, frame: u32, image: &RgbImage) -> Result<()> 
 /// The method's frame and level view, when asked for.
 fn write_extras(
     options: &CompareOptions,
-    method: LodMethod,
+    method: MethodSpec,
     frame: u32,
     image: &RgbImage,
     scene: &FrameScene,
     camera: &Camera,
 ) -> Result<()> {
     if let Some(dir) = &options.frames_dir {
-        write_png(&dir.join(method.as_str()), frame, image)?;
+        write_png(&dir.join(method.to_string()), frame, image)?;
     }
     if let Some(dir) = &options.lod_view_dir {
-        write_png(&dir.join(method.as_str()), frame, &lod_image(scene, camera))?;
+        write_png(
+            &dir.join(method.to_string()),
+            frame,
+            &lod_image(scene, camera),
+        )?;
     }
     Ok(())
 }
@@ -367,9 +446,10 @@ mod tests {
 
     #[test]
     fn baseline_comes_first_once() {
+        let spec = |word: &str| word.parse::<MethodSpec>().unwrap();
         assert_eq!(
-            with_baseline(&[LodMethod::Paper, LodMethod::None, LodMethod::Paper]),
-            vec![LodMethod::None, LodMethod::Paper]
+            with_baseline(&[spec("paper"), spec("none"), spec("none@4"), spec("paper")]),
+            vec![spec("none"), spec("paper"), spec("none@4")]
         );
     }
 }

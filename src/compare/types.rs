@@ -84,3 +84,42 @@ pub struct CompareReport {
     /// Empty unless `--lights A..B` asked for the Table 1 replication.
     pub table1: Vec<LightsRow>,
 }
+
+/// A method's level error against one reference: over one frame, or the mean over frames.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct LevelError {
+    /// Mean of `level(method) - level(reference)` (positive: blurrier).
+    pub bias: f64,
+    /// Root mean square of the same difference.
+    pub rms: f64,
+    /// Share of measured pixels more than half a level below the reference (aliasing).
+    pub under: f64,
+}
+
+/// One method's LOD error over one frame against the sub-pixel reference
+/// (`compare::subpixel_reference`), under both of its conventions.
+#[derive(Debug, Clone, PartialEq)]
+pub struct SubpixelFrameErrors {
+    pub frame: u32,
+    /// Against the longest-axis (OpenGL) level of the fitted footprint.
+    pub longest_axis: LevelError,
+    /// Against the area-preserving level of the same fit.
+    pub area: LevelError,
+    /// Pixels measured (the fit was defined and the method's probe reached a texture).
+    pub pixels: u64,
+    /// Share of textured pixels whose fit is undefined (silhouettes, seams); the same for
+    /// every method of a frame.
+    pub undefined_share: f64,
+}
+
+/// One method's errors against the sub-pixel reference over the frame range (means over
+/// frames of the per-frame values; NaN where no frame measured anything).
+#[derive(Debug, Clone, PartialEq)]
+pub struct SubpixelSummary {
+    /// The method's word as in `MethodSummary::method` (`none@16` for supersampling).
+    pub method: String,
+    pub longest_axis: LevelError,
+    pub area: LevelError,
+    pub undefined_share: f64,
+    pub frames: Vec<SubpixelFrameErrors>,
+}

@@ -3,12 +3,12 @@
 //! the cone's width `w` and full spread angle `gamma` (8 bytes).
 //!
 //! ```text
-//! primary:     w = 0, gamma = atan(2 tan(fov/2) / H) cos(theta)   (one pixel)
+//! primary:     w = 0, gamma = k cos(theta), k = 2 tan(fov/2) / H    (one pixel)
 //! arrive:      w += gamma * t
 //! level:       log2(|w| / |n.d|) - log2(pixel) - log2 P_b
 //! reflection:  gamma += 2 beta
 //! refraction:  gamma = eta (gamma + beta) - beta            (eta = n_i / n_t)
-//! beta = kappa |w| / |n.d|                                   (surface spread)
+//! beta = kappa w / |n.d|                                     (surface spread, signed w)
 //! ```
 //!
 //! `theta` is the primary ray's angle to the optical axis: an off-axis pixel subtends
@@ -19,7 +19,10 @@
 //! `paper` already keeps. `kappa` is the triangle's mean edge curvature from its vertex
 //! normals (positive for convex as seen by the ray), `|n.d|` is clamped at 1/16 like
 //! `paper-cos`. A converging cone may pass through a focus (negative width): the level
-//! uses `|w|`, and a zero width clamps to level 0.
+//! uses `|w|`, and a zero width clamps to level 0. The surface spread keeps the sign of `w`
+//! (JCGT 2021's rule): past a focus the cone is inverted, so a convex mirror must push the
+//! (negative) spread further negative, which `|w|` would turn into a false convergence
+//! (3.7 levels too sharp on issue 15's two-mirror chain, `tests/lod_methods.rs`).
 
 use glam::Vec3A;
 
@@ -40,11 +43,12 @@ pub struct RayCone {
 }
 
 impl RayCone {
-    /// The surface spread angle `beta` the hit's curvature adds over the cone's footprint.
+    /// The surface spread angle `beta` the hit's curvature adds over the cone's footprint,
+    /// signed like the width (an inverted cone past a focus is spread the other way).
     #[inline]
     fn surface_spread(&self, hit: &SurfaceHit) -> f32 {
         let kappa = mean_edge_curvature(hit.positions(), hit.oriented_normals());
-        let beta = kappa * self.width.abs() / hit.clamped_cos();
+        let beta = kappa * self.width / hit.clamped_cos();
         if beta.is_finite() { beta } else { 0.0 }
     }
 
@@ -95,5 +99,107 @@ impl RayLod for RayCone {
     fn refract(&self, hit: &SurfaceHit, eta: f32, _: Vec3A) -> Self {
         let beta = self.surface_spread(hit);
         self.with_spread(eta * (self.spread + beta) - beta)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::super::ViewFrame;
+    use super::super::test_support::{facing_triangle, hit_on, sphere_cap_triangle};
+    use super::*;
+
+    fn camera(yfov: f32, height: u32) -> LodCamera {
+        LodCamera::new(&ViewFrame {
+            forward: Vec3A::NEG_Z,
+            right: Vec3A::X,
+            up: Vec3A::Y,
+            yfov,
+            width: height,
+            height,
+        })
+    }
+
+    #[test]
+    fn primary_cone_is_one_pixel_wide_per_metre_and_narrows_off_axis() {
+        let cam = camera(1.0, 100);
+        let k = 2.0 * 0.5f32.tan() / 100.0;
+        let centre = RayCone::primary(&cam, 50.0, 50.0);
+        assert_eq!(centre.width, 0.0);
+        assert!((centre.spread - k).abs() < 1e-7 * k);
+        // A corner ray is at `theta` with cos = 1 / |(sx, sy, 1)|.
+        let corner = RayCone::primary(&cam, 0.0, 0.0);
+        let cos = 1.0 / (1.0 + 2.0 * 0.5f32.tan().powi(2)).sqrt();
+        assert!(
+            (corner.spread - k * cos).abs() < 1e-6 * k,
+            "{}",
+            corner.spread
+        );
+    }
+
+    #[test]
+    fn facing_level_is_log2_width_minus_the_triangle_constant() {
+        let cam = camera(1.0, 100);
+        let triangles = facing_triangle(-3.0, 2.5);
+        let hit = hit_on(&triangles, 3.0, Vec3A::NEG_Z, 1.0);
+        let mut cone = RayCone::primary(&cam, 50.0, 50.0);
+        cone.arrive(&hit);
+        assert!((cone.width - 3.0 * cam.spread).abs() < 1e-6);
+        let level = cone.footprint(&hit, &cam, (1, 1)).level();
+        // w = k t and log2 k = log2_pixel: the level is log2 t - log2 P_b.
+        assert!((level - (3f32.log2() - 2.5)).abs() < 1e-5, "{level}");
+    }
+
+    #[test]
+    fn convex_mirror_widens_the_spread_by_twice_the_surface_spread() {
+        let triangles = sphere_cap_triangle(2.0);
+        let hit = hit_on(&triangles, 1.0, Vec3A::NEG_Z, 1.0);
+        let cos = hit.clamped_cos();
+        let cone = RayCone {
+            width: 0.3,
+            spread: 0.01,
+        };
+        // kappa = 1 / 2: beta = 0.15 / cos.
+        let reflected = cone.reflect(&hit, Vec3A::Z);
+        assert!(
+            (reflected.spread - (0.01 + 0.3 / cos)).abs() < 1e-5,
+            "{reflected:?}"
+        );
+        // Past a focus (negative width) the cone is inverted: a convex mirror makes it
+        // diverge faster, i.e. the spread more negative (|w| would make it converge).
+        let inverted = RayCone {
+            width: -0.3,
+            spread: -0.01,
+        };
+        let reflected = inverted.reflect(&hit, Vec3A::Z);
+        assert!(
+            (reflected.spread - (-0.01 - 0.3 / cos)).abs() < 1e-5,
+            "{reflected:?}"
+        );
+        // Seen from inside (a concave mirror) the same patch converges the cone.
+        let inside = hit_on(&triangles, 1.0, Vec3A::Z, -1.0);
+        let reflected = cone.reflect(&inside, Vec3A::NEG_Z);
+        assert!(
+            (reflected.spread - (0.01 - 0.3 / cos)).abs() < 1e-5,
+            "{reflected:?}"
+        );
+    }
+
+    #[test]
+    fn flat_refraction_scales_the_spread_by_eta() {
+        let triangles = facing_triangle(0.0, 0.0);
+        let hit = hit_on(&triangles, 1.0, Vec3A::NEG_Z, 1.0);
+        let cone = RayCone {
+            width: 0.3,
+            spread: 0.01,
+        };
+        let refracted = cone.refract(&hit, 1.0 / 1.5, Vec3A::NEG_Z);
+        assert!((refracted.spread - 0.01 / 1.5).abs() < 1e-8);
+        assert_eq!(refracted.width, 0.3);
+        // On a ball (kappa = 1/2) the paraxial law: eta (gamma + beta) - beta.
+        let ball = sphere_cap_triangle(2.0);
+        let hit = hit_on(&ball, 1.0, Vec3A::NEG_Z, 1.0);
+        let beta = 0.5 * 0.3 / hit.clamped_cos();
+        let refracted = cone.refract(&hit, 1.0 / 1.5, Vec3A::NEG_Z);
+        assert!((refracted.spread - ((0.01 + beta) / 1.5 - beta)).abs() < 1e-6);
     }
 }

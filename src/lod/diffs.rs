@@ -198,3 +198,100 @@ impl RayLod for RayDiffs {
         .finite_or_zero()
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::super::ViewFrame;
+    use super::super::test_support::{facing_triangle, hit_on, sphere_cap_triangle};
+    use super::*;
+
+    fn camera(yfov: f32, height: u32) -> LodCamera {
+        LodCamera::new(&ViewFrame {
+            forward: Vec3A::NEG_Z,
+            right: Vec3A::X,
+            up: Vec3A::Y,
+            yfov,
+            width: height,
+            height,
+        })
+    }
+
+    fn close(a: Vec3A, b: Vec3A) -> bool {
+        (a - b).length() <= 1e-6 * b.length().max(1e-3)
+    }
+
+    #[test]
+    fn primary_differentials_on_axis_are_one_pixel_along_right_and_down() {
+        let cam = camera(1.0, 100);
+        let k = 2.0 * 0.5f32.tan() / 100.0;
+        let d = RayDiffs::primary(&cam, 50.0, 50.0);
+        assert!(close(d.dd_dx, Vec3A::X * k), "{:?}", d.dd_dx);
+        assert!(close(d.dd_dy, Vec3A::NEG_Y * k), "{:?}", d.dd_dy);
+        assert_eq!((d.dp_dx, d.dp_dy), (Vec3A::ZERO, Vec3A::ZERO));
+    }
+
+    #[test]
+    fn transfer_to_a_facing_plane_moves_by_t_times_the_direction_differential() {
+        let cam = camera(1.0, 100);
+        let triangles = facing_triangle(-4.0, 0.0);
+        let hit = hit_on(&triangles, 4.0, Vec3A::NEG_Z, 1.0);
+        let mut d = RayDiffs::primary(&cam, 50.0, 50.0);
+        d.arrive(&hit);
+        assert!(close(d.dp_dx, d.dd_dx * 4.0) && close(d.dp_dy, d.dd_dy * 4.0));
+        // UVs equal (x, y) on this triangle: a 64 x 64 texture sees 64 k t texels.
+        let g = d.texel_gradients(&hit, (64, 64)).unwrap();
+        let k = 2.0 * 0.5f32.tan() / 100.0;
+        assert!((g.dx.length() - 64.0 * k * 4.0).abs() < 1e-4, "{g:?}");
+        assert!((g.isotropic_level() - (64.0 * k * 4.0).log2()).abs() < 1e-5);
+    }
+
+    #[test]
+    fn planar_mirror_keeps_tangential_and_flips_normal_differentials() {
+        let triangles = facing_triangle(0.0, 0.0);
+        let hit = hit_on(&triangles, 1.0, Vec3A::NEG_Z, 1.0);
+        let d = RayDiffs {
+            dp_dx: Vec3A::X,
+            dp_dy: Vec3A::Y,
+            dd_dx: Vec3A::new(0.01, 0.0, 0.002),
+            dd_dy: Vec3A::new(0.0, 0.01, 0.0),
+        };
+        let r = d.reflect(&hit, Vec3A::Z);
+        assert!(
+            close(r.dd_dx, Vec3A::new(0.01, 0.0, -0.002)),
+            "{:?}",
+            r.dd_dx
+        );
+        assert!(close(r.dd_dy, d.dd_dy));
+        assert_eq!((r.dp_dx, r.dp_dy), (d.dp_dx, d.dp_dy));
+    }
+
+    #[test]
+    fn curved_mirror_and_glass_follow_the_paraxial_laws_at_normal_incidence() {
+        // A ball of radius 2 hit head-on: reflection adds 2 dP / R to the angle (kappa = 1/2),
+        // refraction gives eta dD - (1 - eta) dP / R (n' u' = n u - (n' - n) y / R).
+        let ball = sphere_cap_triangle(2.0);
+        let hit = hit_on(&ball, 1.0, Vec3A::NEG_Z, 1.0);
+        let d = RayDiffs {
+            dp_dx: Vec3A::X * 0.1,
+            dp_dy: Vec3A::Y * 0.1,
+            dd_dx: Vec3A::X * 0.01,
+            dd_dy: Vec3A::Y * 0.01,
+        };
+        let r = d.reflect(&hit, Vec3A::Z);
+        // The beam keeps diverging towards +x on its way back: 0.01 + 2 * 0.1 / 2.
+        assert!((r.dd_dx.x - 0.11).abs() < 2e-4, "{:?}", r.dd_dx);
+        let eta = 1.0 / 1.5;
+        let t = d.refract(&hit, eta, Vec3A::NEG_Z);
+        let expected = eta * 0.01 - (1.0 - eta) * 0.1 / 2.0;
+        assert!(
+            (t.dd_dx.x - expected).abs() < 2e-4,
+            "{:?} vs {expected}",
+            t.dd_dx
+        );
+        // Flat glass: the direction differential scales by eta.
+        let flat = facing_triangle(0.0, 0.0);
+        let hit = hit_on(&flat, 1.0, Vec3A::NEG_Z, 1.0);
+        let t = d.refract(&hit, eta, Vec3A::NEG_Z);
+        assert!(close(t.dd_dx, d.dd_dx * eta), "{:?}", t.dd_dx);
+    }
+}

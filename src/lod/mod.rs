@@ -21,6 +21,8 @@ mod none;
 mod paper;
 mod paper_cos;
 mod pb;
+#[cfg(test)]
+mod test_support;
 
 pub use cones::RayCone;
 pub use diffs::{RayDiffs, TexelGradients};
@@ -186,7 +188,10 @@ pub struct LodCamera {
     /// `log2` of a pixel's width at unit distance, `log2(2 tan(fov/2) / H)`: the same
     /// constant `log2 P_b` was computed with.
     pub log2_pixel: f32,
-    /// Full cone angle of a pixel on the optical axis, `atan(2 tan(fov/2) / H)`.
+    /// Full cone angle of a pixel on the optical axis in the cone's linear model, `k = 2
+    /// tan(fov/2) / H`: the width per metre of the pixel's footprint on a facing plane, so
+    /// `w = gamma t` is exact there at any field of view. (RTG's `atan(k)` is the same to
+    /// `k^2 / 3` relative, but 1.2 levels too sharp for a 3.12 rad film of 64 pixels.)
     pub spread: f32,
     /// Unnormalised primary direction `forward + right * sx + up * sy` and its derivatives
     /// per film pixel in x and y.
@@ -207,7 +212,7 @@ impl LodCamera {
         let aspect = w / h;
         LodCamera {
             log2_pixel: pixel.log2_k as f32,
-            spread: (2.0 * tan_half / h).atan(),
+            spread: 2.0 * tan_half / h,
             forward: camera.forward,
             right_per_pixel: camera.right * (2.0 * tan_half * aspect / w),
             up_per_pixel: camera.up * (-2.0 * tan_half / h),

@@ -35,6 +35,10 @@ impl Camera {
 
     /// A camera at `eye` looking along `forward` with `up` as the approximate up direction.
     /// Degenerate directions fall back to looking down -Z with +Y up.
+    ///
+    /// `yfov` is used as given in `(0, pi)`, the range every loader accepts (and refuses
+    /// outside with an error naming the file and camera); every such f32 has a finite,
+    /// positive `tan(yfov / 2)`. Outside it (hand-built scenes only) the camera uses 0.8.
     pub fn look(eye: Vec3, forward: Vec3, up: Vec3, yfov: f32, width: u32, height: u32) -> Camera {
         let forward = forward.try_normalize().unwrap_or(Vec3::NEG_Z);
         let right = forward
@@ -43,7 +47,13 @@ impl Camera {
             .or_else(|| forward.cross(Vec3::Y).try_normalize())
             .unwrap_or(Vec3::X);
         let up = right.cross(forward);
-        let yfov = if yfov.is_finite() && yfov > 1e-4 && yfov < 3.1 {
+        // The raw field of view over the whole range the loaders accept: `log2 P_b` was
+        // computed with the scene's value (`frame::Renderer::new`), so a camera that
+        // rendered with another would select levels for a different film (issue 15: the
+        // old clamp to (1e-4, 3.1) cost 7.8 levels at yfov 3.12). Values no loader lets
+        // through (NaN, <= 0, >= pi: only a hand-built scene) get 0.8 rad rather than NaN
+        // pixels.
+        let yfov = if yfov > 0.0 && yfov < std::f32::consts::PI {
             yfov
         } else {
             0.8

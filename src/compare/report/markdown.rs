@@ -37,8 +37,9 @@ const HOW_TO_READ: &str = "**How to read.** `ms/frame` is the mean per-frame ren
 (median over the repeats) plus the method's share of the frame update; `overhead %` is \
 against `none` measured in the same interleaved run, so both saw the same machine state. \
 PSNR, SSIM and FLIP compare every frame with the level-0 supersampled reference (PSNR `inf`: \
-identical). `LOD bias` is the mean of the method's MIP level minus the finite-difference \
-reference level, in levels: above 0 the method is blurrier than the reference, below 0 \
+identical). `LOD bias` is the mean of the method's MIP level minus the level of the probe's \
+finite-difference reference (the ±½-pixel rays forced through the centre ray's chain of \
+planes; the independent sub-pixel reference has its own section below), in levels: above 0 the method is blurrier than the reference, below 0 \
 sharper; `LOD RMS` is the root mean square of the same difference. `LOD under` is the share \
 of pixels under-filtered by more than half a level, i.e. at risk of aliasing. `flicker` is \
 the mean absolute difference between the method's and the reference's frame-to-frame \

@@ -71,13 +71,17 @@ pub(super) fn add_camera_file(scene: &mut SceneDesc, path: &Path) -> Result<(), 
     let file: CameraFile = serde_json::from_str(&text)
         .map_err(|e| error(path, Some(e.line()), format!("bad camera file: {e}")))?;
     let vectors = [file.eye, file.forward, file.up, file.right, file.background];
-    let fov_ok = file.yfov_radians > 0.0 && file.yfov_radians < std::f32::consts::PI;
-    if !fov_ok || !vectors.iter().all(|v| finite3(*v)) {
+    // The renderer uses this value as given (no substitute), so refuse what it cannot use.
+    let yfov = file.yfov_radians;
+    if !(yfov > 0.0 && yfov < std::f32::consts::PI) {
         return Err(error(
             path,
             None,
-            "camera has a non-finite vector or a field of view outside (0, pi)",
+            format!("camera has yfov_radians {yfov}, outside (0, pi)"),
         ));
+    }
+    if !vectors.iter().all(|v| finite3(*v)) {
+        return Err(error(path, None, "camera has a non-finite vector"));
     }
     if let Some(problem) = degenerate_view(&file) {
         return Err(error(path, None, format!("camera: {problem}")));
