@@ -104,20 +104,8 @@ impl RayLod for RayCone {
 
 #[cfg(test)]
 mod tests {
-    use super::super::ViewFrame;
-    use super::super::test_support::{facing_triangle, hit_on, sphere_cap_triangle};
+    use super::super::test_support::{camera, facing_triangle, hit_on, sphere_cap_triangle};
     use super::*;
-
-    fn camera(yfov: f32, height: u32) -> LodCamera {
-        LodCamera::new(&ViewFrame {
-            forward: Vec3A::NEG_Z,
-            right: Vec3A::X,
-            up: Vec3A::Y,
-            yfov,
-            width: height,
-            height,
-        })
-    }
 
     #[test]
     fn primary_cone_is_one_pixel_wide_per_metre_and_narrows_off_axis() {

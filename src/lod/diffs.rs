@@ -201,20 +201,8 @@ impl RayLod for RayDiffs {
 
 #[cfg(test)]
 mod tests {
-    use super::super::ViewFrame;
-    use super::super::test_support::{facing_triangle, hit_on, sphere_cap_triangle};
+    use super::super::test_support::{camera, facing_triangle, hit_on, sphere_cap_triangle};
     use super::*;
-
-    fn camera(yfov: f32, height: u32) -> LodCamera {
-        LodCamera::new(&ViewFrame {
-            forward: Vec3A::NEG_Z,
-            right: Vec3A::X,
-            up: Vec3A::Y,
-            yfov,
-            width: height,
-            height,
-        })
-    }
 
     fn close(a: Vec3A, b: Vec3A) -> bool {
         (a - b).length() <= 1e-6 * b.length().max(1e-3)

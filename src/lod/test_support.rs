@@ -3,7 +3,7 @@
 
 use glam::{Vec2, Vec3, Vec3A};
 
-use super::SurfaceHit;
+use super::{LodCamera, SurfaceHit, ViewFrame};
 use crate::geometry::FrameTriangles;
 
 /// A single triangle with the given vertex normals, UVs and `log2 P_b`.
@@ -67,4 +67,16 @@ pub fn hit_on(
         normal_sign,
         bary: Vec2::splat(1.0 / 3.0),
     }
+}
+
+/// A square camera looking down -Z with vertical field of view `yfov` and `height` pixels.
+pub fn camera(yfov: f32, height: u32) -> LodCamera {
+    LodCamera::new(&ViewFrame {
+        forward: Vec3A::NEG_Z,
+        right: Vec3A::X,
+        up: Vec3A::Y,
+        yfov,
+        width: height,
+        height,
+    })
 }
