@@ -83,6 +83,32 @@ fn dirty_only_update_equals_a_full_recompute_bit_for_bit() {
     }
 }
 
+/// Over 8,192 deformed triangles the `log2 P_b` update runs on several threads: every
+/// value must equal `lod::log2_pb` of the triangle's world vertices computed here, one by
+/// one, and every triangle must be counted.
+#[test]
+fn parallel_log2_pb_update_equals_the_constant_computed_one_by_one() {
+    // Every vertex lifted: all 10,368 triangles deform on every frame.
+    let lifted: Vec<u32> = (0..73 * 73).collect();
+    let triangles = 2 * 72 * 72;
+    let mut r = Renderer::new(morph_grid_scene(72, &lifted), settings(BvhPolicy::Rebuild));
+    // The grid's camera has yfov 0.8; frames are 48 pixels high; the checker is 64x64.
+    let footprint = PixelFootprint::new(0.8, 48);
+    for frame in [0, 3, 9] {
+        let update = r.prepare(frame, frame as f32 / FPS).unwrap().update;
+        assert_eq!(update.lod_recomputed, triangles, "frame {frame}");
+        let t = r.triangles();
+        for slot in 0..t.len() {
+            let expected = log2_pb(t.positions[slot], t.uvs[slot], (64, 64), footprint);
+            assert!(
+                t.log2_pb[slot].to_bits() == expected.to_bits(),
+                "frame {frame}, slot {slot}: updated {} vs one by one {expected}",
+                t.log2_pb[slot]
+            );
+        }
+    }
+}
+
 #[test]
 fn uniform_scale_shifts_log2_pb_by_log2_s() {
     let (scene, [_, grow, _]) = dynamic_scene();

@@ -11,6 +11,7 @@
 //! check it against a full recompute).
 
 use glam::{Mat4, Vec3};
+use rayon::prelude::*;
 
 use super::{InstanceState, Motion, Renderer, UpdateStats};
 use crate::anim::NodeShape;
@@ -18,38 +19,90 @@ use crate::geometry::{Placement, SceneGeometry};
 use crate::lod::{PixelFootprint, log2_pb, shift_log2_pb};
 use crate::scene::SceneDesc;
 
+/// Below this many triangles the `log2 P_b` update stays on the calling thread: rayon's
+/// split and join cost more than the work (a triangle's constant takes tens of ns).
+const PARALLEL_MIN_TRIANGLES: usize = 8192;
+
 impl Renderer {
     /// `log2 P_b` for the dirty triangles: recomputed where deformed, shifted where scaled,
     /// kept where rigid.
     pub(super) fn update_dirty_log2_pb(&mut self, stats: &mut UpdateStats) {
         let states = self.instances.take().unwrap_or_default();
-        for k in 0..self.dirty.len() {
-            let (slot, motion) = (self.dirty.slots[k], self.dirty.motions[k]);
-            if motion == Motion::Rigid {
-                continue;
-            }
-            if self.set_log2_pb(slot, &states) {
-                match motion {
-                    Motion::Deformed => stats.lod_recomputed += 1,
-                    _ => stats.lod_shifted += 1,
-                }
+        let mut values = std::mem::take(&mut self.log2_pb_values);
+        let (slots, motions) = (&self.dirty.slots, &self.dirty.motions);
+        self.log2_pb_values_into(
+            slots.len(),
+            |k| (motions[k] != Motion::Rigid).then_some(slots[k]),
+            &states,
+            &mut values,
+        );
+        for (k, value) in values.iter().enumerate() {
+            let Some(value) = *value else { continue };
+            self.triangles.log2_pb[self.dirty.slots[k] as usize] = value;
+            match self.dirty.motions[k] {
+                Motion::Deformed => stats.lod_recomputed += 1,
+                _ => stats.lod_shifted += 1,
             }
         }
+        self.log2_pb_values = values;
         self.instances = Some(states);
     }
 
-    /// Sets one triangle's `log2 P_b` by the rule for its instance's shape; false when
+    /// `log2 P_b` of every triangle (the first frame); returns how many are textured.
+    pub(super) fn recompute_all_log2_pb(&mut self, states: &[InstanceState]) -> usize {
+        let mut values = std::mem::take(&mut self.log2_pb_values);
+        self.log2_pb_values_into(
+            self.triangles.len(),
+            |k| Some(k as u32),
+            states,
+            &mut values,
+        );
+        let mut textured = 0;
+        for (slot, value) in values.iter().enumerate() {
+            if let Some(value) = *value {
+                self.triangles.log2_pb[slot] = value;
+                textured += 1;
+            }
+        }
+        self.log2_pb_values = values;
+        textured
+    }
+
+    /// Fills `values[k]` with the new `log2 P_b` of slot `slot_at(k)` for `k` in
+    /// `0..count` (`None` where `slot_at` skips it or the triangle is untextured). Each
+    /// value is a pure function of its own triangle, so the work splits across rayon's
+    /// threads when there is enough of it, with results bit-identical to one thread's.
+    fn log2_pb_values_into(
+        &self,
+        count: usize,
+        slot_at: impl Fn(usize) -> Option<u32> + Sync,
+        states: &[InstanceState],
+        values: &mut Vec<Option<f32>>,
+    ) {
+        let value = |k: usize| slot_at(k).and_then(|slot| self.log2_pb_of(slot, states));
+        if count >= PARALLEL_MIN_TRIANGLES {
+            (0..count)
+                .into_par_iter()
+                .map(value)
+                .collect_into_vec(values);
+        } else {
+            values.clear();
+            values.extend((0..count).map(value));
+        }
+    }
+
+    /// One triangle's `log2 P_b` by the rule for its instance's shape; `None` when
     /// untextured. The value depends only on the shape key and the vertices, never on the
     /// frames before: this is what keeps a sequential run equal to a fresh frame.
-    pub(super) fn set_log2_pb(&mut self, slot: u32, states: &[InstanceState]) -> bool {
+    fn log2_pb_of(&self, slot: u32, states: &[InstanceState]) -> Option<f32> {
         let s = slot as usize;
         let source = self.triangles.source[s] as usize;
         let object = self.object_log2_pb[source];
         if object.is_nan() {
-            return false;
+            return None;
         }
         let instance = self.geometry.triangle_instance[source] as usize;
-        self.triangles.log2_pb[s] = match states[instance].shape {
+        Some(match states[instance].shape {
             // Similarity: the object-space constant plus log2 s.
             Some(NodeShape {
                 scale,
@@ -67,8 +120,7 @@ impl Renderer {
                     self.footprint,
                 )
             }
-        };
-        true
+        })
     }
 
     /// `log2 P_b` of a source triangle's rest vertices under `diag(shape.diagonal())`.

@@ -102,6 +102,8 @@ pub struct Renderer {
     previous_pose: Pose,
     scratch: DeformScratch,
     dirty: DirtySet,
+    /// Scratch for the `log2 P_b` update: one value per updated slot, reused every frame.
+    log2_pb_values: Vec<Option<f32>>,
 }
 
 impl Renderer {
@@ -157,6 +159,7 @@ impl Renderer {
             previous_pose: Pose::default(),
             scratch,
             dirty: DirtySet::default(),
+            log2_pb_values: Vec::new(),
         }
     }
 

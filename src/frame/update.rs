@@ -41,11 +41,7 @@ impl Renderer {
         let t = Instant::now();
         self.dirty.reset(self.triangles.len());
         if self.settings.lod.needs_log2_pb() {
-            for slot in 0..self.triangles.len() as u32 {
-                if self.set_log2_pb(slot, &states) {
-                    stats.lod_recomputed += 1;
-                }
-            }
+            stats.lod_recomputed = self.recompute_all_log2_pb(&states);
         }
         stats.lod_update_ms = ms_since(t);
         self.instances = Some(states);
