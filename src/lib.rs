@@ -14,6 +14,7 @@ pub mod export;
 pub mod frame;
 pub mod geometry;
 pub mod lod;
+pub mod markup;
 pub mod metrics;
 pub mod output;
 pub mod pages;

@@ -3,7 +3,7 @@
 
 use std::path::PathBuf;
 
-use anyhow::{Context, Result, bail};
+use anyhow::{Result, bail};
 use clap::Args;
 
 use super::args::{
@@ -117,19 +117,12 @@ pub fn compare(args: &CompareArgs) -> Result<()> {
     let results = run_compare(|| load_scene(&path), &options, &log)?;
     progress.finish_and_clear();
     let report = &results.report;
-    let mut written = report::write_all(report, &out)?;
+    // compare.md carries both references: the probe's table, then the sub-pixel one.
+    let subpixel = subpixel_table::markdown(&results.subpixel);
+    let mut written = report::write_all(report, &subpixel, &out)?;
     written.push(subpixel_table::write_csv(&results.subpixel, &out)?);
-    // compare.md carries both references: the probe's table above, the sub-pixel one after.
-    let markdown = format!(
-        "{}\n{}",
-        report::markdown(report),
-        subpixel_table::markdown(&results.subpixel)
-    );
-    let md_path = out.join("compare.md");
-    crate::output::write_text_atomically(&md_path, &markdown)
-        .with_context(|| format!("cannot write {}", md_path.display()))?;
     written.push(crate::pages::write_compare_page(&out)?);
-    print!("{markdown}");
+    print!("{}", report::markdown_with(report, &subpixel));
     println!();
     for path in written {
         println!("wrote {}", path.display());

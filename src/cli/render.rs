@@ -92,20 +92,8 @@ pub fn render(args: &RenderArgs) -> Result<ExitCode> {
     let mut settings = render_settings(&args.sequence, &args.trace, args.lights.lights, args.spp)?;
     settings.lod = args.lod;
     settings.bvh = bvh_policy(args.bvh, args.rebuild_threshold)?;
-    let output = SequenceOutput {
-        dir: PathBuf::new(),
-        format: args.format,
-        shard: resolve_shard(args.shard.as_deref(), |name| std::env::var(name).ok())?,
-        resume: if args.resume {
-            Resume::SkipComplete
-        } else {
-            Resume::Restart
-        },
-        level_image: match args.view {
-            Some(View::Lod) => LevelImage::Make,
-            None => LevelImage::Skip,
-        },
-    };
+    // Argument errors (shard spec, thread count) before a possibly long scene load.
+    let shard = resolve_shard(args.shard.as_deref(), |name| std::env::var(name).ok())?;
     let pool = thread_pool(args.threads)?;
     let scene = open_scene(&args.sequence)?;
     settings.animation = scene.animation;
@@ -115,7 +103,17 @@ pub fn render(args: &RenderArgs) -> Result<ExitCode> {
                 .join(&scene.name)
                 .join(args.lod.to_string())
         }),
-        ..output
+        format: args.format,
+        shard,
+        resume: if args.resume {
+            Resume::SkipComplete
+        } else {
+            Resume::Restart
+        },
+        level_image: match args.view {
+            Some(View::Lod) => LevelImage::Make,
+            None => LevelImage::Skip,
+        },
     };
     let check = args.check.as_ref().map(|reference| Check {
         reference: reference.clone(),

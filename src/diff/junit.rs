@@ -4,6 +4,7 @@
 use std::fmt::Write as _;
 
 use super::DiffReport;
+use crate::markup::escape;
 use crate::metrics::format_psnr;
 
 /// The report as JUnit XML (testsuites > testsuite > testcase per frame).
@@ -67,29 +68,12 @@ pub fn junit_xml(report: &DiffReport) -> String {
     s
 }
 
-/// Escapes text for XML attributes and content.
-fn escape(s: &str) -> String {
-    let mut out = String::with_capacity(s.len());
-    for c in s.chars() {
-        match c {
-            '&' => out.push_str("&amp;"),
-            '<' => out.push_str("&lt;"),
-            '>' => out.push_str("&gt;"),
-            '"' => out.push_str("&quot;"),
-            '\'' => out.push_str("&apos;"),
-            c if (c as u32) < 0x20 && c != '\n' && c != '\t' && c != '\r' => {}
-            c => out.push(c),
-        }
-    }
-    out
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
 
     #[test]
     fn escapes_markup_and_drops_control_characters() {
-        assert_eq!(escape("a<b>&\"c'\u{1}"), "a&lt;b&gt;&amp;&quot;c&apos;");
+        assert_eq!(escape("a<b>&\"c'\u{1}"), "a&lt;b&gt;&amp;&quot;c&#39;");
     }
 }

@@ -110,10 +110,10 @@ pub fn render_sequence(
         progress.inc(1);
         records.push(record);
         if let Some(check) = check {
-            let judged = check_frame(frame, &path, out.format, check)?;
-            progress.suspend(|| println!("{}", judged.1));
-            let stop = !judged.0.passed && check.fail_fast;
-            checked.push(judged.0);
+            let (judged, verdict_line) = check_frame(frame, &path, out.format, check)?;
+            progress.suspend(|| println!("{verdict_line}"));
+            let stop = !judged.passed && check.fail_fast;
+            checked.push(judged);
             if stop {
                 progress.suspend(|| println!("--fail-fast: stopping at frame {frame}"));
                 break;

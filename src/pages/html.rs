@@ -16,21 +16,7 @@ use super::PageError;
 const PAGE_CSS: &str = include_str!("assets/page.css");
 const COMMON_JS: &str = include_str!("assets/common.js");
 
-/// Escapes text for HTML element content and double-quoted attributes.
-pub fn escape(text: &str) -> String {
-    let mut out = String::with_capacity(text.len());
-    for c in text.chars() {
-        match c {
-            '&' => out.push_str("&amp;"),
-            '<' => out.push_str("&lt;"),
-            '>' => out.push_str("&gt;"),
-            '"' => out.push_str("&quot;"),
-            '\'' => out.push_str("&#39;"),
-            c => out.push(c),
-        }
-    }
-    out
-}
+pub use crate::markup::escape;
 
 /// A complete HTML document: the shared style and script, then `body`, then the page's own
 /// script (which runs after the body is parsed).

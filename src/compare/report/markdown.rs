@@ -12,6 +12,16 @@ fn md_cell(text: &str) -> String {
 
 /// `compare.md`: settings, method table, how to read it, Table 1 (when measured) and the
 /// MIP level shares.
+/// [`markdown`] followed by `appendix` (nothing added when it is empty).
+pub fn markdown_with(report: &CompareReport, appendix: &str) -> String {
+    let md = markdown(report);
+    if appendix.is_empty() {
+        md
+    } else {
+        format!("{md}\n{appendix}")
+    }
+}
+
 pub fn markdown(report: &CompareReport) -> String {
     let mut lines = vec![
         format!("# LOD methods compared on {}", report.scene),

@@ -44,7 +44,7 @@ use std::path::{Path, PathBuf};
 use super::CompareReport;
 use crate::output::write_text_atomically;
 
-pub use markdown::markdown;
+pub use markdown::{markdown, markdown_with};
 pub use plots::write_plots;
 pub use table::{csv, frames_csv};
 
@@ -92,15 +92,20 @@ pub(super) fn readable(v: f64, decimals: usize) -> String {
     }
 }
 
-/// Writes `compare.csv`, `compare_frames.csv`, `compare.md` and the three plots into `dir`
+/// Writes `compare.csv`, `compare_frames.csv`, `compare.md` (the report's Markdown, then
+/// `md_appendix`, e.g. another reference's section) and the three plots into `dir`
 /// (created if needed); returns the six paths in that order. A report without methods
 /// still gets all six files (see the module comment).
-pub fn write_all(report: &CompareReport, dir: &Path) -> Result<Vec<PathBuf>, CompareReportError> {
+pub fn write_all(
+    report: &CompareReport,
+    md_appendix: &str,
+    dir: &Path,
+) -> Result<Vec<PathBuf>, CompareReportError> {
     create_dir(dir)?;
     let texts = [
         ("compare.csv", csv(report)),
         ("compare_frames.csv", frames_csv(report)),
-        ("compare.md", markdown(report)),
+        ("compare.md", markdown_with(report, md_appendix)),
     ];
     let mut written = Vec::with_capacity(texts.len() + plots::PLOTS.len());
     for (name, text) in texts {
@@ -145,7 +150,7 @@ mod tests {
     fn write_all_writes_six_files_and_svgs_name_every_method() {
         let dir = tempfile::tempdir().unwrap();
         let out = dir.path().join("compare");
-        let written = write_all(&sample_report(), &out).unwrap();
+        let written = write_all(&sample_report(), "", &out).unwrap();
         let names: Vec<_> = written
             .iter()
             .map(|p| p.file_name().unwrap().to_str().unwrap())
@@ -185,7 +190,7 @@ mod tests {
         report.table1.clear();
         report.frames.clear();
         let dir = tempfile::tempdir().unwrap();
-        let written = write_all(&report, dir.path()).unwrap();
+        let written = write_all(&report, "", dir.path()).unwrap();
         assert_eq!(written.len(), 6);
         assert_eq!(
             std::fs::read_to_string(&written[0]).unwrap(),
