@@ -1,9 +1,11 @@
-//! Acceleration structure: an obvhs `Bvh2` over the frame's triangles, closest-hit and
-//! shadow traversal.
+//! Acceleration structure: an obvhs `Bvh2` over the frame's triangles, built and refitted,
+//! and the 4-wide tree collapsed from it that rays traverse ([`wide`]).
 //!
 //! Built without spatial splits so it can be refitted later. After a build the triangle
 //! arrays are permuted into BVH order (`FrameTriangles::permute`), so a leaf's primitive
-//! range indexes the triangle arrays directly: no indirection on the hot path.
+//! range indexes the triangle arrays directly: no indirection on the hot path. The hit test
+//! reads each triangle as a vertex and two edges ([`TriangleEdges`], kept in slot order and
+//! refreshed with the boxes), the form Möller-Trumbore uses, so no edge is recomputed per ray.
 //! Leaf boxes are padded (see [`padded_box`]) because a flat triangle's box has zero
 //! thickness and an axis-aligned ray can slip through it by rounding.
 
@@ -14,15 +16,23 @@ use obvhs::{
     BvhBuildParams,
     aabb::Aabb,
     bvh2::{Bvh2, builder::build_bvh2, node::Bvh2Node},
-    fast_stack,
-    ray::{Ray, RayHit},
 };
+use rayon::prelude::*;
 
 use crate::geometry::FrameTriangles;
 
 mod policy;
+mod wide;
 
 pub use policy::{BvhPolicy, TreeStep};
+use wide::{RayBoxes, WideBvh};
+
+/// A triangle as the hit test reads it: vertex 0 and the edges to vertices 1 and 2.
+pub type TriangleEdges = [Vec3A; 3];
+
+/// Past this many triangles the edge and leaf-box refresh of a full refit runs on rayon's
+/// threads (below it the fork costs more than the work).
+const PARALLEL_REFIT_MIN: usize = 16_384;
 
 /// The closest intersection along a ray.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -38,6 +48,10 @@ pub struct Hit {
 #[derive(Default)]
 pub struct Accel {
     bvh: Bvh2,
+    /// The tree rays walk: the binary tree's boxes, four per node.
+    wide: WideBvh,
+    /// Per slot, the triangle as vertex 0 and two edges.
+    edges: Vec<TriangleEdges>,
     /// For each triangle slot, the leaf node that holds it.
     leaf_of_slot: Vec<u32>,
     /// For each node, its parent (the root's is itself).
@@ -92,9 +106,11 @@ impl Accel {
         );
         triangles.permute(&bvh.primitive_indices);
         let mut accel = Accel {
+            wide: WideBvh::collapse(&bvh),
             bvh,
             ..Default::default()
         };
+        accel.edges = triangles.positions.iter().map(triangle_edges).collect();
         accel.index_tree(triangles.len());
         accel.build_cost = accel.sah_cost();
         Ok(accel)
@@ -170,21 +186,25 @@ impl Accel {
         }
     }
 
-    fn leaf_box(&self, triangles: &FrameTriangles, leaf: u32) -> Aabb {
-        let node = &self.bvh.nodes[leaf as usize];
-        let mut aabb = Aabb::empty();
-        for slot in node.first_index..node.first_index + node.prim_count {
-            aabb = aabb.union(&padded_box(&triangles.positions[slot as usize]));
-        }
-        aabb
-    }
-
     fn refit_full(&mut self, triangles: &FrameTriangles) {
-        for id in 0..self.bvh.nodes.len() {
-            if self.bvh.nodes[id].is_leaf() {
-                let aabb = self.leaf_box(triangles, id as u32);
-                self.bvh.nodes[id].set_aabb(aabb);
+        let positions = &triangles.positions;
+        let parallel = positions.len() >= PARALLEL_REFIT_MIN;
+        let leaf_box = |node: &mut Bvh2Node| {
+            if node.is_leaf() {
+                node.set_aabb(leaf_box(positions, node));
             }
+        };
+        if parallel {
+            self.edges
+                .par_iter_mut()
+                .zip(positions.par_iter())
+                .for_each(|(e, p)| *e = triangle_edges(p));
+            self.bvh.nodes.par_iter_mut().for_each(leaf_box);
+        } else {
+            for (e, p) in self.edges.iter_mut().zip(positions) {
+                *e = triangle_edges(p);
+            }
+            self.bvh.nodes.iter_mut().for_each(leaf_box);
         }
         for &id in &self.refit_order {
             let first = self.bvh.nodes[id as usize].first_index as usize;
@@ -193,15 +213,18 @@ impl Accel {
                 .union(self.bvh.nodes[first + 1].aabb());
             self.bvh.nodes[id as usize].set_aabb(aabb);
         }
+        self.wide.refresh_all(&self.bvh);
     }
 
     /// Updates each moved triangle's leaf, then its ancestors up to the first one whose box
     /// comes out unchanged: that ancestor's own ancestors cannot change because of it.
     fn refit_partial(&mut self, triangles: &FrameTriangles, moved_slots: &[u32]) {
         for &slot in moved_slots {
+            self.edges[slot as usize] = triangle_edges(&triangles.positions[slot as usize]);
             let leaf = self.leaf_of_slot[slot as usize];
-            let aabb = self.leaf_box(triangles, leaf);
+            let aabb = leaf_box(&triangles.positions, &self.bvh.nodes[leaf as usize]);
             self.bvh.nodes[leaf as usize].set_aabb(aabb);
+            self.wide.refresh_lane(leaf, &aabb);
             let mut id = leaf;
             while id != 0 {
                 id = self.parent[id as usize];
@@ -213,6 +236,7 @@ impl Accel {
                     break;
                 }
                 self.bvh.nodes[id as usize].set_aabb(aabb);
+                self.wide.refresh_lane(id, &aabb);
             }
         }
     }
@@ -228,16 +252,13 @@ impl Accel {
         direction: Vec3A,
         t_max: f32,
     ) -> Option<Hit> {
-        let ray = Ray::new(origin, direction, 0.0, t_max);
         let mut best: Option<Hit> = None;
         let mut best_source = u32::MAX;
-        let mut test_leaf = |node: &Bvh2Node, ray: &mut Ray, _: &mut RayHit| {
-            for slot in node.first_index..node.first_index + node.prim_count {
-                let Some((t, bary)) = intersect(
-                    &triangles.positions[slot as usize],
-                    ray.origin,
-                    ray.direction,
-                ) else {
+        let ray = RayBoxes::new(origin, direction);
+        self.wide.traverse(&ray, t_max, |first, count, limit| {
+            for slot in first..first + count {
+                let Some((t, bary)) = intersect(&self.edges[slot as usize], origin, direction)
+                else {
                     continue;
                 };
                 if !(t >= 0.0 && t < t_max) {
@@ -256,14 +277,10 @@ impl Accel {
                     });
                     best_source = source;
                     // Keep visiting boxes that start exactly at `t`, where a tie may hide.
-                    ray.tmax = t.next_up();
+                    *limit = t.next_up();
                 }
             }
             true
-        };
-        fast_stack!(u32, (96, 192), self.bvh.max_depth, stack, {
-            self.bvh
-                .ray_traverse_dynamic(&mut stack, ray, &mut RayHit::none(), &mut test_leaf)
         });
         best
     }
@@ -274,36 +291,25 @@ impl Accel {
     #[inline]
     pub fn visit_hits(
         &self,
-        triangles: &FrameTriangles,
+        _triangles: &FrameTriangles,
         origin: Vec3A,
         direction: Vec3A,
         t_max: f32,
         mut visit: impl FnMut(u32, f32) -> bool,
     ) -> bool {
-        let ray = Ray::new(origin, direction, 0.0, t_max);
-        let mut completed = true;
-        let mut test_leaf = |node: &Bvh2Node, ray: &mut Ray, _: &mut RayHit| {
-            for slot in node.first_index..node.first_index + node.prim_count {
-                let hit = intersect(
-                    &triangles.positions[slot as usize],
-                    ray.origin,
-                    ray.direction,
-                );
-                let Some((t, _)) = hit.filter(|(t, _)| *t >= ray.tmin && *t < ray.tmax) else {
+        let ray = RayBoxes::new(origin, direction);
+        self.wide.traverse(&ray, t_max, |first, count, _| {
+            for slot in first..first + count {
+                let hit = intersect(&self.edges[slot as usize], origin, direction);
+                let Some((t, _)) = hit.filter(|(t, _)| *t >= 0.0 && *t < t_max) else {
                     continue;
                 };
                 if !visit(slot, t) {
-                    completed = false;
                     return false;
                 }
             }
             true
-        };
-        fast_stack!(u32, (96, 192), self.bvh.max_depth, stack, {
-            self.bvh
-                .ray_traverse_dynamic(&mut stack, ray, &mut RayHit::none(), &mut test_leaf)
-        });
-        completed
+        })
     }
 }
 
@@ -329,19 +335,34 @@ pub fn padded_box(tri: &[Vec3A; 3]) -> Aabb {
     Aabb::new(min - pad, max + pad)
 }
 
-/// Möller-Trumbore ray/triangle intersection, both faces. Returns `t` and the barycentric
-/// weights of vertices 1 and 2.
+/// The union of the padded boxes of a leaf's triangles.
+fn leaf_box(positions: &[[Vec3A; 3]], node: &Bvh2Node) -> Aabb {
+    let mut aabb = Aabb::empty();
+    for slot in node.first_index..node.first_index + node.prim_count {
+        aabb = aabb.union(&padded_box(&positions[slot as usize]));
+    }
+    aabb
+}
+
+/// Vertex 0 and the edges to vertices 1 and 2, computed as the hit test always did (`v1 -
+/// v0`, `v2 - v0`), so precomputing them changes no bit of any hit.
+#[inline]
+pub fn triangle_edges(tri: &[Vec3A; 3]) -> TriangleEdges {
+    [tri[0], tri[1] - tri[0], tri[2] - tri[0]]
+}
+
+/// Möller-Trumbore ray/triangle intersection, both faces, on a triangle given as vertex 0
+/// and two edges. Returns `t` and the barycentric weights of vertices 1 and 2.
 #[inline(always)]
-pub fn intersect(tri: &[Vec3A; 3], origin: Vec3A, direction: Vec3A) -> Option<(f32, Vec2)> {
-    let e1 = tri[1] - tri[0];
-    let e2 = tri[2] - tri[0];
+pub fn intersect(tri: &TriangleEdges, origin: Vec3A, direction: Vec3A) -> Option<(f32, Vec2)> {
+    let [v0, e1, e2] = *tri;
     let pvec = direction.cross(e2);
     let det = e1.dot(pvec);
     if det.abs() < f32::MIN_POSITIVE || !det.is_finite() {
         return None;
     }
     let inv_det = 1.0 / det;
-    let tvec = origin - tri[0];
+    let tvec = origin - v0;
     let u = tvec.dot(pvec) * inv_det;
     if !(0.0..=1.0).contains(&u) {
         return None;
@@ -449,5 +470,86 @@ mod tests {
                 .closest_hit(&tris, Vec3A::ZERO, Vec3A::X, f32::INFINITY)
                 .is_none()
         );
+    }
+
+    /// A small deterministic generator (xorshift) for the random soups below.
+    struct Rng(u64);
+    impl Rng {
+        fn next(&mut self) -> f32 {
+            self.0 ^= self.0 << 13;
+            self.0 ^= self.0 >> 7;
+            self.0 ^= self.0 << 17;
+            (self.0 >> 40) as f32 / (1u64 << 24) as f32
+        }
+        fn point(&mut self, scale: f32) -> Vec3A {
+            Vec3A::new(self.next(), self.next(), self.next()) * scale - Vec3A::splat(scale / 2.0)
+        }
+    }
+
+    /// Closest hit by testing every triangle (same test, same tie rule).
+    fn brute_force(tris: &FrameTriangles, origin: Vec3A, direction: Vec3A) -> Option<(u32, f32)> {
+        let mut best: Option<(u32, f32)> = None;
+        for (slot, p) in tris.positions.iter().enumerate() {
+            let Some((t, _)) = intersect(&triangle_edges(p), origin, direction) else {
+                continue;
+            };
+            let source = tris.source[slot];
+            if t >= 0.0 && best.is_none_or(|(s, b)| t < b || (t == b && source < s)) {
+                best = Some((source, t));
+            }
+        }
+        best
+    }
+
+    fn random_soup(rng: &mut Rng, n: usize) -> FrameTriangles {
+        let tris: Vec<[Vec3A; 3]> = (0..n)
+            .map(|_| {
+                let c = rng.point(20.0);
+                [c + rng.point(2.0), c + rng.point(2.0), c + rng.point(2.0)]
+            })
+            .collect();
+        soup(&tris)
+    }
+
+    fn assert_matches_brute_force(accel: &Accel, tris: &FrameTriangles, rng: &mut Rng) {
+        let mut hits = 0;
+        for _ in 0..2000 {
+            let origin = rng.point(30.0);
+            let direction = (rng.point(2.0) - origin * 0.05).normalize();
+            let wide = accel
+                .closest_hit(tris, origin, direction, f32::INFINITY)
+                .map(|h| (tris.source[h.triangle as usize], h.t));
+            assert_eq!(wide, brute_force(tris, origin, direction));
+            hits += wide.is_some() as usize;
+            // The shadow walk sees a hit exactly when the closest-hit walk does.
+            let blocked = !accel.visit_hits(tris, origin, direction, f32::INFINITY, |_, _| false);
+            assert_eq!(blocked, wide.is_some());
+        }
+        assert!(
+            hits > 200,
+            "too few rays hit ({hits}): the test would prove little"
+        );
+    }
+
+    #[test]
+    fn wide_walk_finds_what_testing_every_triangle_finds_before_and_after_refits() {
+        let mut rng = Rng(0x9e3779b97f4a7c15);
+        let mut tris = random_soup(&mut rng, 3000);
+        let mut accel = Accel::build(&mut tris).unwrap();
+        assert_matches_brute_force(&accel, &tris, &mut rng);
+        // A few triangles jump (partial refit), then all of them move (full refit).
+        let moved: Vec<u32> = (0..3000).step_by(97).collect();
+        for &slot in &moved {
+            let shift = rng.point(10.0);
+            tris.positions[slot as usize] = tris.positions[slot as usize].map(|v| v + shift);
+        }
+        assert_eq!(accel.refit(&tris, &moved), RefitKind::Partial);
+        assert_matches_brute_force(&accel, &tris, &mut rng);
+        let all: Vec<u32> = (0..3000).collect();
+        for p in &mut tris.positions {
+            *p = p.map(|v| v * 1.5 + Vec3A::new(1.0, 0.0, 0.0));
+        }
+        assert_eq!(accel.refit(&tris, &all), RefitKind::Full);
+        assert_matches_brute_force(&accel, &tris, &mut rng);
     }
 }

@@ -1,0 +1,476 @@
+//! The 4-wide BVH that rays traverse, collapsed from the binary tree that is built and
+//! refitted (Embree's BVH4 layout, read in `embree/kernels/bvh/bvh_node_aabb.h`).
+//!
+//! Why a second tree: a binary tree costs one box test and one stack push or pop per level;
+//! four child boxes side by side in structure-of-arrays form are tested with one SIMD slab
+//! test (four lanes of SSE2, the x86-64 baseline, through glam's `Vec4`), which halves the
+//! levels and the memory traffic per ray. The binary tree stays the one that is built,
+//! refitted and measured (SAH), because obvhs builds and refits it well; the wide tree only
+//! copies its boxes. Each lane remembers which binary node it mirrors, so a refit refreshes
+//! exactly the lanes whose binary node changed ([`WideBvh::refresh_lane`]) and topology never
+//! has to be rebuilt between rebuilds of the binary tree.
+//!
+//! Traversal is near-first: the children a ray enters are sorted by entry distance, the
+//! nearest is visited next, the others go on a stack with their entry distance, and an
+//! entry whose distance is already beyond the closest hit so far is dropped when popped.
+//! The traversal is generic over what a leaf does (closest hit, any hit, or a top-level
+//! tree entering instances), so every kind of ray shares this one loop.
+
+use std::mem::MaybeUninit;
+
+use glam::{Vec3A, Vec4};
+use obvhs::{aabb::Aabb, bvh2::Bvh2};
+
+/// Children per node.
+pub const WIDTH: usize = 4;
+
+/// Marks a child reference as a leaf (the low bits are its first triangle slot).
+const LEAF: u32 = 1 << 31;
+/// An unused lane (its box is inverted, so no ray enters it).
+const EMPTY: u32 = u32::MAX;
+
+/// Far distances are widened by this factor so rounding in the slab test never drops a box
+/// a ray grazes (Ize 2013, "Robust BVH ray traversal": 1 + 2 gamma(3), rounded up).
+const ROBUST_FAR: f32 = 1.0 + 4.0 * f32::EPSILON;
+
+/// A pending subtree: child reference, leaf count, entry distance.
+type StackEntry = (u32, u32, f32);
+
+/// Stack entries a traversal keeps on the machine stack; deeper trees use a heap stack.
+const INLINE_STACK: usize = 128;
+
+/// One node: four child boxes as structure of arrays (`lower[axis][lane]`), and what each
+/// child is. 128 bytes, two cache lines.
+#[derive(Clone, Copy, Debug)]
+#[repr(C, align(64))]
+pub struct WideNode {
+    lower: [[f32; WIDTH]; 3],
+    upper: [[f32; WIDTH]; 3],
+    /// Inner child: its node index. Leaf child: `LEAF | first slot`. Unused: `EMPTY`.
+    child: [u32; WIDTH],
+    /// Leaf child: its triangle count; 0 otherwise.
+    count: [u32; WIDTH],
+}
+
+impl WideNode {
+    const UNUSED: WideNode = WideNode {
+        lower: [[f32::INFINITY; WIDTH]; 3],
+        upper: [[f32::NEG_INFINITY; WIDTH]; 3],
+        child: [EMPTY; WIDTH],
+        count: [0; WIDTH],
+    };
+
+    fn set_box(&mut self, lane: usize, aabb: &Aabb) {
+        for axis in 0..3 {
+            self.lower[axis][lane] = aabb.min[axis];
+            self.upper[axis][lane] = aabb.max[axis];
+        }
+    }
+}
+
+/// A reference to a subtree: an inner node or a leaf's slot range.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum ChildRef {
+    Node(u32),
+    Leaf { first: u32, count: u32 },
+}
+
+impl ChildRef {
+    #[inline(always)]
+    fn decode(child: u32, count: u32) -> ChildRef {
+        if child & LEAF != 0 {
+            ChildRef::Leaf {
+                first: child & !LEAF,
+                count,
+            }
+        } else {
+            ChildRef::Node(child)
+        }
+    }
+}
+
+/// The wide tree plus, per lane, the binary node it mirrors (for refits).
+#[derive(Default, Clone)]
+pub struct WideBvh {
+    nodes: Vec<WideNode>,
+    /// The root when the whole tree is one leaf (a scene of at most one leaf's triangles).
+    root_leaf: Option<(u32, u32)>,
+    /// For each binary node mirrored by a lane, `node * WIDTH + lane`; `EMPTY` otherwise.
+    lane_of_binary: Vec<u32>,
+    /// Longest root-to-leaf path in wide nodes (sizes the traversal stack).
+    depth: usize,
+}
+
+/// The ray constants of the slab test, splatted across the four lanes once per ray.
+#[derive(Clone, Copy)]
+pub struct RayBoxes {
+    origin: [Vec4; 3],
+    inverse: [Vec4; 3],
+    /// Per axis, whether the ray runs toward lower coordinates (the upper plane is hit first).
+    negative: [bool; 3],
+}
+
+impl RayBoxes {
+    #[inline(always)]
+    pub fn new(origin: Vec3A, direction: Vec3A) -> RayBoxes {
+        let inverse = direction.to_array().map(safe_inverse);
+        RayBoxes {
+            origin: origin.to_array().map(Vec4::splat),
+            inverse: inverse.map(Vec4::splat),
+            negative: inverse.map(|v| v < 0.0),
+        }
+    }
+
+    /// Entry distances of the four children and the mask of those the ray enters before
+    /// `t_max` (bit `lane`).
+    #[inline(always)]
+    fn enter(&self, node: &WideNode, t_max: f32) -> (Vec4, u32) {
+        let mut near = Vec4::ZERO;
+        let mut far = Vec4::splat(f32::INFINITY);
+        for axis in 0..3 {
+            let (front, back) = if self.negative[axis] {
+                (&node.upper[axis], &node.lower[axis])
+            } else {
+                (&node.lower[axis], &node.upper[axis])
+            };
+            let t_front = (Vec4::from_array(*front) - self.origin[axis]) * self.inverse[axis];
+            let t_back = (Vec4::from_array(*back) - self.origin[axis]) * self.inverse[axis];
+            near = near.max(t_front);
+            far = far.min(t_back);
+        }
+        let far = (far * ROBUST_FAR).min(Vec4::splat(t_max));
+        (near, near.cmple(far).bitmask())
+    }
+}
+
+/// `1 / x`, kept finite and signed for zero and tiny components so that slab distances are
+/// never NaN (`0 * inf`); 1e30 still puts an axis-parallel ray's far plane beyond any scene.
+#[inline(always)]
+fn safe_inverse(x: f32) -> f32 {
+    if x.abs() < 1e-30 {
+        1e30f32.copysign(x)
+    } else {
+        1.0 / x
+    }
+}
+
+impl WideBvh {
+    /// Collapses a binary tree: each wide node takes a binary inner node's two children and
+    /// keeps opening its largest inner child (by surface area) until it has four.
+    pub fn collapse(binary: &Bvh2) -> WideBvh {
+        let mut wide = WideBvh {
+            lane_of_binary: vec![EMPTY; binary.nodes.len()],
+            ..Default::default()
+        };
+        let Some(root) = binary.nodes.first() else {
+            return wide;
+        };
+        if root.is_leaf() {
+            wide.root_leaf = Some((root.first_index, root.prim_count));
+            return wide;
+        }
+        // (binary inner node, wide node it becomes, depth)
+        let mut pending = vec![(0u32, 0u32, 1usize)];
+        wide.nodes.push(WideNode::UNUSED);
+        while let Some((id, at, depth)) = pending.pop() {
+            wide.depth = wide.depth.max(depth);
+            let lanes = open_children(binary, id);
+            let mut node = WideNode::UNUSED;
+            for (lane, &child) in lanes.iter().enumerate() {
+                let b = &binary.nodes[child as usize];
+                node.set_box(lane, b.aabb());
+                wide.lane_of_binary[child as usize] = at * WIDTH as u32 + lane as u32;
+                if b.is_leaf() {
+                    node.child[lane] = LEAF | b.first_index;
+                    node.count[lane] = b.prim_count;
+                } else {
+                    let next = wide.nodes.len() as u32;
+                    wide.nodes.push(WideNode::UNUSED);
+                    node.child[lane] = next;
+                    pending.push((child, next, depth + 1));
+                }
+            }
+            wide.nodes[at as usize] = node;
+        }
+        wide
+    }
+
+    /// Copies binary node `id`'s box into the lane that mirrors it, if any.
+    #[inline]
+    pub fn refresh_lane(&mut self, id: u32, aabb: &Aabb) {
+        let lane = self.lane_of_binary[id as usize];
+        if lane != EMPTY {
+            let (node, lane) = (lane as usize / WIDTH, lane as usize % WIDTH);
+            self.nodes[node].set_box(lane, aabb);
+        }
+    }
+
+    /// Copies every mirrored box from `binary` (after a full refit).
+    pub fn refresh_all(&mut self, binary: &Bvh2) {
+        for (id, node) in binary.nodes.iter().enumerate() {
+            self.refresh_lane(id as u32, node.aabb());
+        }
+    }
+
+    /// Walks the tree near-first along a ray, calling `leaf(first, count, &mut t_max)` for
+    /// every leaf it enters before `t_max`. The leaf may shrink `t_max` (closest hit: later
+    /// boxes beyond it are skipped) or return false to stop (any hit). Returns false when a
+    /// leaf stopped the walk.
+    #[inline(always)]
+    pub fn traverse(
+        &self,
+        ray: &RayBoxes,
+        t_max: f32,
+        leaf: impl FnMut(u32, u32, &mut f32) -> bool,
+    ) -> bool {
+        if let Some((first, count)) = self.root_leaf {
+            let mut leaf = leaf;
+            let mut t = t_max;
+            return leaf(first, count, &mut t);
+        }
+        if self.nodes.is_empty() {
+            return true;
+        }
+        let needed = self.depth * (WIDTH - 1) + 1;
+        if needed <= INLINE_STACK {
+            // Left uninitialised: zeroing 1.5 KiB per ray showed as 7% of a primary-ray
+            // profile (memset), and `walk` only reads entries it wrote.
+            let mut stack = [const { MaybeUninit::uninit() }; INLINE_STACK];
+            self.walk(&mut stack, ray, t_max, leaf)
+        } else {
+            // Only trees deeper than ~42 wide levels (pathological inputs) pay this.
+            let mut stack = vec![MaybeUninit::uninit(); needed];
+            self.walk(&mut stack, ray, t_max, leaf)
+        }
+    }
+
+    /// The traversal loop. The stack holds at most `depth * (WIDTH - 1) + 1` entries: each
+    /// level pushes at most `WIDTH - 1` siblings.
+    #[inline(always)]
+    fn walk(
+        &self,
+        stack: &mut [MaybeUninit<StackEntry>],
+        ray: &RayBoxes,
+        mut t_max: f32,
+        mut leaf: impl FnMut(u32, u32, &mut f32) -> bool,
+    ) -> bool {
+        let mut top = 0usize;
+        let mut current = ChildRef::Node(0);
+        loop {
+            match current {
+                ChildRef::Node(index) => {
+                    let node = &self.nodes[index as usize];
+                    let (near, mask) = ray.enter(node, t_max);
+                    if mask != 0 {
+                        current = push_far_take_near(node, near, mask, stack, &mut top);
+                        continue;
+                    }
+                }
+                ChildRef::Leaf { first, count } => {
+                    if !leaf(first, count, &mut t_max) {
+                        return false;
+                    }
+                }
+            }
+            // Pop the nearest pending subtree that still starts before the closest hit.
+            loop {
+                if top == 0 {
+                    return true;
+                }
+                top -= 1;
+                // SAFETY: entries below `top` were all written by `push_far_take_near`.
+                let (child, count, near) = unsafe { stack[top].assume_init() };
+                if near <= t_max {
+                    current = ChildRef::decode(child, count);
+                    break;
+                }
+            }
+        }
+    }
+}
+
+/// Of the entered children (`mask`), returns the nearest and pushes the others so that the
+/// next nearest is popped first.
+#[inline(always)]
+fn push_far_take_near(
+    node: &WideNode,
+    near: Vec4,
+    mask: u32,
+    stack: &mut [MaybeUninit<StackEntry>],
+    top: &mut usize,
+) -> ChildRef {
+    let near = near.to_array();
+    if mask.count_ones() == 1 {
+        let lane = mask.trailing_zeros() as usize;
+        return ChildRef::decode(node.child[lane], node.count[lane]);
+    }
+    // Sort the (at most four) entered lanes by distance, farthest first.
+    let mut lanes = [0usize; WIDTH];
+    let mut n = 0;
+    let mut bits = mask;
+    while bits != 0 {
+        let lane = bits.trailing_zeros() as usize;
+        bits &= bits - 1;
+        let mut at = n;
+        while at > 0 && near[lanes[at - 1]] < near[lane] {
+            lanes[at] = lanes[at - 1];
+            at -= 1;
+        }
+        lanes[at] = lane;
+        n += 1;
+    }
+    for &lane in &lanes[..n - 1] {
+        stack[*top] = MaybeUninit::new((node.child[lane], node.count[lane], near[lane]));
+        *top += 1;
+    }
+    let lane = lanes[n - 1];
+    ChildRef::decode(node.child[lane], node.count[lane])
+}
+
+/// The up to four binary nodes a wide node over binary inner node `id` holds: start from
+/// its two children and replace the inner one with the largest surface area by its own two
+/// children until there are four or only leaves remain.
+fn open_children(binary: &Bvh2, id: u32) -> Vec<u32> {
+    let first = binary.nodes[id as usize].first_index;
+    let mut lanes = vec![first, first + 1];
+    while lanes.len() < WIDTH {
+        let largest = lanes
+            .iter()
+            .enumerate()
+            .filter(|(_, c)| !binary.nodes[**c as usize].is_leaf())
+            .max_by(|a, b| {
+                let area = |c: &u32| binary.nodes[*c as usize].aabb().half_area();
+                area(a.1).total_cmp(&area(b.1))
+            })
+            .map(|(i, _)| i);
+        let Some(i) = largest else { break };
+        let opened = binary.nodes[lanes[i] as usize].first_index;
+        lanes[i] = opened;
+        lanes.push(opened + 1);
+    }
+    lanes
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use obvhs::{BvhBuildParams, bvh2::builder::build_bvh2};
+    use std::time::Duration;
+
+    /// A row of unit boxes along x.
+    fn boxes(n: usize) -> Vec<Aabb> {
+        (0..n)
+            .map(|i| {
+                let x = i as f32 * 2.0;
+                Aabb::new(Vec3A::new(x, 0.0, 0.0), Vec3A::new(x + 1.0, 1.0, 1.0))
+            })
+            .collect()
+    }
+
+    fn build(n: usize) -> Bvh2 {
+        let mut params = BvhBuildParams::medium_build();
+        params.max_prims_per_leaf = 1;
+        build_bvh2(&boxes(n), params, &mut Duration::default())
+    }
+
+    /// Every leaf slot the walk reaches.
+    fn reached(wide: &WideBvh, origin: Vec3A, direction: Vec3A) -> Vec<u32> {
+        let mut out = Vec::new();
+        wide.traverse(
+            &RayBoxes::new(origin, direction),
+            f32::INFINITY,
+            |first, count, _| {
+                out.extend(first..first + count);
+                true
+            },
+        );
+        out.sort();
+        out
+    }
+
+    #[test]
+    fn every_binary_node_but_the_root_is_mirrored_once() {
+        let binary = build(100);
+        let wide = WideBvh::collapse(&binary);
+        let mirrored: Vec<u32> = wide
+            .lane_of_binary
+            .iter()
+            .copied()
+            .filter(|&l| l != EMPTY)
+            .collect();
+        let mut unique = mirrored.clone();
+        unique.sort();
+        unique.dedup();
+        assert_eq!(unique.len(), mirrored.len());
+        // Every leaf is a lane; the leaves reached by a ray along the row are all 100 boxes.
+        let leaves = binary.nodes.iter().filter(|n| n.is_leaf()).count();
+        assert_eq!(leaves, 100);
+        let all = reached(&wide, Vec3A::new(-5.0, 0.5, 0.5), Vec3A::X);
+        assert_eq!(all.len(), 100);
+        assert!(wide.nodes.len() < binary.nodes.len() / 2);
+    }
+
+    #[test]
+    fn rays_reach_exactly_the_boxes_they_cross() {
+        let binary = build(37);
+        let wide = WideBvh::collapse(&binary);
+        // Straight down through box 5 (x in [10, 11]) only; between boxes nothing.
+        let slots = reached(&wide, Vec3A::new(10.5, 5.0, 0.5), Vec3A::NEG_Y);
+        assert_eq!(slots.len(), 1);
+        let b = binary.primitive_indices[slots[0] as usize];
+        assert_eq!(b, 5);
+        assert!(reached(&wide, Vec3A::new(11.5, 5.0, 0.5), Vec3A::NEG_Y).is_empty());
+    }
+
+    #[test]
+    fn closest_first_walk_skips_boxes_beyond_the_limit() {
+        let binary = build(64);
+        let wide = WideBvh::collapse(&binary);
+        let ray = RayBoxes::new(Vec3A::new(-5.0, 0.5, 0.5), Vec3A::X);
+        // A leaf that sets the limit at its first box's entry: only boxes that start before
+        // it are visited afterwards, and the first box reached is the nearest one.
+        let mut visited = Vec::new();
+        wide.traverse(&ray, f32::INFINITY, |first, _, t_max| {
+            let b = binary.primitive_indices[first as usize];
+            visited.push(b);
+            *t_max = (*t_max).min(5.0 + b as f32 * 2.0 + 1.0);
+            true
+        });
+        assert_eq!(visited, vec![0]);
+    }
+
+    #[test]
+    fn refresh_moves_a_lane_with_its_binary_node() {
+        let mut binary = build(16);
+        let mut wide = WideBvh::collapse(&binary);
+        // Move every leaf of box 3 far up, refit the binary tree by hand, refresh the lanes.
+        let far = Aabb::new(Vec3A::new(6.0, 100.0, 0.0), Vec3A::new(7.0, 101.0, 1.0));
+        for id in 0..binary.nodes.len() {
+            let n = binary.nodes[id];
+            if n.is_leaf() && binary.primitive_indices[n.first_index as usize] == 3 {
+                binary.nodes[id].set_aabb(far);
+            }
+        }
+        binary.refit_all();
+        wide.refresh_all(&binary);
+        assert!(reached(&wide, Vec3A::new(6.5, 5.0, 0.5), Vec3A::NEG_Y).is_empty());
+        assert_eq!(
+            reached(&wide, Vec3A::new(6.5, 200.0, 0.5), Vec3A::NEG_Y).len(),
+            1
+        );
+    }
+
+    #[test]
+    fn axis_parallel_rays_never_see_nan() {
+        let wide = WideBvh::collapse(&build(8));
+        // The origin on a box plane along a zero direction component.
+        assert_eq!(
+            reached(&wide, Vec3A::new(0.0, 0.0, -3.0), Vec3A::Z).len(),
+            1
+        );
+        assert_eq!(
+            reached(&wide, Vec3A::new(0.0, 0.0, -3.0), -Vec3A::Z).len(),
+            0
+        );
+    }
+}
