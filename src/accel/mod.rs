@@ -4,8 +4,8 @@
 //! Built without spatial splits so it can be refitted later. After a build the triangle
 //! arrays are permuted into BVH order (`FrameTriangles::permute`), so a leaf's primitive
 //! range indexes the triangle arrays directly: no indirection on the hot path. The hit test
-//! reads each triangle as a vertex and two edges ([`TriangleEdges`], kept in slot order and
-//! refreshed with the boxes), the form Möller-Trumbore uses, so no edge is recomputed per ray.
+//! reads the triangles from their own copy laid out four to a pack in leaf order
+//! ([`triangles`], watertight), refreshed with the boxes.
 //! Leaf boxes are padded (see [`padded_box`]) because a flat triangle's box has zero
 //! thickness and an axis-aligned ray can slip through it by rounding.
 
@@ -22,13 +22,13 @@ use rayon::prelude::*;
 use crate::geometry::FrameTriangles;
 
 mod policy;
+mod triangles;
 mod wide;
 
 pub use policy::{BvhPolicy, TreeStep};
+pub use triangles::intersect;
+use triangles::{PackedTriangles, ShearedRay};
 use wide::{RayBoxes, WideBvh};
-
-/// A triangle as the hit test reads it: vertex 0 and the edges to vertices 1 and 2.
-pub type TriangleEdges = [Vec3A; 3];
 
 /// Past this many triangles the edge and leaf-box refresh of a full refit runs on rayon's
 /// threads (below it the fork costs more than the work).
@@ -50,8 +50,8 @@ pub struct Accel {
     bvh: Bvh2,
     /// The tree rays walk: the binary tree's boxes, four per node.
     wide: WideBvh,
-    /// Per slot, the triangle as vertex 0 and two edges.
-    edges: Vec<TriangleEdges>,
+    /// The triangles as the hit test reads them.
+    triangles: PackedTriangles,
     /// For each triangle slot, the leaf node that holds it.
     leaf_of_slot: Vec<u32>,
     /// For each node, its parent (the root's is itself).
@@ -105,12 +105,16 @@ impl Accel {
             &mut Duration::default(),
         );
         triangles.permute(&bvh.primitive_indices);
+        let mut packed = PackedTriangles::default();
+        let wide = WideBvh::collapse(&bvh, |first, count| {
+            packed.push_leaf(&triangles.positions, first, count)
+        });
         let mut accel = Accel {
-            wide: WideBvh::collapse(&bvh),
+            wide,
+            triangles: packed,
             bvh,
             ..Default::default()
         };
-        accel.edges = triangles.positions.iter().map(triangle_edges).collect();
         accel.index_tree(triangles.len());
         accel.build_cost = accel.sah_cost();
         Ok(accel)
@@ -194,16 +198,10 @@ impl Accel {
                 node.set_aabb(leaf_box(positions, node));
             }
         };
+        self.triangles.update_all(positions, parallel);
         if parallel {
-            self.edges
-                .par_iter_mut()
-                .zip(positions.par_iter())
-                .for_each(|(e, p)| *e = triangle_edges(p));
             self.bvh.nodes.par_iter_mut().for_each(leaf_box);
         } else {
-            for (e, p) in self.edges.iter_mut().zip(positions) {
-                *e = triangle_edges(p);
-            }
             self.bvh.nodes.iter_mut().for_each(leaf_box);
         }
         for &id in &self.refit_order {
@@ -220,7 +218,8 @@ impl Accel {
     /// comes out unchanged: that ancestor's own ancestors cannot change because of it.
     fn refit_partial(&mut self, triangles: &FrameTriangles, moved_slots: &[u32]) {
         for &slot in moved_slots {
-            self.edges[slot as usize] = triangle_edges(&triangles.positions[slot as usize]);
+            self.triangles
+                .update(slot, &triangles.positions[slot as usize]);
             let leaf = self.leaf_of_slot[slot as usize];
             let aabb = leaf_box(&triangles.positions, &self.bvh.nodes[leaf as usize]);
             self.bvh.nodes[leaf as usize].set_aabb(aabb);
@@ -255,15 +254,10 @@ impl Accel {
         let mut best: Option<Hit> = None;
         let mut best_source = u32::MAX;
         let ray = RayBoxes::new(origin, direction);
+        let sheared = ShearedRay::new(origin, direction);
         self.wide.traverse(&ray, t_max, |first, count, limit| {
-            for slot in first..first + count {
-                let Some((t, bary)) = intersect(&self.edges[slot as usize], origin, direction)
-                else {
-                    continue;
-                };
-                if !(t >= 0.0 && t < t_max) {
-                    continue;
-                }
+            let cut = *limit;
+            self.triangles.hits_in_leaf(&sheared, first, count, cut, |slot, t, bary| {
                 let source = triangles.source[slot as usize];
                 let better = match best {
                     None => true,
@@ -279,8 +273,8 @@ impl Accel {
                     // Keep visiting boxes that start exactly at `t`, where a tie may hide.
                     *limit = t.next_up();
                 }
-            }
-            true
+                true
+            })
         });
         best
     }
@@ -298,17 +292,10 @@ impl Accel {
         mut visit: impl FnMut(u32, f32) -> bool,
     ) -> bool {
         let ray = RayBoxes::new(origin, direction);
+        let sheared = ShearedRay::new(origin, direction);
         self.wide.traverse(&ray, t_max, |first, count, _| {
-            for slot in first..first + count {
-                let hit = intersect(&self.edges[slot as usize], origin, direction);
-                let Some((t, _)) = hit.filter(|(t, _)| *t >= 0.0 && *t < t_max) else {
-                    continue;
-                };
-                if !visit(slot, t) {
-                    return false;
-                }
-            }
-            true
+            self.triangles
+                .hits_in_leaf(&sheared, first, count, t_max, |slot, t, _| visit(slot, t))
         })
     }
 }
@@ -342,38 +329,6 @@ fn leaf_box(positions: &[[Vec3A; 3]], node: &Bvh2Node) -> Aabb {
         aabb = aabb.union(&padded_box(&positions[slot as usize]));
     }
     aabb
-}
-
-/// Vertex 0 and the edges to vertices 1 and 2, computed as the hit test always did (`v1 -
-/// v0`, `v2 - v0`), so precomputing them changes no bit of any hit.
-#[inline]
-pub fn triangle_edges(tri: &[Vec3A; 3]) -> TriangleEdges {
-    [tri[0], tri[1] - tri[0], tri[2] - tri[0]]
-}
-
-/// Möller-Trumbore ray/triangle intersection, both faces, on a triangle given as vertex 0
-/// and two edges. Returns `t` and the barycentric weights of vertices 1 and 2.
-#[inline(always)]
-pub fn intersect(tri: &TriangleEdges, origin: Vec3A, direction: Vec3A) -> Option<(f32, Vec2)> {
-    let [v0, e1, e2] = *tri;
-    let pvec = direction.cross(e2);
-    let det = e1.dot(pvec);
-    if det.abs() < f32::MIN_POSITIVE || !det.is_finite() {
-        return None;
-    }
-    let inv_det = 1.0 / det;
-    let tvec = origin - v0;
-    let u = tvec.dot(pvec) * inv_det;
-    if !(0.0..=1.0).contains(&u) {
-        return None;
-    }
-    let qvec = tvec.cross(e1);
-    let v = direction.dot(qvec) * inv_det;
-    if v < 0.0 || u + v > 1.0 {
-        return None;
-    }
-    let t = e2.dot(qvec) * inv_det;
-    t.is_finite().then_some((t, Vec2::new(u, v)))
 }
 
 #[cfg(test)]
@@ -490,7 +445,7 @@ mod tests {
     fn brute_force(tris: &FrameTriangles, origin: Vec3A, direction: Vec3A) -> Option<(u32, f32)> {
         let mut best: Option<(u32, f32)> = None;
         for (slot, p) in tris.positions.iter().enumerate() {
-            let Some((t, _)) = intersect(&triangle_edges(p), origin, direction) else {
+            let Some((t, _)) = intersect(p, origin, direction) else {
                 continue;
             };
             let source = tris.source[slot];
@@ -551,5 +506,56 @@ mod tests {
         }
         assert_eq!(accel.refit(&tris, &all), RefitKind::Full);
         assert_matches_brute_force(&accel, &tris, &mut rng);
+    }
+    #[test]
+    fn rays_through_shared_edges_and_vertices_of_a_mesh_never_slip_through() {
+        // A jittered 40 x 40 grid of quads (two triangles each) in a tilted plane; rays aimed
+        // exactly at its vertices and at points on its shared edges must all hit it.
+        let n = 40;
+        let mut rng = Rng(12345);
+        let mut grid = vec![Vec3A::ZERO; (n + 1) * (n + 1)];
+        for y in 0..=n {
+            for x in 0..=n {
+                let jitter = if x == 0 || y == 0 || x == n || y == n {
+                    Vec3A::ZERO
+                } else {
+                    Vec3A::new(rng.next() - 0.5, rng.next() - 0.5, 0.0) * 0.6
+                };
+                let p = Vec3A::new(x as f32, y as f32, 0.0) + jitter;
+                grid[y * (n + 1) + x] = Vec3A::new(p.x, p.y, 0.37 * p.x - 0.21 * p.y);
+            }
+        }
+        let at = |x: usize, y: usize| grid[y * (n + 1) + x];
+        let mut quads = Vec::new();
+        for y in 0..n {
+            for x in 0..n {
+                quads.push([at(x, y), at(x + 1, y), at(x + 1, y + 1)]);
+                quads.push([at(x, y), at(x + 1, y + 1), at(x, y + 1)]);
+            }
+        }
+        let mut tris = soup(&quads);
+        let accel = Accel::build(&mut tris).unwrap();
+        let eye = Vec3A::new(17.3, 21.1, 60.0);
+        let mut misses = 0;
+        let mut rays = 0;
+        for y in 1..n {
+            for x in 1..n {
+                // The vertex, the midpoints of its right and upper edges and of the diagonal.
+                let targets = [
+                    at(x, y),
+                    (at(x, y) + at(x + 1, y)) * 0.5,
+                    (at(x, y) + at(x, y + 1)) * 0.5,
+                    (at(x, y) + at(x + 1, y + 1)) * 0.5,
+                ];
+                for target in targets {
+                    rays += 1;
+                    let direction = (target - eye).normalize();
+                    misses += accel
+                        .closest_hit(&tris, eye, direction, f32::INFINITY)
+                        .is_none() as usize;
+                }
+            }
+        }
+        assert_eq!(misses, 0, "{misses} of {rays} rays slipped through the mesh");
     }
 }

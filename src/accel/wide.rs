@@ -39,13 +39,12 @@ type StackEntry = (u32, u32, f32);
 /// Stack entries a traversal keeps on the machine stack; deeper trees use a heap stack.
 const INLINE_STACK: usize = 128;
 
-/// One node: four child boxes as structure of arrays (`lower[axis][lane]`), and what each
-/// child is. 128 bytes, two cache lines.
+/// One node: four child boxes as structure of arrays (`bounds[plane][lane]`, planes lower
+/// x, y, z then upper x, y, z), and what each child is. 128 bytes, two cache lines.
 #[derive(Clone, Copy, Debug)]
 #[repr(C, align(64))]
 pub struct WideNode {
-    lower: [[f32; WIDTH]; 3],
-    upper: [[f32; WIDTH]; 3],
+    bounds: [[f32; WIDTH]; 6],
     /// Inner child: its node index. Leaf child: `LEAF | first slot`. Unused: `EMPTY`.
     child: [u32; WIDTH],
     /// Leaf child: its triangle count; 0 otherwise.
@@ -54,16 +53,22 @@ pub struct WideNode {
 
 impl WideNode {
     const UNUSED: WideNode = WideNode {
-        lower: [[f32::INFINITY; WIDTH]; 3],
-        upper: [[f32::NEG_INFINITY; WIDTH]; 3],
+        bounds: [
+            [f32::INFINITY; WIDTH],
+            [f32::INFINITY; WIDTH],
+            [f32::INFINITY; WIDTH],
+            [f32::NEG_INFINITY; WIDTH],
+            [f32::NEG_INFINITY; WIDTH],
+            [f32::NEG_INFINITY; WIDTH],
+        ],
         child: [EMPTY; WIDTH],
         count: [0; WIDTH],
     };
 
     fn set_box(&mut self, lane: usize, aabb: &Aabb) {
         for axis in 0..3 {
-            self.lower[axis][lane] = aabb.min[axis];
-            self.upper[axis][lane] = aabb.max[axis];
+            self.bounds[axis][lane] = aabb.min[axis];
+            self.bounds[axis + 3][lane] = aabb.max[axis];
         }
     }
 }
@@ -106,18 +111,22 @@ pub struct WideBvh {
 pub struct RayBoxes {
     origin: [Vec4; 3],
     inverse: [Vec4; 3],
-    /// Per axis, whether the ray runs toward lower coordinates (the upper plane is hit first).
-    negative: [bool; 3],
+    /// Per axis, the plane the ray meets first and last (`bounds` rows): lower then upper
+    /// when it runs toward higher coordinates. Indices, not branches, in the node test.
+    front: [usize; 3],
+    back: [usize; 3],
 }
 
 impl RayBoxes {
     #[inline(always)]
     pub fn new(origin: Vec3A, direction: Vec3A) -> RayBoxes {
         let inverse = direction.to_array().map(safe_inverse);
+        let negative = inverse.map(|v| (v < 0.0) as usize);
         RayBoxes {
             origin: origin.to_array().map(Vec4::splat),
             inverse: inverse.map(Vec4::splat),
-            negative: inverse.map(|v| v < 0.0),
+            front: [0, 1, 2].map(|axis| axis + 3 * negative[axis]),
+            back: [0, 1, 2].map(|axis| axis + 3 * (1 - negative[axis])),
         }
     }
 
@@ -128,13 +137,10 @@ impl RayBoxes {
         let mut near = Vec4::ZERO;
         let mut far = Vec4::splat(f32::INFINITY);
         for axis in 0..3 {
-            let (front, back) = if self.negative[axis] {
-                (&node.upper[axis], &node.lower[axis])
-            } else {
-                (&node.lower[axis], &node.upper[axis])
-            };
-            let t_front = (Vec4::from_array(*front) - self.origin[axis]) * self.inverse[axis];
-            let t_back = (Vec4::from_array(*back) - self.origin[axis]) * self.inverse[axis];
+            let front = Vec4::from_array(node.bounds[self.front[axis]]);
+            let back = Vec4::from_array(node.bounds[self.back[axis]]);
+            let t_front = (front - self.origin[axis]) * self.inverse[axis];
+            let t_back = (back - self.origin[axis]) * self.inverse[axis];
             near = near.max(t_front);
             far = far.min(t_back);
         }
@@ -157,7 +163,10 @@ fn safe_inverse(x: f32) -> f32 {
 impl WideBvh {
     /// Collapses a binary tree: each wide node takes a binary inner node's two children and
     /// keeps opening its largest inner child (by surface area) until it has four.
-    pub fn collapse(binary: &Bvh2) -> WideBvh {
+    /// `leaf_ref(first, count)` gives what the tree stores for a leaf (and what the leaf
+    /// callback of [`WideBvh::traverse`] receives as `first`): the first slot, or the first
+    /// record of the leaf's own layout.
+    pub fn collapse(binary: &Bvh2, mut leaf_ref: impl FnMut(u32, u32) -> u32) -> WideBvh {
         let mut wide = WideBvh {
             lane_of_binary: vec![EMPTY; binary.nodes.len()],
             ..Default::default()
@@ -166,7 +175,7 @@ impl WideBvh {
             return wide;
         };
         if root.is_leaf() {
-            wide.root_leaf = Some((root.first_index, root.prim_count));
+            wide.root_leaf = Some((leaf_ref(root.first_index, root.prim_count), root.prim_count));
             return wide;
         }
         // (binary inner node, wide node it becomes, depth)
@@ -181,7 +190,7 @@ impl WideBvh {
                 node.set_box(lane, b.aabb());
                 wide.lane_of_binary[child as usize] = at * WIDTH as u32 + lane as u32;
                 if b.is_leaf() {
-                    node.child[lane] = LEAF | b.first_index;
+                    node.child[lane] = LEAF | leaf_ref(b.first_index, b.prim_count);
                     node.count[lane] = b.prim_count;
                 } else {
                     let next = wide.nodes.len() as u32;
@@ -212,7 +221,7 @@ impl WideBvh {
         }
     }
 
-    /// Walks the tree near-first along a ray, calling `leaf(first, count, &mut t_max)` for
+    /// Walks the tree near-first along a ray, calling `leaf(leaf_ref, count, &mut t_max)` for
     /// every leaf it enters before `t_max`. The leaf may shrink `t_max` (closest hit: later
     /// boxes beyond it are skipped) or return false to stop (any hit). Returns false when a
     /// leaf stopped the walk.
@@ -391,7 +400,7 @@ mod tests {
     #[test]
     fn every_binary_node_but_the_root_is_mirrored_once() {
         let binary = build(100);
-        let wide = WideBvh::collapse(&binary);
+        let wide = WideBvh::collapse(&binary, |first, _| first);
         let mirrored: Vec<u32> = wide
             .lane_of_binary
             .iter()
@@ -413,7 +422,7 @@ mod tests {
     #[test]
     fn rays_reach_exactly_the_boxes_they_cross() {
         let binary = build(37);
-        let wide = WideBvh::collapse(&binary);
+        let wide = WideBvh::collapse(&binary, |first, _| first);
         // Straight down through box 5 (x in [10, 11]) only; between boxes nothing.
         let slots = reached(&wide, Vec3A::new(10.5, 5.0, 0.5), Vec3A::NEG_Y);
         assert_eq!(slots.len(), 1);
@@ -425,7 +434,7 @@ mod tests {
     #[test]
     fn closest_first_walk_skips_boxes_beyond_the_limit() {
         let binary = build(64);
-        let wide = WideBvh::collapse(&binary);
+        let wide = WideBvh::collapse(&binary, |first, _| first);
         let ray = RayBoxes::new(Vec3A::new(-5.0, 0.5, 0.5), Vec3A::X);
         // A leaf that sets the limit at its first box's entry: only boxes that start before
         // it are visited afterwards, and the first box reached is the nearest one.
@@ -442,7 +451,7 @@ mod tests {
     #[test]
     fn refresh_moves_a_lane_with_its_binary_node() {
         let mut binary = build(16);
-        let mut wide = WideBvh::collapse(&binary);
+        let mut wide = WideBvh::collapse(&binary, |first, _| first);
         // Move every leaf of box 3 far up, refit the binary tree by hand, refresh the lanes.
         let far = Aabb::new(Vec3A::new(6.0, 100.0, 0.0), Vec3A::new(7.0, 101.0, 1.0));
         for id in 0..binary.nodes.len() {
@@ -462,7 +471,7 @@ mod tests {
 
     #[test]
     fn axis_parallel_rays_never_see_nan() {
-        let wide = WideBvh::collapse(&build(8));
+        let wide = WideBvh::collapse(&build(8), |first, _| first);
         // The origin on a box plane along a zero direction component.
         assert_eq!(
             reached(&wide, Vec3A::new(0.0, 0.0, -3.0), Vec3A::Z).len(),

@@ -5,7 +5,8 @@ use clap::Args;
 
 use super::args::{LightArgs, SequenceArgs, TraceArgs, render_settings};
 use super::scene::{load_scene, open_scene};
-use crate::bench::{BenchConfig, bench_table, run_bench};
+use crate::bench::{BenchConfig, RayKinds, bench_table, ray_table, run_bench, run_ray_bench};
+use crate::frame::Renderer;
 use crate::lod::LodMethod;
 
 /// Most repeats of a bench or compare (each repeat renders every frame of every method).
@@ -31,6 +32,10 @@ pub struct BenchArgs {
     /// How many times every configuration renders the frames.
     #[arg(long, default_value_t = 5)]
     pub repeats: usize,
+    /// Time tracing alone instead of whole frames: closest-hit primary rays through pixel
+    /// centres, occlusion rays from their hits to every light, or both (no shading).
+    #[arg(long, value_enum)]
+    pub rays: Option<RayKinds>,
 }
 
 /// `mipray bench`.
@@ -52,6 +57,24 @@ pub fn bench(args: &BenchArgs) -> Result<()> {
     threads.dedup();
     if threads.contains(&0) {
         bail!("--threads: counts must be at least 1");
+    }
+    if let Some(kinds) = args.rays {
+        eprintln!(
+            "bench --rays: {} frames {}..{} at {}x{}, lights {:?}, threads {:?} x {} repeats",
+            path.display(),
+            frames.start,
+            frames.end,
+            settings.width,
+            settings.height,
+            args.lights.lights,
+            threads,
+            args.repeats
+        );
+        settings.lod = args.methods[0];
+        let mut renderer = Renderer::new(load_scene(&path)?, settings);
+        let rates = run_ray_bench(&mut renderer, frames, clock, kinds, &threads, args.repeats)?;
+        print!("{}", ray_table(&rates));
+        return Ok(());
     }
     let configs: Vec<BenchConfig> = threads
         .iter()

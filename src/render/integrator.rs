@@ -285,15 +285,9 @@ impl FrameScene<'_> {
         counters: &mut TraceCounters,
     ) -> Vec3A {
         counters.rays += 1;
-        let origin = surface.position + surface.face_normal * surface.epsilon;
-        let t_max = if distance.is_finite() {
-            distance * (1.0 - 1e-4) - surface.epsilon
-        } else {
-            f32::INFINITY
-        };
-        if !(t_max > 0.0) {
+        let Some((origin, t_max)) = surface.shadow_ray(distance) else {
             return Vec3A::ONE;
-        }
+        };
         // Collect the glass surfaces on the way and multiply them in distance order, so the
         // result does not depend on the tree's traversal order (float products do).
         let mut glass = [(0.0f32, 0u32, 0u32); MAX_SHADOW_GLASS];

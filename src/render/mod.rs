@@ -20,3 +20,4 @@ pub use integrator::{FrameScene, MIP_LEVELS, TraceCounters};
 pub use light::{Light, LightKind, LightSource};
 pub use material::{Material, ShadingModel};
 pub use probe::{Bend, Chain, LodProbe};
+pub use surface::shadow_ray_toward;

@@ -72,6 +72,20 @@ impl SurfacePoint {
         }
     }
 
+    /// The shadow ray from this point toward a light `distance` away along `to_light`:
+    /// origin lifted off the surface, and the distance where the search ends (short of the
+    /// light so that a light on a surface does not shadow itself). `None` when the light is
+    /// closer than the lift.
+    pub(super) fn shadow_ray(&self, distance: f32) -> Option<(Vec3A, f32)> {
+        let origin = self.position + self.face_normal * self.epsilon;
+        let t_max = if distance.is_finite() {
+            distance * (1.0 - 1e-4) - self.epsilon
+        } else {
+            f32::INFINITY
+        };
+        (t_max > 0.0).then_some((origin, t_max))
+    }
+
     /// Refraction of `direction` into (or out of) a material of index `ior`, on the side the
     /// ray arrived from.
     pub(super) fn refraction(&self, direction: Vec3A, ior: f32) -> Refraction {
@@ -197,4 +211,25 @@ mod tests {
         assert!(r.dot(face) > 0.0);
         assert!((r.length() - 1.0).abs() < 1e-6);
     }
+}
+
+/// The shadow ray a hit sends toward `light` as the integrator traces it (origin, unit
+/// direction, search distance), or `None` when the light cannot reach the hit's side. For
+/// `mipray bench --rays shadow`, which times exactly the integrator's shadow rays.
+pub fn shadow_ray_toward(
+    triangles: &FrameTriangles,
+    hit: &Hit,
+    origin: Vec3A,
+    direction: Vec3A,
+    light: &crate::render::Light,
+) -> Option<(Vec3A, Vec3A, f32)> {
+    let surface = SurfacePoint::at(triangles, hit, origin, direction);
+    let incident = light.incident(surface.position)?;
+    let lit_side = surface.shading_normal.dot(incident.to_light) > 0.0
+        && surface.face_normal.dot(incident.to_light) > 0.0;
+    if !lit_side {
+        return None;
+    }
+    let (from, t_max) = surface.shadow_ray(incident.distance)?;
+    Some((from, incident.to_light, t_max))
 }

@@ -7,6 +7,10 @@
 
 use std::fmt::Write;
 
+mod rays;
+
+pub use rays::{RayKind, RayKinds, RayRate, ray_table, run_ray_bench};
+
 use anyhow::Result;
 
 use crate::frame::{RenderSettings, Renderer};

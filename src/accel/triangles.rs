@@ -1,0 +1,375 @@
+//! Triangles laid out for the hit test: four at a time, vertex coordinates as
+//! structure-of-arrays lanes, in leaf order, tested with the watertight ray/triangle
+//! algorithm of Woop, Benthin and Wald (JCGT 2013).
+//!
+//! Why watertight: Möller-Trumbore decides each triangle's edges on its own, so a ray
+//! through a shared edge can be rejected by both neighbours (the unit test of a jittered
+//! grid lost 9% of rays aimed at vertices and edge midpoints). Woop's test shears each
+//! vertex into the ray's frame once and evaluates the edge functions on those shared
+//! values, so two triangles see a shared edge with bit-identical inputs and cannot both
+//! reject a point on it; an exactly-zero edge function is recomputed in f64, as the paper
+//! does. Why four at a time: a leaf holds up to eight triangles, and four lanes of SSE2
+//! (glam `Vec4`) test a pack for little more than the cost of one.
+//!
+//! Each leaf's triangles fill whole packs (a leaf of 5 takes two packs, the second with one
+//! live lane), so a leaf is a run of packs and no pack straddles two leaves.
+
+use glam::{Vec2, Vec3A, Vec4};
+use rayon::prelude::*;
+
+/// Triangles per pack.
+pub const LANES: usize = 4;
+
+/// Four triangles: `v[vertex][axis][lane]`, with the slot of lane 0 (lanes hold consecutive
+/// slots) and the number of live lanes beside them, so a leaf test reads nothing else.
+#[derive(Clone, Copy, Debug, Default)]
+#[repr(C, align(16))]
+pub struct TrianglePack {
+    v: [[[f32; LANES]; 3]; 3],
+    first_slot: u32,
+    live: u32,
+}
+
+impl TrianglePack {
+    fn set(&mut self, lane: usize, tri: &[Vec3A; 3]) {
+        for (vertex, p) in tri.iter().enumerate() {
+            for axis in 0..3 {
+                self.v[vertex][axis][lane] = p[axis];
+            }
+        }
+    }
+
+    #[cfg(test)]
+    fn get(&self, lane: usize) -> [Vec3A; 3] {
+        std::array::from_fn(|vertex| {
+            Vec3A::new(
+                self.v[vertex][0][lane],
+                self.v[vertex][1][lane],
+                self.v[vertex][2][lane],
+            )
+        })
+    }
+}
+
+/// The packs of every leaf, and where each slot lives.
+#[derive(Default, Clone)]
+pub struct PackedTriangles {
+    packs: Vec<TrianglePack>,
+    /// Per slot: `pack * LANES + lane`.
+    lane_of_slot: Vec<u32>,
+}
+
+impl PackedTriangles {
+    /// Packs the triangles of `leaves` (`(first slot, count)`, covering every slot once).
+    #[cfg(test)]
+    pub fn pack(positions: &[[Vec3A; 3]], leaves: impl Iterator<Item = (u32, u32)>) -> Self {
+        let mut packed = PackedTriangles {
+            lane_of_slot: vec![0; positions.len()],
+            ..Default::default()
+        };
+        for (first, count) in leaves {
+            packed.push_leaf(positions, first, count);
+        }
+        packed
+    }
+
+    /// Appends the packs of the leaf of `count` slots from `first`; returns its first pack
+    /// (what the tree stores for the leaf).
+    pub fn push_leaf(&mut self, positions: &[[Vec3A; 3]], first: u32, count: u32) -> u32 {
+        if self.lane_of_slot.len() < positions.len() {
+            self.lane_of_slot.resize(positions.len(), 0);
+        }
+        let first_pack = self.packs.len() as u32;
+        let packed = self;
+        {
+            for start in (first..first + count).step_by(LANES) {
+                let live = (first + count - start).min(LANES as u32);
+                let pack = packed.packs.len() as u32;
+                let mut p = TrianglePack {
+                    first_slot: start,
+                    live,
+                    ..Default::default()
+                };
+                for lane in 0..live {
+                    let slot = start + lane;
+                    p.set(lane as usize, &positions[slot as usize]);
+                    packed.lane_of_slot[slot as usize] = pack * LANES as u32 + lane;
+                }
+                packed.packs.push(p);
+            }
+        }
+        first_pack
+    }
+
+    /// Copies slot `slot`'s moved triangle into its lane.
+    pub fn update(&mut self, slot: u32, tri: &[Vec3A; 3]) {
+        let at = self.lane_of_slot[slot as usize] as usize;
+        self.packs[at / LANES].set(at % LANES, tri);
+    }
+
+    /// Copies every triangle into its lane (after a full refit), on all threads when
+    /// `parallel`.
+    pub fn update_all(&mut self, positions: &[[Vec3A; 3]], parallel: bool) {
+        let fill = |pack: &mut TrianglePack| {
+            for lane in 0..pack.live as usize {
+                let tri = positions[pack.first_slot as usize + lane];
+                pack.set(lane, &tri);
+            }
+        };
+        if parallel {
+            self.packs.par_iter_mut().for_each(fill);
+        } else {
+            self.packs.iter_mut().for_each(fill);
+        }
+    }
+
+    /// The stored triangle of `slot`.
+    #[cfg(test)]
+    pub fn triangle(&self, slot: u32) -> [Vec3A; 3] {
+        let at = self.lane_of_slot[slot as usize] as usize;
+        self.packs[at / LANES].get(at % LANES)
+    }
+
+    /// Tests the `count` triangles of the leaf whose packs start at `first_pack` and calls
+    /// `hit(slot, t, bary)` for each one the ray crosses with `t` in `[0, t_max)`.
+    #[inline(always)]
+    pub fn hits_in_leaf(
+        &self,
+        ray: &ShearedRay,
+        first_pack: u32,
+        count: u32,
+        t_max: f32,
+        mut hit: impl FnMut(u32, f32, Vec2) -> bool,
+    ) -> bool {
+        let first_pack = first_pack as usize;
+        let packs = (count as usize).div_ceil(LANES);
+        for pack in &self.packs[first_pack..first_pack + packs] {
+            let found = ray.intersect_pack(pack, pack.live as usize, t_max);
+            let mut mask = found.mask;
+            while mask != 0 {
+                let lane = mask.trailing_zeros() as usize;
+                mask &= mask - 1;
+                let slot = pack.first_slot + lane as u32;
+                if !hit(slot, found.t[lane], found.bary[lane]) {
+                    return false;
+                }
+            }
+        }
+        true
+    }
+}
+
+/// A ray in the frame of Woop et al.: the axis where the direction is largest becomes z, and
+/// a shear maps the direction to (0, 0, 1).
+#[derive(Clone, Copy)]
+pub struct ShearedRay {
+    origin: [Vec4; 3],
+    /// Axes: `kx`, `ky`, `kz` (chosen so that the winding is kept).
+    k: [usize; 3],
+    /// `(dx / dz, dy / dz, 1 / dz)` in the permuted axes.
+    shear: [Vec4; 3],
+}
+
+/// What a pack test found: the lanes hit, with their distance and barycentrics.
+pub struct PackHits {
+    pub mask: u32,
+    pub t: [f32; LANES],
+    pub bary: [Vec2; LANES],
+}
+
+impl ShearedRay {
+    #[inline(always)]
+    pub fn new(origin: Vec3A, direction: Vec3A) -> ShearedRay {
+        let abs = direction.abs();
+        let kz = if abs.x >= abs.y && abs.x >= abs.z {
+            0
+        } else if abs.y >= abs.z {
+            1
+        } else {
+            2
+        };
+        let mut kx = (kz + 1) % 3;
+        let mut ky = (kx + 1) % 3;
+        if direction[kz] < 0.0 {
+            std::mem::swap(&mut kx, &mut ky);
+        }
+        let shear = [
+            direction[kx] / direction[kz],
+            direction[ky] / direction[kz],
+            1.0 / direction[kz],
+        ];
+        ShearedRay {
+            origin: origin.to_array().map(Vec4::splat),
+            k: [kx, ky, kz],
+            shear: shear.map(Vec4::splat),
+        }
+    }
+
+    /// Tests the first `live` lanes of `pack`.
+    #[inline(always)]
+    fn intersect_pack(&self, pack: &TrianglePack, live: usize, t_max: f32) -> PackHits {
+        let [kx, ky, kz] = self.k;
+        let [sx, sy, sz] = self.shear;
+        // Vertex `i` relative to the origin, sheared: (x, y) in the ray's plane and z along it.
+        let sheared = |i: usize| {
+            let v = &pack.v[i];
+            let z = Vec4::from_array(v[kz]) - self.origin[kz];
+            let x = Vec4::from_array(v[kx]) - self.origin[kx] - sx * z;
+            let y = Vec4::from_array(v[ky]) - self.origin[ky] - sy * z;
+            (x, y, z)
+        };
+        let (ax, ay, az) = sheared(0);
+        let (bx, by, bz) = sheared(1);
+        let (cx, cy, cz) = sheared(2);
+        let mut u = cx * by - cy * bx;
+        let mut v = ax * cy - ay * cx;
+        let mut w = bx * ay - by * ax;
+        let live_mask = (1u32 << live) - 1;
+        let zero = Vec4::ZERO;
+        let on_edge = (u.cmpeq(zero) | v.cmpeq(zero) | w.cmpeq(zero)).bitmask() & live_mask;
+        if on_edge != 0 {
+            // Exactly on an edge in f32: decide it in f64 (rare), as the paper prescribes.
+            let (mut u4, mut v4, mut w4) = (u.to_array(), v.to_array(), w.to_array());
+            let (ax, ay, bx, by, cx, cy) = (
+                ax.to_array(),
+                ay.to_array(),
+                bx.to_array(),
+                by.to_array(),
+                cx.to_array(),
+                cy.to_array(),
+            );
+            let mut bits = on_edge;
+            while bits != 0 {
+                let l = bits.trailing_zeros() as usize;
+                bits &= bits - 1;
+                let f = |a: f32, b: f32, c: f32, d: f32| (a as f64 * b as f64 - c as f64 * d as f64) as f32;
+                u4[l] = f(cx[l], by[l], cy[l], bx[l]);
+                v4[l] = f(ax[l], cy[l], ay[l], cx[l]);
+                w4[l] = f(bx[l], ay[l], by[l], ax[l]);
+            }
+            (u, v, w) = (Vec4::from_array(u4), Vec4::from_array(v4), Vec4::from_array(w4));
+        }
+        let negative = u.cmplt(zero) | v.cmplt(zero) | w.cmplt(zero);
+        let positive = u.cmpgt(zero) | v.cmpgt(zero) | w.cmpgt(zero);
+        let det = u + v + w;
+        let t_scaled = u * (sz * az) + v * (sz * bz) + w * (sz * cz);
+        let inside = !(negative & positive).bitmask() & det.cmpne(zero).bitmask() & live_mask;
+        let mut hits = PackHits {
+            mask: 0,
+            t: [0.0; LANES],
+            bary: [Vec2::ZERO; LANES],
+        };
+        if inside == 0 {
+            return hits;
+        }
+        let inverse = Vec4::ONE / det;
+        let t = (t_scaled * inverse).to_array();
+        let (v, w) = ((v * inverse).to_array(), (w * inverse).to_array());
+        let mut bits = inside;
+        while bits != 0 {
+            let l = bits.trailing_zeros() as usize;
+            bits &= bits - 1;
+            if t[l] >= 0.0 && t[l] < t_max && t[l].is_finite() {
+                hits.mask |= 1 << l;
+                hits.t[l] = t[l];
+                hits.bary[l] = Vec2::new(v[l], w[l]);
+            }
+        }
+        hits
+    }
+}
+
+/// One triangle against one ray, the same arithmetic as one lane of a pack (tests compare
+/// the tree's answers with this applied to every triangle).
+pub fn intersect(tri: &[Vec3A; 3], origin: Vec3A, direction: Vec3A) -> Option<(f32, Vec2)> {
+    let mut pack = TrianglePack::default();
+    pack.set(0, tri);
+    let hits = ShearedRay::new(origin, direction).intersect_pack(&pack, 1, f32::INFINITY);
+    (hits.mask & 1 != 0).then(|| (hits.t[0], hits.bary[0]))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn tri(a: [f32; 3], b: [f32; 3], c: [f32; 3]) -> [Vec3A; 3] {
+        [a, b, c].map(Vec3A::from)
+    }
+
+    #[test]
+    fn distance_and_barycentrics_rebuild_the_hit_point() {
+        let t = tri([-1.0, -1.0, -5.0], [2.0, -1.0, -6.0], [0.0, 3.0, -4.0]);
+        for (o, d) in [
+            (Vec3A::ZERO, Vec3A::new(0.1, 0.2, -1.0).normalize()),
+            (Vec3A::new(0.5, 0.5, -10.0), Vec3A::new(-0.05, 0.1, 1.0).normalize()),
+            (Vec3A::new(-3.0, 0.0, -5.0), Vec3A::new(1.0, 0.0, 0.0)),
+        ] {
+            let (dist, bary) = intersect(&t, o, d).expect("the ray crosses the triangle");
+            let on_ray = o + d * dist;
+            let from_bary = t[0] * (1.0 - bary.x - bary.y) + t[1] * bary.x + t[2] * bary.y;
+            assert!((on_ray - from_bary).length() < 1e-5, "{on_ray} vs {from_bary}");
+            assert!(bary.x >= 0.0 && bary.y >= 0.0 && bary.x + bary.y <= 1.0);
+        }
+        // Behind the origin, parallel to the plane, and beside the triangle: no hit.
+        assert!(intersect(&t, Vec3A::ZERO, Vec3A::new(0.1, 0.2, 1.0).normalize()).is_none());
+        assert!(intersect(&t, Vec3A::new(10.0, 0.0, -5.0), Vec3A::X).is_none());
+        assert!(intersect(&t, Vec3A::new(0.0, 9.0, 0.0), Vec3A::NEG_Z).is_none());
+        // A degenerate (zero-area) triangle is never hit, not even on its own line.
+        let flat = tri([0.0, 0.0, -2.0], [1.0, 0.0, -2.0], [2.0, 0.0, -2.0]);
+        assert!(intersect(&flat, Vec3A::new(0.5, 0.0, 0.0), Vec3A::NEG_Z).is_none());
+    }
+
+    #[test]
+    fn each_lane_of_a_pack_answers_as_the_triangle_alone_and_dead_lanes_never_hit() {
+        let tris = [
+            tri([-1.0, -1.0, -2.0], [1.0, -1.0, -2.0], [0.0, 1.0, -2.0]),
+            tri([-1.0, -1.0, -3.0], [1.0, -1.0, -3.0], [0.0, 1.0, -3.0]),
+            tri([5.0, 5.0, -3.0], [6.0, 5.0, -3.0], [5.0, 6.0, -3.0]),
+            tri([-2.0, -2.0, -1.0], [2.0, -2.0, -1.5], [0.0, 2.0, -1.2]),
+        ];
+        let positions: Vec<[Vec3A; 3]> = tris.to_vec();
+        // One leaf of three: the fourth triangle is left out, its lane dead.
+        let packed = PackedTriangles::pack(&positions, [(0, 3), (3, 1)].into_iter());
+        assert_eq!(packed.packs.len(), 2);
+        let ray = ShearedRay::new(Vec3A::new(0.0, 0.0, 1.0), Vec3A::NEG_Z);
+        let mut seen = Vec::new();
+        packed.hits_in_leaf(&ray, 0, 3, f32::INFINITY, |slot, t, bary| {
+            assert_eq!(Some((t, bary)), intersect(&tris[slot as usize], Vec3A::new(0.0, 0.0, 1.0), Vec3A::NEG_Z));
+            seen.push(slot);
+            true
+        });
+        assert_eq!(seen, vec![0, 1]);
+        // The limit cuts the farther one; stopping early is reported.
+        let mut near = Vec::new();
+        packed.hits_in_leaf(&ray, 0, 3, 3.5, |slot, _, _| {
+            near.push(slot);
+            true
+        });
+        assert_eq!(near, vec![0]);
+        assert!(!packed.hits_in_leaf(&ray, 0, 3, f32::INFINITY, |_, _, _| false));
+    }
+
+    #[test]
+    fn updates_land_in_the_lane_of_their_slot() {
+        let mut positions: Vec<[Vec3A; 3]> = (0..11)
+            .map(|i| tri([i as f32, 0.0, 0.0], [i as f32 + 1.0, 0.0, 0.0], [i as f32, 1.0, 0.0]))
+            .collect();
+        let mut packed = PackedTriangles::pack(&positions, [(0, 5), (5, 6)].into_iter());
+        assert_eq!(packed.packs.len(), 4);
+        for (slot, p) in positions.iter().enumerate() {
+            assert_eq!(packed.triangle(slot as u32), *p);
+        }
+        positions[7] = tri([9.0; 3], [8.0; 3], [7.0; 3]);
+        packed.update(7, &positions[7]);
+        assert_eq!(packed.triangle(7), positions[7]);
+        for p in &mut positions {
+            *p = p.map(|v| v * 2.0);
+        }
+        for parallel in [false, true] {
+            packed.update_all(&positions, parallel);
+            for (slot, p) in positions.iter().enumerate() {
+                assert_eq!(packed.triangle(slot as u32), *p);
+            }
+        }
+    }
+}
