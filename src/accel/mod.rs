@@ -28,6 +28,7 @@ mod wide;
 pub use policy::{BvhPolicy, TreeStep};
 pub use triangles::intersect;
 use triangles::{PackedTriangles, ShearedRay};
+pub use wide::PACKET;
 use wide::{RayBoxes, WideBvh};
 
 /// Past this many triangles the edge and leaf-box refresh of a full refit runs on rayon's
@@ -60,6 +61,22 @@ pub struct Accel {
     refit_order: Vec<u32>,
     /// SAH cost right after the last build (see [`Accel::sah_cost`]).
     build_cost: f32,
+}
+
+/// The best hit of a closest-hit query so far, with its source triangle (the tie rule).
+#[derive(Clone, Copy)]
+struct Closest {
+    hit: Option<Hit>,
+    source: u32,
+}
+
+impl Default for Closest {
+    fn default() -> Self {
+        Closest {
+            hit: None,
+            source: u32::MAX,
+        }
+    }
 }
 
 /// Which refit ran.
@@ -251,32 +268,76 @@ impl Accel {
         direction: Vec3A,
         t_max: f32,
     ) -> Option<Hit> {
-        let mut best: Option<Hit> = None;
-        let mut best_source = u32::MAX;
+        let mut best = Closest::default();
         let ray = RayBoxes::new(origin, direction);
         let sheared = ShearedRay::new(origin, direction);
         self.wide.traverse(&ray, t_max, |first, count, limit| {
-            let cut = *limit;
-            self.triangles.hits_in_leaf(&sheared, first, count, cut, |slot, t, bary| {
+            self.closest_in_leaf(triangles, &sheared, first, count, limit, &mut best);
+            true
+        });
+        best.hit
+    }
+
+    /// [`Accel::closest_hit`] for a packet of up to [`PACKET`] rays `(origin, direction)`
+    /// walked together (coherent rays such as a tile's primary rays); `hits[i]` receives
+    /// exactly what `closest_hit` returns for ray `i`.
+    pub fn closest_hits(
+        &self,
+        triangles: &FrameTriangles,
+        rays: &[(Vec3A, Vec3A)],
+        t_max: f32,
+        hits: &mut [Option<Hit>],
+    ) {
+        let n = rays.len().min(hits.len()).min(PACKET);
+        let mut boxes = [RayBoxes::new(Vec3A::ZERO, Vec3A::X); PACKET];
+        let mut sheared = [ShearedRay::new(Vec3A::ZERO, Vec3A::X); PACKET];
+        for (i, &(origin, direction)) in rays.iter().take(n).enumerate() {
+            boxes[i] = RayBoxes::new(origin, direction);
+            sheared[i] = ShearedRay::new(origin, direction);
+        }
+        let mut best = [Closest::default(); PACKET];
+        let mut limits = [t_max; PACKET];
+        self.wide
+            .traverse_packet(&boxes[..n], &mut limits[..n], |r, first, count, limit| {
+                self.closest_in_leaf(triangles, &sheared[r], first, count, limit, &mut best[r]);
+            });
+        for (hit, best) in hits.iter_mut().zip(&best[..n]) {
+            *hit = best.hit;
+        }
+    }
+
+    /// Tests a leaf for a closest-hit query: keeps the nearest hit (ties to the lowest source
+    /// triangle) and lowers `limit` to it.
+    #[inline(always)]
+    fn closest_in_leaf(
+        &self,
+        triangles: &FrameTriangles,
+        ray: &ShearedRay,
+        first: u32,
+        count: u32,
+        limit: &mut f32,
+        best: &mut Closest,
+    ) {
+        let cut = *limit;
+        self.triangles
+            .hits_in_leaf(ray, first, count, cut, |slot, t, bary| {
                 let source = triangles.source[slot as usize];
-                let better = match best {
+                let better = match best.hit {
                     None => true,
-                    Some(h) => t < h.t || (t == h.t && source < best_source),
+                    Some(h) => t < h.t || (t == h.t && source < best.source),
                 };
                 if better {
-                    best = Some(Hit {
+                    best.hit = Some(Hit {
                         triangle: slot,
                         t,
                         bary,
                     });
-                    best_source = source;
+                    best.source = source;
                     // Keep visiting boxes that start exactly at `t`, where a tie may hide.
                     *limit = t.next_up();
                 }
                 true
-            })
-        });
-        best
+            });
     }
 
     /// Visits every triangle hit with `t` in `[0, t_max)`, as `visit(slot, t)`, in an order
@@ -508,6 +569,47 @@ mod tests {
         assert_matches_brute_force(&accel, &tris, &mut rng);
     }
     #[test]
+    fn a_packet_finds_what_each_of_its_rays_finds_alone() {
+        let mut rng = Rng(0x2545f4914f6cdd1d);
+        let mut tris = random_soup(&mut rng, 4000);
+        // A coherent packet (a camera's 8 x 8 block), an incoherent one, and a short one.
+        let accel = Accel::build(&mut tris).unwrap();
+        let eye = Vec3A::new(0.0, 0.0, 40.0);
+        let coherent: Vec<(Vec3A, Vec3A)> = (0..64)
+            .map(|i| {
+                let (x, y) = ((i % 8) as f32, (i / 8) as f32);
+                (
+                    eye,
+                    Vec3A::new(x * 0.01 - 0.04, y * 0.01 - 0.04, -1.0).normalize(),
+                )
+            })
+            .collect();
+        let scattered: Vec<(Vec3A, Vec3A)> = (0..64)
+            .map(|_| {
+                let origin = rng.point(30.0);
+                (origin, (rng.point(2.0) - origin * 0.05).normalize())
+            })
+            .collect();
+        let mut found = 0;
+        for (rays, t_max) in [
+            (&coherent[..], f32::INFINITY),
+            (&scattered[..], f32::INFINITY),
+            (&scattered[..13], 25.0),
+        ] {
+            let mut hits = vec![None; rays.len()];
+            accel.closest_hits(&tris, rays, t_max, &mut hits);
+            for (&(o, d), hit) in rays.iter().zip(&hits) {
+                assert_eq!(*hit, accel.closest_hit(&tris, o, d, t_max));
+                found += hit.is_some() as usize;
+            }
+        }
+        assert!(
+            found > 40,
+            "too few hits ({found}) for the test to mean much"
+        );
+    }
+
+    #[test]
     fn rays_through_shared_edges_and_vertices_of_a_mesh_never_slip_through() {
         // A jittered 40 x 40 grid of quads (two triangles each) in a tilted plane; rays aimed
         // exactly at its vertices and at points on its shared edges must all hit it.
@@ -556,6 +658,9 @@ mod tests {
                 }
             }
         }
-        assert_eq!(misses, 0, "{misses} of {rays} rays slipped through the mesh");
+        assert_eq!(
+            misses, 0,
+            "{misses} of {rays} rays slipped through the mesh"
+        );
     }
 }

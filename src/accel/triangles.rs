@@ -242,12 +242,18 @@ impl ShearedRay {
             while bits != 0 {
                 let l = bits.trailing_zeros() as usize;
                 bits &= bits - 1;
-                let f = |a: f32, b: f32, c: f32, d: f32| (a as f64 * b as f64 - c as f64 * d as f64) as f32;
+                let f = |a: f32, b: f32, c: f32, d: f32| {
+                    (a as f64 * b as f64 - c as f64 * d as f64) as f32
+                };
                 u4[l] = f(cx[l], by[l], cy[l], bx[l]);
                 v4[l] = f(ax[l], cy[l], ay[l], cx[l]);
                 w4[l] = f(bx[l], ay[l], by[l], ax[l]);
             }
-            (u, v, w) = (Vec4::from_array(u4), Vec4::from_array(v4), Vec4::from_array(w4));
+            (u, v, w) = (
+                Vec4::from_array(u4),
+                Vec4::from_array(v4),
+                Vec4::from_array(w4),
+            );
         }
         let negative = u.cmplt(zero) | v.cmplt(zero) | w.cmplt(zero);
         let positive = u.cmpgt(zero) | v.cmpgt(zero) | w.cmpgt(zero);
@@ -301,13 +307,19 @@ mod tests {
         let t = tri([-1.0, -1.0, -5.0], [2.0, -1.0, -6.0], [0.0, 3.0, -4.0]);
         for (o, d) in [
             (Vec3A::ZERO, Vec3A::new(0.1, 0.2, -1.0).normalize()),
-            (Vec3A::new(0.5, 0.5, -10.0), Vec3A::new(-0.05, 0.1, 1.0).normalize()),
+            (
+                Vec3A::new(0.5, 0.5, -10.0),
+                Vec3A::new(-0.05, 0.1, 1.0).normalize(),
+            ),
             (Vec3A::new(-3.0, 0.0, -5.0), Vec3A::new(1.0, 0.0, 0.0)),
         ] {
             let (dist, bary) = intersect(&t, o, d).expect("the ray crosses the triangle");
             let on_ray = o + d * dist;
             let from_bary = t[0] * (1.0 - bary.x - bary.y) + t[1] * bary.x + t[2] * bary.y;
-            assert!((on_ray - from_bary).length() < 1e-5, "{on_ray} vs {from_bary}");
+            assert!(
+                (on_ray - from_bary).length() < 1e-5,
+                "{on_ray} vs {from_bary}"
+            );
             assert!(bary.x >= 0.0 && bary.y >= 0.0 && bary.x + bary.y <= 1.0);
         }
         // Behind the origin, parallel to the plane, and beside the triangle: no hit.
@@ -334,7 +346,14 @@ mod tests {
         let ray = ShearedRay::new(Vec3A::new(0.0, 0.0, 1.0), Vec3A::NEG_Z);
         let mut seen = Vec::new();
         packed.hits_in_leaf(&ray, 0, 3, f32::INFINITY, |slot, t, bary| {
-            assert_eq!(Some((t, bary)), intersect(&tris[slot as usize], Vec3A::new(0.0, 0.0, 1.0), Vec3A::NEG_Z));
+            assert_eq!(
+                Some((t, bary)),
+                intersect(
+                    &tris[slot as usize],
+                    Vec3A::new(0.0, 0.0, 1.0),
+                    Vec3A::NEG_Z
+                )
+            );
             seen.push(slot);
             true
         });
@@ -352,7 +371,13 @@ mod tests {
     #[test]
     fn updates_land_in_the_lane_of_their_slot() {
         let mut positions: Vec<[Vec3A; 3]> = (0..11)
-            .map(|i| tri([i as f32, 0.0, 0.0], [i as f32 + 1.0, 0.0, 0.0], [i as f32, 1.0, 0.0]))
+            .map(|i| {
+                tri(
+                    [i as f32, 0.0, 0.0],
+                    [i as f32 + 1.0, 0.0, 0.0],
+                    [i as f32, 1.0, 0.0],
+                )
+            })
             .collect();
         let mut packed = PackedTriangles::pack(&positions, [(0, 5), (5, 6)].into_iter());
         assert_eq!(packed.packs.len(), 4);

@@ -205,7 +205,9 @@ mod tests {
 
     #[test]
     fn kinds_select_what_they_name() {
-        assert!(RayKinds::All.includes(RayKind::Primary) && RayKinds::All.includes(RayKind::Shadow));
+        assert!(
+            RayKinds::All.includes(RayKind::Primary) && RayKinds::All.includes(RayKind::Shadow)
+        );
         assert!(RayKinds::Primary.includes(RayKind::Primary));
         assert!(!RayKinds::Primary.includes(RayKind::Shadow));
         assert!(!RayKinds::Shadow.includes(RayKind::Primary));

@@ -10,7 +10,7 @@
 
 use glam::{Vec3, Vec3A};
 
-use crate::accel::Accel;
+use crate::accel::{Accel, Hit};
 use crate::geometry::FrameTriangles;
 use crate::lod::{Footprint, LodCamera, LodMethod, RayLod, SurfaceHit, finite_level};
 use crate::render::camera::Camera;
@@ -97,21 +97,52 @@ impl FrameScene<'_> {
         self.radiance(camera.eye, direction, lod, 0, counters)
     }
 
+    /// [`FrameScene::primary_radiance`] for a primary ray already traced: `direction` is
+    /// `camera.primary_direction(px, py)` and `hit` what `closest_hit` found along it (the
+    /// film traces a tile's primary rays as packets, then shades each).
+    #[inline]
+    pub fn primary_radiance_at<L: RayLod>(
+        &self,
+        camera: &Camera,
+        (px, py): (f32, f32),
+        direction: Vec3A,
+        hit: Option<Hit>,
+        counters: &mut TraceCounters,
+    ) -> Vec3A {
+        let lod = L::primary(&self.lod_camera, px, py);
+        counters.rays += 1;
+        self.shade(hit, camera.eye, direction, lod, 0, counters)
+    }
+
     /// Radiance arriving at `origin` from `direction`; `lod` is the ray's LOD state,
     /// `depth` the number of bounces so far.
     pub fn radiance<L: RayLod>(
         &self,
         origin: Vec3A,
         direction: Vec3A,
-        mut lod: L,
+        lod: L,
         depth: u32,
         counters: &mut TraceCounters,
     ) -> Vec3A {
         counters.rays += 1;
-        let Some(hit) = self
+        let hit = self
             .accel
-            .closest_hit(self.triangles, origin, direction, f32::INFINITY)
-        else {
+            .closest_hit(self.triangles, origin, direction, f32::INFINITY);
+        self.shade(hit, origin, direction, lod, depth, counters)
+    }
+
+    /// Radiance leaving the hit `hit` (background when `None`) of a ray from `origin` along
+    /// `direction`, toward that ray.
+    fn shade<L: RayLod>(
+        &self,
+        hit: Option<Hit>,
+        origin: Vec3A,
+        direction: Vec3A,
+        mut lod: L,
+        depth: u32,
+        counters: &mut TraceCounters,
+    ) -> Vec3A {
+        let Some(hit) = hit else {
             return self.background;
         };
         let slot = hit.triangle as usize;
