@@ -15,9 +15,10 @@ use anyhow::Result;
 use glam::Vec3A;
 use rayon::prelude::*;
 
-use crate::accel::Accel;
+use crate::accel::{Accel, PACKET};
 use crate::frame::Renderer;
 use crate::geometry::FrameTriangles;
+use crate::render::film::TILE;
 use crate::render::shadow_ray_toward;
 use crate::report::Percentiles;
 
@@ -34,7 +35,7 @@ impl RayKinds {
         matches!(
             (self, kind),
             (RayKinds::All, _)
-                | (RayKinds::Primary, RayKind::Primary)
+                | (RayKinds::Primary, RayKind::Primary | RayKind::PrimarySingle)
                 | (RayKinds::Shadow, RayKind::Shadow)
         )
     }
@@ -43,14 +44,18 @@ impl RayKinds {
 /// One kind of ray.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum RayKind {
+    /// Primary rays in packets, as the film traces them.
     Primary,
+    /// The same rays one at a time (what packets are measured against).
+    PrimarySingle,
     Shadow,
 }
 
 impl std::fmt::Display for RayKind {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         f.write_str(match self {
-            RayKind::Primary => "primary",
+            RayKind::Primary => "primary (packets)",
+            RayKind::PrimarySingle => "primary (single)",
             RayKind::Shadow => "shadow",
         })
     }
@@ -92,7 +97,7 @@ pub fn run_ray_bench(
         .map(|&t| rayon::ThreadPoolBuilder::new().num_threads(t).build())
         .collect::<Result<Vec<_>, _>>()?;
     let mut rates = Vec::new();
-    for kind in [RayKind::Primary, RayKind::Shadow] {
+    for kind in [RayKind::Primary, RayKind::PrimarySingle, RayKind::Shadow] {
         if !kinds.includes(kind) {
             continue;
         }
@@ -103,7 +108,7 @@ pub fn run_ray_bench(
             let prepared = renderer.prepare(frame, clock.time(frame))?;
             let generated = frame_rays(renderer, &prepared);
             let list = match kind {
-                RayKind::Primary => &generated.primary,
+                RayKind::Primary | RayKind::PrimarySingle => &generated.primary,
                 RayKind::Shadow => &generated.shadow,
             };
             rays += list.len();
@@ -135,12 +140,18 @@ pub fn run_ray_bench(
     Ok(rates)
 }
 
-/// Primary rays through every pixel centre, and the shadow rays of their hits.
+/// Primary rays through every pixel centre, tile by tile in the film's order (so packets
+/// group the same rays as in a render), and the shadow rays of their hits.
 fn frame_rays(renderer: &Renderer, prepared: &crate::frame::PreparedFrame) -> FrameRays {
     let camera = &prepared.camera;
     let (triangles, accel) = (renderer.triangles(), renderer.accel());
-    let primary: Vec<TimedRay> = (0..camera.height)
-        .flat_map(|y| (0..camera.width).map(move |x| (x, y)))
+    let (w, h) = (camera.width, camera.height);
+    let tiles_x = w.div_ceil(TILE);
+    let primary: Vec<TimedRay> = (0..tiles_x * h.div_ceil(TILE))
+        .flat_map(|tile| {
+            let (x0, y0) = ((tile % tiles_x) * TILE, (tile / tiles_x) * TILE);
+            (y0..(y0 + TILE).min(h)).flat_map(move |y| (x0..(x0 + TILE).min(w)).map(move |x| (x, y)))
+        })
         .map(|(x, y)| {
             let d = camera.primary_direction(x as f32 + 0.5, y as f32 + 0.5);
             (camera.eye, d, f32::INFINITY)
@@ -163,14 +174,28 @@ fn frame_rays(renderer: &Renderer, prepared: &crate::frame::PreparedFrame) -> Fr
 /// (shadow).
 fn trace_all(kind: RayKind, triangles: &FrameTriangles, accel: &Accel, rays: &[TimedRay]) -> usize {
     rays.par_chunks(1024)
-        .map(|chunk| {
-            chunk
-                .iter()
-                .filter(|&&(o, d, t_max)| match kind {
-                    RayKind::Primary => accel.closest_hit(triangles, o, d, t_max).is_some(),
-                    RayKind::Shadow => !accel.visit_hits(triangles, o, d, t_max, |_, _| false),
+        .map(|chunk| match kind {
+            RayKind::Primary => chunk
+                .chunks(PACKET)
+                .map(|packet| {
+                    let mut pairs = [(Vec3A::ZERO, Vec3A::ZERO); PACKET];
+                    for (pair, &(o, d, _)) in pairs.iter_mut().zip(packet) {
+                        *pair = (o, d);
+                    }
+                    let mut hits = [None; PACKET];
+                    let n = packet.len();
+                    accel.closest_hits(triangles, &pairs[..n], f32::INFINITY, &mut hits[..n]);
+                    hits[..n].iter().filter(|h| h.is_some()).count()
                 })
-                .count()
+                .sum(),
+            RayKind::PrimarySingle => chunk
+                .iter()
+                .filter(|&&(o, d, t_max)| accel.closest_hit(triangles, o, d, t_max).is_some())
+                .count(),
+            RayKind::Shadow => chunk
+                .iter()
+                .filter(|&&(o, d, t_max)| !accel.visit_hits(triangles, o, d, t_max, |_, _| false))
+                .count(),
         })
         .sum()
 }
@@ -209,6 +234,7 @@ mod tests {
             RayKinds::All.includes(RayKind::Primary) && RayKinds::All.includes(RayKind::Shadow)
         );
         assert!(RayKinds::Primary.includes(RayKind::Primary));
+        assert!(RayKinds::Primary.includes(RayKind::PrimarySingle));
         assert!(!RayKinds::Primary.includes(RayKind::Shadow));
         assert!(!RayKinds::Shadow.includes(RayKind::Primary));
     }
