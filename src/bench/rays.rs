@@ -150,7 +150,8 @@ fn frame_rays(renderer: &Renderer, prepared: &crate::frame::PreparedFrame) -> Fr
     let primary: Vec<TimedRay> = (0..tiles_x * h.div_ceil(TILE))
         .flat_map(|tile| {
             let (x0, y0) = ((tile % tiles_x) * TILE, (tile / tiles_x) * TILE);
-            (y0..(y0 + TILE).min(h)).flat_map(move |y| (x0..(x0 + TILE).min(w)).map(move |x| (x, y)))
+            (y0..(y0 + TILE).min(h))
+                .flat_map(move |y| (x0..(x0 + TILE).min(w)).map(move |x| (x, y)))
         })
         .map(|(x, y)| {
             let d = camera.primary_direction(x as f32 + 0.5, y as f32 + 0.5);

@@ -1,0 +1,75 @@
+//! Primary rays traced as packets give exactly the image of tracing each ray alone: the film
+//! traces a tile's primary rays in packets (`Accel::closest_hits`) and the integrator's own
+//! single-ray path (`FrameScene::primary_radiance`) must agree with it bit for bit, at
+//! sample counts whose packets split pixels and tiles unevenly.
+
+mod common;
+
+use std::path::Path;
+
+use glam::{Vec3, Vec3A};
+use mipray::frame::Renderer;
+use mipray::lod::{LodMethod, PathLength, RayCone, RayDiffsAniso, RayLod};
+use mipray::render::film::sample_offset;
+use mipray::render::{TraceCounters, render_image};
+
+/// Renders `frame` of an animation with the film and again ray by ray; every pixel must match.
+/// `L` is the per-ray state type of `lod`.
+fn packets_equal_single_rays<L: RayLod>(animation: &str, frame: u32, spp: u32, lod: LodMethod) {
+    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join(format!("animations/{animation}.gltf"));
+    let scene = mipray::scene::load(&path).unwrap();
+    let mut settings = common::scenes::settings(83, 37, lod); // not a multiple of the tile
+    settings.spp = spp;
+    let mut renderer = Renderer::new(scene, settings);
+    let prepared = renderer.prepare(frame, frame as f32 / 30.0).unwrap();
+    let scene = renderer.frame_scene(&prepared);
+    let camera = &prepared.camera;
+    let (image, film_counters) = render_image(&scene, camera, spp);
+    let mut counters = TraceCounters::default();
+    let mut differing = 0;
+    let mut first = None;
+    for y in 0..camera.height {
+        for x in 0..camera.width {
+            let mut sum = Vec3A::ZERO;
+            for i in 0..spp {
+                let (sx, sy) = sample_offset(x, y, i, spp);
+                let radiance = scene.primary_radiance::<L>(
+                    camera,
+                    x as f32 + sx,
+                    y as f32 + sy,
+                    &mut counters,
+                );
+                if radiance.is_finite() {
+                    sum += radiance.max(Vec3A::ZERO);
+                }
+            }
+            let alone = Vec3::from(sum / spp as f32);
+            let film = image.pixels[(y * camera.width + x) as usize];
+            if alone.to_array().map(f32::to_bits) != film.to_array().map(f32::to_bits) {
+                differing += 1;
+                first.get_or_insert((x, y, alone, film));
+            }
+        }
+    }
+    assert_eq!(
+        differing, 0,
+        "{animation} frame {frame} spp {spp} {lod}: {differing} pixels differ, first {first:?}"
+    );
+    assert_eq!(
+        counters.rays, film_counters.rays,
+        "the same rays were traced"
+    );
+}
+
+#[test]
+fn packets_equal_single_rays_on_every_animation() {
+    for animation in ["default", "kitchen", "robots", "museum"] {
+        packets_equal_single_rays::<PathLength>(animation, 7, 1, LodMethod::Paper);
+    }
+}
+
+#[test]
+fn packets_equal_single_rays_when_samples_split_packets() {
+    packets_equal_single_rays::<RayCone>("default", 3, 3, LodMethod::Cones);
+    packets_equal_single_rays::<RayDiffsAniso>("robots", 3, 5, LodMethod::DiffsAniso);
+}
