@@ -1,5 +1,5 @@
-//! Acceleration structure: an obvhs `Bvh2` over the frame's triangles, built and refitted,
-//! and the 4-wide tree collapsed from it that rays traverse ([`wide`]).
+//! Acceleration structure: obvhs builds a binary tree over the frame's triangles, which is
+//! collapsed into the 4-wide tree that rays traverse and that is refitted ([`wide`]).
 //!
 //! Built without spatial splits so it can be refitted later. After a build the triangle
 //! arrays are permuted into BVH order (`FrameTriangles::permute`), so a leaf's primitive
@@ -12,11 +12,7 @@
 use std::time::Duration;
 
 use glam::{Vec2, Vec3A};
-use obvhs::{
-    BvhBuildParams,
-    aabb::Aabb,
-    bvh2::{Bvh2, builder::build_bvh2, node::Bvh2Node},
-};
+use obvhs::{BvhBuildParams, aabb::Aabb, bvh2::builder::build_bvh2};
 use rayon::prelude::*;
 
 use crate::geometry::FrameTriangles;
@@ -48,19 +44,27 @@ pub struct Hit {
 /// A BVH over one frame's triangles.
 #[derive(Default)]
 pub struct Accel {
-    bvh: Bvh2,
-    /// The tree rays walk: the binary tree's boxes, four per node.
+    /// The tree rays walk and refits update.
     wide: WideBvh,
     /// The triangles as the hit test reads them.
     triangles: PackedTriangles,
-    /// For each triangle slot, the leaf node that holds it.
+    /// Per leaf, in slot order: its first slot, triangle count and lane in the wide tree.
+    /// Refits walk leaves (and packs) in this order, so they stream through the triangles.
+    leaves: Vec<Leaf>,
+    /// Per slot, its leaf's index in `leaves`.
     leaf_of_slot: Vec<u32>,
-    /// For each node, its parent (the root's is itself).
-    parent: Vec<u32>,
-    /// Inner nodes, children before parents: the order a full refit visits them.
-    refit_order: Vec<u32>,
+    /// Leaf boxes of a full refit, reused from frame to frame.
+    leaf_boxes: Vec<Aabb>,
     /// SAH cost right after the last build (see [`Accel::sah_cost`]).
     build_cost: f32,
+}
+
+/// A leaf of the tree: its triangle slots and where the wide tree keeps its box.
+#[derive(Clone, Copy)]
+struct Leaf {
+    first: u32,
+    count: u32,
+    lane: u32,
 }
 
 /// The best hit of a closest-hit query so far, with its source triangle (the tie rule).
@@ -122,64 +126,52 @@ impl Accel {
             &mut Duration::default(),
         );
         triangles.permute(&bvh.primitive_indices);
-        let mut packed = PackedTriangles::default();
-        let wide = WideBvh::collapse(&bvh, |first, count| {
-            packed.push_leaf(&triangles.positions, first, count)
+        let mut leaves = Vec::new();
+        let mut wide = WideBvh::collapse(&bvh, |first, count| {
+            leaves.push(Leaf {
+                first,
+                count,
+                lane: 0,
+            });
+            first
         });
+        for (leaf, &lane) in leaves.iter_mut().zip(wide.leaf_lanes()) {
+            leaf.lane = lane;
+        }
+        // Packs and leaves in slot order; each leaf then refers to its first pack.
+        leaves.sort_unstable_by_key(|l| l.first);
+        let mut packed = PackedTriangles::default();
+        let mut leaf_of_slot = vec![0; triangles.len()];
+        for (i, leaf) in leaves.iter().enumerate() {
+            let (first, count) = (leaf.first as usize, leaf.count as usize);
+            leaf_of_slot[first..first + count].fill(i as u32);
+            let first_pack = packed.push_leaf(&triangles.positions, leaf.first, leaf.count);
+            wide.set_leaf_ref(leaf.lane, first_pack);
+        }
         let mut accel = Accel {
             wide,
             triangles: packed,
-            bvh,
-            ..Default::default()
+            leaves,
+            leaf_of_slot,
+            leaf_boxes: Vec::new(),
+            build_cost: 0.0,
         };
-        accel.index_tree(triangles.len());
         accel.build_cost = accel.sah_cost();
         Ok(accel)
-    }
-
-    /// Derives the leaf-of-slot, parent and refit-order tables from the tree.
-    fn index_tree(&mut self, slots: usize) {
-        let nodes = &self.bvh.nodes;
-        self.leaf_of_slot = vec![0; slots];
-        self.parent = vec![0; nodes.len()];
-        self.refit_order.clear();
-        // Depth-first from the root; reversing the visit order puts children before parents.
-        let mut stack = vec![0u32];
-        while let Some(id) = stack.pop() {
-            let node = &nodes[id as usize];
-            if node.is_leaf() {
-                for slot in node.first_index..node.first_index + node.prim_count {
-                    self.leaf_of_slot[slot as usize] = id;
-                }
-            } else {
-                self.refit_order.push(id);
-                for child in [node.first_index, node.first_index + 1] {
-                    self.parent[child as usize] = id;
-                    stack.push(child);
-                }
-            }
-        }
-        self.refit_order.reverse();
     }
 
     /// Surface-area-heuristic cost of the tree, relative to its root box: the expected cost
     /// of a ray through the root. Compared with its value right after the build to decide
     /// when refitting has degraded the tree enough to rebuild it.
     pub fn sah_cost(&self) -> f32 {
-        let Some(root) = self.bvh.nodes.first() else {
-            return 0.0;
-        };
-        let root_area = root.aabb().half_area().max(f32::MIN_POSITIVE);
-        let mut cost = 0.0f64;
-        for node in &self.bvh.nodes {
-            let share = (node.aabb().half_area() / root_area) as f64;
-            cost += if node.is_leaf() {
-                share * (node.prim_count as f32 * SAH_INTERSECTION_COST) as f64
-            } else {
-                share * SAH_TRAVERSAL_COST as f64
-            };
-        }
-        cost as f32
+        self.wide
+            .sah_cost(SAH_TRAVERSAL_COST, SAH_INTERSECTION_COST)
+            .unwrap_or_else(|| {
+                // One leaf (or nothing): every ray tests every triangle.
+                self.leaves
+                    .first()
+                    .map_or(0.0, |l| l.count as f32 * SAH_INTERSECTION_COST)
+            })
     }
 
     /// `sah_cost() / cost right after the last build` (1 for an empty tree).
@@ -194,11 +186,10 @@ impl Accel {
     /// Refits the boxes to the moved triangles `moved_slots` (BVH order) after their
     /// positions changed in `triangles`. The tree's topology is kept.
     pub fn refit(&mut self, triangles: &FrameTriangles, moved_slots: &[u32]) -> RefitKind {
-        if moved_slots.is_empty() || self.bvh.nodes.is_empty() {
+        if moved_slots.is_empty() || self.leaves.is_empty() {
             return RefitKind::None;
         }
-        let leaves = self.bvh.nodes.len().div_ceil(2);
-        if moved_slots.len() as f64 > PARTIAL_REFIT_MAX_SHARE * leaves as f64 {
+        if moved_slots.len() as f64 > PARTIAL_REFIT_MAX_SHARE * self.leaves.len() as f64 {
             self.refit_full(triangles);
             RefitKind::Full
         } else {
@@ -210,49 +201,36 @@ impl Accel {
     fn refit_full(&mut self, triangles: &FrameTriangles) {
         let positions = &triangles.positions;
         let parallel = positions.len() >= PARALLEL_REFIT_MIN;
-        let leaf_box = |node: &mut Bvh2Node| {
-            if node.is_leaf() {
-                node.set_aabb(leaf_box(positions, node));
-            }
-        };
         self.triangles.update_all(positions, parallel);
+        let boxes = &mut self.leaf_boxes;
+        boxes.resize(self.leaves.len(), Aabb::empty());
+        let fill =
+            |(aabb, leaf): (&mut Aabb, &Leaf)| *aabb = leaf_box(positions, leaf.first, leaf.count);
         if parallel {
-            self.bvh.nodes.par_iter_mut().for_each(leaf_box);
+            boxes
+                .par_iter_mut()
+                .zip(self.leaves.par_iter())
+                .for_each(fill);
         } else {
-            self.bvh.nodes.iter_mut().for_each(leaf_box);
+            boxes.iter_mut().zip(&self.leaves).for_each(fill);
         }
-        for &id in &self.refit_order {
-            let first = self.bvh.nodes[id as usize].first_index as usize;
-            let aabb = self.bvh.nodes[first]
-                .aabb()
-                .union(self.bvh.nodes[first + 1].aabb());
-            self.bvh.nodes[id as usize].set_aabb(aabb);
+        for (leaf, aabb) in self.leaves.iter().zip(boxes.iter()) {
+            self.wide.set_leaf_box(leaf.lane, aabb);
         }
-        self.wide.refresh_all(&self.bvh);
+        self.wide.refit_inner();
     }
 
-    /// Updates each moved triangle's leaf, then its ancestors up to the first one whose box
-    /// comes out unchanged: that ancestor's own ancestors cannot change because of it.
+    /// Updates each moved triangle's pack lane and leaf box, then the leaf's ancestors up to
+    /// the first whose box comes out unchanged.
     fn refit_partial(&mut self, triangles: &FrameTriangles, moved_slots: &[u32]) {
         for &slot in moved_slots {
-            self.triangles
-                .update(slot, &triangles.positions[slot as usize]);
-            let leaf = self.leaf_of_slot[slot as usize];
-            let aabb = leaf_box(&triangles.positions, &self.bvh.nodes[leaf as usize]);
-            self.bvh.nodes[leaf as usize].set_aabb(aabb);
-            self.wide.refresh_lane(leaf, &aabb);
-            let mut id = leaf;
-            while id != 0 {
-                id = self.parent[id as usize];
-                let first = self.bvh.nodes[id as usize].first_index as usize;
-                let aabb = self.bvh.nodes[first]
-                    .aabb()
-                    .union(self.bvh.nodes[first + 1].aabb());
-                if *self.bvh.nodes[id as usize].aabb() == aabb {
-                    break;
-                }
-                self.bvh.nodes[id as usize].set_aabb(aabb);
-                self.wide.refresh_lane(id, &aabb);
+            let positions = &triangles.positions;
+            self.triangles.update(slot, &positions[slot as usize]);
+            let leaf = self.leaves[self.leaf_of_slot[slot as usize] as usize];
+            // A tree of one leaf has no lane: rays test that leaf's triangles whatever.
+            if !self.wide.leaf_lanes().is_empty() {
+                let aabb = leaf_box(positions, leaf.first, leaf.count);
+                self.wide.refit_leaf(leaf.lane, &aabb);
             }
         }
     }
@@ -383,13 +361,11 @@ pub fn padded_box(tri: &[Vec3A; 3]) -> Aabb {
     Aabb::new(min - pad, max + pad)
 }
 
-/// The union of the padded boxes of a leaf's triangles.
-fn leaf_box(positions: &[[Vec3A; 3]], node: &Bvh2Node) -> Aabb {
-    let mut aabb = Aabb::empty();
-    for slot in node.first_index..node.first_index + node.prim_count {
-        aabb = aabb.union(&padded_box(&positions[slot as usize]));
-    }
-    aabb
+/// The union of the padded boxes of the `count` triangles from slot `first` (a leaf).
+fn leaf_box(positions: &[[Vec3A; 3]], first: u32, count: u32) -> Aabb {
+    positions[first as usize..(first + count) as usize]
+        .iter()
+        .fold(Aabb::empty(), |a, tri| a.union(&padded_box(tri)))
 }
 
 #[cfg(test)]

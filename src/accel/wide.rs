@@ -1,14 +1,13 @@
 //! The 4-wide BVH that rays traverse, collapsed from the binary tree that is built and
 //! refitted (Embree's BVH4 layout, read in `embree/kernels/bvh/bvh_node_aabb.h`).
 //!
-//! Why a second tree: a binary tree costs one box test and one stack push or pop per level;
-//! four child boxes side by side in structure-of-arrays form are tested with one SIMD slab
-//! test (four lanes of SSE2, the x86-64 baseline, through glam's `Vec4`), which halves the
-//! levels and the memory traffic per ray. The binary tree stays the one that is built,
-//! refitted and measured (SAH), because obvhs builds and refits it well; the wide tree only
-//! copies its boxes. Each lane remembers which binary node it mirrors, so a refit refreshes
-//! exactly the lanes whose binary node changed ([`WideBvh::refresh_lane`]) and topology never
-//! has to be rebuilt between rebuilds of the binary tree.
+//! Why wide: a binary tree costs one box test and one stack push or pop per level; four
+//! child boxes side by side in structure-of-arrays form are tested with one SIMD slab test
+//! (four lanes of SSE2, the x86-64 baseline, through glam's `Vec4`), which halves the levels
+//! and the memory traffic per ray. obvhs builds the binary tree; it is collapsed once per
+//! build and then dropped: refits work on the wide tree itself ([`WideBvh::refit_inner`],
+//! [`WideBvh::refit_leaf`]), and the SAH cost that decides rebuilds is measured on it, the
+//! tree rays actually walk.
 //!
 //! Traversal is near-first: the children a ray enters are sorted by entry distance, the
 //! nearest is visited next, the others go on a stack with their entry distance, and an
@@ -65,6 +64,21 @@ impl WideNode {
         count: [0; WIDTH],
     };
 
+    fn lane_box(&self, lane: usize) -> Aabb {
+        let b = &self.bounds;
+        Aabb::new(
+            Vec3A::new(b[0][lane], b[1][lane], b[2][lane]),
+            Vec3A::new(b[3][lane], b[4][lane], b[5][lane]),
+        )
+    }
+
+    /// The union of the used lanes' boxes.
+    fn bounds_union(&self) -> Aabb {
+        (0..WIDTH)
+            .filter(|&lane| self.child[lane] != EMPTY)
+            .fold(Aabb::empty(), |a, lane| a.union(&self.lane_box(lane)))
+    }
+
     fn set_box(&mut self, lane: usize, aabb: &Aabb) {
         for axis in 0..3 {
             self.bounds[axis][lane] = aabb.min[axis];
@@ -94,14 +108,18 @@ impl ChildRef {
     }
 }
 
-/// The wide tree plus, per lane, the binary node it mirrors (for refits).
+/// The wide tree, with what its refits need: each node's parent lane and each leaf's lane.
 #[derive(Default, Clone)]
 pub struct WideBvh {
+    /// Parents before children (a child's index is larger than its parent's), so walking
+    /// the nodes backwards visits children first.
     nodes: Vec<WideNode>,
     /// The root when the whole tree is one leaf (a scene of at most one leaf's triangles).
     root_leaf: Option<(u32, u32)>,
-    /// For each binary node mirrored by a lane, `node * WIDTH + lane`; `EMPTY` otherwise.
-    lane_of_binary: Vec<u32>,
+    /// Per node, `parent * WIDTH + lane` of the lane that holds it (`EMPTY` for the root).
+    parent: Vec<u32>,
+    /// Per leaf, in the order `collapse` met them: `node * WIDTH + lane`.
+    leaf_lanes: Vec<u32>,
     /// Longest root-to-leaf path in wide nodes (sizes the traversal stack).
     depth: usize,
 }
@@ -198,10 +216,7 @@ impl WideBvh {
     /// callback of [`WideBvh::traverse`] receives as `first`): the first slot, or the first
     /// record of the leaf's own layout.
     pub fn collapse(binary: &Bvh2, mut leaf_ref: impl FnMut(u32, u32) -> u32) -> WideBvh {
-        let mut wide = WideBvh {
-            lane_of_binary: vec![EMPTY; binary.nodes.len()],
-            ..Default::default()
-        };
+        let mut wide = WideBvh::default();
         let Some(root) = binary.nodes.first() else {
             return wide;
         };
@@ -212,6 +227,7 @@ impl WideBvh {
         // (binary inner node, wide node it becomes, depth)
         let mut pending = vec![(0u32, 0u32, 1usize)];
         wide.nodes.push(WideNode::UNUSED);
+        wide.parent.push(EMPTY);
         while let Some((id, at, depth)) = pending.pop() {
             wide.depth = wide.depth.max(depth);
             let lanes = open_children(binary, id);
@@ -219,13 +235,15 @@ impl WideBvh {
             for (lane, &child) in lanes.iter().enumerate() {
                 let b = &binary.nodes[child as usize];
                 node.set_box(lane, b.aabb());
-                wide.lane_of_binary[child as usize] = at * WIDTH as u32 + lane as u32;
+                let here = at * WIDTH as u32 + lane as u32;
                 if b.is_leaf() {
                     node.child[lane] = LEAF | leaf_ref(b.first_index, b.prim_count);
                     node.count[lane] = b.prim_count;
+                    wide.leaf_lanes.push(here);
                 } else {
                     let next = wide.nodes.len() as u32;
                     wide.nodes.push(WideNode::UNUSED);
+                    wide.parent.push(here);
                     node.child[lane] = next;
                     pending.push((child, next, depth + 1));
                 }
@@ -235,21 +253,77 @@ impl WideBvh {
         wide
     }
 
-    /// Copies binary node `id`'s box into the lane that mirrors it, if any.
-    #[inline]
-    pub fn refresh_lane(&mut self, id: u32, aabb: &Aabb) {
-        let lane = self.lane_of_binary[id as usize];
-        if lane != EMPTY {
-            let (node, lane) = (lane as usize / WIDTH, lane as usize % WIDTH);
-            self.nodes[node].set_box(lane, aabb);
+    /// Every leaf's `(node * WIDTH + lane)`, in the order `collapse` called `leaf_ref`.
+    pub fn leaf_lanes(&self) -> &[u32] {
+        &self.leaf_lanes
+    }
+
+    /// Sets the box of the leaf in lane `at` (`node * WIDTH + lane`); a full refit sets
+    /// every leaf's, then calls [`WideBvh::refit_inner`].
+    pub fn set_leaf_box(&mut self, at: u32, aabb: &Aabb) {
+        self.set_lane(at, aabb);
+    }
+
+    /// Replaces what the leaf in lane `at` refers to (its first record).
+    pub fn set_leaf_ref(&mut self, at: u32, leaf_ref: u32) {
+        self.nodes[at as usize / WIDTH].child[at as usize % WIDTH] = LEAF | leaf_ref;
+    }
+
+    /// Refits every inner lane as the union of its child's lanes, children first.
+    pub fn refit_inner(&mut self) {
+        for index in (1..self.nodes.len()).rev() {
+            let aabb = self.nodes[index].bounds_union();
+            self.set_lane(self.parent[index], &aabb);
         }
     }
 
-    /// Copies every mirrored box from `binary` (after a full refit).
-    pub fn refresh_all(&mut self, binary: &Bvh2) {
-        for (id, node) in binary.nodes.iter().enumerate() {
-            self.refresh_lane(id as u32, node.aabb());
+    /// Refits the leaf in lane `at` (`node * WIDTH + lane`) to `aabb`, then its ancestors
+    /// up to the first whose box comes out unchanged (its own ancestors cannot change).
+    pub fn refit_leaf(&mut self, at: u32, aabb: &Aabb) {
+        self.set_lane(at, aabb);
+        let mut node = at as usize / WIDTH;
+        while node != 0 {
+            let aabb = self.nodes[node].bounds_union();
+            let up = self.parent[node];
+            if self.lane_box(up) == aabb {
+                break;
+            }
+            self.set_lane(up, &aabb);
+            node = up as usize / WIDTH;
         }
+    }
+
+    fn set_lane(&mut self, at: u32, aabb: &Aabb) {
+        self.nodes[at as usize / WIDTH].set_box(at as usize % WIDTH, aabb);
+    }
+
+    fn lane_box(&self, at: u32) -> Aabb {
+        self.nodes[at as usize / WIDTH].lane_box(at as usize % WIDTH)
+    }
+
+    /// Surface-area-heuristic cost relative to the root box: the expected cost of a ray
+    /// through the root (one traversal step per node entered, one intersection per
+    /// triangle of a leaf entered), the sum over lanes of its share of the root's area
+    /// times its cost. `None` when the tree is one leaf or empty.
+    pub fn sah_cost(&self, traversal: f32, intersection: f32) -> Option<f32> {
+        let root = self.nodes.first()?.bounds_union();
+        let root_area = f64::from(root.half_area().max(f32::MIN_POSITIVE));
+        let mut cost = f64::from(traversal);
+        for node in &self.nodes {
+            for lane in 0..WIDTH {
+                if node.child[lane] == EMPTY {
+                    continue;
+                }
+                let share = f64::from(node.lane_box(lane).half_area()) / root_area;
+                let step = if node.child[lane] & LEAF != 0 {
+                    node.count[lane] as f32 * intersection
+                } else {
+                    traversal
+                };
+                cost += share * f64::from(step);
+            }
+        }
+        Some(cost as f32)
     }
 
     /// Walks the tree near-first along a ray, calling `leaf(leaf_ref, count, &mut t_max)` for
@@ -558,25 +632,20 @@ mod tests {
     }
 
     #[test]
-    fn every_binary_node_but_the_root_is_mirrored_once() {
+    fn every_leaf_is_one_lane_and_a_ray_along_the_row_reaches_all() {
         let binary = build(100);
         let wide = WideBvh::collapse(&binary, |first, _| first);
-        let mirrored: Vec<u32> = wide
-            .lane_of_binary
-            .iter()
-            .copied()
-            .filter(|&l| l != EMPTY)
-            .collect();
-        let mut unique = mirrored.clone();
-        unique.sort();
-        unique.dedup();
-        assert_eq!(unique.len(), mirrored.len());
-        // Every leaf is a lane; the leaves reached by a ray along the row are all 100 boxes.
-        let leaves = binary.nodes.iter().filter(|n| n.is_leaf()).count();
-        assert_eq!(leaves, 100);
+        let mut lanes = wide.leaf_lanes.clone();
+        lanes.sort();
+        lanes.dedup();
+        assert_eq!(lanes.len(), 100);
         let all = reached(&wide, Vec3A::new(-5.0, 0.5, 0.5), Vec3A::X);
         assert_eq!(all.len(), 100);
         assert!(wide.nodes.len() < binary.nodes.len() / 2);
+        // Parents come before children.
+        for (i, &p) in wide.parent.iter().enumerate().skip(1) {
+            assert!((p as usize / WIDTH) < i);
+        }
     }
 
     #[test]
@@ -609,24 +678,46 @@ mod tests {
     }
 
     #[test]
-    fn refresh_moves_a_lane_with_its_binary_node() {
-        let mut binary = build(16);
-        let mut wide = WideBvh::collapse(&binary, |first, _| first);
-        // Move every leaf of box 3 far up, refit the binary tree by hand, refresh the lanes.
-        let far = Aabb::new(Vec3A::new(6.0, 100.0, 0.0), Vec3A::new(7.0, 101.0, 1.0));
-        for id in 0..binary.nodes.len() {
-            let n = binary.nodes[id];
-            if n.is_leaf() && binary.primitive_indices[n.first_index as usize] == 3 {
-                binary.nodes[id].set_aabb(far);
-            }
-        }
-        binary.refit_all();
-        wide.refresh_all(&binary);
+    fn refits_move_a_leaf_and_its_ancestors() {
+        let binary = build(16);
+        // Leaves in the order collapse meets them, by first slot, with their boxes.
+        let mut order = Vec::new();
+        let mut wide = WideBvh::collapse(&binary, |first, _| {
+            order.push(first);
+            first
+        });
+        let box_of_slot = |slot: u32| {
+            *binary
+                .nodes
+                .iter()
+                .find(|n| n.is_leaf() && n.first_index == slot)
+                .unwrap()
+                .aabb()
+        };
+        let mut leaf_boxes: Vec<Aabb> = order.iter().map(|&f| box_of_slot(f)).collect();
+        let original_cost = wide.sah_cost(1.0, 1.0).unwrap();
+        // Box 3 jumps far up: by a partial refit of its leaf lane, then by a full refit.
+        let moved = order
+            .iter()
+            .position(|&f| binary.primitive_indices[f as usize] == 3)
+            .unwrap();
+        leaf_boxes[moved] = Aabb::new(Vec3A::new(6.0, 100.0, 0.0), Vec3A::new(7.0, 101.0, 1.0));
+        wide.refit_leaf(wide.leaf_lanes[moved], &leaf_boxes[moved]);
         assert!(reached(&wide, Vec3A::new(6.5, 5.0, 0.5), Vec3A::NEG_Y).is_empty());
         assert_eq!(
             reached(&wide, Vec3A::new(6.5, 200.0, 0.5), Vec3A::NEG_Y).len(),
             1
         );
+        // The cost is read from the refitted boxes (relative to the grown root box).
+        assert_ne!(wide.sah_cost(1.0, 1.0).unwrap(), original_cost);
+        let mut full = WideBvh::collapse(&binary, |first, _| first);
+        for (leaf, aabb) in leaf_boxes.iter().enumerate() {
+            full.set_leaf_box(full.leaf_lanes[leaf], aabb);
+        }
+        full.refit_inner();
+        for (a, b) in full.nodes.iter().zip(&wide.nodes) {
+            assert_eq!(a.bounds, b.bounds);
+        }
     }
 
     #[test]
