@@ -202,6 +202,9 @@ impl Accel {
         let positions = &triangles.positions;
         let parallel = positions.len() >= PARALLEL_REFIT_MIN;
         self.triangles.update_all(positions, parallel);
+        if self.wide.leaf_lanes().is_empty() {
+            return; // a tree of one leaf keeps no box: rays test its triangles whatever
+        }
         let boxes = &mut self.leaf_boxes;
         boxes.resize(self.leaves.len(), Aabb::empty());
         let fill =
@@ -583,6 +586,86 @@ mod tests {
             found > 40,
             "too few hits ({found}) for the test to mean much"
         );
+    }
+
+    #[test]
+    fn tiny_and_empty_trees_answer_packets_and_refits() {
+        // Two triangles: the whole tree is one leaf (no wide node), then nothing at all.
+        let tri = |z: f32| {
+            [
+                Vec3A::new(-1.0, -1.0, z),
+                Vec3A::new(1.0, -1.0, z),
+                Vec3A::new(0.0, 1.0, z),
+            ]
+        };
+        let mut tris = soup(&[tri(-5.0), tri(-2.0)]);
+        let mut accel = Accel::build(&mut tris).unwrap();
+        let rays = [
+            (Vec3A::ZERO, Vec3A::NEG_Z),
+            (Vec3A::new(9.0, 0.0, 0.0), Vec3A::NEG_Z),
+        ];
+        let mut hits = [None; 2];
+        accel.closest_hits(&tris, &rays, f32::INFINITY, &mut hits);
+        assert_eq!(hits[0].map(|h| h.t), Some(2.0));
+        assert!(hits[1].is_none());
+        // Move the near one behind the far one: the refit must move the packed copy too.
+        tris.positions[tris.source.iter().position(|&s| s == 1).unwrap()] = tri(-7.0);
+        let moved: Vec<u32> = (0..2).collect();
+        accel.refit(&tris, &moved);
+        assert_eq!(
+            accel
+                .closest_hit(&tris, Vec3A::ZERO, Vec3A::NEG_Z, f32::INFINITY)
+                .map(|h| h.t),
+            Some(5.0)
+        );
+        assert!(accel.sah_cost() > 0.0);
+        // One triangle: certainly a tree of one leaf; a full refit moves it.
+        let mut one = soup(&[tri(-3.0)]);
+        let mut accel = Accel::build(&mut one).unwrap();
+        one.positions[0] = tri(-4.0);
+        assert_eq!(accel.refit(&one, &[0]), RefitKind::Full);
+        assert_eq!(
+            accel
+                .closest_hit(&one, Vec3A::ZERO, Vec3A::NEG_Z, f32::INFINITY)
+                .map(|h| h.t),
+            Some(4.0)
+        );
+        let mut empty = soup(&[]);
+        let accel = Accel::build(&mut empty).unwrap();
+        accel.closest_hits(&empty, &rays, f32::INFINITY, &mut hits);
+        assert_eq!(hits, [None, None]);
+        assert!(accel.visit_hits(&empty, Vec3A::ZERO, Vec3A::X, f32::INFINITY, |_, _| false));
+    }
+
+    #[test]
+    fn packets_of_axis_parallel_and_repeated_rays_match_single_rays() {
+        let mut rng = Rng(99);
+        let mut tris = random_soup(&mut rng, 2000);
+        let accel = Accel::build(&mut tris).unwrap();
+        // Directions with zero components, both signs of zero, and the same ray many times.
+        let mut rays = Vec::new();
+        for d in [
+            Vec3A::X,
+            Vec3A::NEG_X,
+            Vec3A::Y,
+            Vec3A::NEG_Z,
+            Vec3A::new(-0.0, 0.0, 1.0),
+        ] {
+            for i in 0..6 {
+                rays.push((Vec3A::new(i as f32 - 3.0, 1.5, -0.5) - d * 30.0, d));
+            }
+        }
+        rays.extend(std::iter::repeat_n(
+            (Vec3A::new(0.0, 0.0, 30.0), Vec3A::NEG_Z),
+            10,
+        ));
+        assert!(rays.len() <= PACKET);
+        let mut hits = vec![None; rays.len()];
+        accel.closest_hits(&tris, &rays, f32::INFINITY, &mut hits);
+        for (&(o, d), hit) in rays.iter().zip(&hits) {
+            assert_eq!(*hit, accel.closest_hit(&tris, o, d, f32::INFINITY));
+        }
+        assert!(hits.iter().filter(|h| h.is_some()).count() > 5);
     }
 
     #[test]
