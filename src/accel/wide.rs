@@ -264,8 +264,13 @@ impl WideBvh {
         self.set_lane(at, aabb);
     }
 
-    /// Replaces what the leaf in lane `at` refers to (its first record).
+    /// Replaces what the leaf in lane `at` refers to (its first record); for a tree of one
+    /// leaf (no lanes) the root leaf's.
     pub fn set_leaf_ref(&mut self, at: u32, leaf_ref: u32) {
+        if let Some((root_ref, _)) = &mut self.root_leaf {
+            *root_ref = leaf_ref;
+            return;
+        }
         self.nodes[at as usize / WIDTH].child[at as usize % WIDTH] = LEAF | leaf_ref;
     }
 
