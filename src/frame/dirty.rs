@@ -9,6 +9,8 @@
 //! - *deformed*: shape changed (skinning, morphing, non-uniform scale or shear): `log2 P_b`
 //!   is recomputed from its world vertices.
 
+use rayon::prelude::*;
+
 /// How one triangle moved this frame.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Motion {
@@ -46,6 +48,38 @@ impl DirtySet {
             self.slots.push(slot);
             self.motions.push(motion);
         }
+    }
+
+    /// Lists, in the order `visited` yields them, the slots whose entry in `motion_of_slot`
+    /// is set, with that motion, and clears `motion_of_slot`; the parallel counterpart of
+    /// [`Self::mark`] called in that order. Preconditions: the set was just
+    /// [`reset`](Self::reset) for `motion_of_slot.len()` slots, and `visited` yields each
+    /// slot at most once.
+    pub fn assign_in_order(
+        &mut self,
+        visited: impl ParallelIterator<Item = u32>,
+        motion_of_slot: &mut [Option<Motion>],
+    ) {
+        debug_assert!(
+            self.slots.is_empty() && self.bits.len() == motion_of_slot.len().div_ceil(64)
+        );
+        let marked = visited.filter_map(|slot| motion_of_slot[slot as usize].map(|m| (slot, m)));
+        let mut listed = (
+            std::mem::take(&mut self.slots),
+            std::mem::take(&mut self.motions),
+        );
+        listed.par_extend(marked);
+        (self.slots, self.motions) = listed;
+        self.bits
+            .par_iter_mut()
+            .zip(motion_of_slot.par_chunks_mut(64))
+            .for_each(|(word, motions)| {
+                for (bit, motion) in motions.iter_mut().enumerate() {
+                    if motion.take().is_some() {
+                        *word |= 1 << bit;
+                    }
+                }
+            });
     }
 
     #[inline]
@@ -86,5 +120,31 @@ mod tests {
         assert_eq!(d.count(Motion::Deformed), 1);
         d.reset(130);
         assert!(d.is_empty() && !d.contains(3));
+    }
+
+    #[test]
+    fn listing_in_order_equals_marking_one_by_one() {
+        let order: Vec<u32> = (0..5000u32).map(|k| (k * 7919) % 5000).collect();
+        let motion_at = |slot: u32| match slot % 5 {
+            0 => Some(Motion::Rigid),
+            1 => Some(Motion::Deformed),
+            2 => Some(Motion::Scaled),
+            _ => None,
+        };
+        let mut one_by_one = DirtySet::default();
+        one_by_one.reset(5000);
+        for &slot in &order {
+            if let Some(m) = motion_at(slot) {
+                one_by_one.mark(slot, m);
+            }
+        }
+        let mut motions: Vec<Option<Motion>> = (0..5000).map(motion_at).collect();
+        let mut listed = DirtySet::default();
+        listed.reset(5000);
+        listed.assign_in_order(order.par_iter().copied(), &mut motions);
+        assert_eq!(listed.slots, one_by_one.slots);
+        assert_eq!(listed.motions, one_by_one.motions);
+        assert_eq!(listed.bits, one_by_one.bits);
+        assert!(motions.iter().all(Option::is_none), "the marks are taken");
     }
 }

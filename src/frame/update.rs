@@ -2,16 +2,78 @@
 //! mark it in the dirty set as rigid, scaled or deformed, and refit or rebuild the BVH.
 //! Only what changed is touched; `tests/frame_loop.rs` checks every changed-only path
 //! against a fresh build.
+//!
+//! Three steps, each split across rayon's threads when its work is large enough to pay
+//! ([`UpdateParallelism`]): deform the skinned and morphed instances (each into its own
+//! buffers), write the moved triangles into their slots (recording each slot's motion), then
+//! list the marked slots in the dirty set in source-triangle order. Every written value is a
+//! pure function of the pose and its triangle, and the dirty order is fixed by source order,
+//! so the parallel update is bit-identical to the sequential one, dirty order included.
+//! Timing: classifying instances and listing the dirty set count as `dirty_ms`; deforming and
+//! writing (including the per-triangle "did its vertices change" test, fused with the write)
+//! as `animate_ms`.
 
 use std::time::Instant;
 
-use glam::Mat4;
+use rayon::prelude::*;
 
-use super::posed::{VertexSource, instance_vertices, same_deformation, write_all_triangles};
+use super::posed::{
+    PosedVertices, Rewrite, TriangleWriter, VertexSource, WRITE_CHUNK, same_deformation,
+    write_all_triangles,
+};
 use super::{InstanceState, Motion, Renderer, UpdateStats, ms_since};
 use crate::accel::{Accel, AccelError, TreeStep};
 use crate::anim::NodeShape;
-use crate::geometry::Placement;
+
+/// Below this much work (triangles or vertices) an update step stays on the calling thread:
+/// rayon's split and join cost more than the work (tens of ns per item).
+const PARALLEL_MIN_ITEMS: usize = 8192;
+
+/// The parallel triangle write visits every slot (it reads the triangles in slot order and
+/// skips the unmoved ones), so it pays only when at least one slot in this many moves.
+const PARALLEL_WRITE_MAX_SLOTS_PER_MOVED: usize = 16;
+
+/// Whether the frame update splits its steps across rayon's threads.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum UpdateParallelism {
+    /// Each step splits past 8,192 items of work (the default).
+    #[default]
+    Auto,
+    /// Every step on the calling thread: the reference the parallel update is tested against.
+    Sequential,
+    /// Every step split however small its work: drives the parallel path on small scenes.
+    Parallel,
+}
+
+impl UpdateParallelism {
+    /// Whether a step with `items` of work splits.
+    pub(super) fn splits(self, items: usize) -> bool {
+        match self {
+            UpdateParallelism::Auto => items >= PARALLEL_MIN_ITEMS,
+            UpdateParallelism::Sequential => false,
+            UpdateParallelism::Parallel => true,
+        }
+    }
+
+    /// Whether the triangle write over all `slots` splits when `moved` of them are visited.
+    fn splits_write(self, moved: usize, slots: usize) -> bool {
+        self.splits(moved)
+            && (self == UpdateParallelism::Parallel
+                || moved * PARALLEL_WRITE_MAX_SLOTS_PER_MOVED >= slots)
+    }
+}
+
+/// The update's reused per-frame buffers.
+#[derive(Debug, Default)]
+pub struct UpdateScratch {
+    /// Every instance's vertices and placement this frame.
+    pub posed: PosedVertices,
+    /// Per instance: what this frame does to its triangles.
+    pub plan: Vec<Rewrite>,
+    /// Per slot: the motion the write gave it. All `None` between frames (the dirty listing
+    /// takes them), so a rebuild's reordering of slots needs no reset.
+    slot_motion: Vec<Option<Motion>>,
+}
 
 impl Renderer {
     /// First frame: every triangle placed, the tree built, every `log2 P_b` computed.
@@ -26,7 +88,9 @@ impl Renderer {
             &self.geometry,
             &self.pose,
             &self.deforms,
-            &mut self.scratch,
+            &mut self.update.posed,
+            &mut self.update.plan,
+            self.parallelism.splits(self.geometry.triangle_count()),
             &mut self.triangles,
         );
         let states = self.instance_states(scales);
@@ -72,78 +136,161 @@ impl Renderer {
         }
     }
 
-    /// Rewrites the triangles of every instance whose placement changed and records them in
-    /// the dirty set.
+    /// Rewrites the triangles of every instance whose placement or deformation changed and
+    /// records them in the dirty set.
     pub(super) fn update_moved(&mut self, scales: &[Option<NodeShape>], stats: &mut UpdateStats) {
         let t = Instant::now();
         self.dirty.reset(self.triangles.len());
         let previous = self.instances.take().unwrap_or_default();
         let current = self.instance_states(scales);
-        let mut classify_ms = ms_since(t);
-        for (i, (now, before)) in current.iter().zip(&previous).enumerate() {
-            if self.deforms[i] == VertexSource::Deformed {
-                if !same_deformation(
+        let visited = self.plan_rewrites(&current, &previous);
+        self.instances = Some(current);
+        stats.dirty_ms = ms_since(t);
+
+        let t = Instant::now();
+        self.deform_planned();
+        self.write_planned(visited);
+        stats.animate_ms = ms_since(t);
+
+        let t = Instant::now();
+        self.list_dirty(visited);
+        stats.dirty_ms += ms_since(t);
+    }
+
+    /// Decides each instance's [`Rewrite`] from its placement now and before (and records
+    /// the placement of those to rewrite); returns how many triangles the write visits.
+    fn plan_rewrites(&mut self, current: &[InstanceState], previous: &[InstanceState]) -> usize {
+        let UpdateScratch { posed, plan, .. } = &mut self.update;
+        posed.resize(current.len());
+        plan.clear();
+        let mut visited = 0;
+        for (i, (now, before)) in current.iter().zip(previous).enumerate() {
+            let rewrite = if self.deforms[i] == VertexSource::Deformed {
+                let same = same_deformation(
                     &self.scene,
                     &self.geometry,
                     i,
                     &self.pose,
                     &self.previous_pose,
-                ) {
-                    classify_ms += self.deform_instance(i);
+                );
+                if same {
+                    Rewrite::Keep
+                } else {
+                    Rewrite::Changed
                 }
-                continue;
-            }
-            if now.world_from_object == before.world_from_object {
-                continue; // static: untouched
-            }
-            let c = Instant::now();
-            // Same shape key: the triangles only turned and moved. Otherwise a new uniform
-            // scale shifts `log2 P_b`; anything else changed the shape.
-            let motion = match (now.shape, before.shape) {
-                (Some(s), Some(p)) if s == p => Motion::Rigid,
-                (Some(NodeShape { stretch: None, .. }), _) => Motion::Scaled,
-                _ => Motion::Deformed,
+            } else if now.world_from_object == before.world_from_object {
+                Rewrite::Keep // static: untouched
+            } else {
+                posed.place(i, now.world_from_object);
+                Rewrite::All(placed_motion(now.shape, before.shape))
             };
-            classify_ms += ms_since(c);
-            self.place_instance(i, now.world_from_object, motion);
+            if rewrite != Rewrite::Keep {
+                visited += self.geometry.instance_triangles[i].len();
+            }
+            plan.push(rewrite);
         }
-        self.instances = Some(current);
-        stats.dirty_ms = classify_ms;
-        stats.animate_ms = ms_since(t) - classify_ms;
+        visited
     }
 
-    /// Rewrites a skinned or morphed instance's triangles from its deformed vertices; marks
-    /// exactly those whose vertices changed as deformed. Returns the milliseconds spent
-    /// comparing (the classification share of the work).
-    fn deform_instance(&mut self, i: usize) -> f64 {
-        let mut compare_ms = 0.0;
-        let (placement, positions, normals) = instance_vertices(
+    /// Skins and morphs the instances planned [`Rewrite::Changed`], across instances on
+    /// rayon's threads when there are enough vertices (large skins also split inside).
+    fn deform_planned(&mut self) {
+        let UpdateScratch { posed, plan, .. } = &mut self.update;
+        let planned = |i: usize| plan[i] == Rewrite::Changed;
+        let vertices: usize = (0..plan.len())
+            .filter(|&i| planned(i))
+            .map(|i| self.geometry.primitive(&self.scene, i).positions.len())
+            .sum();
+        posed.deform(
             &self.scene,
             &self.geometry,
             &self.pose,
-            i,
-            VertexSource::Deformed,
-            &mut self.scratch,
+            planned,
+            self.parallelism.splits(vertices),
         );
-        for source in self.geometry.instance_triangles[i].clone() {
-            let slot = self.slot_of_source[source as usize];
-            let s = slot as usize;
-            let (p, n) = self
-                .geometry
-                .world_triangle(source, &placement, positions, normals);
-            let c = Instant::now();
-            let moved = p.map(|v| v.to_array().map(f32::to_bits))
-                != self.triangles.positions[s].map(|v| v.to_array().map(f32::to_bits));
-            compare_ms += ms_since(c);
-            if moved {
-                self.triangles.positions[s] = p;
-                self.triangles.uvs[s] = self.geometry.oriented_uvs(source, &placement);
-                self.dirty.mark(slot, Motion::Deformed);
-            }
-            // Normals can turn without the triangle moving (a neighbour's vertex moved).
-            self.triangles.normals[s] = n;
+    }
+
+    /// Writes the triangles of the planned instances into their slots and records each
+    /// written slot's motion in `slot_motion`. In parallel it visits every slot in slot
+    /// order (the slots of one instance are scattered by the BVH), so it takes that path only
+    /// when enough of them move.
+    fn write_planned(&mut self, visited: usize) {
+        let UpdateScratch {
+            posed,
+            plan,
+            slot_motion,
+        } = &mut self.update;
+        let triangles = &mut self.triangles;
+        slot_motion.resize(triangles.len(), None);
+        let writer = TriangleWriter {
+            scene: &self.scene,
+            geometry: &self.geometry,
+            deforms: &self.deforms,
+            posed,
+            plan,
+        };
+        if self.parallelism.splits_write(visited, triangles.len()) {
+            (
+                &mut triangles.positions,
+                &mut triangles.normals,
+                &mut triangles.uvs,
+                &mut *slot_motion,
+                &triangles.source,
+            )
+                .into_par_iter()
+                .with_min_len(WRITE_CHUNK)
+                .for_each(|(position, normal, uv, motion, &source)| {
+                    *motion = writer.write(source, position, normal, uv);
+                });
+            return;
         }
-        compare_ms
+        for (i, _) in plan
+            .iter()
+            .enumerate()
+            .filter(|(_, r)| **r != Rewrite::Keep)
+        {
+            for source in self.geometry.instance_triangles[i].clone() {
+                let s = self.slot_of_source[source as usize] as usize;
+                slot_motion[s] = writer.write(
+                    source,
+                    &mut triangles.positions[s],
+                    &mut triangles.normals[s],
+                    &mut triangles.uvs[s],
+                );
+            }
+        }
+    }
+
+    /// Lists the slots the write marked in the dirty set, in source-triangle order (the
+    /// order of instances, then of their triangles), and clears the marks.
+    fn list_dirty(&mut self, visited: usize) {
+        let UpdateScratch {
+            plan, slot_motion, ..
+        } = &mut self.update;
+        let ranges = &self.geometry.instance_triangles;
+        let slot_of_source = &self.slot_of_source;
+        if self.parallelism.splits(visited) {
+            let visited_slots = plan
+                .par_iter()
+                .enumerate()
+                .filter(|(_, r)| **r != Rewrite::Keep)
+                .flat_map_iter(|(i, _)| ranges[i].clone())
+                .map(|source| slot_of_source[source as usize]);
+            self.dirty.assign_in_order(visited_slots, slot_motion);
+            return;
+        }
+        for (i, _) in plan
+            .iter()
+            .enumerate()
+            .filter(|(_, r)| **r != Rewrite::Keep)
+        {
+            for source in ranges[i].clone() {
+                let slot = slot_of_source[source as usize];
+                if let Some(motion) = slot_motion[slot as usize].take() {
+                    self.dirty.mark(slot, motion);
+                }
+            }
+        }
     }
 
     /// A moved vertex that came out NaN or infinite stops the frame (never a NaN pixel).
@@ -158,26 +305,6 @@ impl Renderer {
             }
         }
         Ok(())
-    }
-
-    /// Writes instance `i`'s triangles for a new placement and marks them.
-    fn place_instance(&mut self, i: usize, world_from_object: Mat4, motion: Motion) {
-        let placement = Placement::new(world_from_object);
-        let primitive = self.geometry.primitive(&self.scene, i);
-        for source in self.geometry.instance_triangles[i].clone() {
-            let slot = self.slot_of_source[source as usize];
-            let (p, n) = self.geometry.world_triangle(
-                source,
-                &placement,
-                &primitive.positions,
-                primitive.normals.as_deref(),
-            );
-            let s = slot as usize;
-            self.triangles.positions[s] = p;
-            self.triangles.normals[s] = n;
-            self.triangles.uvs[s] = self.geometry.oriented_uvs(source, &placement);
-            self.dirty.mark(slot, motion);
-        }
     }
 
     /// Refits the tree to the dirty triangles, or rebuilds it when the policy asks (the
@@ -221,5 +348,16 @@ impl Renderer {
         stats.build_ms = ms_since(t);
         stats.rebuild = true;
         Ok(())
+    }
+}
+
+/// How a placed instance's triangles moved between two placements: the same shape key
+/// means they only turned and moved; a new uniform scale shifts `log2 P_b`; anything else
+/// changed their shape.
+fn placed_motion(now: Option<NodeShape>, before: Option<NodeShape>) -> Motion {
+    match (now, before) {
+        (Some(s), Some(p)) if s == p => Motion::Rigid,
+        (Some(NodeShape { stretch: None, .. }), _) => Motion::Scaled,
+        _ => Motion::Deformed,
     }
 }
