@@ -290,6 +290,65 @@ mod tests {
     use super::*;
     use glam::Quat;
 
+    /// Past `PARALLEL_MIN_VERTICES` the vertex chunks run on several threads: every vertex
+    /// must equal the one skinned alone, bit for bit (fallbacks included).
+    #[test]
+    fn chunked_skinning_equals_skinning_vertex_by_vertex() {
+        let joint_matrices = [
+            Mat4::from_rotation_z(0.3) * Mat4::from_translation(Vec3::new(1.0, 2.0, 3.0)),
+            Mat4::from_scale(Vec3::new(1.5, 0.5, -2.0)),
+            Mat4::from_quat(Quat::from_rotation_x(-1.1)),
+        ];
+        let skinning = Skinning {
+            joint_matrices: &joint_matrices,
+            world_from_node: Mat4::from_translation(Vec3::new(0.0, -4.0, 1.0)),
+        };
+        let count = 3 * PARALLEL_MIN_VERTICES + 123;
+        let positions: Vec<Vec3> = (0..count)
+            .map(|v| Vec3::new(v as f32 * 0.001, (v % 17) as f32, -(v as f32).sqrt()))
+            .collect();
+        let normals: Vec<Vec3> = (0..count)
+            .map(|v| Vec3::new(1.0, (v % 5) as f32, 0.5).normalize())
+            .collect();
+        let joints: Vec<[u16; 4]> = (0..count).map(|v| [(v % 3) as u16, 2, 0, 1]).collect();
+        // Every 11th vertex has zero weights: the rigid fallback.
+        let weights: Vec<[f32; 4]> = (0..count)
+            .map(|v| match v % 11 {
+                0 => [0.0; 4],
+                k => [0.5, k as f32 * 0.04, 0.1, 0.0],
+            })
+            .collect();
+        let influences = Influences {
+            joints: &joints,
+            weights: &weights,
+        };
+        let (mut chunked, mut chunked_normals) = (positions.clone(), normals.clone());
+        skinning.apply(influences, &mut chunked, &mut chunked_normals);
+        let rigid_normals = cofactor(Mat3::from_mat4(skinning.world_from_node));
+        for v in 0..count {
+            let (mut p, mut n) = (positions[v], normals[v]);
+            skinning.skin_vertex(
+                &joints[v],
+                &weights[v],
+                &rigid_normals,
+                &mut p,
+                Some(&mut n),
+            );
+            assert_eq!(
+                p.to_array().map(f32::to_bits),
+                chunked[v].to_array().map(f32::to_bits)
+            );
+            assert_eq!(
+                n.to_array().map(f32::to_bits),
+                chunked_normals[v].to_array().map(f32::to_bits)
+            );
+        }
+        // Without normals the positions are the same.
+        let mut no_normals = positions.clone();
+        skinning.apply(influences, &mut no_normals, &mut []);
+        assert!(no_normals == chunked);
+    }
+
     #[test]
     fn cofactor_is_the_inverse_transpose_up_to_a_positive_scale() {
         let m = Mat3::from_cols(
