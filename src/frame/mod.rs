@@ -15,6 +15,7 @@ mod dirty;
 mod log2_pb;
 mod posed;
 mod record;
+mod scatter;
 pub mod sequence;
 mod settings;
 mod update;

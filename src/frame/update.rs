@@ -21,6 +21,7 @@ use super::posed::{
     PosedVertices, Rewrite, TriangleWriter, VertexSource, WRITE_CHUNK, same_deformation,
     write_all_triangles,
 };
+use super::scatter::SlotScatter;
 use super::{InstanceState, Motion, Renderer, UpdateStats, ms_since};
 use crate::accel::{Accel, AccelError, TreeStep};
 use crate::anim::NodeShape;
@@ -28,10 +29,6 @@ use crate::anim::NodeShape;
 /// Below this much work (triangles or vertices) an update step stays on the calling thread:
 /// rayon's split and join cost more than the work (tens of ns per item).
 const PARALLEL_MIN_ITEMS: usize = 8192;
-
-/// The parallel triangle write visits every slot (it reads the triangles in slot order and
-/// skips the unmoved ones), so it pays only when at least one slot in this many moves.
-const PARALLEL_WRITE_MAX_SLOTS_PER_MOVED: usize = 16;
 
 /// Whether the frame update splits its steps across rayon's threads.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
@@ -53,13 +50,6 @@ impl UpdateParallelism {
             UpdateParallelism::Sequential => false,
             UpdateParallelism::Parallel => true,
         }
-    }
-
-    /// Whether the triangle write over all `slots` splits when `moved` of them are visited.
-    fn splits_write(self, moved: usize, slots: usize) -> bool {
-        self.splits(moved)
-            && (self == UpdateParallelism::Parallel
-                || moved * PARALLEL_WRITE_MAX_SLOTS_PER_MOVED >= slots)
     }
 }
 
@@ -211,17 +201,16 @@ impl Renderer {
     }
 
     /// Writes the triangles of the planned instances into their slots and records each
-    /// written slot's motion in `slot_motion`. In parallel it visits every slot in slot
-    /// order (the slots of one instance are scattered by the BVH), so it takes that path only
-    /// when enough of them move.
+    /// written slot's motion in `slot_motion`. Triangles are visited in source order (reads
+    /// stay sequential); in parallel, instances and chunks of their triangles run as
+    /// separate tasks, writing distinct slots (`scatter`).
     fn write_planned(&mut self, visited: usize) {
         let UpdateScratch {
             posed,
             plan,
             slot_motion,
         } = &mut self.update;
-        let triangles = &mut self.triangles;
-        slot_motion.resize(triangles.len(), None);
+        slot_motion.resize(self.triangles.len(), None);
         let writer = TriangleWriter {
             scene: &self.scene,
             geometry: &self.geometry,
@@ -229,28 +218,37 @@ impl Renderer {
             posed,
             plan,
         };
-        if self.parallelism.splits_write(visited, triangles.len()) {
-            (
-                &mut triangles.positions,
-                &mut triangles.normals,
-                &mut triangles.uvs,
-                &mut *slot_motion,
-                &triangles.source,
-            )
-                .into_par_iter()
-                .with_min_len(WRITE_CHUNK)
-                .for_each(|(position, normal, uv, motion, &source)| {
-                    *motion = writer.write(source, position, normal, uv);
+        let ranges = &self.geometry.instance_triangles;
+        let slot_of_source = &self.slot_of_source;
+        if self.parallelism.splits(visited) {
+            let slots = SlotScatter::new(&mut self.triangles, slot_motion);
+            plan.par_iter()
+                .enumerate()
+                .filter(|(_, r)| **r != Rewrite::Keep)
+                .for_each(|(i, _)| {
+                    ranges[i]
+                        .clone()
+                        .into_par_iter()
+                        .with_min_len(WRITE_CHUNK)
+                        .for_each(|source| {
+                            let slot = slot_of_source[source as usize];
+                            // SAFETY: each source triangle is visited once and
+                            // `slot_of_source` is a permutation: one task per slot.
+                            unsafe {
+                                slots.with_slot(slot, |p, n, uv| writer.write(source, p, n, uv))
+                            };
+                        });
                 });
             return;
         }
+        let triangles = &mut self.triangles;
         for (i, _) in plan
             .iter()
             .enumerate()
             .filter(|(_, r)| **r != Rewrite::Keep)
         {
-            for source in self.geometry.instance_triangles[i].clone() {
-                let s = self.slot_of_source[source as usize] as usize;
+            for source in ranges[i].clone() {
+                let s = slot_of_source[source as usize] as usize;
                 slot_motion[s] = writer.write(
                     source,
                     &mut triangles.positions[s],
