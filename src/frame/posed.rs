@@ -206,12 +206,21 @@ impl TriangleWriter<'_> {
             .geometry
             .world_triangle(source, placement, positions, normals);
         *normal = n;
-        let bits = |p: &[Vec3A; 3]| p.map(|v| v.to_array().map(f32::to_bits));
-        let motion = all.or_else(|| (bits(&p) != bits(position)).then_some(Motion::Deformed))?;
+        let motion = all.or_else(|| (!same_bits(&p, position)).then_some(Motion::Deformed))?;
         *position = p;
         *uv = self.geometry.oriented_uvs(source, placement);
         Some(motion)
     }
+}
+
+/// Whether two triangles have bit-identical vertices (so -0 and 0 differ, and a NaN
+/// equals itself: "did it move" is about the stored bits).
+#[inline]
+fn same_bits(a: &[Vec3A; 3], b: &[Vec3A; 3]) -> bool {
+    a.iter().zip(b).all(|(a, b)| {
+        let (a, b) = (a.to_array(), b.to_array());
+        (0..3).all(|k| a[k].to_bits() == b[k].to_bits())
+    })
 }
 
 /// Fills `out` (source order) with every triangle of the scene posed by `pose`, on rayon's

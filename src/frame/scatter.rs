@@ -6,7 +6,7 @@
 //! through raw pointers. Invariant that makes it sound: `Renderer::slot_of_source` is a
 //! permutation of the slots (`index_slots` inverts `FrameTriangles::source`, itself a
 //! permutation after every build), and each source triangle is visited by exactly one task,
-//! so no two tasks ever touch the same slot.
+//! so no two tasks ever touch the same slot (nor the same source's motion entry).
 
 use glam::{Vec2, Vec3, Vec3A};
 
@@ -18,6 +18,7 @@ pub struct SlotScatter<'a> {
     positions: *mut [Vec3A; 3],
     normals: *mut [Vec3; 3],
     uvs: *mut [Vec2; 3],
+    /// By source triangle.
     motions: *mut Option<Motion>,
     len: usize,
     _arrays: std::marker::PhantomData<&'a mut FrameTriangles>,
@@ -28,7 +29,8 @@ pub struct SlotScatter<'a> {
 unsafe impl Sync for SlotScatter<'_> {}
 
 impl<'a> SlotScatter<'a> {
-    /// Borrows the triangles' positions, normals and uvs and a per-slot motion array.
+    /// Borrows the triangles' positions, normals and uvs (by slot) and a motion array (by
+    /// source triangle).
     ///
     /// # Panics
     /// If `motions` has another length than the triangles.
@@ -47,24 +49,31 @@ impl<'a> SlotScatter<'a> {
         }
     }
 
-    /// Runs `write` on slot `slot`'s position, normal and uvs and stores its motion.
+    /// Runs `write` on slot `slot`'s position, normal and uvs and stores its motion as
+    /// source triangle `source`'s.
     ///
     /// # Safety
-    /// No other call for the same `slot` may run at the same time (module docs).
+    /// No other call for the same `slot` or the same `source` may run at the same time
+    /// (module docs).
     ///
     /// # Panics
-    /// If `slot` is out of range.
+    /// If `slot` or `source` is out of range.
     #[inline]
     pub unsafe fn with_slot(
         &self,
         slot: u32,
+        source: u32,
         write: impl FnOnce(&mut [Vec3A; 3], &mut [Vec3; 3], &mut [Vec2; 3]) -> Option<Motion>,
     ) {
-        let s = slot as usize;
-        assert!(s < self.len, "slot {s} of {}", self.len);
+        let (s, t) = (slot as usize, source as usize);
+        assert!(
+            s < self.len && t < self.len,
+            "slot {s}, source {t} of {}",
+            self.len
+        );
         // SAFETY: in bounds (checked), and exclusive for this call by the caller's contract.
         unsafe {
-            *self.motions.add(s) = write(
+            *self.motions.add(t) = write(
                 &mut *self.positions.add(s),
                 &mut *self.normals.add(s),
                 &mut *self.uvs.add(s),

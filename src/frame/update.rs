@@ -60,9 +60,9 @@ pub struct UpdateScratch {
     pub posed: PosedVertices,
     /// Per instance: what this frame does to its triangles.
     pub plan: Vec<Rewrite>,
-    /// Per slot: the motion the write gave it. All `None` between frames (the dirty listing
-    /// takes them), so a rebuild's reordering of slots needs no reset.
-    slot_motion: Vec<Option<Motion>>,
+    /// Per source triangle: the motion the write gave it. All `None` between frames (the
+    /// dirty listing takes them).
+    source_motion: Vec<Option<Motion>>,
 }
 
 impl Renderer {
@@ -201,16 +201,16 @@ impl Renderer {
     }
 
     /// Writes the triangles of the planned instances into their slots and records each
-    /// written slot's motion in `slot_motion`. Triangles are visited in source order (reads
+    /// written triangle's motion in `source_motion`. Triangles are visited in source order (reads
     /// stay sequential); in parallel, instances and chunks of their triangles run as
     /// separate tasks, writing distinct slots (`scatter`).
     fn write_planned(&mut self, visited: usize) {
         let UpdateScratch {
             posed,
             plan,
-            slot_motion,
+            source_motion,
         } = &mut self.update;
-        slot_motion.resize(self.triangles.len(), None);
+        source_motion.resize(self.triangles.len(), None);
         let writer = TriangleWriter {
             scene: &self.scene,
             geometry: &self.geometry,
@@ -221,7 +221,7 @@ impl Renderer {
         let ranges = &self.geometry.instance_triangles;
         let slot_of_source = &self.slot_of_source;
         if self.parallelism.splits(visited) {
-            let slots = SlotScatter::new(&mut self.triangles, slot_motion);
+            let slots = SlotScatter::new(&mut self.triangles, source_motion);
             plan.par_iter()
                 .enumerate()
                 .filter(|(_, r)| **r != Rewrite::Keep)
@@ -235,7 +235,9 @@ impl Renderer {
                             // SAFETY: each source triangle is visited once and
                             // `slot_of_source` is a permutation: one task per slot.
                             unsafe {
-                                slots.with_slot(slot, |p, n, uv| writer.write(source, p, n, uv))
+                                slots.with_slot(slot, source, |p, n, uv| {
+                                    writer.write(source, p, n, uv)
+                                })
                             };
                         });
                 });
@@ -249,7 +251,7 @@ impl Renderer {
         {
             for source in ranges[i].clone() {
                 let s = slot_of_source[source as usize] as usize;
-                slot_motion[s] = writer.write(
+                source_motion[source as usize] = writer.write(
                     source,
                     &mut triangles.positions[s],
                     &mut triangles.normals[s],
@@ -263,30 +265,25 @@ impl Renderer {
     /// order of instances, then of their triangles), and clears the marks.
     fn list_dirty(&mut self, visited: usize) {
         let UpdateScratch {
-            plan, slot_motion, ..
+            plan,
+            source_motion,
+            ..
         } = &mut self.update;
         let ranges = &self.geometry.instance_triangles;
-        let slot_of_source = &self.slot_of_source;
-        if self.parallelism.splits(visited) {
-            let visited_slots = plan
-                .par_iter()
-                .enumerate()
-                .filter(|(_, r)| **r != Rewrite::Keep)
-                .flat_map_iter(|(i, _)| ranges[i].clone())
-                .map(|source| slot_of_source[source as usize]);
-            self.dirty.assign_in_order(visited_slots, slot_motion);
-            return;
-        }
-        for (i, _) in plan
+        let visited_ranges = plan
             .iter()
             .enumerate()
             .filter(|(_, r)| **r != Rewrite::Keep)
-        {
-            for source in ranges[i].clone() {
-                let slot = slot_of_source[source as usize];
-                if let Some(motion) = slot_motion[slot as usize].take() {
-                    self.dirty.mark(slot, motion);
-                }
+            .map(|(i, _)| ranges[i].clone());
+        if self.parallelism.splits(visited) {
+            self.dirty
+                .assign_in_source_order(visited_ranges, source_motion, &self.slot_of_source);
+            return;
+        }
+        for source in visited_ranges.flatten() {
+            if let Some(motion) = source_motion[source as usize].take() {
+                self.dirty
+                    .mark(self.slot_of_source[source as usize], motion);
             }
         }
     }
