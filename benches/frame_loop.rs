@@ -103,7 +103,9 @@ fn rigid_scene() -> SceneDesc {
     scene
 }
 
-/// Median per-frame update stats over frames 1..=FRAMES (frame 0 is the initial build).
+/// Median per-frame update stats over frames 1..=FRAMES (frame 0 is the initial build):
+/// the last frame's stats; medians of (animate + dirty, refit, build, LOD update,
+/// preprocessing, animate, dirty) ms; the first frame's ms; the triangle count.
 fn update_medians(scene: SceneDesc, bvh: BvhPolicy) -> (UpdateStats, [f64; 7], f64, usize) {
     let settings = RenderSettings {
         width: 640,

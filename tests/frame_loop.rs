@@ -251,6 +251,69 @@ fn forced_parallel_update_equals_the_sequential_update_on_a_small_scene() {
     }
 }
 
+/// A moved triangle whose vertices overflow stops the frame with an error naming it, on
+/// one thread and split (the write flags it; the scan for the first one runs only then).
+/// Refits only, so no rebuild runs before the frame loop's own check.
+#[test]
+fn overflowing_moved_vertex_stops_the_frame_on_every_path() {
+    use mipray::scene::{ChannelDesc, ChannelTarget, Interpolation, MeshDesc, NodeDesc};
+    let scene = || {
+        let mut scene = generated::textured_scene();
+        scene.meshes.push(MeshDesc {
+            name: "patch".into(),
+            primitives: vec![generated::patch(4, 4, 1.0, 1.0)],
+            ..Default::default()
+        });
+        scene.nodes.push(NodeDesc {
+            mesh: Some(0),
+            ..Default::default()
+        });
+        scene.roots.push(0);
+        for (target, end) in [
+            (ChannelTarget::Translation, f32::MAX),
+            (ChannelTarget::Scale, 1e38),
+        ] {
+            let start = if target == ChannelTarget::Scale {
+                1.0
+            } else {
+                0.0
+            };
+            scene.animations[0].channels.push(ChannelDesc {
+                node: 0,
+                target,
+                interpolation: Interpolation::Step,
+                times: vec![0.0, 1.0],
+                values: vec![start, start, start, end, end, end],
+                components: 3,
+            });
+        }
+        scene
+    };
+    let mut messages = Vec::new();
+    for parallelism in [UpdateParallelism::Sequential, UpdateParallelism::Parallel] {
+        let refit = BvhPolicy::Refit {
+            rebuild_threshold: f32::INFINITY,
+        };
+        let mut r = Renderer::new(scene(), settings(refit));
+        r.set_update_parallelism(parallelism);
+        r.prepare(0, 0.0).unwrap();
+        let error = r
+            .prepare(1, 1.0)
+            .err()
+            .expect("an overflowing vertex is an error");
+        let message = error.to_string();
+        // Triangles 0..4 only grow towards -x, -y and stay finite; triangle 4 is the first
+        // moved one in source order with an infinite vertex. (The tree's own check, in slot
+        // order, would name another one: the frame loop's check runs first.)
+        assert!(
+            message.starts_with("frame 1 (t = 1 s): triangle 4 has a non-finite vertex"),
+            "{message}"
+        );
+        messages.push(message);
+    }
+    assert_eq!(messages[0], messages[1]);
+}
+
 #[test]
 fn uniform_scale_shifts_log2_pb_by_log2_s() {
     let (scene, [_, grow, _]) = dynamic_scene();

@@ -7,6 +7,8 @@
 //! each instance deforms into its own buffers, so the write can run over slots on rayon's
 //! threads in any split with results bit-identical to one thread's (`tests/frame_loop.rs`).
 
+use std::sync::atomic::{AtomicBool, Ordering};
+
 use glam::{Mat4, Vec2, Vec3, Vec3A};
 use rayon::prelude::*;
 
@@ -179,6 +181,9 @@ pub struct TriangleWriter<'a> {
     pub posed: &'a PosedVertices,
     /// Per instance.
     pub plan: &'a [Rewrite],
+    /// Set when a triangle written with new vertices has a non-finite one (so the ordered
+    /// search for the first such triangle runs only then).
+    pub moved_nonfinite: AtomicBool,
 }
 
 impl TriangleWriter<'_> {
@@ -207,6 +212,9 @@ impl TriangleWriter<'_> {
             .world_triangle(source, placement, positions, normals);
         *normal = n;
         let motion = all.or_else(|| (!same_bits(&p, position)).then_some(Motion::Deformed))?;
+        if !p.iter().all(|v| v.is_finite()) {
+            self.moved_nonfinite.store(true, Ordering::Relaxed);
+        }
         *position = p;
         *uv = self.geometry.oriented_uvs(source, placement);
         Some(motion)
@@ -273,6 +281,7 @@ pub fn write_all_triangles(
         deforms,
         posed,
         plan,
+        moved_nonfinite: AtomicBool::new(false),
     };
     let write = |(position, normal, uv, &source): (_, _, _, &u32)| {
         writer.write(source, position, normal, uv);

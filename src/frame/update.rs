@@ -13,6 +13,7 @@
 //! writing (including the per-triangle "did its vertices change" test, fused with the write)
 //! as `animate_ms`.
 
+use std::sync::atomic::AtomicBool;
 use std::time::Instant;
 
 use rayon::prelude::*;
@@ -63,6 +64,8 @@ pub struct UpdateScratch {
     /// Per source triangle: the motion the write gave it. All `None` between frames (the
     /// dirty listing takes them).
     source_motion: Vec<Option<Motion>>,
+    /// Whether this frame's write gave a moved triangle a non-finite vertex.
+    moved_nonfinite: bool,
 }
 
 impl Renderer {
@@ -209,6 +212,7 @@ impl Renderer {
             posed,
             plan,
             source_motion,
+            moved_nonfinite,
         } = &mut self.update;
         source_motion.resize(self.triangles.len(), None);
         let writer = TriangleWriter {
@@ -217,6 +221,7 @@ impl Renderer {
             deforms: &self.deforms,
             posed,
             plan,
+            moved_nonfinite: AtomicBool::new(false),
         };
         let ranges = &self.geometry.instance_triangles;
         let slot_of_source = &self.slot_of_source;
@@ -241,24 +246,25 @@ impl Renderer {
                             };
                         });
                 });
-            return;
-        }
-        let triangles = &mut self.triangles;
-        for (i, _) in plan
-            .iter()
-            .enumerate()
-            .filter(|(_, r)| **r != Rewrite::Keep)
-        {
-            for source in ranges[i].clone() {
-                let s = slot_of_source[source as usize] as usize;
-                source_motion[source as usize] = writer.write(
-                    source,
-                    &mut triangles.positions[s],
-                    &mut triangles.normals[s],
-                    &mut triangles.uvs[s],
-                );
+        } else {
+            let triangles = &mut self.triangles;
+            let visited_instances = plan
+                .iter()
+                .enumerate()
+                .filter(|(_, r)| **r != Rewrite::Keep);
+            for (i, _) in visited_instances {
+                for source in ranges[i].clone() {
+                    let s = slot_of_source[source as usize] as usize;
+                    source_motion[source as usize] = writer.write(
+                        source,
+                        &mut triangles.positions[s],
+                        &mut triangles.normals[s],
+                        &mut triangles.uvs[s],
+                    );
+                }
             }
         }
+        *moved_nonfinite = writer.moved_nonfinite.into_inner();
     }
 
     /// Lists the slots the write marked in the dirty set, in source-triangle order (the
@@ -290,6 +296,9 @@ impl Renderer {
 
     /// A moved vertex that came out NaN or infinite stops the frame (never a NaN pixel).
     pub(super) fn check_moved_finite(&self) -> Result<(), AccelError> {
+        if !self.update.moved_nonfinite {
+            return Ok(()); // the write saw none: skip the scan
+        }
         for &slot in &self.dirty.slots {
             let tri = self.triangles.positions[slot as usize];
             if let Some(v) = tri.iter().find(|v| !v.is_finite()) {
