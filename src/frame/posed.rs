@@ -37,69 +37,93 @@ impl VertexSource {
     }
 }
 
-/// One deforming instance's vertices this frame (buffers reused from frame to frame).
+/// One instance's vertices this frame in world space (buffers reused from frame to frame).
 #[derive(Debug, Default)]
-struct DeformedVertices {
+struct WorldVertices {
+    /// Placed by [`Placement::place_point`].
     positions: Vec<Vec3>,
-    /// Empty when the primitive has no normals.
+    /// Placed by [`Placement::place_normal`]; empty when the primitive has no normals.
     normals: Vec<Vec3>,
 }
 
-/// Every instance's vertex arrays and placement for one pose: placed instances read their
-/// mesh's rest vertices, deforming ones the vertices skinned or morphed into their own
-/// buffers, so instances can be written concurrently.
+/// Every instance's world-space vertices and placement for one pose: rest vertices placed
+/// by the node, or vertices skinned or morphed, then placed. Each instance has its own
+/// buffers, so instances can be posed and written concurrently, and each shared vertex is
+/// transformed once (not once per triangle that uses it).
 ///
-/// Invariant: `placements[i]` (and `deformed[i]` for a deforming instance) are this frame's
-/// for every instance the frame rewrites; the others hold an earlier frame's values.
+/// Invariant: `placements[i]` and `vertices[i]` are this frame's for every instance the
+/// frame rewrites; the others hold an earlier frame's values.
 #[derive(Debug, Default)]
 pub struct PosedVertices {
-    /// Per instance: its deformed vertices (left empty for placed instances).
-    deformed: Vec<DeformedVertices>,
+    /// Per instance.
+    vertices: Vec<WorldVertices>,
     /// Per instance: object (or, for skinned vertices, world) to world.
     placements: Vec<Placement>,
 }
 
+/// Below this many vertices an instance is placed on the calling thread.
+const PARALLEL_MIN_VERTICES: usize = 8192;
+
+/// Vertices per parallel placement task.
+const PLACE_CHUNK: usize = 4096;
+
 impl PosedVertices {
     /// Sizes the per-instance arrays for `instances` instances (keeps allocations).
     pub fn resize(&mut self, instances: usize) {
-        self.deformed.resize_with(instances, Default::default);
+        self.vertices.resize_with(instances, Default::default);
         self.placements
             .resize(instances, Placement::new(Mat4::IDENTITY));
     }
 
-    /// Records placed instance `i`'s placement for this frame.
+    /// Records placed instance `i`'s placement for this frame (before [`Self::pose`]).
     pub fn place(&mut self, i: usize, world_from_object: Mat4) {
         self.placements[i] = Placement::new(world_from_object);
     }
 
-    /// Deforms every instance `i` with `needed(i)` (each a deforming instance) for `pose`
-    /// and records its placement; across rayon's threads when `parallel` (each instance
-    /// writes only its own buffers, so the result does not depend on it).
-    pub fn deform(
+    /// Writes the world-space vertices of every instance `i` with `needed(i)`: a deforming
+    /// instance is skinned or morphed for `pose` (which sets its placement), a placed one
+    /// placed by the placement [`Self::place`] recorded. Across instances (and within large
+    /// ones) on rayon's threads when `parallel`: each vertex is a pure function of its
+    /// inputs, so the result does not depend on it.
+    #[allow(clippy::too_many_arguments)]
+    pub fn pose(
         &mut self,
         scene: &SceneDesc,
         geometry: &SceneGeometry,
         pose: &Pose,
+        deforms: &[VertexSource],
         needed: impl Fn(usize) -> bool + Sync,
         parallel: bool,
     ) {
-        let deform_one =
-            |(i, (out, placement)): (usize, (&mut DeformedVertices, &mut Placement))| {
-                if needed(i) {
-                    *placement = deform_instance(scene, geometry, pose, i, out);
-                }
-            };
+        let pose_one = |(i, (out, placement)): (usize, (&mut WorldVertices, &mut Placement))| {
+            if !needed(i) {
+                return;
+            }
+            if deforms[i] == VertexSource::Deformed {
+                *placement = deform_instance(scene, geometry, pose, i, out);
+                place_in_place(placement, out, parallel);
+            } else {
+                let primitive = geometry.primitive(scene, i);
+                place_rest(
+                    placement,
+                    &primitive.positions,
+                    primitive.normals.as_deref(),
+                    out,
+                    parallel,
+                );
+            }
+        };
         if parallel {
-            (self.deformed.par_iter_mut(), self.placements.par_iter_mut())
+            (self.vertices.par_iter_mut(), self.placements.par_iter_mut())
                 .into_par_iter()
                 .enumerate()
-                .for_each(deform_one);
+                .for_each(pose_one);
         } else {
-            self.deformed
+            self.vertices
                 .iter_mut()
                 .zip(self.placements.iter_mut())
                 .enumerate()
-                .for_each(deform_one);
+                .for_each(pose_one);
         }
     }
 
@@ -108,29 +132,15 @@ impl PosedVertices {
         &self.placements[i]
     }
 
-    /// Instance `i`'s vertex positions and normals: its deformed buffers when it deforms,
-    /// else its mesh's rest arrays.
+    /// Instance `i`'s world-space positions and normals (valid for the instances this frame
+    /// rewrites).
     #[inline]
-    pub fn arrays<'a>(
-        &'a self,
-        scene: &'a SceneDesc,
-        geometry: &SceneGeometry,
-        source: VertexSource,
-        i: usize,
-    ) -> (&'a [Vec3], Option<&'a [Vec3]>) {
-        match source {
-            VertexSource::Placed => {
-                let primitive = geometry.primitive(scene, i);
-                (&primitive.positions, primitive.normals.as_deref())
-            }
-            VertexSource::Deformed => {
-                let d = &self.deformed[i];
-                (
-                    &d.positions,
-                    (!d.normals.is_empty()).then_some(d.normals.as_slice()),
-                )
-            }
-        }
+    pub fn world_arrays(&self, i: usize) -> (&[Vec3], Option<&[Vec3]>) {
+        let v = &self.vertices[i];
+        (
+            &v.positions,
+            (!v.normals.is_empty()).then_some(v.normals.as_slice()),
+        )
     }
 }
 
@@ -141,7 +151,7 @@ fn deform_instance(
     geometry: &SceneGeometry,
     pose: &Pose,
     i: usize,
-    out: &mut DeformedVertices,
+    out: &mut WorldVertices,
 ) -> Placement {
     let instance = geometry.instances[i];
     let space = deform_primitive(
@@ -157,6 +167,56 @@ fn deform_instance(
         VertexSpace::Object => pose.world_from_node[instance.node as usize],
         VertexSpace::World => Mat4::IDENTITY,
     })
+}
+
+/// Places `out`'s (deformed) vertices in place.
+fn place_in_place(placement: &Placement, out: &mut WorldVertices, parallel: bool) {
+    let split = parallel && out.positions.len() >= PARALLEL_MIN_VERTICES;
+    let point = |p: &mut Vec3| *p = placement.place_point(*p);
+    let normal = |n: &mut Vec3| *n = placement.place_normal(*n);
+    if split {
+        out.positions
+            .par_iter_mut()
+            .with_min_len(PLACE_CHUNK)
+            .for_each(point);
+        out.normals
+            .par_iter_mut()
+            .with_min_len(PLACE_CHUNK)
+            .for_each(normal);
+    } else {
+        out.positions.iter_mut().for_each(point);
+        out.normals.iter_mut().for_each(normal);
+    }
+}
+
+/// Writes rest vertices placed by `placement` into `out`.
+fn place_rest(
+    placement: &Placement,
+    positions: &[Vec3],
+    normals: Option<&[Vec3]>,
+    out: &mut WorldVertices,
+    parallel: bool,
+) {
+    let normals = normals.unwrap_or_default();
+    out.positions.resize(positions.len(), Vec3::ZERO);
+    out.normals.resize(normals.len(), Vec3::ZERO);
+    let point = |(p, &rest): (&mut Vec3, &Vec3)| *p = placement.place_point(rest);
+    let normal = |(n, &rest): (&mut Vec3, &Vec3)| *n = placement.place_normal(rest);
+    if parallel && positions.len() >= PARALLEL_MIN_VERTICES {
+        out.positions
+            .par_iter_mut()
+            .zip(positions)
+            .with_min_len(PLACE_CHUNK)
+            .for_each(point);
+        out.normals
+            .par_iter_mut()
+            .zip(normals)
+            .with_min_len(PLACE_CHUNK)
+            .for_each(normal);
+    } else {
+        out.positions.iter_mut().zip(positions).for_each(point);
+        out.normals.iter_mut().zip(normals).for_each(normal);
+    }
 }
 
 /// What the frame does to one instance's triangles.
@@ -175,9 +235,7 @@ pub enum Rewrite {
 /// What writing one triangle reads: shared, read-only, so slots can be written from any
 /// thread in any order with the same result.
 pub struct TriangleWriter<'a> {
-    pub scene: &'a SceneDesc,
     pub geometry: &'a SceneGeometry,
-    pub deforms: &'a [VertexSource],
     pub posed: &'a PosedVertices,
     /// Per instance.
     pub plan: &'a [Rewrite],
@@ -204,12 +262,10 @@ impl TriangleWriter<'_> {
             Rewrite::Changed => None,
         };
         let placement = self.posed.placement(i);
-        let (positions, normals) = self
-            .posed
-            .arrays(self.scene, self.geometry, self.deforms[i], i);
-        let (p, n) = self
-            .geometry
-            .world_triangle(source, placement, positions, normals);
+        let (positions, normals) = self.posed.world_arrays(i);
+        let (p, n) =
+            self.geometry
+                .placed_triangle(source, placement.flips_winding, positions, normals);
         *normal = n;
         let motion = all.or_else(|| (!same_bits(&p, position)).then_some(Motion::Deformed))?;
         if !p.iter().all(|v| v.is_finite()) {
@@ -250,13 +306,7 @@ pub fn write_all_triangles(
     for (i, instance) in geometry.instances.iter().enumerate() {
         posed.place(i, pose.world_from_node[instance.node as usize]);
     }
-    posed.deform(
-        scene,
-        geometry,
-        pose,
-        |i| deforms[i] == VertexSource::Deformed,
-        parallel,
-    );
+    posed.pose(scene, geometry, pose, deforms, |_| true, parallel);
     let n = geometry.triangle_count();
     out.positions.clear();
     out.positions.resize(n, [Vec3A::ZERO; 3]);
@@ -276,9 +326,7 @@ pub fn write_all_triangles(
             .map(|&i| geometry.instances[i as usize].material),
     );
     let writer = TriangleWriter {
-        scene,
         geometry,
-        deforms,
         posed,
         plan,
         moved_nonfinite: AtomicBool::new(false),

@@ -141,7 +141,7 @@ impl Renderer {
         stats.dirty_ms = ms_since(t);
 
         let t = Instant::now();
-        self.deform_planned();
+        self.pose_planned();
         self.write_planned(visited);
         stats.animate_ms = ms_since(t);
 
@@ -185,19 +185,20 @@ impl Renderer {
         visited
     }
 
-    /// Skins and morphs the instances planned [`Rewrite::Changed`], across instances on
-    /// rayon's threads when there are enough vertices (large skins also split inside).
-    fn deform_planned(&mut self) {
+    /// Writes the world-space vertices of the planned instances (skinned or morphed, then
+    /// placed; or rest vertices placed), on rayon's threads when there are enough of them.
+    fn pose_planned(&mut self) {
         let UpdateScratch { posed, plan, .. } = &mut self.update;
-        let planned = |i: usize| plan[i] == Rewrite::Changed;
+        let planned = |i: usize| plan[i] != Rewrite::Keep;
         let vertices: usize = (0..plan.len())
             .filter(|&i| planned(i))
             .map(|i| self.geometry.primitive(&self.scene, i).positions.len())
             .sum();
-        posed.deform(
+        posed.pose(
             &self.scene,
             &self.geometry,
             &self.pose,
+            &self.deforms,
             planned,
             self.parallelism.splits(vertices),
         );
@@ -216,9 +217,7 @@ impl Renderer {
         } = &mut self.update;
         source_motion.resize(self.triangles.len(), None);
         let writer = TriangleWriter {
-            scene: &self.scene,
             geometry: &self.geometry,
-            deforms: &self.deforms,
             posed,
             plan,
             moved_nonfinite: AtomicBool::new(false),
