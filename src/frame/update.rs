@@ -4,12 +4,13 @@
 //! against a fresh build.
 //!
 //! Three steps, each split across rayon's threads when its work is large enough to pay
-//! ([`UpdateParallelism`]): deform the skinned and morphed instances (each into its own
-//! buffers), write the moved triangles into their slots (recording each slot's motion), then
-//! list the marked slots in the dirty set in source-triangle order. Every written value is a
+//! ([`UpdateParallelism`]): pose the vertices of the instances that moved (skinned or morphed
+//! then placed, or rest vertices placed; each instance into its own world-space buffers),
+//! write their triangles into the BVH slots in source order (`scatter`; recording each
+//! triangle's motion), then list the marked slots in the dirty set in source-triangle order. Every written value is a
 //! pure function of the pose and its triangle, and the dirty order is fixed by source order,
 //! so the parallel update is bit-identical to the sequential one, dirty order included.
-//! Timing: classifying instances and listing the dirty set count as `dirty_ms`; deforming and
+//! Timing: classifying instances and listing the dirty set count as `dirty_ms`; posing and
 //! writing (including the per-triangle "did its vertices change" test, fused with the write)
 //! as `animate_ms`.
 
