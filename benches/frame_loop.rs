@@ -1,89 +1,54 @@
 //! Frame-loop update costs on generated scenes: `cargo bench --bench frame_loop`.
 //!
-//! Scenes of 100k and 1M textured triangles (a grid of patch instances, 1,000 triangles per
-//! patch) where 1%, 10% or 100% of the patches deform every frame (an animated non-uniform
-//! scale: shape changes, so `log2 P_b` must be recomputed, as for skinning or morphing), the
-//! rest static. For each scene the per-frame update is timed over several frames with the
-//! default refit policy and with a rebuild every frame, and one frame is rendered at 640x480
-//! to give the preprocessing share. Scene generation happens outside the timed region.
-//! Prints a Markdown table of medians (see BENCHMARKS.md).
+//! Scenes (all textured, generated in code outside the timed region; see
+//! `benches/common/generated.rs`):
+//! - `patches`: 100k and 1M triangles in a grid of patch instances (968 triangles each) of
+//!   which 1%, 10% or 100% deform every frame (an animated non-uniform scale: the shape
+//!   changes, so `log2 P_b` is recomputed, as for skinning or morphing), the rest static;
+//! - `skin`: one 1M-triangle grid skinned to a chain of 8 animated joints: every vertex
+//!   moves every frame;
+//! - `rigid`: 200 instances of a 5,000-triangle patch, each turning and sliding (rigid
+//!   motion: no `log2 P_b` recomputed after the first frame).
+//!
+//! For each scene the per-frame update is timed over several frames with refits only and
+//! with a rebuild every frame, and one frame is rendered at 640x480 with the default policy
+//! to give the render time and the preprocessing share. Peak resident memory (VmHWM from
+//! /proc/self/status, reset through /proc/self/clear_refs before the scene is generated)
+//! is reported above the resident size at the reset, in MB per million triangles, for the
+//! default-policy run (scene, renderer, tree and one rendered frame).
+//!
+//! Arguments (after `--`): one word choosing rows: a size (`100k`, `1M`) or a scene
+//! (`patches`, `skin`, `rigid`); none runs every row. Rayon's global pool is set to 2
+//! threads (the figures in BENCHMARKS.md are for a 2-core machine); `RAYON_NUM_THREADS`
+//! overrides it. Prints a Markdown table of medians (see BENCHMARKS.md).
+
+#[path = "common/generated.rs"]
+mod generated;
 
 use std::time::Instant;
 
-use glam::{Vec2, Vec3, Vec4};
+use glam::Vec3;
 use mipray::frame::{BvhPolicy, RenderSettings, Renderer, UpdateStats};
 use mipray::report::Percentiles;
 use mipray::scene::*;
-use mipray::texture::{MipPyramid, Sampler, Texture};
 
 const PATCH_SIDE: u32 = 22; // 22 x 22 quads: 968 triangles per patch
 const FRAMES: u32 = 6;
 
-/// A flat patch of `n x n` quads (2 n^2 triangles) in the XY plane, unit size.
-fn patch(n: u32) -> PrimitiveDesc {
-    let mut positions = Vec::new();
-    let mut uvs = Vec::new();
-    for y in 0..=n {
-        for x in 0..=n {
-            let (u, v) = (x as f32 / n as f32, y as f32 / n as f32);
-            positions.push(Vec3::new(u - 0.5, v - 0.5, 0.0));
-            uvs.push(Vec2::new(u * 4.0, v * 4.0));
-        }
-    }
-    let mut indices = Vec::new();
-    for y in 0..n {
-        for x in 0..n {
-            let i = y * (n + 1) + x;
-            indices.extend([i, i + 1, i + n + 2, i, i + n + 2, i + n + 1]);
-        }
-    }
-    PrimitiveDesc {
-        normals: Some(vec![Vec3::Z; positions.len()]),
-        positions,
-        uvs: Some(uvs),
-        indices,
-        material: Some(0),
-        ..Default::default()
-    }
-}
-
 /// `triangles` textured triangles in patches on a grid facing a camera; the first
 /// `deformed_share` of the patches stretch over time.
-fn scene(triangles: usize, deformed_share: f64) -> SceneDesc {
-    let patch = patch(PATCH_SIDE);
+fn patches_scene(triangles: usize, deformed_share: f64) -> SceneDesc {
+    let patch = generated::patch(PATCH_SIDE, PATCH_SIDE, 1.0, 1.0);
     let per_patch = patch.triangle_count();
     let patches = triangles.div_ceil(per_patch);
     let side = (patches as f64).sqrt().ceil() as usize;
-    let texels = (0..64 * 64)
-        .map(|i| {
-            if (i % 64 / 8 + i / 64 / 8) % 2 == 0 {
-                Vec4::ONE
-            } else {
-                Vec4::new(0.1, 0.2, 0.6, 1.0)
-            }
-        })
-        .collect();
-    let mut scene = SceneDesc {
-        textures: vec![Texture {
-            name: "checker".into(),
-            pyramid: MipPyramid::from_linear_rgba(64, 64, texels).unwrap(),
-            sampler: Sampler::default(),
-        }],
-        materials: vec![MaterialDesc {
-            base_color: Vec3::ONE,
-            base_color_texture: Some(0),
-            ..Default::default()
-        }],
-        meshes: vec![MeshDesc {
-            name: "patch".into(),
-            primitives: vec![patch],
-            ..Default::default()
-        }],
-        background: Vec3::splat(0.2),
+    let mut scene = generated::textured_scene();
+    scene.meshes.push(MeshDesc {
+        name: "patch".into(),
+        primitives: vec![patch],
         ..Default::default()
-    };
+    });
     let deformed = (patches as f64 * deformed_share).round() as usize;
-    let mut channels = Vec::new();
     for p in 0..patches {
         let (x, y) = ((p % side) as f32, (p / side) as f32);
         let translation = Vec3::new(
@@ -99,10 +64,10 @@ fn scene(triangles: usize, deformed_share: f64) -> SceneDesc {
             mesh: Some(0),
             ..Default::default()
         });
-        scene.roots.push(p);
+        scene.roots.push(scene.nodes.len() - 1);
         if p < deformed {
-            channels.push(ChannelDesc {
-                node: p,
+            scene.animations[0].channels.push(ChannelDesc {
+                node: scene.nodes.len() - 1,
                 target: ChannelTarget::Scale,
                 interpolation: Interpolation::Linear,
                 times: vec![0.0, 1.0],
@@ -111,29 +76,37 @@ fn scene(triangles: usize, deformed_share: f64) -> SceneDesc {
             });
         }
     }
-    scene.animations.push(AnimationDesc {
-        name: "stretch".into(),
-        channels,
-    });
-    let distance = side as f32 * 1.1;
-    scene.cameras.push(CameraDesc {
-        yfov: 1.0,
-        znear: 0.1,
-    });
-    scene.nodes.push(NodeDesc {
-        local: Trs {
-            translation: Vec3::new(0.0, 0.0, distance),
-            ..Default::default()
-        },
-        camera: Some(0),
-        ..Default::default()
-    });
-    scene.roots.push(scene.nodes.len() - 1);
+    generated::add_camera(&mut scene, Vec3::new(0.0, 0.0, side as f32 * 1.1), 1.0);
     scene
 }
 
-/// Median per-frame update stats over frames 1..=FRAMES (frame 0 is the initial build).
-fn update_medians(scene: SceneDesc, bvh: BvhPolicy) -> (UpdateStats, [f64; 5], f64) {
+/// One 1M-triangle grid (1,000 x 500 quads, 10 x 5 units) skinned to 8 animated joints.
+fn skin_scene() -> SceneDesc {
+    let mut scene = generated::textured_scene();
+    generated::add_skinned_grid(
+        &mut scene,
+        1000,
+        500,
+        (10.0, 5.0),
+        8,
+        Vec3::new(-5.0, 0.0, 0.0),
+    );
+    generated::add_camera(&mut scene, Vec3::new(0.0, 0.0, 9.0), 1.0);
+    scene
+}
+
+/// 200 instances of a 50 x 50-quad (5,000-triangle) patch, each moving rigidly.
+fn rigid_scene() -> SceneDesc {
+    let mut scene = generated::textured_scene();
+    generated::add_rigid_patches(&mut scene, 200, 50, 1.3, Vec3::ZERO);
+    generated::add_camera(&mut scene, Vec3::new(0.0, 0.0, 20.0), 1.0);
+    scene
+}
+
+/// Median per-frame update stats over frames 1..=FRAMES (frame 0 is the initial build):
+/// the last frame's stats; medians of (animate + dirty, refit, build, LOD update,
+/// preprocessing, animate, dirty) ms; the first frame's ms; the triangle count.
+fn update_medians(scene: SceneDesc, bvh: BvhPolicy) -> (UpdateStats, [f64; 7], f64, usize) {
     let settings = RenderSettings {
         width: 640,
         height: 480,
@@ -155,59 +128,134 @@ fn update_medians(scene: SceneDesc, bvh: BvhPolicy) -> (UpdateStats, [f64; 5], f
         median(|u| u.build_ms),
         median(|u| u.lod_update_ms),
         median(UpdateStats::preprocessing_ms),
+        median(|u| u.animate_ms),
+        median(|u| u.dirty_ms),
     ];
-    (rows[rows.len() - 1], medians, first_ms)
+    let triangles = renderer.triangles().len();
+    (rows[rows.len() - 1], medians, first_ms, triangles)
 }
 
-/// Preprocessing share of one rendered frame (frame 1, after the initial build) at 640x480.
-fn preprocessing_share(scene: SceneDesc) -> (f64, f64) {
+/// One rendered frame (frame 1, after the initial build) at 640x480 with the default
+/// policy: (preprocessing share, frame ms, render ms, peak resident MB above the start).
+fn rendered_frame(make_scene: impl FnOnce() -> SceneDesc) -> (f64, f64, f64, f64) {
+    let start_mb = reset_peak_resident_mb();
     let settings = RenderSettings {
         width: 640,
         height: 480,
         ..Default::default()
     };
-    let mut renderer = Renderer::new(scene, settings);
+    let mut renderer = Renderer::new(make_scene(), settings);
     renderer.prepare(0, 0.0).unwrap();
     let (_, r) = renderer.render_frame(1, 1.0 / 30.0).unwrap();
+    let peak_mb = status_mb("VmHWM:") - start_mb;
     let u = r.update;
-    (u.preprocessing_ms() / r.total_ms, r.total_ms)
+    (
+        u.preprocessing_ms() / r.total_ms,
+        r.total_ms,
+        r.render_ms,
+        peak_mb,
+    )
+}
+
+/// Resets the process's peak resident size to its current one (Linux: `clear_refs` 5) and
+/// returns that size in MB (NaN where /proc is unavailable).
+fn reset_peak_resident_mb() -> f64 {
+    let _ = std::fs::write("/proc/self/clear_refs", "5");
+    status_mb("VmRSS:")
+}
+
+/// A `/proc/self/status` field in kB, as MB (NaN when absent).
+fn status_mb(field: &str) -> f64 {
+    let status = std::fs::read_to_string("/proc/self/status").unwrap_or_default();
+    status
+        .lines()
+        .find_map(|l| l.strip_prefix(field))
+        .and_then(|v| v.trim().trim_end_matches("kB").trim().parse::<f64>().ok())
+        .map_or(f64::NAN, |kb| kb / 1024.0)
+}
+
+/// One table row: a scene by its labels, with a generator called afresh for each run.
+struct Row {
+    kind: &'static str,
+    size: &'static str,
+    moving: String,
+    make: Box<dyn Fn() -> SceneDesc>,
+}
+
+fn rows() -> Vec<Row> {
+    let mut rows = Vec::new();
+    for (size, triangles) in [("100k", 100_000usize), ("1M", 1_000_000)] {
+        for share in [0.01, 0.10, 1.0] {
+            rows.push(Row {
+                kind: "patches",
+                size,
+                moving: format!("{:.0}% deformed", share * 100.0),
+                make: Box::new(move || patches_scene(triangles, share)),
+            });
+        }
+    }
+    rows.push(Row {
+        kind: "skin",
+        size: "1M",
+        moving: "100% skinned".into(),
+        make: Box::new(skin_scene),
+    });
+    rows.push(Row {
+        kind: "rigid",
+        size: "1M",
+        moving: "200 x 5k rigid".into(),
+        make: Box::new(rigid_scene),
+    });
+    rows
 }
 
 fn main() {
-    // `cargo bench` passes `--bench`; an optional size filter like `100k` or `1M` may follow.
+    // `cargo bench` passes `--bench`; an optional row filter like `1M` or `skin` may follow.
     let filter: Option<String> = std::env::args().skip(1).find(|a| !a.starts_with("--"));
+    if std::env::var_os("RAYON_NUM_THREADS").is_none() {
+        rayon::ThreadPoolBuilder::new()
+            .num_threads(2)
+            .build_global()
+            .unwrap();
+    }
     println!(
-        "| triangles | deformed | animate+dirty ms | refit ms | LOD update ms | update ms (refit) | rebuild ms | update ms (rebuild) | refit/rebuild | LOD recomputed | preprocessing share @640x480 | frame ms |"
+        "| scene | triangles | moving | animate+dirty ms | refit ms | LOD update ms | update ms (refit) | rebuild ms | update ms (rebuild) | refit/rebuild | LOD recomputed | preprocessing share @640x480 | frame ms | animate ms | dirty ms | render ms | peak MB per 1M triangles |"
     );
-    println!("|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|");
-    for (label, triangles) in [("100k", 100_000usize), ("1M", 1_000_000)] {
-        if filter.as_deref().is_some_and(|f| f != label) {
+    println!(
+        "|---|---:|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|"
+    );
+    for row in rows() {
+        if filter
+            .as_deref()
+            .is_some_and(|f| f != row.kind && f != row.size)
+        {
             continue;
         }
-        for share in [0.01, 0.10, 1.0] {
-            let (last, refit, _) = update_medians(
-                scene(triangles, share),
-                BvhPolicy::Refit {
-                    rebuild_threshold: f32::INFINITY,
-                },
-            );
-            let (_, rebuild, _) = update_medians(scene(triangles, share), BvhPolicy::Rebuild);
-            let (pre_share, frame_ms) = preprocessing_share(scene(triangles, share));
-            println!(
-                "| {} | {:.0}% | {:.3} | {:.3} | {:.3} | {:.3} | {:.3} | {:.3} | {:.3} | {} | {:.1}% | {:.1} |",
-                triangles,
-                share * 100.0,
-                refit[0],
-                refit[1],
-                refit[3],
-                refit[4],
-                rebuild[2],
-                rebuild[4],
-                refit[1] / rebuild[2],
-                last.lod_recomputed,
-                pre_share * 100.0,
-                frame_ms
-            );
-        }
+        let refit_only = BvhPolicy::Refit {
+            rebuild_threshold: f32::INFINITY,
+        };
+        let (last, refit, _, triangles) = update_medians((row.make)(), refit_only);
+        let (_, rebuild, _, _) = update_medians((row.make)(), BvhPolicy::Rebuild);
+        let (pre_share, frame_ms, render_ms, peak_mb) = rendered_frame(&row.make);
+        println!(
+            "| {} | {} | {} | {:.3} | {:.3} | {:.3} | {:.3} | {:.3} | {:.3} | {:.3} | {} | {:.1}% | {:.1} | {:.3} | {:.3} | {:.1} | {:.0} |",
+            row.kind,
+            triangles,
+            row.moving,
+            refit[0],
+            refit[1],
+            refit[3],
+            refit[4],
+            rebuild[2],
+            rebuild[4],
+            refit[1] / rebuild[2],
+            last.lod_recomputed,
+            pre_share * 100.0,
+            frame_ms,
+            refit[5],
+            refit[6],
+            render_ms,
+            peak_mb / (triangles as f64 / 1e6),
+        );
     }
 }

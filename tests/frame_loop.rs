@@ -2,11 +2,13 @@
 //! updates, refitted BVH hits, statelessness.
 
 mod common;
+#[path = "../benches/common/generated.rs"]
+mod generated;
 
 use common::scenes::*;
 use glam::Vec3A;
 use mipray::accel::Accel;
-use mipray::frame::{BvhPolicy, RenderSettings, Renderer};
+use mipray::frame::{BvhPolicy, RenderSettings, Renderer, UpdateParallelism};
 use mipray::lod::{PixelFootprint, log2_pb};
 
 const FRAMES: u32 = 30;
@@ -107,6 +109,209 @@ fn parallel_log2_pb_update_equals_the_constant_computed_one_by_one() {
             );
         }
     }
+}
+
+/// The dynamic scene (rigid, scaled and stretched cards, a rigidly moving card) plus a
+/// skinned grid of 12,000 triangles whose every vertex moves and 30 patches of 288
+/// triangles moving rigidly: every update step has more than 8,192 items of work, and more
+/// than a sixteenth of the slots move, so `Auto` takes each parallel path.
+fn large_dynamic_scene() -> mipray::scene::SceneDesc {
+    let (mut scene, _) = dynamic_scene();
+    let mut generated = generated::textured_scene();
+    generated::add_skinned_grid(
+        &mut generated,
+        100,
+        60,
+        (4.0, 2.0),
+        4,
+        glam::Vec3::new(-2.0, -1.0, -9.0),
+    );
+    generated::add_rigid_patches(
+        &mut generated,
+        30,
+        12,
+        1.2,
+        glam::Vec3::new(0.0, 0.0, -12.0),
+    );
+    merge_textured(&mut scene, generated, 0, glam::Vec3::ZERO);
+    scene
+}
+
+/// Everything one `prepare` leaves behind, in slot order, as bits.
+fn frame_bits(r: &Renderer) -> Vec<u32> {
+    let t = r.triangles();
+    let mut out: Vec<u32> = t.source.clone();
+    out.extend(
+        t.positions
+            .iter()
+            .flatten()
+            .flat_map(|v| v.to_array())
+            .map(f32::to_bits),
+    );
+    out.extend(
+        t.normals
+            .iter()
+            .flatten()
+            .flat_map(|v| v.to_array())
+            .map(f32::to_bits),
+    );
+    out.extend(
+        t.uvs
+            .iter()
+            .flatten()
+            .flat_map(|v| v.to_array())
+            .map(f32::to_bits),
+    );
+    out.extend(t.log2_pb.iter().map(|v| v.to_bits()));
+    out
+}
+
+/// The parallel update (past the thresholds with `Auto`, and forced with `Parallel`) leaves
+/// the same triangles, `log2 P_b`, dirty slots in the same order with the same motions,
+/// and the same counts as the update on one thread, on every frame, refitting and
+/// rebuilding.
+#[test]
+fn parallel_update_equals_the_sequential_update_bit_for_bit() {
+    let triangles = Renderer::new(large_dynamic_scene(), settings(BvhPolicy::Rebuild))
+        .geometry()
+        .triangle_count();
+    assert!(triangles > 20_000, "{triangles} triangles");
+    for policy in [
+        BvhPolicy::Refit {
+            rebuild_threshold: BvhPolicy::DEFAULT_REBUILD_THRESHOLD,
+        },
+        BvhPolicy::Rebuild,
+    ] {
+        let renderer = |parallelism| {
+            let mut r = Renderer::new(large_dynamic_scene(), settings(policy));
+            r.set_update_parallelism(parallelism);
+            r
+        };
+        let mut one = renderer(UpdateParallelism::Sequential);
+        let mut split = [
+            renderer(UpdateParallelism::Auto),
+            renderer(UpdateParallelism::Parallel),
+        ];
+        for frame in [0, 1, 2, 5, 6, 20, 21, 45] {
+            let time = frame as f32 / FPS;
+            let expected = one.prepare(frame, time).unwrap().update;
+            if frame > 0 {
+                assert!(
+                    expected.deformed_triangles >= 12_000 && expected.moved_triangles > 20_000,
+                    "frame {frame}: the skin and the patches move ({expected:?})"
+                );
+            }
+            for r in &mut split {
+                let update = r.prepare(frame, time).unwrap().update;
+                let what = format!("frame {frame}, {policy:?}");
+                assert_eq!(r.dirty().slots, one.dirty().slots, "{what}: dirty slots");
+                assert_eq!(r.dirty().motions, one.dirty().motions, "{what}: motions");
+                assert!(
+                    frame_bits(r) == frame_bits(&one),
+                    "{what}: triangles differ"
+                );
+                assert_eq!(
+                    (
+                        update.moved_triangles,
+                        update.deformed_triangles,
+                        update.lod_recomputed,
+                        update.lod_shifted
+                    ),
+                    (
+                        expected.moved_triangles,
+                        expected.deformed_triangles,
+                        expected.lod_recomputed,
+                        expected.lod_shifted
+                    ),
+                    "{what}"
+                );
+            }
+        }
+    }
+}
+
+/// Small scenes take the parallel path too when it is forced: the skinned strip and the
+/// cards give the same frame as on one thread.
+#[test]
+fn forced_parallel_update_equals_the_sequential_update_on_a_small_scene() {
+    let policy = BvhPolicy::Refit {
+        rebuild_threshold: BvhPolicy::DEFAULT_REBUILD_THRESHOLD,
+    };
+    let mut one = Renderer::new(skinned_dynamic_scene(), settings(policy));
+    one.set_update_parallelism(UpdateParallelism::Sequential);
+    let mut split = Renderer::new(skinned_dynamic_scene(), settings(policy));
+    split.set_update_parallelism(UpdateParallelism::Parallel);
+    for frame in 0..FRAMES {
+        let time = frame as f32 / FPS;
+        one.prepare(frame, time).unwrap();
+        split.prepare(frame, time).unwrap();
+        assert_eq!(split.dirty().slots, one.dirty().slots, "frame {frame}");
+        assert_eq!(split.dirty().motions, one.dirty().motions, "frame {frame}");
+        assert!(frame_bits(&split) == frame_bits(&one), "frame {frame}");
+    }
+}
+
+/// A moved triangle whose vertices overflow stops the frame with an error naming it, on
+/// one thread and split (the write flags it; the scan for the first one runs only then).
+/// Refits only, so no rebuild runs before the frame loop's own check.
+#[test]
+fn overflowing_moved_vertex_stops_the_frame_on_every_path() {
+    use mipray::scene::{ChannelDesc, ChannelTarget, Interpolation, MeshDesc, NodeDesc};
+    let scene = || {
+        let mut scene = generated::textured_scene();
+        scene.meshes.push(MeshDesc {
+            name: "patch".into(),
+            primitives: vec![generated::patch(4, 4, 1.0, 1.0)],
+            ..Default::default()
+        });
+        scene.nodes.push(NodeDesc {
+            mesh: Some(0),
+            ..Default::default()
+        });
+        scene.roots.push(0);
+        for (target, end) in [
+            (ChannelTarget::Translation, f32::MAX),
+            (ChannelTarget::Scale, 1e38),
+        ] {
+            let start = if target == ChannelTarget::Scale {
+                1.0
+            } else {
+                0.0
+            };
+            scene.animations[0].channels.push(ChannelDesc {
+                node: 0,
+                target,
+                interpolation: Interpolation::Step,
+                times: vec![0.0, 1.0],
+                values: vec![start, start, start, end, end, end],
+                components: 3,
+            });
+        }
+        scene
+    };
+    let mut messages = Vec::new();
+    for parallelism in [UpdateParallelism::Sequential, UpdateParallelism::Parallel] {
+        let refit = BvhPolicy::Refit {
+            rebuild_threshold: f32::INFINITY,
+        };
+        let mut r = Renderer::new(scene(), settings(refit));
+        r.set_update_parallelism(parallelism);
+        r.prepare(0, 0.0).unwrap();
+        let error = r
+            .prepare(1, 1.0)
+            .err()
+            .expect("an overflowing vertex is an error");
+        let message = error.to_string();
+        // Triangles 0..4 only grow towards -x, -y and stay finite; triangle 4 is the first
+        // moved one in source order with an infinite vertex. (The tree's own check, in slot
+        // order, would name another one: the frame loop's check runs first.)
+        assert!(
+            message.starts_with("frame 1 (t = 1 s): triangle 4 has a non-finite vertex"),
+            "{message}"
+        );
+        messages.push(message);
+    }
+    assert_eq!(messages[0], messages[1]);
 }
 
 #[test]

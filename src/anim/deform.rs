@@ -23,10 +23,12 @@
 //! - a normal that comes out zero or non-finite: the previous stage's normal (morph: the
 //!   base normal; skin: `normalize(M3 n')`, else `n'` unchanged).
 //!
-//! Every loop runs in vertex order with a fixed summation order (targets in file order,
-//! influences in slot order), so results are bit-identical across calls and thread counts.
+//! Every vertex is computed with a fixed summation order (targets in file order, influences
+//! in slot order) from its own inputs only, so results are bit-identical across calls and
+//! thread counts: skinning of large meshes runs in vertex chunks on rayon's threads.
 
 use glam::{Mat3, Mat4, Vec3};
+use rayon::prelude::*;
 
 use super::Pose;
 use crate::scene::{PrimitiveDesc, SceneDesc};
@@ -161,35 +163,80 @@ struct Skinning<'a> {
     world_from_node: Mat4,
 }
 
+/// Below this many vertices skinning stays on the calling thread: a vertex takes tens of
+/// ns, less than rayon's split and join of a small job.
+const PARALLEL_MIN_VERTICES: usize = 8192;
+
+/// Vertices per parallel skinning task (large enough to amortise the task, small enough
+/// to balance two to a few dozen threads on a million-vertex mesh).
+const SKIN_CHUNK: usize = 4096;
+
 impl Skinning<'_> {
+    /// Skins every vertex; past [`PARALLEL_MIN_VERTICES`] in chunks on rayon's threads.
+    /// Each vertex is a pure function of its own inputs, so the split changes no bit.
     fn apply(&self, influences: Influences, positions: &mut [Vec3], normals: &mut [Vec3]) {
         let Influences { joints, weights } = influences;
         let rigid_normals = cofactor(Mat3::from_mat4(self.world_from_node));
-        for (v, position) in positions.iter_mut().enumerate() {
-            let normal = normals.get_mut(v);
-            let blended = self.blend(&joints[v], &weights[v]);
-            let skinned = blended
-                .map(|m| (m, m.transform_point3(*position)))
-                .filter(|(_, p)| p.is_finite());
-            match skinned {
-                Some((m, p)) => {
+        let skin_range = |first: usize, positions: &mut [Vec3], normals: &mut [Vec3]| {
+            for (k, position) in positions.iter_mut().enumerate() {
+                let v = first + k;
+                self.skin_vertex(
+                    &joints[v],
+                    &weights[v],
+                    &rigid_normals,
+                    position,
+                    normals.get_mut(k),
+                );
+            }
+        };
+        if positions.len() < PARALLEL_MIN_VERTICES {
+            skin_range(0, positions, normals);
+            return;
+        }
+        // Normals are either one per vertex or absent (empty): split them alike or not at all.
+        let chunks = positions.par_chunks_mut(SKIN_CHUNK).enumerate();
+        if normals.is_empty() {
+            chunks.for_each(|(c, positions)| skin_range(c * SKIN_CHUNK, positions, &mut []));
+        } else {
+            chunks
+                .zip(normals.par_chunks_mut(SKIN_CHUNK))
+                .for_each(|((c, positions), normals)| {
+                    skin_range(c * SKIN_CHUNK, positions, normals)
+                });
+        }
+    }
+
+    /// One vertex: the blended joint matrix, or the rigid fallback (module docs).
+    #[inline]
+    fn skin_vertex(
+        &self,
+        joints: &[u16; 4],
+        weights: &[f32; 4],
+        rigid_normals: &(Mat3, f32),
+        position: &mut Vec3,
+        normal: Option<&mut Vec3>,
+    ) {
+        let blended = self.blend(joints, weights);
+        let skinned = blended
+            .map(|m| (m, m.transform_point3(*position)))
+            .filter(|(_, p)| p.is_finite());
+        match skinned {
+            Some((m, p)) => {
+                *position = p;
+                if let Some(n) = normal {
+                    *n = transform_normal(&cofactor(Mat3::from_mat4(m)), Mat3::from_mat4(m), *n);
+                }
+            }
+            None => {
+                let p = self.world_from_node.transform_point3(*position);
+                if p.is_finite() {
                     *position = p;
                     if let Some(n) = normal {
-                        *n =
-                            transform_normal(&cofactor(Mat3::from_mat4(m)), Mat3::from_mat4(m), *n);
-                    }
-                }
-                None => {
-                    let p = self.world_from_node.transform_point3(*position);
-                    if p.is_finite() {
-                        *position = p;
-                        if let Some(n) = normal {
-                            *n = transform_normal(
-                                &rigid_normals,
-                                Mat3::from_mat4(self.world_from_node),
-                                *n,
-                            );
-                        }
+                        *n = transform_normal(
+                            rigid_normals,
+                            Mat3::from_mat4(self.world_from_node),
+                            *n,
+                        );
                     }
                 }
             }
@@ -242,6 +289,65 @@ fn transform_normal(normal_from_object: &(Mat3, f32), m: Mat3, n: Vec3) -> Vec3 
 mod tests {
     use super::*;
     use glam::Quat;
+
+    /// Past `PARALLEL_MIN_VERTICES` the vertex chunks run on several threads: every vertex
+    /// must equal the one skinned alone, bit for bit (fallbacks included).
+    #[test]
+    fn chunked_skinning_equals_skinning_vertex_by_vertex() {
+        let joint_matrices = [
+            Mat4::from_rotation_z(0.3) * Mat4::from_translation(Vec3::new(1.0, 2.0, 3.0)),
+            Mat4::from_scale(Vec3::new(1.5, 0.5, -2.0)),
+            Mat4::from_quat(Quat::from_rotation_x(-1.1)),
+        ];
+        let skinning = Skinning {
+            joint_matrices: &joint_matrices,
+            world_from_node: Mat4::from_translation(Vec3::new(0.0, -4.0, 1.0)),
+        };
+        let count = 3 * PARALLEL_MIN_VERTICES + 123;
+        let positions: Vec<Vec3> = (0..count)
+            .map(|v| Vec3::new(v as f32 * 0.001, (v % 17) as f32, -(v as f32).sqrt()))
+            .collect();
+        let normals: Vec<Vec3> = (0..count)
+            .map(|v| Vec3::new(1.0, (v % 5) as f32, 0.5).normalize())
+            .collect();
+        let joints: Vec<[u16; 4]> = (0..count).map(|v| [(v % 3) as u16, 2, 0, 1]).collect();
+        // Every 11th vertex has zero weights: the rigid fallback.
+        let weights: Vec<[f32; 4]> = (0..count)
+            .map(|v| match v % 11 {
+                0 => [0.0; 4],
+                k => [0.5, k as f32 * 0.04, 0.1, 0.0],
+            })
+            .collect();
+        let influences = Influences {
+            joints: &joints,
+            weights: &weights,
+        };
+        let (mut chunked, mut chunked_normals) = (positions.clone(), normals.clone());
+        skinning.apply(influences, &mut chunked, &mut chunked_normals);
+        let rigid_normals = cofactor(Mat3::from_mat4(skinning.world_from_node));
+        for v in 0..count {
+            let (mut p, mut n) = (positions[v], normals[v]);
+            skinning.skin_vertex(
+                &joints[v],
+                &weights[v],
+                &rigid_normals,
+                &mut p,
+                Some(&mut n),
+            );
+            assert_eq!(
+                p.to_array().map(f32::to_bits),
+                chunked[v].to_array().map(f32::to_bits)
+            );
+            assert_eq!(
+                n.to_array().map(f32::to_bits),
+                chunked_normals[v].to_array().map(f32::to_bits)
+            );
+        }
+        // Without normals the positions are the same.
+        let mut no_normals = positions.clone();
+        skinning.apply(influences, &mut no_normals, &mut []);
+        assert!(no_normals == chunked);
+    }
 
     #[test]
     fn cofactor_is_the_inverse_transpose_up_to_a_positive_scale() {

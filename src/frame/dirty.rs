@@ -9,6 +9,13 @@
 //! - *deformed*: shape changed (skinning, morphing, non-uniform scale or shear): `log2 P_b`
 //!   is recomputed from its world vertices.
 
+use std::ops::Range;
+
+use rayon::prelude::*;
+
+/// Source triangles per parallel listing task.
+const LIST_CHUNK: usize = 16384;
+
 /// How one triangle moved this frame.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Motion {
@@ -45,6 +52,66 @@ impl DirtySet {
             self.bits[word] |= 1 << bit;
             self.slots.push(slot);
             self.motions.push(motion);
+        }
+    }
+
+    /// Lists the source triangles of `visited` (increasing, disjoint ranges) whose entry in
+    /// `source_motion` is set, in source order, as their slots (`slot_of_source`) with that
+    /// motion, and clears those entries: the parallel counterpart of [`Self::mark`] called in
+    /// that order. The ranges are cut into chunks that are counted, then filled at their
+    /// offsets, on rayon's threads; every read is sequential. Precondition: the set was just
+    /// [`reset`](Self::reset) for `slot_of_source.len()` slots.
+    pub fn assign_in_source_order(
+        &mut self,
+        visited: impl Iterator<Item = Range<u32>>,
+        source_motion: &mut [Option<Motion>],
+        slot_of_source: &[u32],
+    ) {
+        debug_assert!(self.slots.is_empty());
+        let chunks: Vec<Range<usize>> = visited
+            .flat_map(|r| {
+                let (start, end) = (r.start as usize, r.end as usize);
+                (start..end)
+                    .step_by(LIST_CHUNK)
+                    .map(move |a| a..(a + LIST_CHUNK).min(end))
+            })
+            .collect();
+        let counts: Vec<usize> = chunks
+            .par_iter()
+            .map(|c| source_motion[c.clone()].iter().flatten().count())
+            .collect();
+        let total = counts.iter().sum();
+        self.slots.resize(total, 0);
+        self.motions.resize(total, Motion::Rigid);
+        // Each chunk's input (its `source_motion` entries) and output (its share of the list).
+        let mut jobs = Vec::with_capacity(chunks.len());
+        let (mut input, mut consumed) = (source_motion, 0);
+        let (mut slots, mut motions) = (&mut self.slots[..], &mut self.motions[..]);
+        for (chunk, &count) in chunks.iter().zip(&counts) {
+            let (_, rest) = std::mem::take(&mut input).split_at_mut(chunk.start - consumed);
+            let (here, rest) = rest.split_at_mut(chunk.len());
+            (input, consumed) = (rest, chunk.end);
+            let (chunk_slots, rest) = std::mem::take(&mut slots).split_at_mut(count);
+            slots = rest;
+            let (chunk_motions, rest) = std::mem::take(&mut motions).split_at_mut(count);
+            motions = rest;
+            jobs.push((chunk.start, here, chunk_slots, chunk_motions));
+        }
+        jobs.into_par_iter()
+            .for_each(|(first, input, slots, motions)| {
+                let marked = input
+                    .iter_mut()
+                    .enumerate()
+                    .filter_map(|(k, m)| Some((first + k, m.take()?)));
+                for ((source, motion), (slot, out)) in
+                    marked.zip(slots.iter_mut().zip(motions.iter_mut()))
+                {
+                    *slot = slot_of_source[source];
+                    *out = motion;
+                }
+            });
+        for &slot in &self.slots {
+            self.bits[slot as usize / 64] |= 1 << (slot % 64);
         }
     }
 
@@ -86,5 +153,46 @@ mod tests {
         assert_eq!(d.count(Motion::Deformed), 1);
         d.reset(130);
         assert!(d.is_empty() && !d.contains(3));
+    }
+
+    #[test]
+    fn listing_in_source_order_equals_marking_one_by_one() {
+        let n = 3 * LIST_CHUNK as u32 + 500;
+        // A permutation of the slots, and visited ranges with gaps, one longer than a chunk.
+        let slot_of_source: Vec<u32> = (0..n).map(|k| (k * 7919) % n).collect();
+        let visited = [3..40, 100..100 + 2 * LIST_CHUNK as u32 + 7, n - 300..n];
+        let motion_at = |source: u32| match source % 5 {
+            0 => Some(Motion::Rigid),
+            1 => Some(Motion::Deformed),
+            2 => Some(Motion::Scaled),
+            _ => None,
+        };
+        let mut one_by_one = DirtySet::default();
+        one_by_one.reset(n as usize);
+        for source in visited.iter().cloned().flatten() {
+            if let Some(m) = motion_at(source) {
+                one_by_one.mark(slot_of_source[source as usize], m);
+            }
+        }
+        let mut motions: Vec<Option<Motion>> = (0..n).map(motion_at).collect();
+        let mut listed = DirtySet::default();
+        listed.reset(n as usize);
+        listed.assign_in_source_order(visited.iter().cloned(), &mut motions, &slot_of_source);
+        assert!(one_by_one.len() > LIST_CHUNK);
+        assert_eq!(listed.slots, one_by_one.slots);
+        assert_eq!(listed.motions, one_by_one.motions);
+        assert_eq!(listed.bits, one_by_one.bits);
+        let untouched = |s: u32| !visited.iter().any(|r| r.contains(&s));
+        for source in 0..n {
+            let expected = if untouched(source) {
+                motion_at(source)
+            } else {
+                None
+            };
+            assert_eq!(
+                motions[source as usize], expected,
+                "source {source}: visited marks are taken, others kept"
+            );
+        }
     }
 }

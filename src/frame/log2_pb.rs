@@ -19,10 +19,6 @@ use crate::geometry::{Placement, SceneGeometry};
 use crate::lod::{PixelFootprint, log2_pb, shift_log2_pb};
 use crate::scene::SceneDesc;
 
-/// Below this many triangles the `log2 P_b` update stays on the calling thread: rayon's
-/// split and join cost more than the work (a triangle's constant takes tens of ns).
-const PARALLEL_MIN_TRIANGLES: usize = 8192;
-
 impl Renderer {
     /// `log2 P_b` for the dirty triangles: recomputed where deformed, shifted where scaled,
     /// kept where rigid.
@@ -80,7 +76,9 @@ impl Renderer {
         values: &mut Vec<Option<f32>>,
     ) {
         let value = |k: usize| slot_at(k).and_then(|slot| self.log2_pb_of(slot, states));
-        if count >= PARALLEL_MIN_TRIANGLES {
+        // Below 8,192 triangles (`UpdateParallelism::Auto`) rayon's split and join cost more
+        // than the work (a triangle's constant takes tens of ns).
+        if self.parallelism.splits(count) {
             (0..count)
                 .into_par_iter()
                 .map(value)

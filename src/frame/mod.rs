@@ -15,6 +15,7 @@ mod dirty;
 mod log2_pb;
 mod posed;
 mod record;
+mod scatter;
 pub mod sequence;
 mod settings;
 mod update;
@@ -25,6 +26,7 @@ pub use dirty::{DirtySet, Motion};
 pub use record::{FrameRecord, Phase, UpdateStats};
 pub use sequence::{Check, Resume, SequenceOutcome, SequenceOutput, render_sequence};
 pub use settings::RenderSettings;
+pub use update::UpdateParallelism;
 
 use std::time::Instant;
 
@@ -38,7 +40,8 @@ use crate::render::light::ring_lights;
 use crate::render::{Camera, FrameScene, Light, LinearImage, TraceCounters, render_image};
 use crate::scene::SceneDesc;
 use log2_pb::object_space_log2_pb;
-use posed::{DeformScratch, VertexSource, write_all_triangles};
+use posed::{PosedVertices, VertexSource, write_all_triangles};
+use update::UpdateScratch;
 
 /// Errors that stop a frame.
 #[derive(Debug, thiserror::Error)]
@@ -100,7 +103,10 @@ pub struct Renderer {
     /// This frame's pose and the previous frame's (swapped each frame, reused).
     pose: Pose,
     previous_pose: Pose,
-    scratch: DeformScratch,
+    /// Reused buffers of the update (deformed vertices, per-instance plan, per-slot marks).
+    update: UpdateScratch,
+    /// When the update splits its steps across rayon's threads.
+    parallelism: UpdateParallelism,
     dirty: DirtySet,
     /// Scratch for the `log2 P_b` update: one value per updated slot, reused every frame.
     log2_pb_values: Vec<Option<f32>>,
@@ -123,9 +129,17 @@ impl Renderer {
             .collect();
         let mut pose = Pose::default();
         pose.evaluate(&scene, settings.animation, 0.0);
-        let mut scratch = DeformScratch::default();
         let mut rest = FrameTriangles::default();
-        write_all_triangles(&scene, &geometry, &pose, &deforms, &mut scratch, &mut rest);
+        write_all_triangles(
+            &scene,
+            &geometry,
+            &pose,
+            &deforms,
+            &mut PosedVertices::default(),
+            &mut Vec::new(),
+            UpdateParallelism::Auto.splits(geometry.triangle_count()),
+            &mut rest,
+        );
         let rest_bounds = bounds(&rest);
         let camera_node = first_node_with(&scene, |n| n.camera.is_some());
         let yfov = match camera_node {
@@ -157,10 +171,17 @@ impl Renderer {
             deforms,
             pose,
             previous_pose: Pose::default(),
-            scratch,
+            update: UpdateScratch::default(),
+            parallelism: UpdateParallelism::Auto,
             dirty: DirtySet::default(),
             log2_pb_values: Vec::new(),
         }
+    }
+
+    /// Sets when the per-frame update splits across rayon's threads (default
+    /// [`UpdateParallelism::Auto`]); the results do not depend on it, only the time.
+    pub fn set_update_parallelism(&mut self, parallelism: UpdateParallelism) {
+        self.parallelism = parallelism;
     }
 
     pub fn scene(&self) -> &SceneDesc {

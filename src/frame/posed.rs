@@ -1,9 +1,18 @@
 //! Where an instance's vertices come from this frame: its mesh's rest vertices placed by its
 //! node, or (for skinned and morphed primitives) the vertices `anim::deform_primitive`
-//! writes, in object or world space.
+//! writes, in object or world space; and the writer that turns them into a slot's
+//! world-space triangle.
+//!
+//! Every triangle written is a pure function of the pose and its own source triangle, and
+//! each instance deforms into its own buffers, so the write can run over slots on rayon's
+//! threads in any split with results bit-identical to one thread's (`tests/frame_loop.rs`).
 
-use glam::{Mat4, Vec3};
+use std::sync::atomic::{AtomicBool, Ordering};
 
+use glam::{Mat4, Vec2, Vec3, Vec3A};
+use rayon::prelude::*;
+
+use super::Motion;
 use crate::anim::{Pose, VertexSpace, deform_primitive};
 use crate::geometry::{FrameTriangles, Placement, SceneGeometry};
 use crate::scene::SceneDesc;
@@ -28,79 +37,326 @@ impl VertexSource {
     }
 }
 
-/// Reused vertex buffers for deformed primitives.
+/// One instance's vertices this frame in world space (buffers reused from frame to frame).
 #[derive(Debug, Default)]
-pub struct DeformScratch {
-    pub positions: Vec<Vec3>,
-    pub normals: Vec<Vec3>,
+struct WorldVertices {
+    /// Placed by [`Placement::place_point`].
+    positions: Vec<Vec3>,
+    /// Placed by [`Placement::place_normal`]; empty when the primitive has no normals.
+    normals: Vec<Vec3>,
 }
 
-/// The placement and vertex arrays of instance `i` for `pose`; a `Deformed` source has its
-/// vertices written into `scratch`.
-pub fn instance_vertices<'a>(
-    scene: &'a SceneDesc,
+/// Every instance's world-space vertices and placement for one pose: rest vertices placed
+/// by the node, or vertices skinned or morphed, then placed. Each instance has its own
+/// buffers, so instances can be posed and written concurrently, and each shared vertex is
+/// transformed once (not once per triangle that uses it).
+///
+/// Invariant: `placements[i]` and `vertices[i]` are this frame's for every instance the
+/// frame rewrites; the others hold an earlier frame's values.
+#[derive(Debug, Default)]
+pub struct PosedVertices {
+    /// Per instance.
+    vertices: Vec<WorldVertices>,
+    /// Per instance: object (or, for skinned vertices, world) to world.
+    placements: Vec<Placement>,
+}
+
+/// Below this many vertices an instance is placed on the calling thread.
+const PARALLEL_MIN_VERTICES: usize = 8192;
+
+/// Vertices per parallel placement task.
+const PLACE_CHUNK: usize = 4096;
+
+impl PosedVertices {
+    /// Sizes the per-instance arrays for `instances` instances (keeps allocations).
+    pub fn resize(&mut self, instances: usize) {
+        self.vertices.resize_with(instances, Default::default);
+        self.placements
+            .resize(instances, Placement::new(Mat4::IDENTITY));
+    }
+
+    /// Records placed instance `i`'s placement for this frame (before [`Self::pose`]).
+    pub fn place(&mut self, i: usize, world_from_object: Mat4) {
+        self.placements[i] = Placement::new(world_from_object);
+    }
+
+    /// Writes the world-space vertices of every instance `i` with `needed(i)`: a deforming
+    /// instance is skinned or morphed for `pose` (which sets its placement), a placed one
+    /// placed by the placement [`Self::place`] recorded. Across instances (and within large
+    /// ones) on rayon's threads when `parallel`: each vertex is a pure function of its
+    /// inputs, so the result does not depend on it.
+    #[allow(clippy::too_many_arguments)]
+    pub fn pose(
+        &mut self,
+        scene: &SceneDesc,
+        geometry: &SceneGeometry,
+        pose: &Pose,
+        deforms: &[VertexSource],
+        needed: impl Fn(usize) -> bool + Sync,
+        parallel: bool,
+    ) {
+        let pose_one = |(i, (out, placement)): (usize, (&mut WorldVertices, &mut Placement))| {
+            if !needed(i) {
+                return;
+            }
+            if deforms[i] == VertexSource::Deformed {
+                *placement = deform_instance(scene, geometry, pose, i, out);
+                place_in_place(placement, out, parallel);
+            } else {
+                let primitive = geometry.primitive(scene, i);
+                place_rest(
+                    placement,
+                    &primitive.positions,
+                    primitive.normals.as_deref(),
+                    out,
+                    parallel,
+                );
+            }
+        };
+        if parallel {
+            (self.vertices.par_iter_mut(), self.placements.par_iter_mut())
+                .into_par_iter()
+                .enumerate()
+                .for_each(pose_one);
+        } else {
+            self.vertices
+                .iter_mut()
+                .zip(self.placements.iter_mut())
+                .enumerate()
+                .for_each(pose_one);
+        }
+    }
+
+    /// Instance `i`'s placement (valid for the instances this frame rewrites).
+    pub fn placement(&self, i: usize) -> &Placement {
+        &self.placements[i]
+    }
+
+    /// Instance `i`'s world-space positions and normals (valid for the instances this frame
+    /// rewrites).
+    #[inline]
+    pub fn world_arrays(&self, i: usize) -> (&[Vec3], Option<&[Vec3]>) {
+        let v = &self.vertices[i];
+        (
+            &v.positions,
+            (!v.normals.is_empty()).then_some(v.normals.as_slice()),
+        )
+    }
+}
+
+/// Writes deforming instance `i`'s vertices into `out`; returns the placement that takes
+/// them to world space (its node's for object-space vertices, the identity for skinned).
+fn deform_instance(
+    scene: &SceneDesc,
     geometry: &SceneGeometry,
     pose: &Pose,
     i: usize,
-    source: VertexSource,
-    scratch: &'a mut DeformScratch,
-) -> (Placement, &'a [Vec3], Option<&'a [Vec3]>) {
+    out: &mut WorldVertices,
+) -> Placement {
     let instance = geometry.instances[i];
-    let world_from_node = pose.world_from_node[instance.node as usize];
-    if source == VertexSource::Placed {
-        let primitive = geometry.primitive(scene, i);
-        return (
-            Placement::new(world_from_node),
-            &primitive.positions,
-            primitive.normals.as_deref(),
-        );
-    }
     let space = deform_primitive(
         scene,
         pose,
         instance.node as usize,
         instance.mesh as usize,
         instance.primitive as usize,
-        &mut scratch.positions,
-        &mut scratch.normals,
+        &mut out.positions,
+        &mut out.normals,
     );
-    let placement = match space {
-        VertexSpace::Object => Placement::new(world_from_node),
-        VertexSpace::World => Placement::new(Mat4::IDENTITY),
-    };
-    let normals = (!scratch.normals.is_empty()).then_some(scratch.normals.as_slice());
-    (placement, &scratch.positions, normals)
+    Placement::new(match space {
+        VertexSpace::Object => pose.world_from_node[instance.node as usize],
+        VertexSpace::World => Mat4::IDENTITY,
+    })
 }
 
-/// Fills `out` (source order) with every triangle of the scene posed by `pose`.
+/// Places `out`'s (deformed) vertices in place.
+fn place_in_place(placement: &Placement, out: &mut WorldVertices, parallel: bool) {
+    let split = parallel && out.positions.len() >= PARALLEL_MIN_VERTICES;
+    let point = |p: &mut Vec3| *p = placement.place_point(*p);
+    let normal = |n: &mut Vec3| *n = placement.place_normal(*n);
+    if split {
+        out.positions
+            .par_iter_mut()
+            .with_min_len(PLACE_CHUNK)
+            .for_each(point);
+        out.normals
+            .par_iter_mut()
+            .with_min_len(PLACE_CHUNK)
+            .for_each(normal);
+    } else {
+        out.positions.iter_mut().for_each(point);
+        out.normals.iter_mut().for_each(normal);
+    }
+}
+
+/// Writes rest vertices placed by `placement` into `out`.
+fn place_rest(
+    placement: &Placement,
+    positions: &[Vec3],
+    normals: Option<&[Vec3]>,
+    out: &mut WorldVertices,
+    parallel: bool,
+) {
+    let normals = normals.unwrap_or_default();
+    out.positions.resize(positions.len(), Vec3::ZERO);
+    out.normals.resize(normals.len(), Vec3::ZERO);
+    let point = |(p, &rest): (&mut Vec3, &Vec3)| *p = placement.place_point(rest);
+    let normal = |(n, &rest): (&mut Vec3, &Vec3)| *n = placement.place_normal(rest);
+    if parallel && positions.len() >= PARALLEL_MIN_VERTICES {
+        out.positions
+            .par_iter_mut()
+            .zip(positions)
+            .with_min_len(PLACE_CHUNK)
+            .for_each(point);
+        out.normals
+            .par_iter_mut()
+            .zip(normals)
+            .with_min_len(PLACE_CHUNK)
+            .for_each(normal);
+    } else {
+        out.positions.iter_mut().zip(positions).for_each(point);
+        out.normals.iter_mut().zip(normals).for_each(normal);
+    }
+}
+
+/// What the frame does to one instance's triangles.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Rewrite {
+    /// Unchanged: not visited.
+    Keep,
+    /// Every triangle rewritten and marked with this motion.
+    All(Motion),
+    /// A deforming instance whose inputs changed: normals rewritten (they turn with a
+    /// neighbour's vertex), positions and uvs only where a vertex changed, those marked
+    /// deformed.
+    Changed,
+}
+
+/// What writing one triangle reads: shared, read-only, so slots can be written from any
+/// thread in any order with the same result.
+pub struct TriangleWriter<'a> {
+    pub geometry: &'a SceneGeometry,
+    pub posed: &'a PosedVertices,
+    /// Per instance.
+    pub plan: &'a [Rewrite],
+    /// Set when a triangle written with new vertices has a non-finite one (so the ordered
+    /// search for the first such triangle runs only then).
+    pub moved_nonfinite: AtomicBool,
+}
+
+impl TriangleWriter<'_> {
+    /// Writes source triangle `source` into its slot's `position`, `normal` and `uv` as its
+    /// instance's [`Rewrite`] says; returns the slot's motion (`None`: unmoved).
+    #[inline]
+    pub fn write(
+        &self,
+        source: u32,
+        position: &mut [Vec3A; 3],
+        normal: &mut [Vec3; 3],
+        uv: &mut [Vec2; 3],
+    ) -> Option<Motion> {
+        let i = self.geometry.triangle_instance[source as usize] as usize;
+        let all = match self.plan[i] {
+            Rewrite::Keep => return None,
+            Rewrite::All(motion) => Some(motion),
+            Rewrite::Changed => None,
+        };
+        let placement = self.posed.placement(i);
+        let (positions, normals) = self.posed.world_arrays(i);
+        let (p, n) =
+            self.geometry
+                .placed_triangle(source, placement.flips_winding, positions, normals);
+        *normal = n;
+        let motion = all.or_else(|| (!same_bits(&p, position)).then_some(Motion::Deformed))?;
+        if !p.iter().all(|v| v.is_finite()) {
+            self.moved_nonfinite.store(true, Ordering::Relaxed);
+        }
+        *position = p;
+        *uv = self.geometry.oriented_uvs(source, placement);
+        Some(motion)
+    }
+}
+
+/// Whether two triangles have bit-identical vertices (so -0 and 0 differ, and a NaN
+/// equals itself: "did it move" is about the stored bits).
+#[inline]
+fn same_bits(a: &[Vec3A; 3], b: &[Vec3A; 3]) -> bool {
+    a.iter().zip(b).all(|(a, b)| {
+        let (a, b) = (a.to_array(), b.to_array());
+        (0..3).all(|k| a[k].to_bits() == b[k].to_bits())
+    })
+}
+
+/// Fills `out` (source order) with every triangle of the scene posed by `pose`, on rayon's
+/// threads when `parallel`.
+#[allow(clippy::too_many_arguments)]
 pub fn write_all_triangles(
     scene: &SceneDesc,
     geometry: &SceneGeometry,
     pose: &Pose,
     deforms: &[VertexSource],
-    scratch: &mut DeformScratch,
+    posed: &mut PosedVertices,
+    plan: &mut Vec<Rewrite>,
+    parallel: bool,
     out: &mut FrameTriangles,
 ) {
-    out.positions.clear();
-    out.normals.clear();
-    out.uvs.clear();
-    out.material.clear();
-    out.log2_pb.clear();
-    out.source.clear();
+    posed.resize(geometry.instances.len());
+    plan.clear();
+    plan.resize(geometry.instances.len(), Rewrite::All(Motion::Deformed));
     for (i, instance) in geometry.instances.iter().enumerate() {
-        let (placement, positions, normals) =
-            instance_vertices(scene, geometry, pose, i, deforms[i], scratch);
-        for source in geometry.instance_triangles[i].clone() {
-            let (p, n) = geometry.world_triangle(source, &placement, positions, normals);
-            out.positions.push(p);
-            out.normals.push(n);
-            out.uvs.push(geometry.oriented_uvs(source, &placement));
-            out.material.push(instance.material);
-            out.log2_pb.push(0.0);
-            out.source.push(source);
-        }
+        posed.place(i, pose.world_from_node[instance.node as usize]);
+    }
+    posed.pose(scene, geometry, pose, deforms, |_| true, parallel);
+    let n = geometry.triangle_count();
+    out.positions.clear();
+    out.positions.resize(n, [Vec3A::ZERO; 3]);
+    out.normals.clear();
+    out.normals.resize(n, [Vec3::ZERO; 3]);
+    out.uvs.clear();
+    out.uvs.resize(n, [Vec2::ZERO; 3]);
+    out.log2_pb.clear();
+    out.log2_pb.resize(n, 0.0);
+    out.source.clear();
+    out.source.extend(0..n as u32);
+    out.material.clear();
+    out.material.extend(
+        geometry
+            .triangle_instance
+            .iter()
+            .map(|&i| geometry.instances[i as usize].material),
+    );
+    let writer = TriangleWriter {
+        geometry,
+        posed,
+        plan,
+        moved_nonfinite: AtomicBool::new(false),
+    };
+    let write = |(position, normal, uv, &source): (_, _, _, &u32)| {
+        writer.write(source, position, normal, uv);
+    };
+    let slots = (
+        &mut out.positions,
+        &mut out.normals,
+        &mut out.uvs,
+        &out.source,
+    );
+    if parallel {
+        slots
+            .into_par_iter()
+            .with_min_len(WRITE_CHUNK)
+            .for_each(write);
+    } else {
+        let (p, n, uv, s) = slots;
+        p.iter_mut()
+            .zip(n.iter_mut())
+            .zip(uv.iter_mut())
+            .zip(s.iter())
+            .for_each(|(((p, n), uv), s)| write((p, n, uv, s)));
     }
 }
+
+/// Triangles per parallel write task (a triangle takes tens of ns).
+pub const WRITE_CHUNK: usize = 1024;
 
 /// Whether instance `i`'s deformation inputs are the same in both poses (node transform,
 /// morph weights, and its skin's joint matrices), so its vertices cannot have changed.

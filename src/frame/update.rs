@@ -2,16 +2,72 @@
 //! mark it in the dirty set as rigid, scaled or deformed, and refit or rebuild the BVH.
 //! Only what changed is touched; `tests/frame_loop.rs` checks every changed-only path
 //! against a fresh build.
+//!
+//! Three steps, each split across rayon's threads when its work is large enough to pay
+//! ([`UpdateParallelism`]): pose the vertices of the instances that moved (skinned or morphed
+//! then placed, or rest vertices placed; each instance into its own world-space buffers),
+//! write their triangles into the BVH slots in source order (`scatter`; recording each
+//! triangle's motion), then list the marked slots in the dirty set in source-triangle order. Every written value is a
+//! pure function of the pose and its triangle, and the dirty order is fixed by source order,
+//! so the parallel update is bit-identical to the sequential one, dirty order included.
+//! Timing: classifying instances and listing the dirty set count as `dirty_ms`; posing and
+//! writing (including the per-triangle "did its vertices change" test, fused with the write)
+//! as `animate_ms`.
 
+use std::sync::atomic::AtomicBool;
 use std::time::Instant;
 
-use glam::Mat4;
+use rayon::prelude::*;
 
-use super::posed::{VertexSource, instance_vertices, same_deformation, write_all_triangles};
+use super::posed::{
+    PosedVertices, Rewrite, TriangleWriter, VertexSource, WRITE_CHUNK, same_deformation,
+    write_all_triangles,
+};
+use super::scatter::SlotScatter;
 use super::{InstanceState, Motion, Renderer, UpdateStats, ms_since};
 use crate::accel::{Accel, AccelError, TreeStep};
 use crate::anim::NodeShape;
-use crate::geometry::Placement;
+
+/// Below this much work (triangles or vertices) an update step stays on the calling thread:
+/// rayon's split and join cost more than the work (tens of ns per item).
+const PARALLEL_MIN_ITEMS: usize = 8192;
+
+/// Whether the frame update splits its steps across rayon's threads.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum UpdateParallelism {
+    /// Each step splits past 8,192 items of work (the default).
+    #[default]
+    Auto,
+    /// Every step on the calling thread: the reference the parallel update is tested against.
+    Sequential,
+    /// Every step split however small its work: drives the parallel path on small scenes.
+    Parallel,
+}
+
+impl UpdateParallelism {
+    /// Whether a step with `items` of work splits.
+    pub(super) fn splits(self, items: usize) -> bool {
+        match self {
+            UpdateParallelism::Auto => items >= PARALLEL_MIN_ITEMS,
+            UpdateParallelism::Sequential => false,
+            UpdateParallelism::Parallel => true,
+        }
+    }
+}
+
+/// The update's reused per-frame buffers.
+#[derive(Debug, Default)]
+pub struct UpdateScratch {
+    /// Every instance's vertices and placement this frame.
+    pub posed: PosedVertices,
+    /// Per instance: what this frame does to its triangles.
+    pub plan: Vec<Rewrite>,
+    /// Per source triangle: the motion the write gave it. All `None` between frames (the
+    /// dirty listing takes them).
+    source_motion: Vec<Option<Motion>>,
+    /// Whether this frame's write gave a moved triangle a non-finite vertex.
+    moved_nonfinite: bool,
+}
 
 impl Renderer {
     /// First frame: every triangle placed, the tree built, every `log2 P_b` computed.
@@ -26,7 +82,9 @@ impl Renderer {
             &self.geometry,
             &self.pose,
             &self.deforms,
-            &mut self.scratch,
+            &mut self.update.posed,
+            &mut self.update.plan,
+            self.parallelism.splits(self.geometry.triangle_count()),
             &mut self.triangles,
         );
         let states = self.instance_states(scales);
@@ -72,82 +130,175 @@ impl Renderer {
         }
     }
 
-    /// Rewrites the triangles of every instance whose placement changed and records them in
-    /// the dirty set.
+    /// Rewrites the triangles of every instance whose placement or deformation changed and
+    /// records them in the dirty set.
     pub(super) fn update_moved(&mut self, scales: &[Option<NodeShape>], stats: &mut UpdateStats) {
         let t = Instant::now();
         self.dirty.reset(self.triangles.len());
         let previous = self.instances.take().unwrap_or_default();
         let current = self.instance_states(scales);
-        let mut classify_ms = ms_since(t);
-        for (i, (now, before)) in current.iter().zip(&previous).enumerate() {
-            if self.deforms[i] == VertexSource::Deformed {
-                if !same_deformation(
+        let visited = self.plan_rewrites(&current, &previous);
+        self.instances = Some(current);
+        stats.dirty_ms = ms_since(t);
+
+        let t = Instant::now();
+        self.pose_planned();
+        self.write_planned(visited);
+        stats.animate_ms = ms_since(t);
+
+        let t = Instant::now();
+        self.list_dirty(visited);
+        stats.dirty_ms += ms_since(t);
+    }
+
+    /// Decides each instance's [`Rewrite`] from its placement now and before (and records
+    /// the placement of those to rewrite); returns how many triangles the write visits.
+    fn plan_rewrites(&mut self, current: &[InstanceState], previous: &[InstanceState]) -> usize {
+        let UpdateScratch { posed, plan, .. } = &mut self.update;
+        posed.resize(current.len());
+        plan.clear();
+        let mut visited = 0;
+        for (i, (now, before)) in current.iter().zip(previous).enumerate() {
+            let rewrite = if self.deforms[i] == VertexSource::Deformed {
+                let same = same_deformation(
                     &self.scene,
                     &self.geometry,
                     i,
                     &self.pose,
                     &self.previous_pose,
-                ) {
-                    classify_ms += self.deform_instance(i);
+                );
+                if same {
+                    Rewrite::Keep
+                } else {
+                    Rewrite::Changed
                 }
-                continue;
-            }
-            if now.world_from_object == before.world_from_object {
-                continue; // static: untouched
-            }
-            let c = Instant::now();
-            // Same shape key: the triangles only turned and moved. Otherwise a new uniform
-            // scale shifts `log2 P_b`; anything else changed the shape.
-            let motion = match (now.shape, before.shape) {
-                (Some(s), Some(p)) if s == p => Motion::Rigid,
-                (Some(NodeShape { stretch: None, .. }), _) => Motion::Scaled,
-                _ => Motion::Deformed,
+            } else if now.world_from_object == before.world_from_object {
+                Rewrite::Keep // static: untouched
+            } else {
+                posed.place(i, now.world_from_object);
+                Rewrite::All(placed_motion(now.shape, before.shape))
             };
-            classify_ms += ms_since(c);
-            self.place_instance(i, now.world_from_object, motion);
+            if rewrite != Rewrite::Keep {
+                visited += self.geometry.instance_triangles[i].len();
+            }
+            plan.push(rewrite);
         }
-        self.instances = Some(current);
-        stats.dirty_ms = classify_ms;
-        stats.animate_ms = ms_since(t) - classify_ms;
+        visited
     }
 
-    /// Rewrites a skinned or morphed instance's triangles from its deformed vertices; marks
-    /// exactly those whose vertices changed as deformed. Returns the milliseconds spent
-    /// comparing (the classification share of the work).
-    fn deform_instance(&mut self, i: usize) -> f64 {
-        let mut compare_ms = 0.0;
-        let (placement, positions, normals) = instance_vertices(
+    /// Writes the world-space vertices of the planned instances (skinned or morphed, then
+    /// placed; or rest vertices placed), on rayon's threads when there are enough of them.
+    fn pose_planned(&mut self) {
+        let UpdateScratch { posed, plan, .. } = &mut self.update;
+        let planned = |i: usize| plan[i] != Rewrite::Keep;
+        let vertices: usize = (0..plan.len())
+            .filter(|&i| planned(i))
+            .map(|i| self.geometry.primitive(&self.scene, i).positions.len())
+            .sum();
+        posed.pose(
             &self.scene,
             &self.geometry,
             &self.pose,
-            i,
-            VertexSource::Deformed,
-            &mut self.scratch,
+            &self.deforms,
+            planned,
+            self.parallelism.splits(vertices),
         );
-        for source in self.geometry.instance_triangles[i].clone() {
-            let slot = self.slot_of_source[source as usize];
-            let s = slot as usize;
-            let (p, n) = self
-                .geometry
-                .world_triangle(source, &placement, positions, normals);
-            let c = Instant::now();
-            let moved = p.map(|v| v.to_array().map(f32::to_bits))
-                != self.triangles.positions[s].map(|v| v.to_array().map(f32::to_bits));
-            compare_ms += ms_since(c);
-            if moved {
-                self.triangles.positions[s] = p;
-                self.triangles.uvs[s] = self.geometry.oriented_uvs(source, &placement);
-                self.dirty.mark(slot, Motion::Deformed);
+    }
+
+    /// Writes the triangles of the planned instances into their slots and records each
+    /// written triangle's motion in `source_motion`. Triangles are visited in source order (reads
+    /// stay sequential); in parallel, instances and chunks of their triangles run as
+    /// separate tasks, writing distinct slots (`scatter`).
+    fn write_planned(&mut self, visited: usize) {
+        let UpdateScratch {
+            posed,
+            plan,
+            source_motion,
+            moved_nonfinite,
+        } = &mut self.update;
+        source_motion.resize(self.triangles.len(), None);
+        let writer = TriangleWriter {
+            geometry: &self.geometry,
+            posed,
+            plan,
+            moved_nonfinite: AtomicBool::new(false),
+        };
+        let ranges = &self.geometry.instance_triangles;
+        let slot_of_source = &self.slot_of_source;
+        if self.parallelism.splits(visited) {
+            let slots = SlotScatter::new(&mut self.triangles, source_motion);
+            plan.par_iter()
+                .enumerate()
+                .filter(|(_, r)| **r != Rewrite::Keep)
+                .for_each(|(i, _)| {
+                    ranges[i]
+                        .clone()
+                        .into_par_iter()
+                        .with_min_len(WRITE_CHUNK)
+                        .for_each(|source| {
+                            let slot = slot_of_source[source as usize];
+                            // SAFETY: each source triangle is visited once and
+                            // `slot_of_source` is a permutation: one task per slot.
+                            unsafe {
+                                slots.with_slot(slot, source, |p, n, uv| {
+                                    writer.write(source, p, n, uv)
+                                })
+                            };
+                        });
+                });
+        } else {
+            let triangles = &mut self.triangles;
+            let visited_instances = plan
+                .iter()
+                .enumerate()
+                .filter(|(_, r)| **r != Rewrite::Keep);
+            for (i, _) in visited_instances {
+                for source in ranges[i].clone() {
+                    let s = slot_of_source[source as usize] as usize;
+                    source_motion[source as usize] = writer.write(
+                        source,
+                        &mut triangles.positions[s],
+                        &mut triangles.normals[s],
+                        &mut triangles.uvs[s],
+                    );
+                }
             }
-            // Normals can turn without the triangle moving (a neighbour's vertex moved).
-            self.triangles.normals[s] = n;
         }
-        compare_ms
+        *moved_nonfinite = writer.moved_nonfinite.into_inner();
+    }
+
+    /// Lists the slots the write marked in the dirty set, in source-triangle order (the
+    /// order of instances, then of their triangles), and clears the marks.
+    fn list_dirty(&mut self, visited: usize) {
+        let UpdateScratch {
+            plan,
+            source_motion,
+            ..
+        } = &mut self.update;
+        let ranges = &self.geometry.instance_triangles;
+        let visited_ranges = plan
+            .iter()
+            .enumerate()
+            .filter(|(_, r)| **r != Rewrite::Keep)
+            .map(|(i, _)| ranges[i].clone());
+        if self.parallelism.splits(visited) {
+            self.dirty
+                .assign_in_source_order(visited_ranges, source_motion, &self.slot_of_source);
+            return;
+        }
+        for source in visited_ranges.flatten() {
+            if let Some(motion) = source_motion[source as usize].take() {
+                self.dirty
+                    .mark(self.slot_of_source[source as usize], motion);
+            }
+        }
     }
 
     /// A moved vertex that came out NaN or infinite stops the frame (never a NaN pixel).
     pub(super) fn check_moved_finite(&self) -> Result<(), AccelError> {
+        if !self.update.moved_nonfinite {
+            return Ok(()); // the write saw none: skip the scan
+        }
         for &slot in &self.dirty.slots {
             let tri = self.triangles.positions[slot as usize];
             if let Some(v) = tri.iter().find(|v| !v.is_finite()) {
@@ -158,26 +309,6 @@ impl Renderer {
             }
         }
         Ok(())
-    }
-
-    /// Writes instance `i`'s triangles for a new placement and marks them.
-    fn place_instance(&mut self, i: usize, world_from_object: Mat4, motion: Motion) {
-        let placement = Placement::new(world_from_object);
-        let primitive = self.geometry.primitive(&self.scene, i);
-        for source in self.geometry.instance_triangles[i].clone() {
-            let slot = self.slot_of_source[source as usize];
-            let (p, n) = self.geometry.world_triangle(
-                source,
-                &placement,
-                &primitive.positions,
-                primitive.normals.as_deref(),
-            );
-            let s = slot as usize;
-            self.triangles.positions[s] = p;
-            self.triangles.normals[s] = n;
-            self.triangles.uvs[s] = self.geometry.oriented_uvs(source, &placement);
-            self.dirty.mark(slot, motion);
-        }
     }
 
     /// Refits the tree to the dirty triangles, or rebuilds it when the policy asks (the
@@ -221,5 +352,16 @@ impl Renderer {
         stats.build_ms = ms_since(t);
         stats.rebuild = true;
         Ok(())
+    }
+}
+
+/// How a placed instance's triangles moved between two placements: the same shape key
+/// means they only turned and moved; a new uniform scale shifts `log2 P_b`; anything else
+/// changed their shape.
+fn placed_motion(now: Option<NodeShape>, before: Option<NodeShape>) -> Motion {
+    match (now, before) {
+        (Some(s), Some(p)) if s == p => Motion::Rigid,
+        (Some(NodeShape { stretch: None, .. }), _) => Motion::Scaled,
+        _ => Motion::Deformed,
     }
 }

@@ -154,21 +154,51 @@ impl SceneGeometry {
         positions: &[Vec3],
         normals: Option<&[Vec3]>,
     ) -> ([Vec3A; 3], [Vec3; 3]) {
+        self.assemble_triangle(
+            source,
+            placement.flips_winding,
+            |i| placement.place_point(positions[i as usize]),
+            normals.map(|n| move |i: u32| placement.place_normal(n[i as usize])),
+        )
+    }
+
+    /// [`Self::world_triangle`] from vertices already placed one by one (`positions` by
+    /// [`Placement::place_point`], `normals` by [`Placement::place_normal`]): the same bits,
+    /// with each shared vertex transformed once instead of once per triangle.
+    #[inline]
+    pub fn placed_triangle(
+        &self,
+        source: u32,
+        flips_winding: bool,
+        positions: &[Vec3],
+        normals: Option<&[Vec3]>,
+    ) -> ([Vec3A; 3], [Vec3; 3]) {
+        self.assemble_triangle(
+            source,
+            flips_winding,
+            |i| positions[i as usize],
+            normals.map(|n| move |i: u32| n[i as usize]),
+        )
+    }
+
+    /// A triangle from its placed vertices and normals (a zero normal: the geometric one).
+    #[inline]
+    fn assemble_triangle(
+        &self,
+        source: u32,
+        flips_winding: bool,
+        position: impl Fn(u32) -> Vec3,
+        normal: Option<impl Fn(u32) -> Vec3>,
+    ) -> ([Vec3A; 3], [Vec3; 3]) {
         let mut v = self.triangle_vertices[source as usize];
-        if placement.flips_winding {
+        if flips_winding {
             v.swap(1, 2);
         }
-        let p = v.map(|i| {
-            Vec3A::from(
-                placement
-                    .world_from_object
-                    .transform_point3(positions[i as usize]),
-            )
-        });
+        let p = v.map(|i| Vec3A::from(position(i)));
         let geometric = Vec3::from((p[1] - p[0]).cross(p[2] - p[0]).normalize_or_zero());
-        let normals = match normals {
-            Some(normals) => v.map(|i| {
-                let n = (placement.normal_from_object * normals[i as usize]).normalize_or_zero();
+        let normals = match normal {
+            Some(normal) => v.map(|i| {
+                let n = normal(i);
                 if n == Vec3::ZERO { geometric } else { n }
             }),
             None => [geometric; 3],
@@ -197,6 +227,19 @@ pub struct Placement {
 }
 
 impl Placement {
+    /// A vertex position in world space.
+    #[inline]
+    pub fn place_point(&self, p: Vec3) -> Vec3 {
+        self.world_from_object.transform_point3(p)
+    }
+
+    /// A shading normal in world space, unit length (zero when it degenerates: the caller
+    /// falls back to the geometric normal).
+    #[inline]
+    pub fn place_normal(&self, n: Vec3) -> Vec3 {
+        (self.normal_from_object * n).normalize_or_zero()
+    }
+
     pub fn new(world_from_object: Mat4) -> Self {
         let linear = Mat3::from_mat4(world_from_object);
         let det = linear.determinant();
@@ -252,6 +295,60 @@ fn rebase_uvs(uv: [Vec2; 3], wrap: [WrapMode; 2]) -> [Vec2; 3] {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Placing vertices once and assembling triangles from them gives the bits of placing
+    /// each triangle's vertices itself (mirrored placement and a zero normal included).
+    #[test]
+    fn placed_triangle_equals_world_triangle_bit_for_bit() {
+        let geometry = SceneGeometry {
+            triangle_vertices: vec![[0, 1, 2], [2, 1, 3]],
+            triangle_uvs: vec![[Vec2::ZERO; 3]; 2],
+            ..Default::default()
+        };
+        let positions = [
+            Vec3::new(0.1, -0.3, 0.7),
+            Vec3::new(1.3, 0.2, -0.1),
+            Vec3::new(-0.4, 1.1, 0.25),
+            Vec3::new(0.9, 0.8, -1.7),
+        ];
+        let normals = [Vec3::Z, Vec3::ZERO, Vec3::new(0.3, 0.4, 0.5), Vec3::X];
+        let mirrored = Mat4::from_scale_rotation_translation(
+            Vec3::new(-1.5, 0.5, 2.0),
+            glam::Quat::from_rotation_y(0.4),
+            Vec3::new(3.0, -2.0, 1.0),
+        );
+        for world_from_object in [mirrored, Mat4::IDENTITY] {
+            let placement = Placement::new(world_from_object);
+            let placed: Vec<Vec3> = positions
+                .iter()
+                .map(|&p| placement.place_point(p))
+                .collect();
+            let placed_normals: Vec<Vec3> =
+                normals.iter().map(|&n| placement.place_normal(n)).collect();
+            for source in 0..2 {
+                for with_normals in [false, true] {
+                    let (n, pn) = (
+                        with_normals.then_some(&normals[..]),
+                        with_normals.then_some(&placed_normals[..]),
+                    );
+                    let direct = geometry.world_triangle(source, &placement, &positions, n);
+                    let once =
+                        geometry.placed_triangle(source, placement.flips_winding, &placed, pn);
+                    let bits = |(p, n): ([Vec3A; 3], [Vec3; 3])| {
+                        (
+                            p.map(|v| v.to_array().map(f32::to_bits)),
+                            n.map(|v| v.to_array().map(f32::to_bits)),
+                        )
+                    };
+                    assert_eq!(
+                        bits(direct),
+                        bits(once),
+                        "triangle {source}, normals {with_normals}"
+                    );
+                }
+            }
+        }
+    }
 
     #[test]
     fn rebasing_keeps_differences_and_period() {

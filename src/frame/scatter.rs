@@ -1,0 +1,83 @@
+//! Concurrent writes to distinct triangle slots.
+//!
+//! The update visits moved triangles in source order (instance by instance: reads of
+//! vertices, indices and uvs stay sequential) but writes them to their BVH slots, which the
+//! tree scatters. Slices cannot be split by such a permutation, so the parallel write goes
+//! through raw pointers. Invariant that makes it sound: `Renderer::slot_of_source` is a
+//! permutation of the slots (`index_slots` inverts `FrameTriangles::source`, itself a
+//! permutation after every build), and each source triangle is visited by exactly one task,
+//! so no two tasks ever touch the same slot (nor the same source's motion entry).
+
+use glam::{Vec2, Vec3, Vec3A};
+
+use super::Motion;
+use crate::geometry::FrameTriangles;
+
+/// Mutable access to one slot of each per-slot array, handed to concurrent tasks.
+pub struct SlotScatter<'a> {
+    positions: *mut [Vec3A; 3],
+    normals: *mut [Vec3; 3],
+    uvs: *mut [Vec2; 3],
+    /// By source triangle.
+    motions: *mut Option<Motion>,
+    len: usize,
+    _arrays: std::marker::PhantomData<&'a mut FrameTriangles>,
+}
+
+// SAFETY: the pointers come from exclusive borrows held for 'a; `with_slot`'s contract keeps
+// every slot to one task at a time.
+unsafe impl Sync for SlotScatter<'_> {}
+
+impl<'a> SlotScatter<'a> {
+    /// Borrows the triangles' positions, normals and uvs (by slot) and a motion array (by
+    /// source triangle).
+    ///
+    /// # Panics
+    /// If `motions` has another length than the triangles.
+    pub fn new(triangles: &'a mut FrameTriangles, motions: &'a mut [Option<Motion>]) -> Self {
+        let len = triangles.len();
+        assert!(
+            motions.len() == len && triangles.normals.len() == len && triangles.uvs.len() == len
+        );
+        SlotScatter {
+            positions: triangles.positions.as_mut_ptr(),
+            normals: triangles.normals.as_mut_ptr(),
+            uvs: triangles.uvs.as_mut_ptr(),
+            motions: motions.as_mut_ptr(),
+            len,
+            _arrays: std::marker::PhantomData,
+        }
+    }
+
+    /// Runs `write` on slot `slot`'s position, normal and uvs and stores its motion as
+    /// source triangle `source`'s.
+    ///
+    /// # Safety
+    /// No other call for the same `slot` or the same `source` may run at the same time
+    /// (module docs).
+    ///
+    /// # Panics
+    /// If `slot` or `source` is out of range.
+    #[inline]
+    pub unsafe fn with_slot(
+        &self,
+        slot: u32,
+        source: u32,
+        write: impl FnOnce(&mut [Vec3A; 3], &mut [Vec3; 3], &mut [Vec2; 3]) -> Option<Motion>,
+    ) {
+        let (s, t) = (slot as usize, source as usize);
+        assert!(
+            s < self.len && t < self.len,
+            "slot {s}, source {t} of {}",
+            self.len
+        );
+        // SAFETY: in bounds (checked), and exclusive for this call by the caller's contract.
+        unsafe {
+            *self.motions.add(t) = write(
+                &mut *self.positions.add(s),
+                &mut *self.normals.add(s),
+                &mut *self.uvs.add(s),
+            );
+        }
+    }
+}
