@@ -230,7 +230,8 @@ impl WideBvh {
         wide.parent.push(EMPTY);
         while let Some((id, at, depth)) = pending.pop() {
             wide.depth = wide.depth.max(depth);
-            let lanes = open_children(binary, id);
+            let (lanes, n) = open_children(binary, id);
+            let lanes = &lanes[..n];
             let mut node = WideNode::UNUSED;
             for (lane, &child) in lanes.iter().enumerate() {
                 let b = &binary.nodes[child as usize];
@@ -578,25 +579,22 @@ fn push_far_take_near(
 /// The up to four binary nodes a wide node over binary inner node `id` holds: start from
 /// its two children and replace the inner one with the largest surface area by its own two
 /// children until there are four or only leaves remain.
-fn open_children(binary: &Bvh2, id: u32) -> Vec<u32> {
+fn open_children(binary: &Bvh2, id: u32) -> ([u32; WIDTH], usize) {
     let first = binary.nodes[id as usize].first_index;
-    let mut lanes = vec![first, first + 1];
-    while lanes.len() < WIDTH {
-        let largest = lanes
-            .iter()
-            .enumerate()
-            .filter(|(_, c)| !binary.nodes[**c as usize].is_leaf())
-            .max_by(|a, b| {
-                let area = |c: &u32| binary.nodes[*c as usize].aabb().half_area();
-                area(a.1).total_cmp(&area(b.1))
-            })
-            .map(|(i, _)| i);
+    let mut lanes = [first, first + 1, 0, 0];
+    let mut n = 2;
+    while n < WIDTH {
+        let area = |c: u32| binary.nodes[c as usize].aabb().half_area();
+        let largest = (0..n)
+            .filter(|&i| !binary.nodes[lanes[i] as usize].is_leaf())
+            .max_by(|&a, &b| area(lanes[a]).total_cmp(&area(lanes[b])));
         let Some(i) = largest else { break };
         let opened = binary.nodes[lanes[i] as usize].first_index;
         lanes[i] = opened;
-        lanes.push(opened + 1);
+        lanes[n] = opened + 1;
+        n += 1;
     }
-    lanes
+    (lanes, n)
 }
 
 #[cfg(test)]
