@@ -4,7 +4,7 @@
 //! Built without spatial splits so it can be refitted later. After a build the triangle
 //! arrays are permuted into BVH order (`FrameTriangles::permute`), so a leaf's primitive
 //! range indexes the triangle arrays directly: no indirection on the hot path. The hit test
-//! reads the triangles from their own copy laid out four to a pack in leaf order
+//! reads the triangles from their own copy laid out four to a pack in slot order
 //! ([`triangles`], watertight), refreshed with the boxes.
 //! Leaf boxes are padded (see [`padded_box`]) because a flat triangle's box has zero
 //! thickness and an axis-aligned ray can slip through it by rounding.

@@ -1,5 +1,5 @@
 //! Triangles laid out for the hit test: four at a time, vertex coordinates as
-//! structure-of-arrays lanes, in leaf order, tested with the watertight ray/triangle
+//! structure-of-arrays lanes, leaf by leaf in slot order, tested with the watertight ray/triangle
 //! algorithm of Woop, Benthin and Wald (JCGT 2013).
 //!
 //! Why watertight: Möller-Trumbore decides each triangle's edges on its own, so a ray
