@@ -202,9 +202,6 @@ impl Accel {
         let positions = &triangles.positions;
         let parallel = positions.len() >= PARALLEL_REFIT_MIN;
         self.triangles.update_all(positions, parallel);
-        if self.wide.leaf_lanes().is_empty() {
-            return; // a tree of one leaf keeps no box: rays test its triangles whatever
-        }
         let boxes = &mut self.leaf_boxes;
         boxes.resize(self.leaves.len(), Aabb::empty());
         let fill =
@@ -230,11 +227,8 @@ impl Accel {
             let positions = &triangles.positions;
             self.triangles.update(slot, &positions[slot as usize]);
             let leaf = self.leaves[self.leaf_of_slot[slot as usize] as usize];
-            // A tree of one leaf has no lane: rays test that leaf's triangles whatever.
-            if !self.wide.leaf_lanes().is_empty() {
-                let aabb = leaf_box(positions, leaf.first, leaf.count);
-                self.wide.refit_leaf(leaf.lane, &aabb);
-            }
+            let aabb = leaf_box(positions, leaf.first, leaf.count);
+            self.wide.refit_leaf(leaf.lane, &aabb);
         }
     }
 
@@ -270,8 +264,8 @@ impl Accel {
         hits: &mut [Option<Hit>],
     ) {
         let n = rays.len().min(hits.len()).min(PACKET);
-        let mut boxes = [RayBoxes::new(Vec3A::ZERO, Vec3A::X); PACKET];
-        let mut sheared = [ShearedRay::new(Vec3A::ZERO, Vec3A::X); PACKET];
+        let mut boxes = [RayBoxes::default(); PACKET];
+        let mut sheared = [ShearedRay::default(); PACKET];
         for (i, &(origin, direction)) in rays.iter().take(n).enumerate() {
             boxes[i] = RayBoxes::new(origin, direction);
             sheared[i] = ShearedRay::new(origin, direction);
@@ -327,7 +321,6 @@ impl Accel {
     #[inline]
     pub fn visit_hits(
         &self,
-        _triangles: &FrameTriangles,
         origin: Vec3A,
         direction: Vec3A,
         t_max: f32,
@@ -404,7 +397,7 @@ mod tests {
         assert!((hit.t - 2.0).abs() < 1e-6);
         assert_eq!(tris.source[hit.triangle as usize], 1);
         let mut count = 0;
-        accel.visit_hits(&tris, Vec3A::ZERO, Vec3A::NEG_Z, f32::INFINITY, |_, _| {
+        accel.visit_hits(Vec3A::ZERO, Vec3A::NEG_Z, f32::INFINITY, |_, _| {
             count += 1;
             true
         });
@@ -517,7 +510,7 @@ mod tests {
             assert_eq!(wide, brute_force(tris, origin, direction));
             hits += wide.is_some() as usize;
             // The shadow walk sees a hit exactly when the closest-hit walk does.
-            let blocked = !accel.visit_hits(tris, origin, direction, f32::INFINITY, |_, _| false);
+            let blocked = !accel.visit_hits(origin, direction, f32::INFINITY, |_, _| false);
             assert_eq!(blocked, wide.is_some());
         }
         assert!(
@@ -634,7 +627,7 @@ mod tests {
         let accel = Accel::build(&mut empty).unwrap();
         accel.closest_hits(&empty, &rays, f32::INFINITY, &mut hits);
         assert_eq!(hits, [None, None]);
-        assert!(accel.visit_hits(&empty, Vec3A::ZERO, Vec3A::X, f32::INFINITY, |_, _| false));
+        assert!(accel.visit_hits(Vec3A::ZERO, Vec3A::X, f32::INFINITY, |_, _| false));
     }
 
     #[test]

@@ -160,8 +160,9 @@ impl PackedTriangles {
 }
 
 /// A ray in the frame of Woop et al.: the axis where the direction is largest becomes z, and
-/// a shear maps the direction to (0, 0, 1).
-#[derive(Clone, Copy)]
+/// a shear maps the direction to (0, 0, 1). (`Default`: an all-zero placeholder for unused
+/// packet slots, never tested.)
+#[derive(Clone, Copy, Default)]
 pub struct ShearedRay {
     origin: [Vec4; 3],
     /// Axes: `kx`, `ky`, `kz` (chosen so that the winding is kept).

@@ -124,8 +124,9 @@ pub struct WideBvh {
     depth: usize,
 }
 
-/// The ray constants of the slab test, splatted across the four lanes once per ray.
-#[derive(Clone, Copy)]
+/// The ray constants of the slab test, splatted across the four lanes once per ray
+/// (`Default`: an all-zero placeholder for unused packet slots, never walked).
+#[derive(Clone, Copy, Default)]
 pub struct RayBoxes {
     origin: [Vec4; 3],
     inverse: [Vec4; 3],
@@ -260,9 +261,12 @@ impl WideBvh {
     }
 
     /// Sets the box of the leaf in lane `at` (`node * WIDTH + lane`); a full refit sets
-    /// every leaf's, then calls [`WideBvh::refit_inner`].
+    /// every leaf's, then calls [`WideBvh::refit_inner`]. A tree of one leaf keeps no box
+    /// (rays test that leaf whatever), so there it does nothing.
     pub fn set_leaf_box(&mut self, at: u32, aabb: &Aabb) {
-        self.set_lane(at, aabb);
+        if self.root_leaf.is_none() {
+            self.set_lane(at, aabb);
+        }
     }
 
     /// Replaces what the leaf in lane `at` refers to (its first record); for a tree of one
@@ -286,6 +290,9 @@ impl WideBvh {
     /// Refits the leaf in lane `at` (`node * WIDTH + lane`) to `aabb`, then its ancestors
     /// up to the first whose box comes out unchanged (its own ancestors cannot change).
     pub fn refit_leaf(&mut self, at: u32, aabb: &Aabb) {
+        if self.root_leaf.is_some() {
+            return; // one leaf, no box (see `set_leaf_box`)
+        }
         self.set_lane(at, aabb);
         let mut node = at as usize / WIDTH;
         while node != 0 {
@@ -481,7 +488,8 @@ impl WideBvh {
             // The first ray decides the order; later rays only claim children it missed.
             let (near, entered) = rays[first].enter(node, limits[first]);
             let mut first_of = [first as u32; WIDTH];
-            let mut missed = used_lanes(node) & !entered;
+            let used = used_lanes(node);
+            let mut missed = used & !entered;
             let mut r = first + 1;
             while missed != 0 && r < n {
                 let (_, m) = rays[r].enter(node, limits[r]);
@@ -494,7 +502,7 @@ impl WideBvh {
                 }
                 r += 1;
             }
-            let later = used_lanes(node) & !entered & !missed;
+            let later = used & !entered & !missed;
             let mut push = |lane: usize, top: &mut usize| {
                 stack[*top] = MaybeUninit::new(PacketEntry {
                     child: node.child[lane],

@@ -195,7 +195,7 @@ fn trace_all(kind: RayKind, triangles: &FrameTriangles, accel: &Accel, rays: &[T
                 .count(),
             RayKind::Shadow => chunk
                 .iter()
-                .filter(|&&(o, d, t_max)| !accel.visit_hits(triangles, o, d, t_max, |_, _| false))
+                .filter(|&&(o, d, t_max)| !accel.visit_hits(o, d, t_max, |_, _| false))
                 .count(),
         })
         .sum()

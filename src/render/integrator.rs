@@ -281,10 +281,10 @@ impl FrameScene<'_> {
             let Some(incident) = light.incident(surface.position) else {
                 continue;
             };
-            let cos = surface.shading_normal.dot(incident.to_light);
-            if cos <= 0.0 || surface.face_normal.dot(incident.to_light) <= 0.0 {
+            if !surface.faces(incident.to_light) {
                 continue;
             }
+            let cos = surface.shading_normal.dot(incident.to_light);
             let transmittance =
                 self.shadow_transmittance(surface, incident.to_light, incident.distance, counters);
             if transmittance == Vec3A::ZERO {
@@ -323,17 +323,15 @@ impl FrameScene<'_> {
         // result does not depend on the tree's traversal order (float products do).
         let mut glass = [(0.0f32, 0u32, 0u32); MAX_SHADOW_GLASS];
         let mut count = 0;
-        let unblocked =
-            self.accel
-                .visit_hits(self.triangles, origin, to_light, t_max, |slot, t| {
-                    let material = &self.materials[self.triangles.material[slot as usize] as usize];
-                    if material.transmission <= 0.0 || count == MAX_SHADOW_GLASS {
-                        return false;
-                    }
-                    glass[count] = (t, self.triangles.source[slot as usize], slot);
-                    count += 1;
-                    true
-                });
+        let unblocked = self.accel.visit_hits(origin, to_light, t_max, |slot, t| {
+            let material = &self.materials[self.triangles.material[slot as usize] as usize];
+            if material.transmission <= 0.0 || count == MAX_SHADOW_GLASS {
+                return false;
+            }
+            glass[count] = (t, self.triangles.source[slot as usize], slot);
+            count += 1;
+            true
+        });
         if !unblocked {
             return Vec3A::ZERO;
         }

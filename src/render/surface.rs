@@ -72,6 +72,15 @@ impl SurfacePoint {
         }
     }
 
+    /// Whether direction `to_light` leaves the surface on the side both its shading and
+    /// geometric normals face: only then does a light there shine on it (and get a shadow
+    /// ray).
+    pub(super) fn faces(&self, to_light: Vec3A) -> bool {
+        // Written as the negation of "either faces away" so that a NaN cosine counts as
+        // facing, as the integrator always treated it.
+        !(self.shading_normal.dot(to_light) <= 0.0 || self.face_normal.dot(to_light) <= 0.0)
+    }
+
     /// The shadow ray from this point toward a light `distance` away along `to_light`:
     /// origin lifted off the surface, and the distance where the search ends (short of the
     /// light so that a light on a surface does not shadow itself). `None` when the light is
@@ -225,9 +234,7 @@ pub fn shadow_ray_toward(
 ) -> Option<(Vec3A, Vec3A, f32)> {
     let surface = SurfacePoint::at(triangles, hit, origin, direction);
     let incident = light.incident(surface.position)?;
-    let lit_side = surface.shading_normal.dot(incident.to_light) > 0.0
-        && surface.face_normal.dot(incident.to_light) > 0.0;
-    if !lit_side {
+    if !surface.faces(incident.to_light) {
         return None;
     }
     let (from, t_max) = surface.shadow_ray(incident.distance)?;
