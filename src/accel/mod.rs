@@ -17,11 +17,13 @@ use rayon::prelude::*;
 
 use crate::geometry::FrameTriangles;
 
+mod instanced;
 mod policy;
 mod triangles;
 mod wide;
 
-pub use policy::{BvhPolicy, TreeStep};
+pub use instanced::{BlasRef, TlasInstance, TwoLevelAccel};
+pub use policy::{BvhLayout, BvhPolicy, TreeStep};
 pub use triangles::intersect;
 use triangles::{PackedTriangles, ShearedRay};
 pub use wide::PACKET;
@@ -34,11 +36,36 @@ const PARALLEL_REFIT_MIN: usize = 16_384;
 /// The closest intersection along a ray.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Hit {
-    /// Triangle slot (BVH order).
+    /// Triangle slot (BVH order) in the triangles of `instance`'s tree.
     pub triangle: u32,
+    /// [`Hit::WORLD`] for a triangle of the world-space tree (every hit of a flat BVH);
+    /// otherwise the instance of a [`TwoLevelAccel`] whose object-space tree holds it.
+    pub instance: u32,
     pub t: f32,
     /// Barycentric weights of vertices 1 and 2.
     pub bary: Vec2,
+}
+
+impl Hit {
+    /// The `instance` of a hit on world-space triangles.
+    pub const WORLD: u32 = u32::MAX;
+
+    /// Which triangle was hit.
+    #[inline]
+    pub fn triangle_ref(&self) -> TriangleRef {
+        TriangleRef {
+            instance: self.instance,
+            slot: self.triangle,
+        }
+    }
+}
+
+/// A triangle of a frame: a slot of the world-space tree ([`Hit::WORLD`]) or of the mesh an
+/// instance places.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct TriangleRef {
+    pub instance: u32,
+    pub slot: u32,
 }
 
 /// A BVH over one frame's triangles.
@@ -81,6 +108,15 @@ impl Default for Closest {
             source: u32::MAX,
         }
     }
+}
+
+/// Which tree a closest-hit query is walking: how its slots map to source triangles (the
+/// tie rule) and the instance its hits report.
+struct Within<'a> {
+    /// Per slot, the source id relative to `source_base`.
+    source: &'a [u32],
+    source_base: u32,
+    instance: u32,
 }
 
 /// Which refit ran.
@@ -174,6 +210,18 @@ impl Accel {
             })
     }
 
+    /// The box of every triangle in the tree (`None` when empty).
+    pub fn bounds(&self, triangles: &FrameTriangles) -> Option<Aabb> {
+        if self.leaves.is_empty() {
+            return None;
+        }
+        Some(self.wide.root_box().unwrap_or_else(|| {
+            self.leaves.iter().fold(Aabb::empty(), |a, l| {
+                a.union(&leaf_box(&triangles.positions, l.first, l.count))
+            })
+        }))
+    }
+
     /// `sah_cost() / cost right after the last build` (1 for an empty tree).
     pub fn sah_ratio(&self) -> f32 {
         if self.build_cost > 0.0 {
@@ -246,11 +294,37 @@ impl Accel {
         let mut best = Closest::default();
         let ray = RayBoxes::new(origin, direction);
         let sheared = ShearedRay::new(origin, direction);
+        let within = Within {
+            source: &triangles.source,
+            source_base: 0,
+            instance: Hit::WORLD,
+        };
         self.wide.traverse(&ray, t_max, |first, count, limit| {
-            self.closest_in_leaf(triangles, &sheared, first, count, limit, &mut best);
+            self.closest_in_leaf(&within, &sheared, first, count, limit, &mut best);
             true
         });
         best.hit
+    }
+
+    /// Continues a closest-hit query `best` (shared across the trees of a two-level
+    /// structure) in this tree, whose triangles' source ids are `within`'s; returns the
+    /// limit the query ends with.
+    #[inline]
+    fn closest_within(
+        &self,
+        within: &Within,
+        ray: &RayBoxes,
+        sheared: &ShearedRay,
+        t_max: f32,
+        best: &mut Closest,
+    ) -> f32 {
+        let mut end = t_max;
+        self.wide.traverse(ray, t_max, |first, count, limit| {
+            self.closest_in_leaf(within, sheared, first, count, limit, best);
+            end = *limit;
+            true
+        });
+        end
     }
 
     /// [`Accel::closest_hit`] for a packet of up to [`PACKET`] rays `(origin, direction)`
@@ -272,9 +346,14 @@ impl Accel {
         }
         let mut best = [Closest::default(); PACKET];
         let mut limits = [t_max; PACKET];
+        let within = Within {
+            source: &triangles.source,
+            source_base: 0,
+            instance: Hit::WORLD,
+        };
         self.wide
             .traverse_packet(&boxes[..n], &mut limits[..n], |r, first, count, limit| {
-                self.closest_in_leaf(triangles, &sheared[r], first, count, limit, &mut best[r]);
+                self.closest_in_leaf(&within, &sheared[r], first, count, limit, &mut best[r]);
             });
         for (hit, best) in hits.iter_mut().zip(&best[..n]) {
             *hit = best.hit;
@@ -286,7 +365,7 @@ impl Accel {
     #[inline(always)]
     fn closest_in_leaf(
         &self,
-        triangles: &FrameTriangles,
+        within: &Within,
         ray: &ShearedRay,
         first: u32,
         count: u32,
@@ -296,7 +375,7 @@ impl Accel {
         let cut = *limit;
         self.triangles
             .hits_in_leaf(ray, first, count, cut, |slot, t, bary| {
-                let source = triangles.source[slot as usize];
+                let source = within.source_base + within.source[slot as usize];
                 let better = match best.hit {
                     None => true,
                     Some(h) => t < h.t || (t == h.t && source < best.source),
@@ -304,6 +383,7 @@ impl Accel {
                 if better {
                     best.hit = Some(Hit {
                         triangle: slot,
+                        instance: within.instance,
                         t,
                         bary,
                     });

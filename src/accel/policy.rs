@@ -10,6 +10,17 @@ use std::time::Instant;
 use super::{Accel, RefitKind};
 use crate::geometry::FrameTriangles;
 
+/// What rays are traced against.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum BvhLayout {
+    /// One tree over every triangle in world space, refitted as they move.
+    #[default]
+    Flat,
+    /// A tree per shared mesh in object space, one over the deforming triangles in world
+    /// space, and a top-level tree over the instances placing them ([`super::TwoLevelAccel`]).
+    TwoLevel,
+}
+
 /// How the BVH follows the animation.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum BvhPolicy {

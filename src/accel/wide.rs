@@ -255,6 +255,12 @@ impl WideBvh {
         wide
     }
 
+    /// The union of the root's lanes (`None` for an empty tree or a tree of one leaf, which
+    /// keeps no box).
+    pub fn root_box(&self) -> Option<Aabb> {
+        self.nodes.first().map(WideNode::bounds_union)
+    }
+
     /// Every leaf's `(node * WIDTH + lane)`, in the order `collapse` called `leaf_ref`.
     pub fn leaf_lanes(&self) -> &[u32] {
         &self.leaf_lanes

@@ -15,11 +15,10 @@ use anyhow::Result;
 use glam::Vec3A;
 use rayon::prelude::*;
 
-use crate::accel::{Accel, PACKET};
+use crate::accel::PACKET;
 use crate::frame::Renderer;
-use crate::geometry::FrameTriangles;
 use crate::render::film::TILE;
-use crate::render::shadow_ray_toward;
+use crate::render::{SceneBvh, shadow_ray_toward};
 use crate::report::Percentiles;
 
 /// Which rays `--rays` times.
@@ -112,12 +111,12 @@ pub fn run_ray_bench(
                 RayKind::Shadow => &generated.shadow,
             };
             rays += list.len();
-            let (triangles, accel) = (renderer.triangles(), renderer.accel());
+            let bvh = renderer.frame_scene(&prepared).bvh;
             for repeat in 0..repeats {
                 for k in 0..threads.len() {
                     let c = (k + repeat) % threads.len();
                     let start = Instant::now();
-                    let n = pools[c].install(|| trace_all(kind, triangles, accel, list));
+                    let n = pools[c].install(|| trace_all(kind, &bvh, list));
                     seconds[c][repeat] += start.elapsed().as_secs_f64();
                     if repeat == 0 && k == 0 {
                         hits += n;
@@ -144,7 +143,7 @@ pub fn run_ray_bench(
 /// group the same rays as in a render), and the shadow rays of their hits.
 fn frame_rays(renderer: &Renderer, prepared: &crate::frame::PreparedFrame) -> FrameRays {
     let camera = &prepared.camera;
-    let (triangles, accel) = (renderer.triangles(), renderer.accel());
+    let scene = renderer.frame_scene(prepared);
     let (w, h) = (camera.width, camera.height);
     let tiles_x = w.div_ceil(TILE);
     let primary: Vec<TimedRay> = (0..tiles_x * h.div_ceil(TILE))
@@ -161,11 +160,12 @@ fn frame_rays(renderer: &Renderer, prepared: &crate::frame::PreparedFrame) -> Fr
     let shadow = primary
         .par_iter()
         .flat_map_iter(|&(o, d, t_max)| {
-            let hit = accel.closest_hit(triangles, o, d, t_max);
+            let hit = scene.bvh.closest_hit(o, d, t_max);
+            let scene = &scene;
             prepared
                 .lights
                 .iter()
-                .filter_map(move |light| shadow_ray_toward(triangles, &hit?, o, d, light))
+                .filter_map(move |light| shadow_ray_toward(scene, hit?, o, d, light))
         })
         .collect();
     FrameRays { primary, shadow }
@@ -173,7 +173,7 @@ fn frame_rays(renderer: &Renderer, prepared: &crate::frame::PreparedFrame) -> Fr
 
 /// Traces `rays` on the current pool; returns how many hit (primary) or were blocked
 /// (shadow).
-fn trace_all(kind: RayKind, triangles: &FrameTriangles, accel: &Accel, rays: &[TimedRay]) -> usize {
+fn trace_all(kind: RayKind, bvh: &SceneBvh, rays: &[TimedRay]) -> usize {
     rays.par_chunks(1024)
         .map(|chunk| match kind {
             RayKind::Primary => chunk
@@ -185,17 +185,17 @@ fn trace_all(kind: RayKind, triangles: &FrameTriangles, accel: &Accel, rays: &[T
                     }
                     let mut hits = [None; PACKET];
                     let n = packet.len();
-                    accel.closest_hits(triangles, &pairs[..n], f32::INFINITY, &mut hits[..n]);
+                    bvh.closest_hits(&pairs[..n], f32::INFINITY, &mut hits[..n]);
                     hits[..n].iter().filter(|h| h.is_some()).count()
                 })
                 .sum(),
             RayKind::PrimarySingle => chunk
                 .iter()
-                .filter(|&&(o, d, t_max)| accel.closest_hit(triangles, o, d, t_max).is_some())
+                .filter(|&&(o, d, t_max)| bvh.closest_hit(o, d, t_max).is_some())
                 .count(),
             RayKind::Shadow => chunk
                 .iter()
-                .filter(|&&(o, d, t_max)| !accel.visit_hits(o, d, t_max, |_, _| false))
+                .filter(|&&(o, d, t_max)| !bvh.visit_hits(o, d, t_max, |_, _, _| false))
                 .count(),
         })
         .sum()

@@ -9,7 +9,7 @@ use clap::Args;
 use super::args::{LightArgs, SequenceArgs, TraceArgs, View, render_settings};
 use super::diff::CheckArgs;
 use super::scene::open_scene;
-use crate::accel::BvhPolicy;
+use crate::accel::{BvhLayout, BvhPolicy};
 use crate::diff::{DiffOptions, Verdict};
 use crate::frame::{
     Check, LevelImage, Renderer, Resume, SequenceOutcome, SequenceOutput, render_sequence,
@@ -40,9 +40,12 @@ pub struct RenderArgs {
     /// Frame file format.
     #[arg(long, value_enum, default_value_t = FrameFormat::Png)]
     pub format: FrameFormat,
-    /// BVH update: `refit` every frame (rebuild past --rebuild-threshold) or `rebuild`
-    /// every frame (for comparison).
-    #[arg(long, value_enum, default_value_t = BvhMode::Refit)]
+    /// BVH: `flat` (alias `refit`): one world-space tree refitted every frame, rebuilt past
+    /// --rebuild-threshold; `two-level`: shared object-space meshes under a top-level tree
+    /// over their instances (rigid motion moves transforms, not triangles; what deforms
+    /// stays in a refitted world-space tree); `rebuild`: flat, rebuilt every frame (for
+    /// comparison).
+    #[arg(long, value_enum, default_value_t = BvhMode::Flat)]
     pub bvh: BvhMode,
     /// Rebuild when the refitted tree's SAH cost exceeds this multiple of its cost right
     /// after the last build.
@@ -73,7 +76,9 @@ pub struct RenderArgs {
 /// `--bvh` values.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
 pub enum BvhMode {
-    Refit,
+    #[value(alias = "refit")]
+    Flat,
+    TwoLevel,
     Rebuild,
 }
 
@@ -92,6 +97,10 @@ pub fn render(args: &RenderArgs) -> Result<ExitCode> {
     let mut settings = render_settings(&args.sequence, &args.trace, args.lights.lights, args.spp)?;
     settings.lod = args.lod;
     settings.bvh = bvh_policy(args.bvh, args.rebuild_threshold)?;
+    settings.layout = match args.bvh {
+        BvhMode::TwoLevel => BvhLayout::TwoLevel,
+        BvhMode::Flat | BvhMode::Rebuild => BvhLayout::Flat,
+    };
     // Argument errors (shard spec, thread count) before a possibly long scene load.
     let shard = resolve_shard(args.shard.as_deref(), |name| std::env::var(name).ok())?;
     let pool = thread_pool(args.threads)?;
@@ -140,7 +149,7 @@ fn bvh_policy(mode: BvhMode, rebuild_threshold: f32) -> Result<BvhPolicy> {
         bail!("--rebuild-threshold {rebuild_threshold}: must be a number >= 1");
     }
     Ok(match mode {
-        BvhMode::Refit => BvhPolicy::Refit { rebuild_threshold },
+        BvhMode::Flat | BvhMode::TwoLevel => BvhPolicy::Refit { rebuild_threshold },
         BvhMode::Rebuild => BvhPolicy::Rebuild,
     })
 }

@@ -116,7 +116,7 @@ fn fit_pixel(scene: &FrameScene, camera: &Camera, px: f32, py: f32) -> PixelFit 
         .filter_map(|i| {
             let offset = subpixel_offset(i);
             let p = scene.probe::<NoLod>(camera, px + offset.x, py + offset.y)?;
-            same_surface(scene, &centre, &p).then(|| (offset.as_dvec2(), p.uv.as_dvec2() * size))
+            same_surface(&centre, &p).then(|| (offset.as_dvec2(), p.uv.as_dvec2() * size))
         })
         .collect();
     if samples.len() < MIN_KEPT {
@@ -141,9 +141,8 @@ fn fit_pixel(scene: &FrameScene, camera: &Camera, px: f32, py: f32) -> PixelFit 
 
 /// Whether a sub-ray's textured hit is on the centre ray's surface: same material and
 /// texture, reached through the same number of mirror and glass bounces.
-fn same_surface(scene: &FrameScene, centre: &LodProbe, p: &LodProbe) -> bool {
-    let material = |probe: &LodProbe| scene.triangles.material[probe.triangle as usize];
-    material(p) == material(centre)
+fn same_surface(centre: &LodProbe, p: &LodProbe) -> bool {
+    p.material == centre.material
         && p.texture == centre.texture
         && p.chain.bends().len() == centre.chain.bends().len()
 }

@@ -18,9 +18,10 @@ mod record;
 mod scatter;
 pub mod sequence;
 mod settings;
+mod two_level;
 mod update;
 
-pub use crate::accel::BvhPolicy;
+pub use crate::accel::{BvhLayout, BvhPolicy};
 pub use clock::FrameClock;
 pub use dirty::{DirtySet, Motion};
 pub use record::{FrameRecord, Phase, UpdateStats};
@@ -37,7 +38,9 @@ use crate::anim::{NodeShape, Pose, node_shapes, primitive_deforms};
 use crate::geometry::{FrameTriangles, SceneGeometry};
 use crate::lod::{LodCamera, PixelFootprint};
 use crate::render::light::ring_lights;
-use crate::render::{Camera, FrameScene, Light, LinearImage, TraceCounters, render_image};
+use crate::render::{
+    Camera, FrameScene, Instanced, Light, LinearImage, SceneBvh, TraceCounters, render_image,
+};
 use crate::scene::SceneDesc;
 use log2_pb::object_space_log2_pb;
 use posed::{PosedVertices, VertexSource, write_all_triangles};
@@ -110,6 +113,11 @@ pub struct Renderer {
     dirty: DirtySet,
     /// Scratch for the `log2 P_b` update: one value per updated slot, reused every frame.
     log2_pb_values: Vec<Option<f32>>,
+    /// The shared meshes, placements and top-level tree under `--bvh two-level` (`None`
+    /// for the flat tree, or before the first frame).
+    two_level: Option<two_level::TwoLevel>,
+    /// What this frame's placed instances changed (two-level only; counted into the record).
+    placed_changes: two_level::PlacedChanges,
 }
 
 impl Renderer {
@@ -175,6 +183,8 @@ impl Renderer {
             parallelism: UpdateParallelism::Auto,
             dirty: DirtySet::default(),
             log2_pb_values: Vec::new(),
+            two_level: None,
+            placed_changes: Default::default(),
         }
     }
 
@@ -192,7 +202,9 @@ impl Renderer {
         &self.settings
     }
 
-    /// The frame's triangles in BVH order (valid after `prepare`).
+    /// The frame's world-space triangles in BVH order (valid after `prepare`): every
+    /// triangle under the flat BVH; under the two-level one only the deforming instances'
+    /// (placed instances keep theirs in object space).
     pub fn triangles(&self) -> &FrameTriangles {
         &self.triangles
     }
@@ -305,6 +317,7 @@ impl Renderer {
         stats.animate_ms += pose_ms;
         stats.moved_triangles = self.dirty.len();
         stats.deformed_triangles = self.dirty.count(Motion::Deformed);
+        stats.add_placed(std::mem::take(&mut self.placed_changes));
         stats.sah_ratio = self.accel.sah_ratio();
         let world = &self.pose.world_from_node;
         Ok(PreparedFrame {
@@ -316,9 +329,22 @@ impl Renderer {
 
     /// What the integrator reads for a prepared frame (valid until the next `prepare`).
     pub fn frame_scene<'a>(&'a self, prepared: &'a PreparedFrame) -> FrameScene<'a> {
+        let bvh = match &self.two_level {
+            None => SceneBvh::Flat {
+                triangles: &self.triangles,
+                accel: &self.accel,
+            },
+            Some(two) => SceneBvh::TwoLevel(Instanced {
+                world_triangles: &self.triangles,
+                world: &self.accel,
+                accel: &two.accel,
+                instances: &two.shading,
+                footprint: self.footprint,
+                needs_log2_pb: self.settings.lod.needs_log2_pb(),
+            }),
+        };
         FrameScene {
-            triangles: &self.triangles,
-            accel: &self.accel,
+            bvh,
             materials: &self.geometry.materials,
             textures: &self.scene.textures,
             lights: &prepared.lights,
@@ -348,7 +374,7 @@ impl Renderer {
             height: self.settings.height,
             lod_method: self.settings.lod.to_string(),
             lod_bias: self.settings.lod_bias,
-            triangles: self.triangles.len(),
+            triangles: self.geometry.triangle_count(),
             lights: prepared.lights.len(),
             spp: self.settings.spp.max(1),
             update: u,

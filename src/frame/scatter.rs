@@ -3,10 +3,12 @@
 //! The update visits moved triangles in source order (instance by instance: reads of
 //! vertices, indices and uvs stay sequential) but writes them to their BVH slots, which the
 //! tree scatters. Slices cannot be split by such a permutation, so the parallel write goes
-//! through raw pointers. Invariant that makes it sound: `Renderer::slot_of_source` is a
-//! permutation of the slots (`index_slots` inverts `FrameTriangles::source`, itself a
-//! permutation after every build), and each source triangle is visited by exactly one task,
-//! so no two tasks ever touch the same slot (nor the same source's motion entry).
+//! through raw pointers. Invariant that makes it sound: `Renderer::slot_of_source` maps the
+//! sources that have a slot one-to-one onto the slots (`index_slots` inverts
+//! `FrameTriangles::source`, itself a permutation of those sources after every build; under
+//! the two-level BVH only deforming instances' triangles have slots, and only they are
+//! written), and each source triangle is visited by exactly one task, so no two tasks ever
+//! touch the same slot (nor the same source's motion entry).
 
 use glam::{Vec2, Vec3, Vec3A};
 
@@ -20,7 +22,8 @@ pub struct SlotScatter<'a> {
     uvs: *mut [Vec2; 3],
     /// By source triangle.
     motions: *mut Option<Motion>,
-    len: usize,
+    slots: usize,
+    sources: usize,
     _arrays: std::marker::PhantomData<&'a mut FrameTriangles>,
 }
 
@@ -33,18 +36,17 @@ impl<'a> SlotScatter<'a> {
     /// source triangle).
     ///
     /// # Panics
-    /// If `motions` has another length than the triangles.
+    /// If the triangles' arrays differ in length.
     pub fn new(triangles: &'a mut FrameTriangles, motions: &'a mut [Option<Motion>]) -> Self {
         let len = triangles.len();
-        assert!(
-            motions.len() == len && triangles.normals.len() == len && triangles.uvs.len() == len
-        );
+        assert!(triangles.normals.len() == len && triangles.uvs.len() == len);
         SlotScatter {
             positions: triangles.positions.as_mut_ptr(),
             normals: triangles.normals.as_mut_ptr(),
             uvs: triangles.uvs.as_mut_ptr(),
+            sources: motions.len(),
             motions: motions.as_mut_ptr(),
-            len,
+            slots: len,
             _arrays: std::marker::PhantomData,
         }
     }
@@ -67,9 +69,10 @@ impl<'a> SlotScatter<'a> {
     ) {
         let (s, t) = (slot as usize, source as usize);
         assert!(
-            s < self.len && t < self.len,
-            "slot {s}, source {t} of {}",
-            self.len
+            s < self.slots && t < self.sources,
+            "slot {s} of {}, source {t} of {}",
+            self.slots,
+            self.sources
         );
         // SAFETY: in bounds (checked), and exclusive for this call by the caller's contract.
         unsafe {

@@ -1,6 +1,6 @@
 //! How frames are rendered: the options every command turns into a [`RenderSettings`].
 
-use crate::accel::BvhPolicy;
+use crate::accel::{BvhLayout, BvhPolicy};
 use crate::anim::AnimationSelection;
 use crate::lod::LodMethod;
 
@@ -20,6 +20,8 @@ pub struct RenderSettings {
     /// `None`: all of the scene's lights (at least one).
     pub lights: Option<usize>,
     pub bvh: BvhPolicy,
+    /// Flat or two-level (`--bvh two-level`).
+    pub layout: BvhLayout,
     /// Which clips play (`--animation`).
     pub animation: AnimationSelection,
 }
@@ -37,6 +39,7 @@ impl Default for RenderSettings {
             bvh: BvhPolicy::Refit {
                 rebuild_threshold: BvhPolicy::DEFAULT_REBUILD_THRESHOLD,
             },
+            layout: BvhLayout::Flat,
             animation: AnimationSelection::All,
         }
     }

@@ -25,7 +25,7 @@ use super::posed::{
 };
 use super::scatter::SlotScatter;
 use super::{InstanceState, Motion, Renderer, UpdateStats, ms_since};
-use crate::accel::{Accel, AccelError, TreeStep};
+use crate::accel::{Accel, AccelError, BvhLayout, TreeStep};
 use crate::anim::NodeShape;
 
 /// Below this much work (triangles or vertices) an update step stays on the calling thread:
@@ -91,15 +91,19 @@ impl Renderer {
         stats.animate_ms = ms_since(t);
 
         let t = Instant::now();
+        if self.settings.layout == BvhLayout::TwoLevel {
+            self.build_two_level()?;
+        }
         self.accel = Accel::build(&mut self.triangles)?;
         self.index_slots();
+        self.place_instances(&states);
         stats.build_ms = ms_since(t);
         stats.rebuild = true;
 
         let t = Instant::now();
         self.dirty.reset(self.triangles.len());
         if self.settings.lod.needs_log2_pb() {
-            stats.lod_recomputed = self.recompute_all_log2_pb(&states);
+            stats.lod_recomputed = self.recompute_all_log2_pb(&states) + self.placed_textured();
         }
         stats.lod_update_ms = ms_since(t);
         self.instances = Some(states);
@@ -123,8 +127,12 @@ impl Renderer {
             .collect()
     }
 
+    /// Inverts `triangles.source`; sources without a slot (instances of shared meshes
+    /// under the two-level BVH) map to `u32::MAX`.
     fn index_slots(&mut self) {
-        self.slot_of_source.resize(self.triangles.len(), 0);
+        self.slot_of_source.clear();
+        self.slot_of_source
+            .resize(self.geometry.triangle_count(), u32::MAX);
         for (slot, &source) in self.triangles.source.iter().enumerate() {
             self.slot_of_source[source as usize] = slot as u32;
         }
@@ -137,6 +145,7 @@ impl Renderer {
         self.dirty.reset(self.triangles.len());
         let previous = self.instances.take().unwrap_or_default();
         let current = self.instance_states(scales);
+        self.placed_changes = self.placed_changes(&current, &previous);
         let visited = self.plan_rewrites(&current, &previous);
         self.instances = Some(current);
         stats.dirty_ms = ms_since(t);
@@ -158,6 +167,7 @@ impl Renderer {
         posed.resize(current.len());
         plan.clear();
         let mut visited = 0;
+        let two_level = self.two_level.is_some();
         for (i, (now, before)) in current.iter().zip(previous).enumerate() {
             let rewrite = if self.deforms[i] == VertexSource::Deformed {
                 let same = same_deformation(
@@ -172,8 +182,10 @@ impl Renderer {
                 } else {
                     Rewrite::Changed
                 }
-            } else if now.world_from_object == before.world_from_object {
-                Rewrite::Keep // static: untouched
+            } else if two_level || now.world_from_object == before.world_from_object {
+                // Static, or a shared mesh under the two-level BVH: only its transform
+                // changes (`place_instances`).
+                Rewrite::Keep
             } else {
                 posed.place(i, now.world_from_object);
                 Rewrite::All(placed_motion(now.shape, before.shape))
@@ -216,7 +228,7 @@ impl Renderer {
             source_motion,
             moved_nonfinite,
         } = &mut self.update;
-        source_motion.resize(self.triangles.len(), None);
+        source_motion.resize(self.geometry.triangle_count(), None);
         let writer = TriangleWriter {
             geometry: &self.geometry,
             posed,
@@ -238,7 +250,8 @@ impl Renderer {
                         .for_each(|source| {
                             let slot = slot_of_source[source as usize];
                             // SAFETY: each source triangle is visited once and
-                            // `slot_of_source` is a permutation: one task per slot.
+                            // `slot_of_source` is one-to-one on the written sources (see
+                            // `scatter`): one task per slot.
                             unsafe {
                                 slots.with_slot(slot, source, |p, n, uv| {
                                     writer.write(source, p, n, uv)
@@ -319,16 +332,23 @@ impl Renderer {
             self.accel
                 .refit_or_rebuild(&self.triangles, &self.dirty.slots, self.settings.bvh);
         match step {
-            TreeStep::Unchanged => Ok(()),
-            TreeStep::Refitted { refit_ms } => {
-                stats.refit_ms = refit_ms;
-                Ok(())
-            }
+            TreeStep::Unchanged => {}
+            TreeStep::Refitted { refit_ms } => stats.refit_ms = refit_ms,
             TreeStep::Rebuild { refit_ms } => {
                 stats.refit_ms = refit_ms;
-                self.rebuild_accel(stats)
+                self.rebuild_accel(stats)?;
             }
         }
+        let placed_moved = self.placed_changes.moved > 0;
+        if self.two_level.is_some() && (placed_moved || step != TreeStep::Unchanged) {
+            // The top-level tree over the new placements and world box: counted as refit.
+            let t = Instant::now();
+            let states = self.instances.take().unwrap_or_default();
+            self.place_instances(&states);
+            self.instances = Some(states);
+            stats.refit_ms += ms_since(t);
+        }
+        Ok(())
     }
 
     /// Builds a fresh tree over the moved triangles; the dirty marks follow their triangles
@@ -358,7 +378,7 @@ impl Renderer {
 /// How a placed instance's triangles moved between two placements: the same shape key
 /// means they only turned and moved; a new uniform scale shifts `log2 P_b`; anything else
 /// changed their shape.
-fn placed_motion(now: Option<NodeShape>, before: Option<NodeShape>) -> Motion {
+pub(super) fn placed_motion(now: Option<NodeShape>, before: Option<NodeShape>) -> Motion {
     match (now, before) {
         (Some(s), Some(p)) if s == p => Motion::Rigid,
         (Some(NodeShape { stretch: None, .. }), _) => Motion::Scaled,

@@ -66,7 +66,40 @@ pub struct FrameTriangles {
     pub source: Vec<u32>,
 }
 
+/// One triangle as shading reads it at a hit: world-space vertices and normals in the
+/// winding the flat arrays use, and the per-triangle values.
+#[derive(Debug, Clone, Copy)]
+pub struct HitTriangle {
+    pub positions: [Vec3A; 3],
+    pub normals: [Vec3; 3],
+    pub uvs: [Vec2; 3],
+    pub material: u32,
+    pub log2_pb: f32,
+    pub source: u32,
+}
+
 impl FrameTriangles {
+    /// Slot `slot` as shading reads it.
+    #[inline]
+    pub fn hit_triangle(&self, slot: usize) -> HitTriangle {
+        HitTriangle {
+            positions: self.positions[slot],
+            normals: self.normals[slot],
+            uvs: self.uvs[slot],
+            material: self.material[slot],
+            log2_pb: self.log2_pb[slot],
+            source: self.source[slot],
+        }
+    }
+
+    /// Keeps the slots whose source triangle `keep` accepts, in their order.
+    pub fn retain_sources(&mut self, keep: impl Fn(u32) -> bool) {
+        let order: Vec<u32> = (0..self.len() as u32)
+            .filter(|&slot| keep(self.source[slot as usize]))
+            .collect();
+        self.permute(&order);
+    }
+
     pub fn len(&self) -> usize {
         self.positions.len()
     }
@@ -240,6 +273,36 @@ impl Placement {
         (self.normal_from_object * n).normalize_or_zero()
     }
 
+    /// An object-space triangle (vertices in the mesh's winding, normals as the mesh
+    /// stores them, zero where it has none) placed in world space: the same bits as
+    /// [`SceneGeometry::world_triangle`] gives for that triangle under this placement, uvs
+    /// in the same (possibly flipped) order.
+    #[inline]
+    pub fn place_triangle(
+        &self,
+        positions: [Vec3A; 3],
+        normals: [Vec3; 3],
+        uvs: [Vec2; 3],
+    ) -> ([Vec3A; 3], [Vec3; 3], [Vec2; 3]) {
+        let (mut p, mut n, mut uv) = (positions, normals, uvs);
+        if self.flips_winding {
+            p.swap(1, 2);
+            n.swap(1, 2);
+            uv.swap(1, 2);
+        }
+        let p = p.map(|v| Vec3A::from(self.place_point(Vec3::from(v))));
+        let geometric = Vec3::from((p[1] - p[0]).cross(p[2] - p[0]).normalize_or_zero());
+        let n = n.map(|n| {
+            let placed = self.place_normal(n);
+            if placed == Vec3::ZERO {
+                geometric
+            } else {
+                placed
+            }
+        });
+        (p, n, uv)
+    }
+
     pub fn new(world_from_object: Mat4) -> Self {
         let linear = Mat3::from_mat4(world_from_object);
         let det = linear.determinant();
@@ -345,6 +408,18 @@ mod tests {
                         bits(once),
                         "triangle {source}, normals {with_normals}"
                     );
+                    // The two-level path: the object-space triangle placed at a hit.
+                    let v = geometry.triangle_vertices[source as usize];
+                    let object_normals = v.map(|i| match n {
+                        Some(n) => n[i as usize],
+                        None => Vec3::ZERO,
+                    });
+                    let (p, n, _) = placement.place_triangle(
+                        v.map(|i| Vec3A::from(positions[i as usize])),
+                        object_normals,
+                        [Vec2::ZERO; 3],
+                    );
+                    assert_eq!(bits(direct), bits((p, n)), "placed at a hit: {source}");
                 }
             }
         }

@@ -37,7 +37,7 @@ use std::str::FromStr;
 
 use glam::{Vec2, Vec3, Vec3A};
 
-use crate::geometry::FrameTriangles;
+use crate::geometry::HitTriangle;
 
 /// A LOD selection method. The CLI word, the stats field and the output folder name are
 /// all `Display` of this enum.
@@ -265,9 +265,8 @@ impl LodCamera {
 /// vertex normals to the same side.
 #[derive(Clone, Copy)]
 pub struct SurfaceHit<'a> {
-    pub triangles: &'a FrameTriangles,
-    /// Triangle slot (BVH order).
-    pub slot: usize,
+    /// The hit triangle in world space.
+    pub triangle: &'a HitTriangle,
     /// Distance along the ray.
     pub t: f32,
     /// Unit direction of the incoming ray.
@@ -292,23 +291,25 @@ impl SurfaceHit<'_> {
 
     #[inline]
     pub fn log2_pb(&self) -> f32 {
-        self.triangles.log2_pb[self.slot]
+        self.triangle.log2_pb
     }
 
     #[inline]
     pub fn positions(&self) -> [Vec3A; 3] {
-        self.triangles.positions[self.slot]
+        self.triangle.positions
     }
 
     /// Vertex normals turned to the side the ray came from.
     #[inline]
     pub fn oriented_normals(&self) -> [Vec3A; 3] {
-        self.triangles.normals[self.slot].map(|n: Vec3| Vec3A::from(n) * self.normal_sign)
+        self.triangle
+            .normals
+            .map(|n: Vec3| Vec3A::from(n) * self.normal_sign)
     }
 
     #[inline]
     pub fn uvs(&self) -> [Vec2; 3] {
-        self.triangles.uvs[self.slot]
+        self.triangle.uvs
     }
 }
 

@@ -1,10 +1,9 @@
-//! One-triangle hits for the methods' unit tests: a `FrameTriangles` holding a single
-//! triangle and a `SurfaceHit` on it, so each formula can be checked without a scene.
+//! One-triangle hits for the methods' unit tests: a `HitTriangle` and a `SurfaceHit` on it, so each formula can be checked without a scene.
 
 use glam::{Vec2, Vec3, Vec3A};
 
 use super::{LodCamera, SurfaceHit, ViewFrame};
-use crate::geometry::FrameTriangles;
+use crate::geometry::HitTriangle;
 
 /// A single triangle with the given vertex normals, UVs and `log2 P_b`.
 pub fn one_triangle(
@@ -12,19 +11,19 @@ pub fn one_triangle(
     normals: [Vec3; 3],
     uvs: [Vec2; 3],
     log2_pb: f32,
-) -> FrameTriangles {
-    FrameTriangles {
-        positions: vec![positions],
-        normals: vec![normals],
-        uvs: vec![uvs],
-        material: vec![0],
-        log2_pb: vec![log2_pb],
-        source: vec![0],
+) -> HitTriangle {
+    HitTriangle {
+        positions,
+        normals,
+        uvs,
+        material: 0,
+        log2_pb,
+        source: 0,
     }
 }
 
 /// A flat triangle in the plane `z = z`, facing +Z, UVs = (x, y) of the vertices.
-pub fn facing_triangle(z: f32, log2_pb: f32) -> FrameTriangles {
+pub fn facing_triangle(z: f32, log2_pb: f32) -> HitTriangle {
     let p = [
         Vec3A::new(-1.0, -1.0, z),
         Vec3A::new(1.0, -1.0, z),
@@ -36,7 +35,7 @@ pub fn facing_triangle(z: f32, log2_pb: f32) -> FrameTriangles {
 
 /// A small triangle on the sphere of `radius` about the origin around +Z, with the
 /// sphere's outward normals (curvature `1 / radius` seen from outside).
-pub fn sphere_cap_triangle(radius: f32) -> FrameTriangles {
+pub fn sphere_cap_triangle(radius: f32) -> HitTriangle {
     let n = [
         Vec3::new(-0.02, -0.02, 1.0),
         Vec3::new(0.02, -0.02, 1.0),
@@ -47,19 +46,18 @@ pub fn sphere_cap_triangle(radius: f32) -> FrameTriangles {
     one_triangle(p, n, [Vec2::ZERO; 3], 0.0)
 }
 
-/// The hit of a ray along `direction` at distance `t` in the middle of slot 0, seen from
+/// The hit of a ray along `direction` at distance `t` in the middle of `triangle`, seen from
 /// the side `normal_sign` turns the vertex normals to (+1 for the +Z side).
 pub fn hit_on(
-    triangles: &FrameTriangles,
+    triangle: &HitTriangle,
     t: f32,
     direction: Vec3A,
     normal_sign: f32,
 ) -> SurfaceHit<'_> {
-    let [p0, p1, p2] = triangles.positions[0];
+    let [p0, p1, p2] = triangle.positions;
     let face = (p1 - p0).cross(p2 - p0).normalize() * normal_sign;
     SurfaceHit {
-        triangles,
-        slot: 0,
+        triangle,
         t,
         direction,
         face_normal: face,

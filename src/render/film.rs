@@ -119,8 +119,8 @@ fn render_tile_with<L: RayLod>(
             break;
         }
         scene
-            .accel
-            .closest_hits(scene.triangles, &rays[..n], f32::INFINITY, &mut hits[..n]);
+            .bvh
+            .closest_hits(&rays[..n], f32::INFINITY, &mut hits[..n]);
         for k in 0..n {
             let radiance = scene.primary_radiance_at::<L>(
                 camera,

@@ -10,12 +10,13 @@
 
 use glam::{Vec3, Vec3A};
 
-use crate::accel::{Accel, Hit};
-use crate::geometry::FrameTriangles;
+use crate::accel::Hit;
+use crate::geometry::HitTriangle;
 use crate::lod::{Footprint, LodCamera, LodMethod, RayLod, SurfaceHit, finite_level};
 use crate::render::camera::Camera;
 use crate::render::light::Light;
 use crate::render::material::{Material, ShadingModel};
+use crate::render::scene_bvh::SceneBvh;
 use crate::render::surface::{SurfacePoint, dielectric_fresnel, interpolate_uv, reflect};
 use crate::texture::{MipPyramid, Texture};
 
@@ -65,8 +66,8 @@ impl TraceCounters {
 
 /// Everything the integrator reads for one frame.
 pub struct FrameScene<'a> {
-    pub triangles: &'a FrameTriangles,
-    pub accel: &'a Accel,
+    /// What rays are traced against.
+    pub bvh: SceneBvh<'a>,
     pub materials: &'a [Material],
     pub textures: &'a [Texture],
     pub lights: &'a [Light],
@@ -125,10 +126,16 @@ impl FrameScene<'_> {
         counters: &mut TraceCounters,
     ) -> Vec3A {
         counters.rays += 1;
-        let hit = self
-            .accel
-            .closest_hit(self.triangles, origin, direction, f32::INFINITY);
+        let hit = self.bvh.closest_hit(origin, direction, f32::INFINITY);
         self.shade(hit, origin, direction, lod, depth, counters)
+    }
+
+    /// The hit triangle in world space (the hit's distance and barycentrics made those of
+    /// that triangle, see `scene_bvh`).
+    #[inline]
+    pub fn hit_triangle(&self, hit: &mut Hit, origin: Vec3A, direction: Vec3A) -> HitTriangle {
+        self.bvh
+            .hit_triangle(hit, origin, direction, self.materials, self.textures)
     }
 
     /// Radiance leaving the hit `hit` (background when `None`) of a ray from `origin` along
@@ -142,14 +149,14 @@ impl FrameScene<'_> {
         depth: u32,
         counters: &mut TraceCounters,
     ) -> Vec3A {
-        let Some(hit) = hit else {
+        let Some(mut hit) = hit else {
             return self.background;
         };
-        let slot = hit.triangle as usize;
-        let surface = SurfacePoint::at(self.triangles, &hit, origin, direction);
-        let lod_hit = surface.lod_hit(self.triangles, &hit, direction);
+        let triangle = self.hit_triangle(&mut hit, origin, direction);
+        let surface = SurfacePoint::at(&triangle, &hit, origin, direction);
+        let lod_hit = surface.lod_hit(&triangle, &hit, direction);
         lod.arrive(&lod_hit);
-        let material = &self.materials[self.triangles.material[slot] as usize];
+        let material = &self.materials[triangle.material as usize];
         if let ShadingModel::Additive { ambient } = material.model {
             return self
                 .shade_additive(&lod_hit, &surface, material, ambient, lod, depth, counters);
@@ -251,7 +258,7 @@ impl FrameScene<'_> {
         else {
             return Vec3A::ONE;
         };
-        let uv = interpolate_uv(self.triangles.uvs[lod_hit.slot], lod_hit.bary);
+        let uv = interpolate_uv(lod_hit.triangle.uvs, lod_hit.bary);
         let pyramid = &texture.pyramid;
         let footprint = lod.footprint(lod_hit, &self.lod_camera, pyramid.base_size());
         let (_, level) = self.biased_level(&footprint, pyramid);
@@ -323,23 +330,25 @@ impl FrameScene<'_> {
         // result does not depend on the tree's traversal order (float products do).
         let mut glass = [(0.0f32, 0u32, 0u32); MAX_SHADOW_GLASS];
         let mut count = 0;
-        let unblocked = self.accel.visit_hits(origin, to_light, t_max, |slot, t| {
-            let material = &self.materials[self.triangles.material[slot as usize] as usize];
-            if material.transmission <= 0.0 || count == MAX_SHADOW_GLASS {
-                return false;
-            }
-            glass[count] = (t, self.triangles.source[slot as usize], slot);
-            count += 1;
-            true
-        });
+        let unblocked = self
+            .bvh
+            .visit_hits(origin, to_light, t_max, |t, m, source| {
+                let material = &self.materials[m as usize];
+                if material.transmission <= 0.0 || count == MAX_SHADOW_GLASS {
+                    return false;
+                }
+                glass[count] = (t, source, m);
+                count += 1;
+                true
+            });
         if !unblocked {
             return Vec3A::ZERO;
         }
         let glass = &mut glass[..count];
         glass.sort_unstable_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
         let mut transmittance = Vec3A::ONE;
-        for &(_, _, slot) in glass.iter() {
-            let material = &self.materials[self.triangles.material[slot as usize] as usize];
+        for &(_, _, m) in glass.iter() {
+            let material = &self.materials[m as usize];
             // Additive glass attenuates by T alone; energy-weighted transmission is tinted by
             // the base colour.
             let tint = if material.is_additive() {

@@ -12,6 +12,7 @@ pub mod light;
 pub mod lod_view;
 pub mod material;
 pub mod probe;
+pub mod scene_bvh;
 mod surface;
 
 pub use camera::Camera;
@@ -20,4 +21,5 @@ pub use integrator::{FrameScene, MIP_LEVELS, TraceCounters};
 pub use light::{Light, LightKind, LightSource};
 pub use material::{Material, ShadingModel};
 pub use probe::{Bend, Chain, LodProbe};
+pub use scene_bvh::{InstanceShading, Instanced, PbRule, SceneBvh};
 pub use surface::shadow_ray_toward;

@@ -8,7 +8,8 @@
 
 use glam::{Vec2, Vec3A};
 
-use crate::accel::Hit;
+use crate::accel::{Hit, TriangleRef};
+use crate::geometry::HitTriangle;
 use crate::lod::{RayLod, with_lod_state};
 use crate::render::camera::Camera;
 use crate::render::integrator::FrameScene;
@@ -32,20 +33,20 @@ pub enum Bend {
 /// hit on the way and how the ray bent there, then the textured triangle.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Chain {
-    bends: [(u32, Bend); MAX_CHAIN],
+    bends: [(TriangleRef, Bend); MAX_CHAIN],
     len: usize,
 }
 
 impl Chain {
     fn new() -> Chain {
         Chain {
-            bends: [(0, Bend::Reflect); MAX_CHAIN],
+            bends: [(TriangleRef::default(), Bend::Reflect); MAX_CHAIN],
             len: 0,
         }
     }
 
-    /// The surfaces passed before the textured one: (triangle slot, bend).
-    pub fn bends(&self) -> &[(u32, Bend)] {
+    /// The surfaces passed before the textured one: (triangle, bend).
+    pub fn bends(&self) -> &[(TriangleRef, Bend)] {
         &self.bends[..self.len]
     }
 }
@@ -53,8 +54,9 @@ impl Chain {
 /// The LOD selected at the first textured surface along a specular chain.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct LodProbe {
-    /// Triangle slot (BVH order) of the textured hit.
-    pub triangle: u32,
+    /// The textured triangle hit, and its material.
+    pub triangle: TriangleRef,
+    pub material: u32,
     /// Total distance from the ray's origin over every bounce.
     pub path_length: f32,
     /// The method's level including the bias, before clamping to the texture's pyramid.
@@ -98,15 +100,13 @@ impl FrameScene<'_> {
         let mut path_length = 0.0f32;
         let mut chain = Chain::new();
         loop {
-            let hit = self
-                .accel
-                .closest_hit(self.triangles, origin, direction, f32::INFINITY)?;
-            let slot = hit.triangle as usize;
-            let surface = SurfacePoint::at(self.triangles, &hit, origin, direction);
-            let lod_hit = surface.lod_hit(self.triangles, &hit, direction);
+            let mut hit = self.bvh.closest_hit(origin, direction, f32::INFINITY)?;
+            let triangle = self.hit_triangle(&mut hit, origin, direction);
+            let surface = SurfacePoint::at(&triangle, &hit, origin, direction);
+            let lod_hit = surface.lod_hit(&triangle, &hit, direction);
             lod.arrive(&lod_hit);
             path_length += hit.t;
-            let material = &self.materials[self.triangles.material[slot] as usize];
+            let material = &self.materials[triangle.material as usize];
             if let Some((index, texture)) = material
                 .base_color_texture
                 .and_then(|t| Some((t, self.textures.get(t)?)))
@@ -115,11 +115,12 @@ impl FrameScene<'_> {
                     lod.footprint(&lod_hit, &self.lod_camera, texture.pyramid.base_size());
                 let (level, clamped_level) = self.biased_level(&footprint, &texture.pyramid);
                 return Some(LodProbe {
-                    triangle: hit.triangle,
+                    triangle: hit.triangle_ref(),
+                    material: triangle.material,
                     path_length,
                     level,
                     clamped_level,
-                    uv: interpolate_uv(self.triangles.uvs[slot], hit.bary),
+                    uv: interpolate_uv(triangle.uvs, hit.bary),
                     texture: index,
                     texture_size: texture.pyramid.base_size(),
                     texture_levels: texture.pyramid.level_count(),
@@ -134,7 +135,7 @@ impl FrameScene<'_> {
                 Bend::Reflect => lod.reflect(&lod_hit, next),
                 Bend::Refract { eta } => lod.refract(&lod_hit, eta, next),
             };
-            chain.bends[chain.len] = (hit.triangle, bend);
+            chain.bends[chain.len] = (hit.triangle_ref(), bend);
             chain.len += 1;
             let side = match bend {
                 Bend::Reflect => surface.face_normal,
@@ -156,11 +157,11 @@ impl FrameScene<'_> {
         origin: Vec3A,
         direction: Vec3A,
         chain: &Chain,
-        textured: u32,
+        textured: TriangleRef,
     ) -> Option<Vec2> {
         let (mut origin, mut direction) = (origin, direction);
-        for &(slot, bend) in chain.bends() {
-            let surface = self.plane_point(slot, origin, direction)?;
+        for &(at, bend) in chain.bends() {
+            let surface = self.plane_point(&self.world_triangle(at), origin, direction)?;
             direction = match bend {
                 Bend::Reflect => reflect(direction, surface.shading_normal, surface.face_normal),
                 Bend::Refract { eta } => {
@@ -171,21 +172,30 @@ impl FrameScene<'_> {
             };
             origin = surface.position;
         }
-        let slot = textured as usize;
-        let (_, bary) = plane_barycentrics(self.triangles.positions[slot], origin, direction)?;
-        Some(interpolate_uv(self.triangles.uvs[slot], bary))
+        let textured = self.world_triangle(textured);
+        let (_, bary) = plane_barycentrics(textured.positions, origin, direction)?;
+        Some(interpolate_uv(textured.uvs, bary))
     }
 
-    /// The hit of a ray with the plane of triangle `slot`, as a surface point.
-    fn plane_point(&self, slot: u32, origin: Vec3A, direction: Vec3A) -> Option<SurfacePoint> {
-        let (t, bary) =
-            plane_barycentrics(self.triangles.positions[slot as usize], origin, direction)?;
+    fn world_triangle(&self, at: TriangleRef) -> HitTriangle {
+        self.bvh.triangle(at, self.materials, self.textures)
+    }
+
+    /// The hit of a ray with the plane of `triangle`, as a surface point.
+    fn plane_point(
+        &self,
+        triangle: &HitTriangle,
+        origin: Vec3A,
+        direction: Vec3A,
+    ) -> Option<SurfacePoint> {
+        let (t, bary) = plane_barycentrics(triangle.positions, origin, direction)?;
         let hit = Hit {
             t,
-            triangle: slot,
+            triangle: 0,
+            instance: Hit::WORLD,
             bary,
         };
-        Some(SurfacePoint::at(self.triangles, &hit, origin, direction))
+        Some(SurfacePoint::at(triangle, &hit, origin, direction))
     }
 }
 

@@ -8,7 +8,7 @@
 use glam::{Vec2, Vec3A};
 
 use crate::accel::Hit;
-use crate::geometry::FrameTriangles;
+use crate::geometry::HitTriangle;
 use crate::lod::SurfaceHit;
 
 /// Surface data at a hit, oriented towards the incoming ray.
@@ -39,17 +39,16 @@ pub(super) struct Refraction {
 
 impl SurfacePoint {
     /// The point where `hit` (of a ray from `origin` along unit `direction`) lies on
-    /// `triangles`, oriented towards the ray.
+    /// `triangle`, oriented towards the ray.
     pub(super) fn at(
-        triangles: &FrameTriangles,
+        triangle: &HitTriangle,
         hit: &Hit,
         origin: Vec3A,
         direction: Vec3A,
     ) -> SurfacePoint {
-        let slot = hit.triangle as usize;
-        let [p0, p1, p2] = triangles.positions[slot];
+        let [p0, p1, p2] = triangle.positions;
         let geometric = (p1 - p0).cross(p2 - p0).normalize_or_zero();
-        let [n0, n1, n2] = triangles.normals[slot];
+        let [n0, n1, n2] = triangle.normals;
         let (b1, b2) = (hit.bary.x, hit.bary.y);
         let interpolated =
             Vec3A::from(n0 * (1.0 - b1 - b2) + n1 * b1 + n2 * b2).normalize_or_zero();
@@ -112,13 +111,12 @@ impl SurfacePoint {
     #[inline]
     pub(super) fn lod_hit<'t>(
         &self,
-        triangles: &'t FrameTriangles,
+        triangle: &'t HitTriangle,
         hit: &Hit,
         direction: Vec3A,
     ) -> SurfaceHit<'t> {
         SurfaceHit {
-            triangles,
-            slot: hit.triangle as usize,
+            triangle,
             t: hit.t,
             direction,
             face_normal: self.face_normal,
@@ -226,13 +224,15 @@ mod tests {
 /// direction, search distance), or `None` when the light cannot reach the hit's side. For
 /// `mipray bench --rays shadow`, which times exactly the integrator's shadow rays.
 pub fn shadow_ray_toward(
-    triangles: &FrameTriangles,
-    hit: &Hit,
+    scene: &crate::render::FrameScene,
+    hit: Hit,
     origin: Vec3A,
     direction: Vec3A,
     light: &crate::render::Light,
 ) -> Option<(Vec3A, Vec3A, f32)> {
-    let surface = SurfacePoint::at(triangles, hit, origin, direction);
+    let mut hit = hit;
+    let triangle = scene.hit_triangle(&mut hit, origin, direction);
+    let surface = SurfacePoint::at(&triangle, &hit, origin, direction);
     let incident = light.incident(surface.position)?;
     if !surface.faces(incident.to_light) {
         return None;

@@ -275,7 +275,7 @@ pub fn showcase_scene() -> SceneDesc {
     scene
 }
 
-fn channel(node: usize, target: ChannelTarget, times: &[f32], values: &[f32]) -> ChannelDesc {
+pub fn channel(node: usize, target: ChannelTarget, times: &[f32], values: &[f32]) -> ChannelDesc {
     let components = if target == ChannelTarget::Rotation {
         4
     } else {

@@ -1,0 +1,534 @@
+//! The two-level structure: one bottom-level tree per shared mesh (object space, built
+//! once), one world-space tree for everything that deforms (the flat [`Accel`] the frame
+//! loop already refits), and a top-level tree over the instances that place them, rebuilt
+//! from the instances' boxes when they move. Rigid motion then costs a transform per
+//! instance instead of a rewrite of every triangle (Embree's and OptiX's instancing).
+//!
+//! A ray enters an instance by its inverse transform without renormalising the direction,
+//! so the object-space `t` is the world-space `t` and one closest-hit query runs through
+//! every tree it enters with one limit. Ties break by source triangle as in the flat tree
+//! (`source_base` turns a mesh's own triangle index into the scene's), so the hit found does
+//! not depend on the top-level tree's shape.
+
+use std::time::Duration;
+
+use glam::{Affine3A, Mat4, Vec3A};
+use obvhs::{BvhBuildParams, aabb::Aabb, bvh2::builder::build_bvh2};
+
+use super::triangles::ShearedRay;
+use super::wide::{PACKET, RayBoxes, WideBvh};
+use super::{Accel, AccelError, Closest, Hit, Within};
+use crate::geometry::FrameTriangles;
+
+/// Which bottom-level tree an instance places.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum BlasRef {
+    /// The world-space tree (identity placement; hits report [`Hit::WORLD`]).
+    World,
+    /// Mesh `i` of [`TwoLevelAccel::new`], in object space.
+    Mesh(u32),
+}
+
+/// One instance of the top-level tree as the frame loop describes it.
+#[derive(Debug, Clone, Copy)]
+pub struct TlasInstance {
+    pub blas: BlasRef,
+    pub world_from_object: Mat4,
+    /// Added to the mesh's own triangle index to give the scene's source triangle (0 for
+    /// the world tree, whose triangles carry scene ids already).
+    pub source_base: u32,
+}
+
+/// A shared mesh's tree over its object-space triangles.
+struct MeshBlas {
+    triangles: FrameTriangles,
+    accel: Accel,
+    bounds: Option<Aabb>,
+}
+
+/// An instance as rays read it, stored in top-level leaf order.
+#[derive(Clone, Copy)]
+struct Placed {
+    blas: BlasRef,
+    object_from_world: Affine3A,
+    source_base: u32,
+    /// Its index in the caller's instance list (what hits report).
+    index: u32,
+}
+
+/// Bottom-level trees of the shared meshes and the top-level tree over their instances.
+#[derive(Default)]
+pub struct TwoLevelAccel {
+    meshes: Vec<MeshBlas>,
+    tlas: WideBvh,
+    /// Instances in top-level leaf order (a leaf's reference is its first index here).
+    placed: Vec<Placed>,
+    /// Boxes of the last `set_instances`, reused.
+    boxes: Vec<Aabb>,
+}
+
+impl TwoLevelAccel {
+    /// Builds one tree per mesh over `meshes` (object-space triangles whose `source` is the
+    /// mesh's own triangle index); the meshes' arrays are permuted into tree order.
+    ///
+    /// # Errors
+    /// A non-finite vertex.
+    pub fn new(meshes: Vec<FrameTriangles>) -> Result<TwoLevelAccel, AccelError> {
+        let meshes = meshes
+            .into_iter()
+            .map(|mut triangles| {
+                let accel = Accel::build(&mut triangles)?;
+                let bounds = accel.bounds(&triangles);
+                Ok(MeshBlas {
+                    triangles,
+                    accel,
+                    bounds,
+                })
+            })
+            .collect::<Result<Vec<_>, AccelError>>()?;
+        Ok(TwoLevelAccel {
+            meshes,
+            ..Default::default()
+        })
+    }
+
+    /// Mesh `i`'s triangles in its tree's slot order (object space).
+    pub fn mesh_triangles(&self, i: u32) -> &FrameTriangles {
+        &self.meshes[i as usize].triangles
+    }
+
+    /// Object-space triangles across all meshes (each stored once, however many instances).
+    pub fn mesh_triangle_count(&self) -> usize {
+        self.meshes.iter().map(|m| m.triangles.len()).sum()
+    }
+
+    /// Instances in the top-level tree (those with an empty mesh or a transform that
+    /// cannot be inverted are left out: they have no area to hit).
+    pub fn instance_count(&self) -> usize {
+        self.placed.len()
+    }
+
+    /// Places the instances for this frame and rebuilds the top-level tree over their
+    /// world boxes. `world` is the world-space tree over `world_triangles`.
+    pub fn set_instances(
+        &mut self,
+        instances: &[TlasInstance],
+        world: &Accel,
+        world_triangles: &FrameTriangles,
+    ) {
+        let mut placed = Vec::with_capacity(instances.len());
+        self.boxes.clear();
+        for (index, instance) in instances.iter().enumerate() {
+            let Some((object_from_world, aabb)) = self.placement(instance, world, world_triangles)
+            else {
+                continue;
+            };
+            placed.push(Placed {
+                blas: instance.blas,
+                object_from_world,
+                source_base: instance.source_base,
+                index: index as u32,
+            });
+            self.boxes.push(aabb);
+        }
+        self.tlas = WideBvh::default();
+        self.placed.clear();
+        if placed.is_empty() {
+            return;
+        }
+        let bvh = build_bvh2(
+            &self.boxes,
+            BvhBuildParams::medium_build(),
+            &mut Duration::default(),
+        );
+        self.placed = bvh
+            .primitive_indices
+            .iter()
+            .map(|&i| placed[i as usize])
+            .collect();
+        self.tlas = WideBvh::collapse(&bvh, |first, _| first);
+    }
+
+    /// An instance's inverse transform and world box; `None` when it has nothing to hit.
+    fn placement(
+        &self,
+        instance: &TlasInstance,
+        world: &Accel,
+        world_triangles: &FrameTriangles,
+    ) -> Option<(Affine3A, Aabb)> {
+        match instance.blas {
+            BlasRef::World => Some((Affine3A::IDENTITY, world.bounds(world_triangles)?)),
+            BlasRef::Mesh(m) => {
+                let bounds = self.meshes.get(m as usize)?.bounds?;
+                let to_world = Affine3A::from_mat4(instance.world_from_object);
+                let inverse = to_world.inverse();
+                let invertible = to_world.matrix3.determinant() != 0.0
+                    && inverse.matrix3.is_finite()
+                    && inverse.translation.is_finite();
+                invertible.then(|| (inverse, transformed_box(&bounds, &to_world)))
+            }
+        }
+    }
+
+    /// The closest hit with `t` in `[0, t_max)` over every instance; ties to the lowest
+    /// source triangle, as [`Accel::closest_hit`].
+    pub fn closest_hit(
+        &self,
+        world: &Accel,
+        world_triangles: &FrameTriangles,
+        origin: Vec3A,
+        direction: Vec3A,
+        t_max: f32,
+    ) -> Option<Hit> {
+        let mut best = Closest::default();
+        let ray = RayBoxes::new(origin, direction);
+        self.tlas.traverse(&ray, t_max, |first, count, limit| {
+            for placed in &self.placed[first as usize..(first + count) as usize] {
+                *limit = self.closest_in_instance(
+                    placed,
+                    world,
+                    world_triangles,
+                    origin,
+                    direction,
+                    *limit,
+                    &mut best,
+                );
+            }
+            true
+        });
+        best.hit
+    }
+
+    /// [`TwoLevelAccel::closest_hit`] for a packet of up to [`PACKET`] rays: the top-level
+    /// tree is walked once for the packet, each instance it reaches by each ray alone.
+    pub fn closest_hits(
+        &self,
+        world: &Accel,
+        world_triangles: &FrameTriangles,
+        rays: &[(Vec3A, Vec3A)],
+        t_max: f32,
+        hits: &mut [Option<Hit>],
+    ) {
+        let n = rays.len().min(hits.len()).min(PACKET);
+        let mut boxes = [RayBoxes::default(); PACKET];
+        for (b, &(origin, direction)) in boxes.iter_mut().zip(&rays[..n]) {
+            *b = RayBoxes::new(origin, direction);
+        }
+        let mut best = [Closest::default(); PACKET];
+        let mut limits = [t_max; PACKET];
+        self.tlas
+            .traverse_packet(&boxes[..n], &mut limits[..n], |r, first, count, limit| {
+                let (origin, direction) = rays[r];
+                for placed in &self.placed[first as usize..(first + count) as usize] {
+                    *limit = self.closest_in_instance(
+                        placed,
+                        world,
+                        world_triangles,
+                        origin,
+                        direction,
+                        *limit,
+                        &mut best[r],
+                    );
+                }
+            });
+        for (hit, best) in hits.iter_mut().zip(&best[..n]) {
+            *hit = best.hit;
+        }
+    }
+
+    /// Continues a closest-hit query in one instance's tree; returns the new limit.
+    #[allow(clippy::too_many_arguments)]
+    #[inline]
+    fn closest_in_instance(
+        &self,
+        placed: &Placed,
+        world: &Accel,
+        world_triangles: &FrameTriangles,
+        origin: Vec3A,
+        direction: Vec3A,
+        t_max: f32,
+        best: &mut Closest,
+    ) -> f32 {
+        match placed.blas {
+            BlasRef::World => {
+                let within = Within {
+                    source: &world_triangles.source,
+                    source_base: 0,
+                    instance: Hit::WORLD,
+                };
+                let ray = RayBoxes::new(origin, direction);
+                let sheared = ShearedRay::new(origin, direction);
+                world.closest_within(&within, &ray, &sheared, t_max, best)
+            }
+            BlasRef::Mesh(m) => {
+                let mesh = &self.meshes[m as usize];
+                let (o, d) = object_ray(&placed.object_from_world, origin, direction);
+                let within = Within {
+                    source: &mesh.triangles.source,
+                    source_base: placed.source_base,
+                    instance: placed.index,
+                };
+                let ray = RayBoxes::new(o, d);
+                let sheared = ShearedRay::new(o, d);
+                mesh.accel
+                    .closest_within(&within, &ray, &sheared, t_max, best)
+            }
+        }
+    }
+
+    /// Visits every hit with `t` in `[0, t_max)` as `visit(instance, slot, t)` (instance
+    /// [`Hit::WORLD`] for the world tree) until `visit` returns false; returns false when
+    /// it was stopped early.
+    pub fn visit_hits(
+        &self,
+        world: &Accel,
+        origin: Vec3A,
+        direction: Vec3A,
+        t_max: f32,
+        mut visit: impl FnMut(u32, u32, f32) -> bool,
+    ) -> bool {
+        let ray = RayBoxes::new(origin, direction);
+        self.tlas.traverse(&ray, t_max, |first, count, _| {
+            for placed in &self.placed[first as usize..(first + count) as usize] {
+                let go_on = match placed.blas {
+                    BlasRef::World => world.visit_hits(origin, direction, t_max, |slot, t| {
+                        visit(Hit::WORLD, slot, t)
+                    }),
+                    BlasRef::Mesh(m) => {
+                        let (o, d) = object_ray(&placed.object_from_world, origin, direction);
+                        self.meshes[m as usize]
+                            .accel
+                            .visit_hits(o, d, t_max, |slot, t| visit(placed.index, slot, t))
+                    }
+                };
+                if !go_on {
+                    return false;
+                }
+            }
+            true
+        })
+    }
+}
+
+/// A world ray in an instance's object space; the direction keeps the length the
+/// transform gives it, so distances along the ray stay world distances.
+#[inline]
+fn object_ray(object_from_world: &Affine3A, origin: Vec3A, direction: Vec3A) -> (Vec3A, Vec3A) {
+    (
+        object_from_world.transform_point3a(origin),
+        object_from_world.transform_vector3a(direction),
+    )
+}
+
+/// The world box of an object box under `to_world` (its eight corners), grown by a few
+/// ulps of its magnitude: the box is tested in world space, the triangles in object space,
+/// and rounding of the transform must not let a hit on the box's edge slip past.
+fn transformed_box(bounds: &Aabb, to_world: &Affine3A) -> Aabb {
+    let mut out = Aabb::empty();
+    for corner in 0..8 {
+        let pick = |bit: usize, axis: usize| {
+            if corner & bit != 0 {
+                bounds.max[axis]
+            } else {
+                bounds.min[axis]
+            }
+        };
+        let p = Vec3A::new(pick(1, 0), pick(2, 1), pick(4, 2));
+        out.extend(to_world.transform_point3a(p));
+    }
+    let magnitude = out.min.abs().max(out.max.abs()).max_element();
+    let pad = Vec3A::splat(magnitude * 2f32.powi(-18) + f32::MIN_POSITIVE * 8.0);
+    Aabb::new(out.min - pad, out.max + pad)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::accel::intersect;
+    use glam::{Quat, Vec2, Vec3};
+
+    fn soup(tris: &[[Vec3A; 3]]) -> FrameTriangles {
+        FrameTriangles {
+            positions: tris.to_vec(),
+            normals: vec![[Vec3::Z; 3]; tris.len()],
+            uvs: vec![[Vec2::ZERO; 3]; tris.len()],
+            material: vec![0; tris.len()],
+            log2_pb: vec![0.0; tris.len()],
+            source: (0..tris.len() as u32).collect(),
+        }
+    }
+
+    struct Rng(u64);
+    impl Rng {
+        fn next(&mut self) -> f32 {
+            self.0 = self
+                .0
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            ((self.0 >> 40) as f32) / (1u64 << 24) as f32
+        }
+        fn point(&mut self, scale: f32) -> Vec3A {
+            Vec3A::new(self.next(), self.next(), self.next()) * scale - Vec3A::splat(scale / 2.0)
+        }
+    }
+
+    fn random_mesh(rng: &mut Rng, n: usize) -> Vec<[Vec3A; 3]> {
+        (0..n)
+            .map(|_| {
+                let c = rng.point(4.0);
+                [c + rng.point(0.6), c + rng.point(0.6), c + rng.point(0.6)]
+            })
+            .collect()
+    }
+
+    /// Two meshes placed five times each (rotated, scaled, mirrored) plus a world tree:
+    /// every ray finds what testing every placed triangle in world space finds (the same
+    /// triangle and instance; `t` within rounding of the transform).
+    #[test]
+    fn instances_find_what_their_world_space_triangles_find() {
+        let mut rng = Rng(7);
+        let meshes = [random_mesh(&mut rng, 40), random_mesh(&mut rng, 25)];
+        let mut two = TwoLevelAccel::new(meshes.iter().map(|m| soup(m)).collect()).unwrap();
+        let mut world_tris = soup(&random_mesh(&mut rng, 30));
+        // World triangles take source ids after the instances'.
+        for s in world_tris.source.iter_mut() {
+            *s += 1000;
+        }
+        let world = Accel::build(&mut world_tris).unwrap();
+        let mut instances = vec![TlasInstance {
+            blas: BlasRef::World,
+            world_from_object: Mat4::IDENTITY,
+            source_base: 0,
+        }];
+        for k in 0..10u32 {
+            let m = k % 2;
+            let scale = if k == 3 {
+                Vec3::new(-1.5, 1.5, 1.5)
+            } else {
+                Vec3::splat(0.5 + 0.2 * k as f32)
+            };
+            instances.push(TlasInstance {
+                blas: BlasRef::Mesh(m),
+                world_from_object: Mat4::from_scale_rotation_translation(
+                    scale,
+                    Quat::from_rotation_y(k as f32) * Quat::from_rotation_x(0.3 * k as f32),
+                    Vec3::from(rng.point(8.0)),
+                ),
+                source_base: 100 * k,
+            });
+        }
+        two.set_instances(&instances, &world, &world_tris);
+        assert_eq!(two.instance_count(), 11);
+        let (mut hits, mut rays) = (0, Vec::new());
+        for _ in 0..400 {
+            let origin = rng.point(20.0);
+            let direction = (rng.point(8.0) - origin).normalize();
+            rays.push((origin, direction));
+            // Brute force: every instance's triangles placed in world space.
+            let mut expected: Option<(u32, u32, f32)> = None;
+            for (index, inst) in instances.iter().enumerate() {
+                let (tris, base, id): (Vec<[Vec3A; 3]>, Vec<u32>, u32) = match inst.blas {
+                    BlasRef::World => (
+                        world_tris.positions.clone(),
+                        world_tris.source.clone(),
+                        Hit::WORLD,
+                    ),
+                    BlasRef::Mesh(m) => {
+                        let mesh = two.mesh_triangles(m);
+                        let placed = mesh
+                            .positions
+                            .iter()
+                            .map(|t| t.map(|p| inst.world_from_object.transform_point3a(p)))
+                            .collect();
+                        let ids = mesh.source.iter().map(|s| s + inst.source_base).collect();
+                        (placed, ids, index as u32)
+                    }
+                };
+                for (slot, tri) in tris.iter().enumerate() {
+                    if let Some((t, _)) = intersect(tri, origin, direction)
+                        && expected.is_none_or(|(_, _, best)| t < best)
+                    {
+                        expected = Some((id, base[slot], t));
+                    }
+                }
+            }
+            let found = two.closest_hit(&world, &world_tris, origin, direction, f32::INFINITY);
+            match (expected, found) {
+                (None, None) => {}
+                (Some((id, _, t)), Some(hit)) => {
+                    hits += 1;
+                    assert_eq!(hit.instance, id, "ray {origin} {direction}");
+                    assert!((hit.t - t).abs() <= 1e-4 * t.max(1.0), "t {} vs {t}", hit.t);
+                }
+                (e, f) => panic!("ray {origin} {direction}: expected {e:?}, found {f:?}"),
+            }
+            // Any-hit: some hit exactly when the closest-hit query finds one.
+            let mut any = false;
+            two.visit_hits(&world, origin, direction, f32::INFINITY, |_, _, _| {
+                any = true;
+                false
+            });
+            assert_eq!(any, found.is_some());
+        }
+        assert!(hits > 100, "only {hits} rays hit: the test shows little");
+        // Packets answer as single rays.
+        for chunk in rays.chunks(PACKET) {
+            let mut packet = vec![None; chunk.len()];
+            two.closest_hits(&world, &world_tris, chunk, f32::INFINITY, &mut packet);
+            for (&(o, d), hit) in chunk.iter().zip(packet) {
+                assert_eq!(
+                    hit,
+                    two.closest_hit(&world, &world_tris, o, d, f32::INFINITY)
+                );
+            }
+        }
+    }
+
+    #[test]
+    fn collapsed_and_empty_instances_are_left_out() {
+        let tri = [Vec3A::ZERO, Vec3A::X, Vec3A::Y];
+        let mut two = TwoLevelAccel::new(vec![soup(&[tri]), soup(&[])]).unwrap();
+        let world_tris = soup(&[]);
+        let world = Accel::default();
+        let instances = [
+            TlasInstance {
+                blas: BlasRef::Mesh(0),
+                world_from_object: Mat4::from_scale(Vec3::new(1.0, 0.0, 1.0)),
+                source_base: 0,
+            },
+            TlasInstance {
+                blas: BlasRef::Mesh(1),
+                world_from_object: Mat4::IDENTITY,
+                source_base: 1,
+            },
+            TlasInstance {
+                blas: BlasRef::World,
+                world_from_object: Mat4::IDENTITY,
+                source_base: 0,
+            },
+            TlasInstance {
+                blas: BlasRef::Mesh(0),
+                world_from_object: Mat4::from_translation(Vec3::new(0.0, 0.0, -2.0)),
+                source_base: 2,
+            },
+        ];
+        two.set_instances(&instances, &world, &world_tris);
+        assert_eq!(two.instance_count(), 1);
+        let hit = two
+            .closest_hit(
+                &world,
+                &world_tris,
+                Vec3A::new(0.2, 0.2, 5.0),
+                Vec3A::NEG_Z,
+                f32::INFINITY,
+            )
+            .unwrap();
+        assert_eq!((hit.instance, hit.triangle), (3, 0));
+        assert!((hit.t - 7.0).abs() < 1e-5);
+        two.set_instances(&[], &world, &world_tris);
+        assert!(
+            two.closest_hit(&world, &world_tris, Vec3A::ZERO, Vec3A::X, f32::INFINITY)
+                .is_none()
+        );
+    }
+}

@@ -1,0 +1,216 @@
+//! The frame loop under the two-level BVH (`--bvh two-level`): every instance that is only
+//! placed (rigid, scaled or stretched) draws a shared object-space mesh and updates nothing
+//! but its transform; skinned and morphed instances keep the flat path (their triangles in
+//! world space, refitted or rebuilt by the policy) as one world-space tree; a top-level tree
+//! over all of them is rebuilt when any placement or the world tree's box changed.
+//!
+//! The `log2 P_b` of a placed instance follows the flat rules (`log2_pb.rs`), evaluated at
+//! the hit from the object-space constant and the instance's shape key (`PbRule`), so a
+//! moving instance costs nothing per triangle. The update's counters keep their meaning:
+//! `moved_triangles`, `deformed_triangles`, `lod_recomputed` and `lod_shifted` count what
+//! changed exactly as under the flat tree; the timings say what was paid.
+
+use std::collections::HashMap;
+
+use glam::{Mat4, Vec3, Vec3A};
+
+use super::posed::VertexSource;
+use super::{InstanceState, Motion, Renderer, UpdateStats};
+use crate::accel::{AccelError, BlasRef, TlasInstance, TwoLevelAccel};
+use crate::anim::NodeShape;
+use crate::geometry::{FrameTriangles, Placement};
+use crate::render::{InstanceShading, PbRule};
+
+/// What the two-level structure keeps between frames.
+#[derive(Default)]
+pub(super) struct TwoLevel {
+    pub accel: TwoLevelAccel,
+    /// Per scene instance: the shared mesh it places, `None` when it deforms (world tree).
+    pub mesh_of: Vec<Option<u32>>,
+    /// Per placed instance, in scene order (the index hits report): its scene instance.
+    pub placed: Vec<u32>,
+    /// Per placed instance: how its triangles are shaded this frame.
+    pub shading: Vec<InstanceShading>,
+    /// Per scene instance: its textured triangles (what `lod_*` counters count).
+    pub textured: Vec<usize>,
+}
+
+/// What a frame's placed instances changed, counted as the flat update would.
+#[derive(Debug, Default, Clone, Copy)]
+pub(super) struct PlacedChanges {
+    pub moved: usize,
+    pub deformed: usize,
+    pub lod_recomputed: usize,
+    pub lod_shifted: usize,
+}
+
+impl Renderer {
+    /// First frame: the shared meshes' trees; the placed instances' triangles leave the
+    /// world-space arrays (the caller then builds the world tree over what is left and
+    /// places the instances).
+    pub(super) fn build_two_level(&mut self) -> Result<(), AccelError> {
+        let mut two = TwoLevel::default();
+        let mut mesh_of_key: HashMap<(u32, u32), u32> = HashMap::new();
+        let mut meshes = Vec::new();
+        for (i, (instance, source)) in self
+            .geometry
+            .instances
+            .iter()
+            .zip(&self.deforms)
+            .enumerate()
+        {
+            let range = self.geometry.instance_triangles[i].clone();
+            two.textured.push(
+                range
+                    .clone()
+                    .filter(|&s| !self.object_log2_pb[s as usize].is_nan())
+                    .count(),
+            );
+            if *source == VertexSource::Deformed {
+                two.mesh_of.push(None);
+                continue;
+            }
+            let key = (instance.mesh, instance.primitive);
+            let mesh = *mesh_of_key.entry(key).or_insert_with(|| {
+                meshes.push(self.object_triangles(i));
+                meshes.len() as u32 - 1
+            });
+            two.mesh_of.push(Some(mesh));
+            two.placed.push(i as u32);
+        }
+        two.accel = TwoLevelAccel::new(meshes)?;
+        let deforms = &self.deforms;
+        let instance_of = &self.geometry.triangle_instance;
+        self.triangles.retain_sources(|s| {
+            deforms[instance_of[s as usize] as usize] == VertexSource::Deformed
+        });
+        self.two_level = Some(two);
+        Ok(())
+    }
+
+    /// Instance `i`'s triangles in object space as the shared tree stores them: the mesh's
+    /// winding, its normals as stored (zero where it has none), the object-space `log2 P_b`
+    /// (NaN where untextured) and the mesh's own triangle index as `source`.
+    fn object_triangles(&self, i: usize) -> FrameTriangles {
+        let primitive = self.geometry.primitive(&self.scene, i);
+        let range = self.geometry.instance_triangles[i].clone();
+        let material = self.geometry.instances[i].material;
+        let mut t = FrameTriangles::default();
+        for (local, source) in range.enumerate() {
+            let v = self.geometry.triangle_vertices[source as usize];
+            t.positions
+                .push(v.map(|k| Vec3A::from(primitive.positions[k as usize])));
+            t.normals.push(v.map(|k| match &primitive.normals {
+                Some(n) => n[k as usize],
+                None => Vec3::ZERO,
+            }));
+            t.uvs.push(self.geometry.triangle_uvs[source as usize]);
+            t.material.push(material);
+            t.log2_pb.push(self.object_log2_pb[source as usize]);
+            t.source.push(local as u32);
+        }
+        t
+    }
+
+    /// This frame's placements of every placed instance and the top-level tree over them
+    /// and the world tree.
+    pub(super) fn place_instances(&mut self, states: &[InstanceState]) {
+        let Some(two) = self.two_level.as_mut() else {
+            return;
+        };
+        two.shading.clear();
+        let mut tlas = Vec::with_capacity(two.placed.len() + 1);
+        for &i in &two.placed {
+            let i = i as usize;
+            let state = states[i];
+            let mesh = two.mesh_of[i].unwrap_or(0);
+            let source_base = self.geometry.instance_triangles[i].start;
+            let placement = Placement::new(state.world_from_object);
+            two.shading.push(InstanceShading {
+                placement,
+                mesh,
+                source_base,
+                pb: pb_rule(state.shape, placement),
+            });
+            tlas.push(TlasInstance {
+                blas: BlasRef::Mesh(mesh),
+                world_from_object: state.world_from_object,
+                source_base,
+            });
+        }
+        tlas.push(TlasInstance {
+            blas: BlasRef::World,
+            world_from_object: Mat4::IDENTITY,
+            source_base: 0,
+        });
+        two.accel.set_instances(&tlas, &self.accel, &self.triangles);
+    }
+
+    /// The counters of the placed instances that moved between `previous` and `current`.
+    pub(super) fn placed_changes(
+        &self,
+        current: &[InstanceState],
+        previous: &[InstanceState],
+    ) -> PlacedChanges {
+        let mut changes = PlacedChanges::default();
+        let Some(two) = &self.two_level else {
+            return changes;
+        };
+        let lod = self.settings.lod.needs_log2_pb();
+        for &i in &two.placed {
+            let i = i as usize;
+            let (now, before) = (&current[i], &previous[i]);
+            if now.world_from_object == before.world_from_object {
+                continue;
+            }
+            let count = self.geometry.instance_triangles[i].len();
+            changes.moved += count;
+            match super::update::placed_motion(now.shape, before.shape) {
+                Motion::Deformed => {
+                    changes.deformed += count;
+                    changes.lod_recomputed += if lod { two.textured[i] } else { 0 };
+                }
+                Motion::Scaled => changes.lod_shifted += if lod { two.textured[i] } else { 0 },
+                Motion::Rigid => {}
+            }
+        }
+        changes
+    }
+
+    /// The first frame's `lod_recomputed` share of the placed instances (their constants
+    /// come from the object-space ones computed at load).
+    pub(super) fn placed_textured(&self) -> usize {
+        self.two_level.as_ref().map_or(0, |two| {
+            two.placed.iter().map(|&i| two.textured[i as usize]).sum()
+        })
+    }
+}
+
+/// The `log2 P_b` rule of a placed instance with shape key `shape` (see `log2_pb.rs`).
+fn pb_rule(shape: Option<NodeShape>, placement: Placement) -> PbRule {
+    match shape {
+        Some(NodeShape {
+            scale,
+            stretch: None,
+        }) => PbRule::Shift {
+            log2_scale: scale.log2(),
+        },
+        Some(shape) => {
+            let [x, y, z] = shape.diagonal();
+            PbRule::Placed(Placement::new(Mat4::from_scale(Vec3::new(
+                x as f32, y as f32, z as f32,
+            ))))
+        }
+        None => PbRule::Placed(placement),
+    }
+}
+
+impl UpdateStats {
+    /// Adds the placed instances' changes to the counters.
+    pub(super) fn add_placed(&mut self, changes: PlacedChanges) {
+        self.moved_triangles += changes.moved;
+        self.deformed_triangles += changes.deformed;
+        self.lod_recomputed += changes.lod_recomputed;
+        self.lod_shifted += changes.lod_shifted;
+    }
+}

@@ -1,0 +1,204 @@
+//! What rays are traced against: the flat tree over world-space triangles, or the two-level
+//! structure (shared object-space meshes placed by instances, plus a world-space tree for
+//! what deforms). The integrator asks for hits and for the hit triangle in world space and
+//! never sees which one it has.
+//!
+//! A hit on an instance is turned into world space at the hit, with the same arithmetic the
+//! flat path uses to write its triangles (`Placement::place_triangle`), and the distance and
+//! barycentrics are taken again from the world-space triangle with the same watertight test:
+//! where both structures find the same triangle, shading sees the same bits. Only which
+//! triangle is found can differ, where the object-space test rounds differently on an edge.
+
+use glam::{Vec2, Vec3A};
+
+use crate::accel::{Accel, Hit, TriangleRef, TwoLevelAccel, intersect};
+use crate::geometry::{FrameTriangles, HitTriangle, Placement};
+use crate::lod::{PixelFootprint, log2_pb, shift_log2_pb};
+use crate::render::material::Material;
+use crate::texture::Texture;
+
+/// The acceleration structure of a frame, with the triangles its hits refer to.
+#[derive(Clone, Copy)]
+pub enum SceneBvh<'a> {
+    Flat {
+        triangles: &'a FrameTriangles,
+        accel: &'a Accel,
+    },
+    TwoLevel(Instanced<'a>),
+}
+
+/// The two-level structure of a frame.
+#[derive(Clone, Copy)]
+pub struct Instanced<'a> {
+    /// Triangles of the deforming instances, in world space (the world tree's).
+    pub world_triangles: &'a FrameTriangles,
+    pub world: &'a Accel,
+    pub accel: &'a TwoLevelAccel,
+    /// Per instance of `accel` (the index a hit reports): how its triangles are shaded.
+    pub instances: &'a [InstanceShading],
+    /// For the `log2 P_b` of triangles whose instance is not a similarity.
+    pub footprint: PixelFootprint,
+    /// Whether the LOD method reads `log2 P_b` (otherwise it is left 0).
+    pub needs_log2_pb: bool,
+}
+
+/// How the triangles of one instance of a shared mesh are shaded this frame.
+#[derive(Debug, Clone, Copy)]
+pub struct InstanceShading {
+    /// Object to world.
+    pub placement: Placement,
+    /// Which mesh of the two-level structure it places.
+    pub mesh: u32,
+    /// Its first source triangle: the mesh's triangle `i` is source `source_base + i`.
+    pub source_base: u32,
+    pub pb: PbRule,
+}
+
+/// Where a placed instance's `log2 P_b` comes from (the rules of `frame/log2_pb.rs`, here
+/// evaluated at the hit instead of written per triangle).
+#[derive(Debug, Clone, Copy)]
+pub enum PbRule {
+    /// A similarity: the object-space constant plus `log2 s`.
+    Shift { log2_scale: f64 },
+    /// Anything else: the constant of the object-space triangle under this placement (the
+    /// exact axis stretch, or the world placement itself).
+    Placed(Placement),
+}
+
+impl SceneBvh<'_> {
+    /// The closest hit with `t` in `[0, t_max)` (ties to the lowest source triangle).
+    #[inline]
+    pub fn closest_hit(&self, origin: Vec3A, direction: Vec3A, t_max: f32) -> Option<Hit> {
+        match self {
+            SceneBvh::Flat { triangles, accel } => {
+                accel.closest_hit(triangles, origin, direction, t_max)
+            }
+            SceneBvh::TwoLevel(i) => {
+                i.accel
+                    .closest_hit(i.world, i.world_triangles, origin, direction, t_max)
+            }
+        }
+    }
+
+    /// [`SceneBvh::closest_hit`] for a packet of coherent rays.
+    pub fn closest_hits(&self, rays: &[(Vec3A, Vec3A)], t_max: f32, hits: &mut [Option<Hit>]) {
+        match self {
+            SceneBvh::Flat { triangles, accel } => accel.closest_hits(triangles, rays, t_max, hits),
+            SceneBvh::TwoLevel(i) => {
+                i.accel
+                    .closest_hits(i.world, i.world_triangles, rays, t_max, hits)
+            }
+        }
+    }
+
+    /// Visits every hit with `t` in `[0, t_max)` as `visit(t, material, source)`, in an
+    /// order that depends on the tree, until `visit` returns false; returns false when it
+    /// was stopped early.
+    #[inline]
+    pub fn visit_hits(
+        &self,
+        origin: Vec3A,
+        direction: Vec3A,
+        t_max: f32,
+        mut visit: impl FnMut(f32, u32, u32) -> bool,
+    ) -> bool {
+        match self {
+            SceneBvh::Flat { triangles, accel } => {
+                accel.visit_hits(origin, direction, t_max, |slot, t| {
+                    let s = slot as usize;
+                    visit(t, triangles.material[s], triangles.source[s])
+                })
+            }
+            SceneBvh::TwoLevel(i) => {
+                i.accel
+                    .visit_hits(i.world, origin, direction, t_max, |instance, slot, t| {
+                        let s = slot as usize;
+                        if instance == Hit::WORLD {
+                            let w = i.world_triangles;
+                            return visit(t, w.material[s], w.source[s]);
+                        }
+                        let shading = &i.instances[instance as usize];
+                        let mesh = i.accel.mesh_triangles(shading.mesh);
+                        visit(t, mesh.material[s], shading.source_base + mesh.source[s])
+                    })
+            }
+        }
+    }
+
+    /// The hit triangle in world space. For a hit on an instance the hit's distance and
+    /// barycentrics are replaced by the world-space triangle's own (see the module note).
+    #[inline]
+    pub fn hit_triangle(
+        &self,
+        hit: &mut Hit,
+        origin: Vec3A,
+        direction: Vec3A,
+        materials: &[Material],
+        textures: &[Texture],
+    ) -> HitTriangle {
+        let triangle = self.triangle(hit.triangle_ref(), materials, textures);
+        if let SceneBvh::TwoLevel(i) = self
+            && hit.instance != Hit::WORLD
+        {
+            match intersect(&triangle.positions, origin, direction) {
+                Some((t, bary)) => (hit.t, hit.bary) = (t, bary),
+                // Missed by rounding on an edge: keep the object-space answer, its
+                // barycentrics in the world winding.
+                None if i.instances[hit.instance as usize].placement.flips_winding => {
+                    hit.bary = Vec2::new(hit.bary.y, hit.bary.x)
+                }
+                None => {}
+            }
+        }
+        triangle
+    }
+
+    /// Triangle `at` in world space.
+    #[inline]
+    pub fn triangle(
+        &self,
+        at: TriangleRef,
+        materials: &[Material],
+        textures: &[Texture],
+    ) -> HitTriangle {
+        let slot = at.slot as usize;
+        let i = match self {
+            SceneBvh::Flat { triangles, .. } => return triangles.hit_triangle(slot),
+            SceneBvh::TwoLevel(i) if at.instance == Hit::WORLD => {
+                return i.world_triangles.hit_triangle(slot);
+            }
+            SceneBvh::TwoLevel(i) => i,
+        };
+        let shading = &i.instances[at.instance as usize];
+        let mesh = i.accel.mesh_triangles(shading.mesh);
+        let object = (mesh.positions[slot], mesh.normals[slot], mesh.uvs[slot]);
+        let (positions, normals, uvs) = shading
+            .placement
+            .place_triangle(object.0, object.1, object.2);
+        let material = mesh.material[slot];
+        let object_log2_pb = mesh.log2_pb[slot];
+        let log2_pb = if !i.needs_log2_pb || object_log2_pb.is_nan() {
+            0.0 // untextured, as the flat arrays hold it
+        } else {
+            match shading.pb {
+                PbRule::Shift { log2_scale } => shift_log2_pb(object_log2_pb, log2_scale),
+                PbRule::Placed(under) => {
+                    let (p, _, uv) = under.place_triangle(object.0, object.1, object.2);
+                    let size = materials
+                        .get(material as usize)
+                        .and_then(|m| textures.get(m.base_color_texture?))
+                        .map_or((1, 1), |t| t.pyramid.base_size());
+                    log2_pb(p, uv, size, i.footprint)
+                }
+            }
+        };
+        HitTriangle {
+            positions,
+            normals,
+            uvs,
+            material,
+            log2_pb,
+            source: shading.source_base + mesh.source[slot],
+        }
+    }
+}
