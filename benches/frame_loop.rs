@@ -10,15 +10,18 @@
 //! - `rigid`: 200 instances of a 5,000-triangle patch, each turning and sliding (rigid
 //!   motion: no `log2 P_b` recomputed after the first frame).
 //!
-//! For each scene the per-frame update is timed over several frames with refits only and
-//! with a rebuild every frame, and one frame is rendered at 640x480 with the default policy
-//! to give the render time and the preprocessing share. Peak resident memory (VmHWM from
+//! Each scene runs under both BVH layouts (`flat`, `two-level`: see `accel::TwoLevelAccel`).
+//! For each the per-frame update is timed over several frames with refits only and with a
+//! rebuild every frame (under `two-level` the rebuild is the world tree's, over the
+//! deforming instances; the top-level tree is rebuilt whenever an instance moved, and
+//! counted as refit), and one frame is rendered at 640x480 with the default policy to give
+//! the render time and the preprocessing share. Peak resident memory (VmHWM from
 //! /proc/self/status, reset through /proc/self/clear_refs before the scene is generated)
 //! is reported above the resident size at the reset, in MB per million triangles, for the
 //! default-policy run (scene, renderer, tree and one rendered frame).
 //!
-//! Arguments (after `--`): one word choosing rows: a size (`100k`, `1M`) or a scene
-//! (`patches`, `skin`, `rigid`); none runs every row. Rayon's global pool is set to 2
+//! Arguments (after `--`): words choosing rows: a size (`100k`, `1M`), a scene (`patches`,
+//! `skin`, `rigid`) and/or a layout (`flat`, `two-level`); none runs every row. Rayon's global pool is set to 2
 //! threads (the figures in BENCHMARKS.md are for a 2-core machine); `RAYON_NUM_THREADS`
 //! overrides it. Prints a Markdown table of medians (see BENCHMARKS.md).
 
@@ -28,7 +31,7 @@ mod generated;
 use std::time::Instant;
 
 use glam::Vec3;
-use mipray::frame::{BvhPolicy, RenderSettings, Renderer, UpdateStats};
+use mipray::frame::{BvhLayout, BvhPolicy, RenderSettings, Renderer, UpdateStats};
 use mipray::report::Percentiles;
 use mipray::scene::*;
 
@@ -106,11 +109,16 @@ fn rigid_scene() -> SceneDesc {
 /// Median per-frame update stats over frames 1..=FRAMES (frame 0 is the initial build):
 /// the last frame's stats; medians of (animate + dirty, refit, build, LOD update,
 /// preprocessing, animate, dirty) ms; the first frame's ms; the triangle count.
-fn update_medians(scene: SceneDesc, bvh: BvhPolicy) -> (UpdateStats, [f64; 7], f64, usize) {
+fn update_medians(
+    scene: SceneDesc,
+    bvh: BvhPolicy,
+    layout: BvhLayout,
+) -> (UpdateStats, [f64; 7], f64, usize) {
     let settings = RenderSettings {
         width: 640,
         height: 480,
         bvh,
+        layout,
         ..Default::default()
     };
     let mut renderer = Renderer::new(scene, settings);
@@ -131,17 +139,21 @@ fn update_medians(scene: SceneDesc, bvh: BvhPolicy) -> (UpdateStats, [f64; 7], f
         median(|u| u.animate_ms),
         median(|u| u.dirty_ms),
     ];
-    let triangles = renderer.triangles().len();
+    let triangles = renderer.geometry().triangle_count();
     (rows[rows.len() - 1], medians, first_ms, triangles)
 }
 
 /// One rendered frame (frame 1, after the initial build) at 640x480 with the default
 /// policy: (preprocessing share, frame ms, render ms, peak resident MB above the start).
-fn rendered_frame(make_scene: impl FnOnce() -> SceneDesc) -> (f64, f64, f64, f64) {
+fn rendered_frame(
+    make_scene: impl FnOnce() -> SceneDesc,
+    layout: BvhLayout,
+) -> (f64, f64, f64, f64) {
     let start_mb = reset_peak_resident_mb();
     let settings = RenderSettings {
         width: 640,
         height: 480,
+        layout,
         ..Default::default()
     };
     let mut renderer = Renderer::new(make_scene(), settings);
@@ -210,8 +222,20 @@ fn rows() -> Vec<Row> {
 }
 
 fn main() {
-    // `cargo bench` passes `--bench`; an optional row filter like `1M` or `skin` may follow.
-    let filter: Option<String> = std::env::args().skip(1).find(|a| !a.starts_with("--"));
+    // `cargo bench` passes `--bench`; row filters like `1M`, `skin` or `two-level` may follow.
+    let words: Vec<String> = std::env::args()
+        .skip(1)
+        .filter(|a| !a.starts_with("--"))
+        .collect();
+    let layouts = [(BvhLayout::Flat, "flat"), (BvhLayout::TwoLevel, "two-level")];
+    let layout_words: Vec<&String> = words
+        .iter()
+        .filter(|w| layouts.iter().any(|(_, name)| name == w))
+        .collect();
+    let row_words: Vec<&String> = words
+        .iter()
+        .filter(|w| !layout_words.contains(w))
+        .collect();
     if std::env::var_os("RAYON_NUM_THREADS").is_none() {
         rayon::ThreadPoolBuilder::new()
             .num_threads(2)
@@ -219,29 +243,42 @@ fn main() {
             .unwrap();
     }
     println!(
-        "| scene | triangles | moving | animate+dirty ms | refit ms | LOD update ms | update ms (refit) | rebuild ms | update ms (rebuild) | refit/rebuild | LOD recomputed | preprocessing share @640x480 | frame ms | animate ms | dirty ms | render ms | peak MB per 1M triangles |"
+        "| scene | triangles | moving | bvh | animate+dirty ms | refit ms | LOD update ms | update ms (refit) | rebuild ms | update ms (rebuild) | refit/rebuild | LOD recomputed | preprocessing share @640x480 | frame ms | animate ms | dirty ms | render ms | peak MB per 1M triangles |"
     );
     println!(
-        "|---|---:|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|"
+        "|---|---:|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|"
     );
     for row in rows() {
-        if filter
-            .as_deref()
-            .is_some_and(|f| f != row.kind && f != row.size)
+        if row_words
+            .iter()
+            .any(|w| **w != row.kind && **w != row.size)
         {
             continue;
         }
+        for &(layout, layout_name) in &layouts {
+            if !layout_words.is_empty() && !layout_words.iter().any(|w| **w == layout_name) {
+                continue;
+            }
+            print_row(&row, layout, layout_name);
+        }
+    }
+}
+
+/// Times one scene under one layout and prints its table row.
+fn print_row(row: &Row, layout: BvhLayout, layout_name: &str) {
+    {
         let refit_only = BvhPolicy::Refit {
             rebuild_threshold: f32::INFINITY,
         };
-        let (last, refit, _, triangles) = update_medians((row.make)(), refit_only);
-        let (_, rebuild, _, _) = update_medians((row.make)(), BvhPolicy::Rebuild);
-        let (pre_share, frame_ms, render_ms, peak_mb) = rendered_frame(&row.make);
+        let (last, refit, _, triangles) = update_medians((row.make)(), refit_only, layout);
+        let (_, rebuild, _, _) = update_medians((row.make)(), BvhPolicy::Rebuild, layout);
+        let (pre_share, frame_ms, render_ms, peak_mb) = rendered_frame(&row.make, layout);
         println!(
-            "| {} | {} | {} | {:.3} | {:.3} | {:.3} | {:.3} | {:.3} | {:.3} | {:.3} | {} | {:.1}% | {:.1} | {:.3} | {:.3} | {:.1} | {:.0} |",
+            "| {} | {} | {} | {} | {:.3} | {:.3} | {:.3} | {:.3} | {:.3} | {:.3} | {:.3} | {} | {:.1}% | {:.1} | {:.3} | {:.3} | {:.1} | {:.0} |",
             row.kind,
             triangles,
             row.moving,
+            layout_name,
             refit[0],
             refit[1],
             refit[3],

@@ -375,8 +375,8 @@ mod tests {
     fn random_mesh(rng: &mut Rng, n: usize) -> Vec<[Vec3A; 3]> {
         (0..n)
             .map(|_| {
-                let c = rng.point(4.0);
-                [c + rng.point(0.6), c + rng.point(0.6), c + rng.point(0.6)]
+                let c = rng.point(3.0);
+                [c + rng.point(1.2), c + rng.point(1.2), c + rng.point(1.2)]
             })
             .collect()
     }
@@ -420,9 +420,11 @@ mod tests {
         two.set_instances(&instances, &world, &world_tris);
         assert_eq!(two.instance_count(), 11);
         let (mut hits, mut rays) = (0, Vec::new());
-        for _ in 0..400 {
+        for r in 0..400 {
             let origin = rng.point(20.0);
-            let direction = (rng.point(8.0) - origin).normalize();
+            // Aimed near an instance's origin (most hit something) or anywhere.
+            let aim = instances[r % instances.len()].world_from_object.w_axis.truncate();
+            let direction = (Vec3A::from(aim) + rng.point(2.0) - origin).normalize();
             rays.push((origin, direction));
             // Brute force: every instance's triangles placed in world space.
             let mut expected: Option<(u32, u32, f32)> = None;
@@ -470,7 +472,7 @@ mod tests {
             });
             assert_eq!(any, found.is_some());
         }
-        assert!(hits > 100, "only {hits} rays hit: the test shows little");
+        assert!(hits > 150, "only {hits} rays hit: the test shows little");
         // Packets answer as single rays.
         for chunk in rays.chunks(PACKET) {
             let mut packet = vec![None; chunk.len()];
