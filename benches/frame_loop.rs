@@ -227,15 +227,15 @@ fn main() {
         .skip(1)
         .filter(|a| !a.starts_with("--"))
         .collect();
-    let layouts = [(BvhLayout::Flat, "flat"), (BvhLayout::TwoLevel, "two-level")];
+    let layouts = [
+        (BvhLayout::Flat, "flat"),
+        (BvhLayout::TwoLevel, "two-level"),
+    ];
     let layout_words: Vec<&String> = words
         .iter()
         .filter(|w| layouts.iter().any(|(_, name)| name == w))
         .collect();
-    let row_words: Vec<&String> = words
-        .iter()
-        .filter(|w| !layout_words.contains(w))
-        .collect();
+    let row_words: Vec<&String> = words.iter().filter(|w| !layout_words.contains(w)).collect();
     if std::env::var_os("RAYON_NUM_THREADS").is_none() {
         rayon::ThreadPoolBuilder::new()
             .num_threads(2)
@@ -249,10 +249,7 @@ fn main() {
         "|---|---:|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|"
     );
     for row in rows() {
-        if row_words
-            .iter()
-            .any(|w| **w != row.kind && **w != row.size)
-        {
+        if row_words.iter().any(|w| **w != row.kind && **w != row.size) {
             continue;
         }
         for &(layout, layout_name) in &layouts {

@@ -4,6 +4,8 @@
 //! no triangle; a frame alone equal to the same frame of a sequence.
 
 mod common;
+#[path = "../benches/common/generated.rs"]
+mod generated;
 
 use common::scenes::*;
 use glam::{Quat, Vec3};
@@ -139,23 +141,61 @@ fn rigid_motion_under_two_level_writes_no_triangle() {
         settings(LodMethod::Paper, BvhLayout::TwoLevel),
     );
     let mut moved = 0;
+    let mut world_at_start = None;
     for frame in 0..10 {
         let time = frame as f32 / FPS;
         let f = flat.prepare(frame, time).unwrap().update;
         let t = two.prepare(frame, time).unwrap().update;
-        // Nothing here deforms: no world-space triangle exists, none is rewritten, and no
-        // refit or `log2 P_b` pass has any triangle to visit.
-        assert_eq!(two.triangles().len(), 0, "frame {frame}");
         assert_eq!(counters(&f), counters(&t), "frame {frame}");
+        // Nothing here deforms: the world tree holds the static objects drawn once (floor,
+        // mirror, glass ball), the moving cards are instances of one shared mesh.
+        let world = two.triangles();
+        assert!(world.len() < flat.triangles().len(), "frame {frame}");
+        let start = world_at_start.get_or_insert_with(|| world.positions.clone());
         if frame > 0 {
             moved += t.moved_triangles;
             assert!(
-                !t.rebuild,
-                "frame {frame}: the world tree is empty, nothing to rebuild"
+                two.dirty().is_empty(),
+                "frame {frame}: a triangle was marked"
             );
+            assert!(
+                *start == world.positions,
+                "frame {frame}: a world triangle was rewritten"
+            );
+            assert!(!t.rebuild, "frame {frame}: nothing in the world tree moved");
         }
     }
     assert!(moved > 0, "the scene's instances were meant to move");
+}
+
+/// The frame-loop bench's rigid crowd, small: instances of one patch turning and sliding.
+/// Under two-level nothing has world-space triangles, and after the first frame no
+/// `log2 P_b` is recomputed or shifted.
+#[test]
+fn a_rigid_crowd_recomputes_nothing_after_the_first_frame() {
+    let crowd = || {
+        let mut scene = generated::textured_scene();
+        generated::add_rigid_patches(&mut scene, 20, 10, 1.3, Vec3::ZERO);
+        generated::add_camera(&mut scene, Vec3::new(0.0, 0.0, 9.0), 1.0);
+        scene
+    };
+    let mut two = Renderer::new(crowd(), settings(LodMethod::Paper, BvhLayout::TwoLevel));
+    let mut flat = Renderer::new(crowd(), settings(LodMethod::Paper, BvhLayout::Flat));
+    for frame in 0..8 {
+        let time = frame as f32 / FPS;
+        let t = two.prepare(frame, time).unwrap().update;
+        let f = flat.prepare(frame, time).unwrap().update;
+        assert_eq!(counters(&f), counters(&t), "frame {frame}");
+        assert_eq!(two.triangles().len(), 0, "frame {frame}: only instances");
+        if frame > 0 {
+            assert_eq!(
+                t.moved_triangles,
+                20 * 200,
+                "frame {frame}: every patch moves"
+            );
+            assert_eq!((t.lod_recomputed, t.lod_shifted), (0, 0), "frame {frame}");
+        }
+    }
 }
 
 #[test]

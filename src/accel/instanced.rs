@@ -423,7 +423,10 @@ mod tests {
         for r in 0..400 {
             let origin = rng.point(20.0);
             // Aimed near an instance's origin (most hit something) or anywhere.
-            let aim = instances[r % instances.len()].world_from_object.w_axis.truncate();
+            let aim = instances[r % instances.len()]
+                .world_from_object
+                .w_axis
+                .truncate();
             let direction = (Vec3A::from(aim) + rng.point(2.0) - origin).normalize();
             rays.push((origin, direction));
             // Brute force: every instance's triangles placed in world space.

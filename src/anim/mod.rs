@@ -22,7 +22,7 @@ pub use deform::{VertexSpace, deform_primitive, primitive_deforms};
 pub use pose::Pose;
 pub use sample::{sample_channel, sample_rotation, sample_vec3};
 pub use scale::{NodeShape, node_shapes};
-pub use selection::{AnimationSelection, select_animation};
+pub use selection::{AnimationSelection, moving_nodes, select_animation};
 
 use glam::Mat4;
 

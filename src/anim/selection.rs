@@ -37,6 +37,28 @@ impl AnimationSelection {
     }
 }
 
+/// Per node: whether a translation, rotation or scale channel of the selected clips drives
+/// it or one of its ancestors (its world transform may change over time). Weights channels
+/// do not count: they deform, they do not move.
+pub fn moving_nodes(scene: &SceneDesc, selection: AnimationSelection) -> Vec<bool> {
+    let mut driven = vec![false; scene.nodes.len()];
+    for c in selection.clips(scene).iter().flat_map(|a| &a.channels) {
+        if c.target != crate::scene::ChannelTarget::Weights && c.node < driven.len() {
+            driven[c.node] = true;
+        }
+    }
+    let mut moving = vec![false; scene.nodes.len()];
+    let mut stack: Vec<(usize, bool)> = scene.roots.iter().map(|&r| (r, false)).collect();
+    while let Some((i, parent_moves)) = stack.pop() {
+        if i >= moving.len() || moving[i] {
+            continue;
+        }
+        moving[i] = parent_moves || driven[i];
+        stack.extend(scene.nodes[i].children.iter().map(|&c| (c, moving[i])));
+    }
+    moving
+}
+
 /// Resolves `--animation SPEC`: the clip whose name is `spec`, else the clip at index
 /// `spec` (a decimal number).
 ///

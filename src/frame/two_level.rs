@@ -1,8 +1,12 @@
 //! The frame loop under the two-level BVH (`--bvh two-level`): every instance that is only
-//! placed (rigid, scaled or stretched) draws a shared object-space mesh and updates nothing
-//! but its transform; skinned and morphed instances keep the flat path (their triangles in
-//! world space, refitted or rebuilt by the policy) as one world-space tree; a top-level tree
-//! over all of them is rebuilt when any placement or the world tree's box changed.
+//! placed (rigid, scaled or stretched) by an animated node, or that draws a mesh primitive
+//! other nodes draw too, places a shared object-space mesh and updates nothing but its
+//! transform. Skinned and morphed instances, and static instances of meshes drawn once,
+//! keep the flat path (their triangles in world space, refitted or rebuilt by the policy)
+//! as one world-space tree: a static object gains nothing from a transform but costs a
+//! top-level box that overlaps its neighbours (Embree users merge static geometry the same
+//! way). A top-level tree over the instances and the world tree is rebuilt when a placement
+//! or the world tree's box changed.
 //!
 //! The `log2 P_b` of a placed instance follows the flat rules (`log2_pb.rs`), evaluated at
 //! the hit from the object-space constant and the instance's shape key (`PbRule`), so a
@@ -17,7 +21,7 @@ use glam::{Mat4, Vec3, Vec3A};
 use super::posed::VertexSource;
 use super::{InstanceState, Motion, Renderer, UpdateStats};
 use crate::accel::{AccelError, BlasRef, TlasInstance, TwoLevelAccel};
-use crate::anim::NodeShape;
+use crate::anim::{NodeShape, moving_nodes};
 use crate::geometry::{FrameTriangles, Placement};
 use crate::render::{InstanceShading, PbRule};
 
@@ -25,7 +29,8 @@ use crate::render::{InstanceShading, PbRule};
 #[derive(Default)]
 pub(super) struct TwoLevel {
     pub accel: TwoLevelAccel,
-    /// Per scene instance: the shared mesh it places, `None` when it deforms (world tree).
+    /// Per scene instance: the shared mesh it places, `None` when its triangles are in the
+    /// world tree.
     pub mesh_of: Vec<Option<u32>>,
     /// Per placed instance, in scene order (the index hits report): its scene instance.
     pub placed: Vec<u32>,
@@ -50,6 +55,13 @@ impl Renderer {
     /// places the instances).
     pub(super) fn build_two_level(&mut self) -> Result<(), AccelError> {
         let mut two = TwoLevel::default();
+        let moving = moving_nodes(&self.scene, self.settings.animation);
+        let mut drawn_by: HashMap<(u32, u32), usize> = HashMap::new();
+        for instance in &self.geometry.instances {
+            *drawn_by
+                .entry((instance.mesh, instance.primitive))
+                .or_default() += 1;
+        }
         let mut mesh_of_key: HashMap<(u32, u32), u32> = HashMap::new();
         let mut meshes = Vec::new();
         for (i, (instance, source)) in self
@@ -66,11 +78,12 @@ impl Renderer {
                     .filter(|&s| !self.object_log2_pb[s as usize].is_nan())
                     .count(),
             );
-            if *source == VertexSource::Deformed {
+            let key = (instance.mesh, instance.primitive);
+            let fixed_and_alone = !moving[instance.node as usize] && drawn_by[&key] == 1;
+            if *source == VertexSource::Deformed || fixed_and_alone {
                 two.mesh_of.push(None);
                 continue;
             }
-            let key = (instance.mesh, instance.primitive);
             let mesh = *mesh_of_key.entry(key).or_insert_with(|| {
                 meshes.push(self.object_triangles(i));
                 meshes.len() as u32 - 1
@@ -79,11 +92,9 @@ impl Renderer {
             two.placed.push(i as u32);
         }
         two.accel = TwoLevelAccel::new(meshes)?;
-        let deforms = &self.deforms;
         let instance_of = &self.geometry.triangle_instance;
-        self.triangles.retain_sources(|s| {
-            deforms[instance_of[s as usize] as usize] == VertexSource::Deformed
-        });
+        self.triangles
+            .retain_sources(|s| two.mesh_of[instance_of[s as usize] as usize].is_none());
         self.two_level = Some(two);
         Ok(())
     }

@@ -167,7 +167,11 @@ impl Renderer {
         posed.resize(current.len());
         plan.clear();
         let mut visited = 0;
-        let two_level = self.two_level.is_some();
+        let instanced = |i: usize| {
+            self.two_level
+                .as_ref()
+                .is_some_and(|two| two.mesh_of[i].is_some())
+        };
         for (i, (now, before)) in current.iter().zip(previous).enumerate() {
             let rewrite = if self.deforms[i] == VertexSource::Deformed {
                 let same = same_deformation(
@@ -182,9 +186,9 @@ impl Renderer {
                 } else {
                     Rewrite::Changed
                 }
-            } else if two_level || now.world_from_object == before.world_from_object {
-                // Static, or a shared mesh under the two-level BVH: only its transform
-                // changes (`place_instances`).
+            } else if instanced(i) || now.world_from_object == before.world_from_object {
+                // Static, or an instance of a shared mesh under the two-level BVH: only its
+                // transform changes (`place_instances`).
                 Rewrite::Keep
             } else {
                 posed.place(i, now.world_from_object);
