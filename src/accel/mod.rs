@@ -22,7 +22,7 @@ mod policy;
 mod triangles;
 mod wide;
 
-pub use instanced::{BlasRef, TlasInstance, TwoLevelAccel};
+pub use instanced::{TlasInstance, TwoLevelAccel};
 pub use policy::{BvhLayout, BvhPolicy, TreeStep};
 pub use triangles::intersect;
 use triangles::{PackedTriangles, ShearedRay};
@@ -351,13 +351,31 @@ impl Accel {
             source_base: 0,
             instance: Hit::WORLD,
         };
-        self.wide
-            .traverse_packet(&boxes[..n], &mut limits[..n], |r, first, count, limit| {
-                self.closest_in_leaf(&within, &sheared[r], first, count, limit, &mut best[r]);
-            });
+        self.closest_hits_within(
+            &within,
+            &boxes[..n],
+            &sheared[..n],
+            &mut limits[..n],
+            &mut best[..n],
+        );
         for (hit, best) in hits.iter_mut().zip(&best[..n]) {
             *hit = best.hit;
         }
+    }
+
+    /// Continues the closest-hit queries `best` of a packet (limits `limits`) in this tree.
+    fn closest_hits_within(
+        &self,
+        within: &Within,
+        boxes: &[RayBoxes],
+        sheared: &[ShearedRay],
+        limits: &mut [f32],
+        best: &mut [Closest],
+    ) {
+        self.wide
+            .traverse_packet(boxes, limits, |r, first, count, limit| {
+                self.closest_in_leaf(within, &sheared[r], first, count, limit, &mut best[r]);
+            });
     }
 
     /// Tests a leaf for a closest-hit query: keeps the nearest hit (ties to the lowest source

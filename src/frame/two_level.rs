@@ -5,8 +5,7 @@
 //! keep the flat path (their triangles in world space, refitted or rebuilt by the policy)
 //! as one world-space tree: a static object gains nothing from a transform but costs a
 //! top-level box that overlaps its neighbours (Embree users merge static geometry the same
-//! way). A top-level tree over the instances and the world tree is rebuilt when a placement
-//! or the world tree's box changed.
+//! way). The top-level tree over the instances is rebuilt when a placement changed.
 //!
 //! The `log2 P_b` of a placed instance follows the flat rules (`log2_pb.rs`), evaluated at
 //! the hit from the object-space constant and the instance's shape key (`PbRule`), so a
@@ -20,7 +19,7 @@ use glam::{Mat4, Vec3, Vec3A};
 
 use super::posed::VertexSource;
 use super::{InstanceState, Motion, Renderer, UpdateStats};
-use crate::accel::{AccelError, BlasRef, TlasInstance, TwoLevelAccel};
+use crate::accel::{AccelError, TlasInstance, TwoLevelAccel};
 use crate::anim::{NodeShape, moving_nodes};
 use crate::geometry::{FrameTriangles, Placement};
 use crate::render::{InstanceShading, PbRule};
@@ -123,8 +122,7 @@ impl Renderer {
         t
     }
 
-    /// This frame's placements of every placed instance and the top-level tree over them
-    /// and the world tree.
+    /// This frame's placements of every placed instance and the top-level tree over them.
     pub(super) fn place_instances(&mut self, states: &[InstanceState]) {
         let Some(two) = self.two_level.as_mut() else {
             return;
@@ -144,17 +142,12 @@ impl Renderer {
                 pb: pb_rule(state.shape, placement),
             });
             tlas.push(TlasInstance {
-                blas: BlasRef::Mesh(mesh),
+                mesh,
                 world_from_object: state.world_from_object,
                 source_base,
             });
         }
-        tlas.push(TlasInstance {
-            blas: BlasRef::World,
-            world_from_object: Mat4::IDENTITY,
-            source_base: 0,
-        });
-        two.accel.set_instances(&tlas, &self.accel, &self.triangles);
+        two.accel.set_instances(&tlas);
     }
 
     /// The counters of the placed instances that moved between `previous` and `current`.

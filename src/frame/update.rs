@@ -343,9 +343,8 @@ impl Renderer {
                 self.rebuild_accel(stats)?;
             }
         }
-        let placed_moved = self.placed_changes.moved > 0;
-        if self.two_level.is_some() && (placed_moved || step != TreeStep::Unchanged) {
-            // The top-level tree over the new placements and world box: counted as refit.
+        if self.two_level.is_some() && self.placed_changes.moved > 0 {
+            // The top-level tree over the new placements: counted as refit.
             let t = Instant::now();
             let states = self.instances.take().unwrap_or_default();
             self.place_instances(&states);
