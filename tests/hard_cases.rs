@@ -4,7 +4,7 @@
 //! behaviour of each case is in its comment (and in the README's testing section).
 
 use glam::{Quat, Vec2, Vec3, Vec4};
-use mipray::frame::Renderer;
+use mipray::frame::{BvhLayout, RenderSettings, Renderer};
 use mipray::lod::LodMethod;
 use mipray::scene::{
     AnimationDesc, ChannelDesc, ChannelTarget, Interpolation, MeshDesc, SceneDesc, Trs,
@@ -17,13 +17,20 @@ use common::scenes::{
     add_root, at, camera_node, checker, facing_quad_scene, node, quad, settings, sphere, textured,
 };
 
-/// Renders the scene `make_scene` builds at `times` with every method, sequentially (so
-/// refit and the LOD update paths run), and checks every frame.
+/// Renders the scene `make_scene` builds at `times` with every method under both BVH
+/// layouts, sequentially (so refit and the LOD update paths run), and checks every frame.
 fn render_all_methods(name: &str, make_scene: impl Fn() -> SceneDesc, times: &[f32]) {
-    for method in LodMethod::ALL {
-        let mut renderer = Renderer::new(make_scene(), settings(24, 16, method));
+    for (method, layout) in LodMethod::ALL
+        .into_iter()
+        .flat_map(|m| [BvhLayout::Flat, BvhLayout::TwoLevel].map(|l| (m, l)))
+    {
+        let settings = RenderSettings {
+            layout,
+            ..settings(24, 16, method)
+        };
+        let mut renderer = Renderer::new(make_scene(), settings);
         for (frame, &t) in times.iter().enumerate() {
-            let what = format!("{name} --lod {method} frame {frame} (t = {t})");
+            let what = format!("{name} --lod {method} ({layout:?}) frame {frame} (t = {t})");
             let (image, record) = renderer
                 .render_frame(frame as u32, t)
                 .unwrap_or_else(|e| panic!("{what}: {e}"));

@@ -102,13 +102,22 @@ impl TwoLevelAccel {
 
     /// Places the instances for this frame and rebuilds the top-level tree over their
     /// world boxes.
-    pub fn set_instances(&mut self, instances: &[TlasInstance]) {
+    ///
+    /// # Errors
+    /// The index of the first instance whose world box is not finite (a transform that
+    /// overflows or is NaN); the tree is then left empty.
+    pub fn set_instances(&mut self, instances: &[TlasInstance]) -> Result<(), usize> {
         let mut placed = Vec::with_capacity(instances.len());
         self.boxes.clear();
+        self.tlas = WideBvh::default();
+        self.placed.clear();
         for (index, instance) in instances.iter().enumerate() {
             let Some((object_from_world, aabb)) = self.placement(instance) else {
                 continue;
             };
+            if !(aabb.min.is_finite() && aabb.max.is_finite()) {
+                return Err(index);
+            }
             placed.push(Placed {
                 mesh: instance.mesh,
                 object_from_world,
@@ -117,10 +126,8 @@ impl TwoLevelAccel {
             });
             self.boxes.push(aabb);
         }
-        self.tlas = WideBvh::default();
-        self.placed.clear();
         if placed.is_empty() {
-            return;
+            return Ok(());
         }
         // One instance per leaf: entering an instance costs a transform and the ray's
         // setup, so the top-level boxes should decide as much as they can.
@@ -135,17 +142,24 @@ impl TwoLevelAccel {
             .map(|&i| placed[i as usize])
             .collect();
         self.tlas = WideBvh::collapse(&bvh, |first, _| first);
+        Ok(())
     }
 
     /// An instance's inverse transform and world box; `None` when it has nothing to hit.
+    /// An instance's inverse transform and world box; `None` when it has nothing to hit
+    /// (an empty mesh, or a finite transform that cannot be inverted: a collapsed node).
     fn placement(&self, instance: &TlasInstance) -> Option<(Affine3A, Aabb)> {
         let bounds = self.meshes.get(instance.mesh as usize)?.bounds?;
         let to_world = Affine3A::from_mat4(instance.world_from_object);
+        let world_box = transformed_box(&bounds, &to_world);
+        if !(world_box.min.is_finite() && world_box.max.is_finite()) {
+            return Some((Affine3A::IDENTITY, world_box)); // reported by the caller
+        }
         let inverse = to_world.inverse();
         let invertible = to_world.matrix3.determinant() != 0.0
             && inverse.matrix3.is_finite()
             && inverse.translation.is_finite();
-        invertible.then(|| (inverse, transformed_box(&bounds, &to_world)))
+        invertible.then_some((inverse, world_box))
     }
 
     /// The closest hit with `t` in `[0, t_max)` over the world-space tree `world` (over
@@ -380,7 +394,7 @@ mod tests {
                 source_base: 100 * k,
             });
         }
-        two.set_instances(&instances);
+        two.set_instances(&instances).unwrap();
         assert_eq!(two.instance_count(), 10);
         let (mut hits, mut rays) = (0, Vec::new());
         for r in 0..400 {
@@ -465,7 +479,7 @@ mod tests {
             instance(1, Mat4::IDENTITY, 1),
             instance(0, Mat4::from_translation(Vec3::new(0.0, 0.0, -2.0)), 2),
         ];
-        two.set_instances(&instances);
+        two.set_instances(&instances).unwrap();
         assert_eq!(two.instance_count(), 1);
         let hit = two
             .closest_hit(
@@ -478,10 +492,16 @@ mod tests {
             .unwrap();
         assert_eq!((hit.instance, hit.triangle), (2, 0));
         assert!((hit.t - 7.0).abs() < 1e-5);
-        two.set_instances(&[]);
+        two.set_instances(&[]).unwrap();
         assert!(
             two.closest_hit(&world, &world_tris, Vec3A::ZERO, Vec3A::X, f32::INFINITY)
                 .is_none()
         );
+        // An overflowing transform is reported (by index), not built into the tree.
+        let overflow = instance(0, Mat4::from_scale(Vec3::splat(f32::MAX)), 0);
+        let nan = instance(0, Mat4::from_translation(Vec3::splat(f32::NAN)), 0);
+        assert_eq!(two.set_instances(&[instances[2], overflow]), Err(1));
+        assert_eq!(two.set_instances(&[nan]), Err(0));
+        assert_eq!(two.instance_count(), 0);
     }
 }

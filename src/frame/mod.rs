@@ -43,7 +43,7 @@ use crate::render::{
 };
 use crate::scene::SceneDesc;
 use log2_pb::object_space_log2_pb;
-use posed::{PosedVertices, VertexSource, write_all_triangles};
+use posed::{VertexSource, posed_bounds};
 use update::UpdateScratch;
 
 /// Errors that stop a frame.
@@ -137,18 +137,9 @@ impl Renderer {
             .collect();
         let mut pose = Pose::default();
         pose.evaluate(&scene, settings.animation, 0.0);
-        let mut rest = FrameTriangles::default();
-        write_all_triangles(
-            &scene,
-            &geometry,
-            &pose,
-            &deforms,
-            &mut PosedVertices::default(),
-            &mut Vec::new(),
-            UpdateParallelism::Auto.splits(geometry.triangle_count()),
-            &mut rest,
-        );
-        let rest_bounds = bounds(&rest);
+        // Finite vertices of every triangle (a unit box when there are none).
+        let rest_bounds = posed_bounds(&scene, &geometry, &pose, &deforms)
+            .unwrap_or((Vec3::splat(-1.0), Vec3::splat(1.0)));
         let camera_node = first_node_with(&scene, |n| n.camera.is_some());
         let yfov = match camera_node {
             Some(node) => scene.cameras[scene.nodes[node].camera.unwrap_or(0)].yfov,
@@ -434,26 +425,6 @@ fn first_node_with(
         .traversal_order()
         .into_iter()
         .find(|&i| predicate(&scene.nodes[i]))
-}
-
-/// Axis-aligned bounds of the finite vertices (a unit box when there are none).
-fn bounds(triangles: &FrameTriangles) -> (Vec3, Vec3) {
-    let mut min = Vec3::splat(f32::INFINITY);
-    let mut max = Vec3::splat(f32::NEG_INFINITY);
-    for p in triangles
-        .positions
-        .iter()
-        .flatten()
-        .filter(|p| p.is_finite())
-    {
-        min = min.min(Vec3::from(*p));
-        max = max.max(Vec3::from(*p));
-    }
-    if min.cmple(max).all() {
-        (min, max)
-    } else {
-        (Vec3::splat(-1.0), Vec3::splat(1.0))
-    }
 }
 
 pub(crate) fn ms_since(t: Instant) -> f64 {

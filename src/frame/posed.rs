@@ -96,21 +96,8 @@ impl PosedVertices {
         parallel: bool,
     ) {
         let pose_one = |(i, (out, placement)): (usize, (&mut WorldVertices, &mut Placement))| {
-            if !needed(i) {
-                return;
-            }
-            if deforms[i] == VertexSource::Deformed {
-                *placement = deform_instance(scene, geometry, pose, i, out);
-                place_in_place(placement, out, parallel);
-            } else {
-                let primitive = geometry.primitive(scene, i);
-                place_rest(
-                    placement,
-                    &primitive.positions,
-                    primitive.normals.as_deref(),
-                    out,
-                    parallel,
-                );
+            if needed(i) {
+                pose_instance(scene, geometry, pose, deforms, i, out, placement, parallel);
             }
         };
         if parallel {
@@ -141,6 +128,34 @@ impl PosedVertices {
             &v.positions,
             (!v.normals.is_empty()).then_some(v.normals.as_slice()),
         )
+    }
+}
+
+/// Writes instance `i`'s world-space vertices into `out`: skinned or morphed for `pose`
+/// (which sets `placement`), or its rest vertices placed by `placement`.
+#[allow(clippy::too_many_arguments)]
+fn pose_instance(
+    scene: &SceneDesc,
+    geometry: &SceneGeometry,
+    pose: &Pose,
+    deforms: &[VertexSource],
+    i: usize,
+    out: &mut WorldVertices,
+    placement: &mut Placement,
+    parallel: bool,
+) {
+    if deforms[i] == VertexSource::Deformed {
+        *placement = deform_instance(scene, geometry, pose, i, out);
+        place_in_place(placement, out, parallel);
+    } else {
+        let primitive = geometry.primitive(scene, i);
+        place_rest(
+            placement,
+            &primitive.positions,
+            primitive.normals.as_deref(),
+            out,
+            parallel,
+        );
     }
 }
 
@@ -277,6 +292,41 @@ impl TriangleWriter<'_> {
     }
 }
 
+/// Axis-aligned bounds of the finite vertices of every triangle posed by `pose` (`None`
+/// when there are none): the bounds of what [`write_all_triangles`] writes, without
+/// writing the triangles (only each instance's vertices, one instance at a time).
+pub fn posed_bounds(
+    scene: &SceneDesc,
+    geometry: &SceneGeometry,
+    pose: &Pose,
+    deforms: &[VertexSource],
+) -> Option<(Vec3, Vec3)> {
+    let mut vertices = WorldVertices::default();
+    let (mut min, mut max) = (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY));
+    for (i, instance) in geometry.instances.iter().enumerate() {
+        let mut placement = Placement::new(pose.world_from_node[instance.node as usize]);
+        pose_instance(
+            scene,
+            geometry,
+            pose,
+            deforms,
+            i,
+            &mut vertices,
+            &mut placement,
+            false,
+        );
+        for source in geometry.instance_triangles[i].clone() {
+            for v in geometry.triangle_vertices[source as usize] {
+                let p = vertices.positions[v as usize];
+                if p.is_finite() {
+                    (min, max) = (min.min(p), max.max(p));
+                }
+            }
+        }
+    }
+    min.cmple(max).all().then_some((min, max))
+}
+
 /// Whether two triangles have bit-identical vertices (so -0 and 0 differ, and a NaN
 /// equals itself: "did it move" is about the stored bits).
 #[inline]
@@ -287,8 +337,8 @@ fn same_bits(a: &[Vec3A; 3], b: &[Vec3A; 3]) -> bool {
     })
 }
 
-/// Fills `out` (source order) with every triangle of the scene posed by `pose`, on rayon's
-/// threads when `parallel`.
+/// Fills `out` (source order) with every triangle of the instances `include` accepts, posed
+/// by `pose`, on rayon's threads when `parallel`.
 #[allow(clippy::too_many_arguments)]
 pub fn write_all_triangles(
     scene: &SceneDesc,
@@ -298,16 +348,29 @@ pub fn write_all_triangles(
     posed: &mut PosedVertices,
     plan: &mut Vec<Rewrite>,
     parallel: bool,
+    include: impl Fn(usize) -> bool + Sync,
     out: &mut FrameTriangles,
 ) {
     posed.resize(geometry.instances.len());
     plan.clear();
-    plan.resize(geometry.instances.len(), Rewrite::All(Motion::Deformed));
+    plan.extend((0..geometry.instances.len()).map(|i| {
+        if include(i) {
+            Rewrite::All(Motion::Deformed)
+        } else {
+            Rewrite::Keep
+        }
+    }));
     for (i, instance) in geometry.instances.iter().enumerate() {
         posed.place(i, pose.world_from_node[instance.node as usize]);
     }
-    posed.pose(scene, geometry, pose, deforms, |_| true, parallel);
-    let n = geometry.triangle_count();
+    posed.pose(scene, geometry, pose, deforms, &include, parallel);
+    out.source.clear();
+    for (i, range) in geometry.instance_triangles.iter().enumerate() {
+        if include(i) {
+            out.source.extend(range.clone());
+        }
+    }
+    let n = out.source.len();
     out.positions.clear();
     out.positions.resize(n, [Vec3A::ZERO; 3]);
     out.normals.clear();
@@ -316,14 +379,11 @@ pub fn write_all_triangles(
     out.uvs.resize(n, [Vec2::ZERO; 3]);
     out.log2_pb.clear();
     out.log2_pb.resize(n, 0.0);
-    out.source.clear();
-    out.source.extend(0..n as u32);
     out.material.clear();
     out.material.extend(
-        geometry
-            .triangle_instance
+        out.source
             .iter()
-            .map(|&i| geometry.instances[i as usize].material),
+            .map(|&s| geometry.instances[geometry.triangle_instance[s as usize] as usize].material),
     );
     let writer = TriangleWriter {
         geometry,

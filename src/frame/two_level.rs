@@ -49,8 +49,8 @@ pub(super) struct PlacedChanges {
 }
 
 impl Renderer {
-    /// First frame: the shared meshes' trees; the placed instances' triangles leave the
-    /// world-space arrays (the caller then builds the world tree over what is left and
+    /// First frame: which instances place shared meshes, and the meshes' trees (the caller
+    /// then writes the other instances' triangles, builds the world tree over them and
     /// places the instances).
     pub(super) fn build_two_level(&mut self) -> Result<(), AccelError> {
         let mut two = TwoLevel::default();
@@ -91,9 +91,6 @@ impl Renderer {
             two.placed.push(i as u32);
         }
         two.accel = TwoLevelAccel::new(meshes)?;
-        let instance_of = &self.geometry.triangle_instance;
-        self.triangles
-            .retain_sources(|s| two.mesh_of[instance_of[s as usize] as usize].is_none());
         self.two_level = Some(two);
         Ok(())
     }
@@ -123,9 +120,13 @@ impl Renderer {
     }
 
     /// This frame's placements of every placed instance and the top-level tree over them.
-    pub(super) fn place_instances(&mut self, states: &[InstanceState]) {
+    ///
+    /// # Errors
+    /// A placement that makes a vertex non-finite (as the flat path reports it: the first
+    /// such triangle of the first such instance).
+    pub(super) fn place_instances(&mut self, states: &[InstanceState]) -> Result<(), AccelError> {
         let Some(two) = self.two_level.as_mut() else {
-            return;
+            return Ok(());
         };
         two.shading.clear();
         let mut tlas = Vec::with_capacity(two.placed.len() + 1);
@@ -147,7 +148,28 @@ impl Renderer {
                 source_base,
             });
         }
-        two.accel.set_instances(&tlas);
+        let Err(k) = two.accel.set_instances(&tlas) else {
+            return Ok(());
+        };
+        let i = two.placed[k] as usize;
+        let placement = Placement::new(states[i].world_from_object);
+        let primitive = self.geometry.primitive(&self.scene, i);
+        for source in self.geometry.instance_triangles[i].clone() {
+            let (p, _) =
+                self.geometry
+                    .world_triangle(source, &placement, &primitive.positions, None);
+            if let Some(v) = p.iter().find(|v| !v.is_finite()) {
+                return Err(AccelError::NonFiniteVertex {
+                    triangle: source as usize,
+                    vertex: v.to_array(),
+                });
+            }
+        }
+        // The box overflowed though no vertex did (its corners lie further out).
+        Err(AccelError::NonFiniteVertex {
+            triangle: self.geometry.instance_triangles[i].start as usize,
+            vertex: [f32::INFINITY; 3],
+        })
     }
 
     /// The counters of the placed instances that moved between `previous` and `current`.

@@ -77,6 +77,13 @@ impl Renderer {
         stats: &mut UpdateStats,
     ) -> Result<(), AccelError> {
         let t = Instant::now();
+        if self.settings.layout == BvhLayout::TwoLevel {
+            self.build_two_level()?;
+        }
+        let build_ms = ms_since(t);
+        let t = Instant::now();
+        // Under the two-level BVH only what is not an instance of a shared mesh.
+        let two_level = self.two_level.as_ref();
         write_all_triangles(
             &self.scene,
             &self.geometry,
@@ -85,19 +92,17 @@ impl Renderer {
             &mut self.update.posed,
             &mut self.update.plan,
             self.parallelism.splits(self.geometry.triangle_count()),
+            |i| two_level.is_none_or(|two| two.mesh_of[i].is_none()),
             &mut self.triangles,
         );
         let states = self.instance_states(scales);
         stats.animate_ms = ms_since(t);
 
         let t = Instant::now();
-        if self.settings.layout == BvhLayout::TwoLevel {
-            self.build_two_level()?;
-        }
         self.accel = Accel::build(&mut self.triangles)?;
         self.index_slots();
-        self.place_instances(&states);
-        stats.build_ms = ms_since(t);
+        self.place_instances(&states)?;
+        stats.build_ms = build_ms + ms_since(t);
         stats.rebuild = true;
 
         let t = Instant::now();
@@ -347,8 +352,9 @@ impl Renderer {
             // The top-level tree over the new placements: counted as refit.
             let t = Instant::now();
             let states = self.instances.take().unwrap_or_default();
-            self.place_instances(&states);
+            let placed = self.place_instances(&states);
             self.instances = Some(states);
+            placed?;
             stats.refit_ms += ms_since(t);
         }
         Ok(())

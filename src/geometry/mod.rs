@@ -92,14 +92,6 @@ impl FrameTriangles {
         }
     }
 
-    /// Keeps the slots whose source triangle `keep` accepts, in their order.
-    pub fn retain_sources(&mut self, keep: impl Fn(u32) -> bool) {
-        let order: Vec<u32> = (0..self.len() as u32)
-            .filter(|&slot| keep(self.source[slot as usize]))
-            .collect();
-        self.permute(&order);
-    }
-
     pub fn len(&self) -> usize {
         self.positions.len()
     }
