@@ -222,6 +222,18 @@ fn rows() -> Vec<Row> {
 }
 
 fn main() {
+    let args: Vec<String> = std::env::args().collect();
+    if let Some(at) = args.iter().position(|a| a == "--peak-of") {
+        // Child run: one row, one layout, print its peak MB.
+        let index: usize = args[at + 1].parse().expect("row index");
+        let layout = match args[at + 2].as_str() {
+            "two-level" => BvhLayout::TwoLevel,
+            _ => BvhLayout::Flat,
+        };
+        let (_, _, _, peak_mb) = rendered_frame(&rows()[index].make, layout);
+        println!("{peak_mb}");
+        return;
+    }
     // `cargo bench` passes `--bench`; row filters like `1M`, `skin` or `two-level` may follow.
     let words: Vec<String> = std::env::args()
         .skip(1)
@@ -248,7 +260,7 @@ fn main() {
     println!(
         "|---|---:|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|"
     );
-    for row in rows() {
+    for (index, row) in rows().iter().enumerate() {
         if row_words.iter().any(|w| **w != row.kind && **w != row.size) {
             continue;
         }
@@ -256,20 +268,36 @@ fn main() {
             if !layout_words.is_empty() && !layout_words.iter().any(|w| **w == layout_name) {
                 continue;
             }
-            print_row(&row, layout, layout_name);
+            print_row(index, row, layout, layout_name);
         }
     }
 }
 
+/// Peak resident MB of row `index` under `layout_name`, measured by a fresh run of this
+/// bench (`--peak-of`); NaN when that fails.
+fn peak_in_fresh_process(index: usize, layout_name: &str) -> f64 {
+    let Ok(exe) = std::env::current_exe() else {
+        return f64::NAN;
+    };
+    std::process::Command::new(exe)
+        .args(["--peak-of", &index.to_string(), layout_name])
+        .output()
+        .ok()
+        .filter(|o| o.status.success())
+        .and_then(|o| String::from_utf8_lossy(&o.stdout).trim().parse().ok())
+        .unwrap_or(f64::NAN)
+}
+
 /// Times one scene under one layout and prints its table row.
-fn print_row(row: &Row, layout: BvhLayout, layout_name: &str) {
+fn print_row(index: usize, row: &Row, layout: BvhLayout, layout_name: &str) {
     {
         let refit_only = BvhPolicy::Refit {
             rebuild_threshold: f32::INFINITY,
         };
         let (last, refit, _, triangles) = update_medians((row.make)(), refit_only, layout);
         let (_, rebuild, _, _) = update_medians((row.make)(), BvhPolicy::Rebuild, layout);
-        let (pre_share, frame_ms, render_ms, peak_mb) = rendered_frame(&row.make, layout);
+        let (pre_share, frame_ms, render_ms, _) = rendered_frame(&row.make, layout);
+        let peak_mb = peak_in_fresh_process(index, layout_name);
         println!(
             "| {} | {} | {} | {} | {:.3} | {:.3} | {:.3} | {:.3} | {:.3} | {:.3} | {:.3} | {} | {:.1}% | {:.1} | {:.3} | {:.3} | {:.1} | {:.0} |",
             row.kind,
