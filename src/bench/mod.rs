@@ -1,4 +1,4 @@
-//! `mipray bench`: times LOD methods and thread counts side by side in one run.
+//! `mipray bench`: times LOD methods, BVH layouts and thread counts side by side in one run.
 //!
 //! Configurations are interleaved within each repeat (and their order rotated between
 //! repeats) so that drift in machine load hits all of them alike; the report gives the median
@@ -13,6 +13,7 @@ pub use rays::{RayKind, RayKinds, RayRate, ray_table, run_ray_bench};
 
 use anyhow::Result;
 
+use crate::accel::{BvhLayout, BvhPolicy};
 use crate::frame::{RenderSettings, Renderer};
 use crate::lod::LodMethod;
 use crate::report::Percentiles;
@@ -23,6 +24,19 @@ use crate::scene::SceneDesc;
 pub struct BenchConfig {
     pub lod: LodMethod,
     pub threads: usize,
+    pub layout: BvhLayout,
+    pub policy: BvhPolicy,
+}
+
+impl BenchConfig {
+    /// The `--bvh` value this configuration stands for.
+    pub fn bvh_name(&self) -> &'static str {
+        match (self.layout, self.policy) {
+            (BvhLayout::TwoLevel, _) => "two-level",
+            (BvhLayout::Flat, BvhPolicy::Rebuild) => "rebuild",
+            (BvhLayout::Flat, _) => "flat",
+        }
+    }
 }
 
 /// Medians over repeats for one configuration.
@@ -64,6 +78,8 @@ pub fn run_bench(
                 load()?,
                 RenderSettings {
                     lod: c.lod,
+                    layout: c.layout,
+                    bvh: c.policy,
                     ..settings
                 },
             ))
@@ -111,14 +127,15 @@ pub fn bench_table(results: &[BenchResult]) -> String {
     let mut s = String::new();
     let _ = writeln!(
         s,
-        "| lod | threads | render ms/frame (median) | min..max | frame ms (median) | Mrays/s (median) | render ratio vs first (median) |"
+        "| lod | bvh | threads | render ms/frame (median) | min..max | frame ms (median) | Mrays/s (median) | render ratio vs first (median) |"
     );
-    let _ = writeln!(s, "|---|---:|---:|---:|---:|---:|---:|");
+    let _ = writeln!(s, "|---|---|---:|---:|---:|---:|---:|---:|");
     for r in results {
         let _ = writeln!(
             s,
-            "| {} | {} | {:.2} | {:.2}..{:.2} | {:.2} | {:.3} | {:.4} |",
+            "| {} | {} | {} | {:.2} | {:.2}..{:.2} | {:.2} | {:.3} | {:.4} |",
             r.config.lod,
+            r.config.bvh_name(),
             r.config.threads,
             r.render_ms_per_frame.median,
             r.render_ms_per_frame.min,

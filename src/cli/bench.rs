@@ -4,7 +4,9 @@ use anyhow::{Result, bail};
 use clap::Args;
 
 use super::args::{LightArgs, SequenceArgs, TraceArgs, render_settings};
+use super::render::{BvhMode, apply_bvh};
 use super::scene::{load_scene, open_scene};
+use crate::accel::BvhPolicy;
 use crate::bench::{BenchConfig, RayKinds, bench_table, ray_table, run_bench, run_ray_bench};
 use crate::frame::Renderer;
 use crate::lod::LodMethod;
@@ -36,6 +38,10 @@ pub struct BenchArgs {
     /// centres, occlusion rays from their hits to every light, or both (no shading).
     #[arg(long, value_enum)]
     pub rays: Option<RayKinds>,
+    /// BVH layouts and policies, comma separated, as `render --bvh` (whole frames: each is a
+    /// configuration; `--rays`: the first).
+    #[arg(long, value_enum, value_delimiter = ',', default_value = "flat")]
+    pub bvh: Vec<BvhMode>,
 }
 
 /// `mipray bench`.
@@ -44,6 +50,14 @@ pub fn bench(args: &BenchArgs) -> Result<()> {
     if args.repeats == 0 || args.repeats > MAX_REPEATS || args.methods.is_empty() {
         bail!("bench needs 1 to {MAX_REPEATS} repeats and at least one method");
     }
+    let Some(&first_bvh) = args.bvh.first() else {
+        bail!("--bvh: give at least one of flat, two-level, rebuild");
+    };
+    apply_bvh(
+        &mut settings,
+        first_bvh,
+        BvhPolicy::DEFAULT_REBUILD_THRESHOLD,
+    )?;
     let scene = open_scene(&args.sequence)?;
     settings.animation = scene.animation;
     let (path, frames, clock) = (scene.path, scene.frames, scene.clock);
@@ -76,14 +90,21 @@ pub fn bench(args: &BenchArgs) -> Result<()> {
         print!("{}", ray_table(&rates));
         return Ok(());
     }
-    let configs: Vec<BenchConfig> = threads
-        .iter()
-        .flat_map(|&t| {
-            args.methods
-                .iter()
-                .map(move |&lod| BenchConfig { lod, threads: t })
-        })
-        .collect();
+    let mut configs = Vec::new();
+    for &t in &threads {
+        for &mode in &args.bvh {
+            let mut s = settings;
+            apply_bvh(&mut s, mode, BvhPolicy::DEFAULT_REBUILD_THRESHOLD)?;
+            for &lod in &args.methods {
+                configs.push(BenchConfig {
+                    lod,
+                    threads: t,
+                    layout: s.layout,
+                    policy: s.bvh,
+                });
+            }
+        }
+    }
     eprintln!(
         "bench: {} frames {}..{} at {}x{}, {} configurations x {} repeats",
         path.display(),

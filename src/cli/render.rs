@@ -96,11 +96,7 @@ impl Default for RenderArgs {
 pub fn render(args: &RenderArgs) -> Result<ExitCode> {
     let mut settings = render_settings(&args.sequence, &args.trace, args.lights.lights, args.spp)?;
     settings.lod = args.lod;
-    settings.bvh = bvh_policy(args.bvh, args.rebuild_threshold)?;
-    settings.layout = match args.bvh {
-        BvhMode::TwoLevel => BvhLayout::TwoLevel,
-        BvhMode::Flat | BvhMode::Rebuild => BvhLayout::Flat,
-    };
+    apply_bvh(&mut settings, args.bvh, args.rebuild_threshold)?;
     // Argument errors (shard spec, thread count) before a possibly long scene load.
     let shard = resolve_shard(args.shard.as_deref(), |name| std::env::var(name).ok())?;
     let pool = thread_pool(args.threads)?;
@@ -144,14 +140,24 @@ pub fn render(args: &RenderArgs) -> Result<ExitCode> {
     })
 }
 
-fn bvh_policy(mode: BvhMode, rebuild_threshold: f32) -> Result<BvhPolicy> {
+/// Sets the BVH policy and layout of `--bvh MODE` and `--rebuild-threshold`.
+pub fn apply_bvh(
+    settings: &mut crate::frame::RenderSettings,
+    mode: BvhMode,
+    rebuild_threshold: f32,
+) -> Result<()> {
     if !(rebuild_threshold.is_finite() && rebuild_threshold >= 1.0) {
         bail!("--rebuild-threshold {rebuild_threshold}: must be a number >= 1");
     }
-    Ok(match mode {
+    settings.bvh = match mode {
         BvhMode::Flat | BvhMode::TwoLevel => BvhPolicy::Refit { rebuild_threshold },
         BvhMode::Rebuild => BvhPolicy::Rebuild,
-    })
+    };
+    settings.layout = match mode {
+        BvhMode::TwoLevel => BvhLayout::TwoLevel,
+        BvhMode::Flat | BvhMode::Rebuild => BvhLayout::Flat,
+    };
+    Ok(())
 }
 
 fn thread_pool(threads: Option<usize>) -> Result<rayon::ThreadPool> {

@@ -1,11 +1,13 @@
 //! The frame loop under the two-level BVH (`--bvh two-level`): every instance that is only
-//! placed (rigid, scaled or stretched) by an animated node, or that draws a mesh primitive
-//! other nodes draw too, places a shared object-space mesh and updates nothing but its
-//! transform. Skinned and morphed instances, and static instances of meshes drawn once,
-//! keep the flat path (their triangles in world space, refitted or rebuilt by the policy)
-//! as one world-space tree: a static object gains nothing from a transform but costs a
-//! top-level box that overlaps its neighbours (Embree users merge static geometry the same
-//! way). The top-level tree over the instances is rebuilt when a placement changed.
+//! placed (rigid, scaled or stretched) by an animated node places a shared object-space
+//! mesh and updates nothing but its transform. Skinned and morphed instances and static
+//! ones keep the flat path (their triangles in world space, refitted or rebuilt by the
+//! policy) as one world-space tree: a static object gains nothing from a transform but
+//! costs a top-level box that overlaps its neighbours and a ray setup per visit (Embree
+//! users merge static geometry the same way). The exception is a mesh whose static copies
+//! would cost more than [`FLATTEN_BUDGET`] extra triangles in world space (a forest of one
+//! tree): its static instances stay instances, which is what saves the memory. The
+//! top-level tree over the instances is rebuilt when a placement changed.
 //!
 //! The `log2 P_b` of a placed instance follows the flat rules (`log2_pb.rs`), evaluated at
 //! the hit from the object-space constant and the instance's shape key (`PbRule`), so a
@@ -23,6 +25,10 @@ use crate::accel::{AccelError, TlasInstance, TwoLevelAccel};
 use crate::anim::{NodeShape, moving_nodes};
 use crate::geometry::{FrameTriangles, Placement};
 use crate::render::{InstanceShading, PbRule};
+
+/// Most extra world-space triangles the static copies of one mesh may add (beyond its first
+/// copy) and still be merged into the world tree: 65,536 triangles are ~10 MB.
+const FLATTEN_BUDGET: usize = 65_536;
 
 /// What the two-level structure keeps between frames.
 #[derive(Default)]
@@ -55,12 +61,22 @@ impl Renderer {
     pub(super) fn build_two_level(&mut self) -> Result<(), AccelError> {
         let mut two = TwoLevel::default();
         let moving = moving_nodes(&self.scene, self.settings.animation);
-        let mut drawn_by: HashMap<(u32, u32), usize> = HashMap::new();
-        for instance in &self.geometry.instances {
-            *drawn_by
-                .entry((instance.mesh, instance.primitive))
-                .or_default() += 1;
+        // Per mesh primitive: its static copies' triangles.
+        let mut static_triangles: HashMap<(u32, u32), (usize, usize)> = HashMap::new();
+        for (i, instance) in self.geometry.instances.iter().enumerate() {
+            if !moving[instance.node as usize] {
+                let entry = static_triangles
+                    .entry((instance.mesh, instance.primitive))
+                    .or_default();
+                entry.0 += 1;
+                entry.1 = self.geometry.instance_triangles[i].len();
+            }
         }
+        let flattened = |key| {
+            static_triangles
+                .get(&key)
+                .is_some_and(|&(copies, triangles)| (copies - 1) * triangles <= FLATTEN_BUDGET)
+        };
         let mut mesh_of_key: HashMap<(u32, u32), u32> = HashMap::new();
         let mut meshes = Vec::new();
         for (i, (instance, source)) in self
@@ -78,8 +94,8 @@ impl Renderer {
                     .count(),
             );
             let key = (instance.mesh, instance.primitive);
-            let fixed_and_alone = !moving[instance.node as usize] && drawn_by[&key] == 1;
-            if *source == VertexSource::Deformed || fixed_and_alone {
+            let fixed = !moving[instance.node as usize];
+            if *source == VertexSource::Deformed || (fixed && flattened(key)) {
                 two.mesh_of.push(None);
                 continue;
             }
