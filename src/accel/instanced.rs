@@ -326,32 +326,8 @@ fn transformed_box(bounds: &Aabb, to_world: &Affine3A) -> Aabb {
 mod tests {
     use super::*;
     use crate::accel::intersect;
-    use glam::{Quat, Vec2, Vec3};
-
-    fn soup(tris: &[[Vec3A; 3]]) -> FrameTriangles {
-        FrameTriangles {
-            positions: tris.to_vec(),
-            normals: vec![[Vec3::Z; 3]; tris.len()],
-            uvs: vec![[Vec2::ZERO; 3]; tris.len()],
-            material: vec![0; tris.len()],
-            log2_pb: vec![0.0; tris.len()],
-            source: (0..tris.len() as u32).collect(),
-        }
-    }
-
-    struct Rng(u64);
-    impl Rng {
-        fn next(&mut self) -> f32 {
-            self.0 = self
-                .0
-                .wrapping_mul(6364136223846793005)
-                .wrapping_add(1442695040888963407);
-            ((self.0 >> 40) as f32) / (1u64 << 24) as f32
-        }
-        fn point(&mut self, scale: f32) -> Vec3A {
-            Vec3A::new(self.next(), self.next(), self.next()) * scale - Vec3A::splat(scale / 2.0)
-        }
-    }
+    use crate::accel::tests::{Rng, soup};
+    use glam::{Quat, Vec3};
 
     fn random_mesh(rng: &mut Rng, n: usize) -> Vec<[Vec3A; 3]> {
         (0..n)

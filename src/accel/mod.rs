@@ -463,11 +463,12 @@ fn leaf_box(positions: &[[Vec3A; 3]], first: u32, count: u32) -> Aabb {
 }
 
 #[cfg(test)]
-mod tests {
+pub(super) mod tests {
     use super::*;
     use glam::Vec3;
 
-    fn soup(tris: &[[Vec3A; 3]]) -> FrameTriangles {
+    /// Triangles with placeholder shading data, source ids in order.
+    pub(in crate::accel) fn soup(tris: &[[Vec3A; 3]]) -> FrameTriangles {
         FrameTriangles {
             positions: tris.to_vec(),
             normals: vec![[Vec3::Z; 3]; tris.len()],
@@ -559,15 +560,17 @@ mod tests {
     }
 
     /// A small deterministic generator (xorshift) for the random soups below.
-    struct Rng(u64);
+    /// Xorshift: reproducible pseudo-random points (seed non-zero).
+    pub(in crate::accel) struct Rng(pub u64);
     impl Rng {
-        fn next(&mut self) -> f32 {
+        pub(in crate::accel) fn next(&mut self) -> f32 {
             self.0 ^= self.0 << 13;
             self.0 ^= self.0 >> 7;
             self.0 ^= self.0 << 17;
             (self.0 >> 40) as f32 / (1u64 << 24) as f32
         }
-        fn point(&mut self, scale: f32) -> Vec3A {
+        /// A point in the cube of side `scale` centred on the origin.
+        pub(in crate::accel) fn point(&mut self, scale: f32) -> Vec3A {
             Vec3A::new(self.next(), self.next(), self.next()) * scale - Vec3A::splat(scale / 2.0)
         }
     }
