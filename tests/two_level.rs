@@ -18,7 +18,8 @@ const FPS: f32 = 30.0;
 
 /// Largest share of pixels allowed to differ between the layouts, and the largest mean
 /// absolute difference per channel: where both find the same triangle shading is
-/// bit-identical (`render::scene_bvh`); only a ray on an edge may find its neighbour.
+/// bit-identical (`render::scene_bvh`); only a ray on an edge may find its neighbour (or,
+/// not in this scene, one of two coincident surfaces of an instance and another tree).
 const MAX_DIFFERING_SHARE: f64 = 0.005;
 const MAX_MEAN_ABS: f64 = 1e-3;
 
@@ -195,6 +196,104 @@ fn a_rigid_crowd_recomputes_nothing_after_the_first_frame() {
             );
             assert_eq!((t.lod_recomputed, t.lod_shifted), (0, 0), "frame {frame}");
         }
+    }
+}
+
+/// A textured quad whose scale animates to 0 along its own normal (z) while turned: under
+/// two-level its transform has no inverse, yet it is still a visible quad, as under flat.
+#[test]
+fn a_quad_flattened_along_its_normal_stays_visible() {
+    let scene = || {
+        let mut scene = facing_quad_scene(3.0, 2.0, 64, 0.8);
+        let quad_node = scene.roots[0];
+        scene.nodes[quad_node].local.rotation = Quat::from_rotation_y(0.5);
+        scene.animations.push(AnimationDesc {
+            name: "flatten".into(),
+            channels: vec![channel(
+                quad_node,
+                ChannelTarget::Scale,
+                &[0.0, 1.0],
+                &[1.0, 1.0, 1.0, 1.0, 1.0, 0.0],
+            )],
+        });
+        scene
+    };
+    for lod in LodMethod::ALL {
+        let mut flat = Renderer::new(scene(), settings(lod, BvhLayout::Flat));
+        let mut two = Renderer::new(scene(), settings(lod, BvhLayout::TwoLevel));
+        for (frame, time) in [(0, 0.0), (1, 0.5), (2, 1.0)] {
+            let (a, _) = flat.render_frame(frame, time).unwrap();
+            let (b, _) = two.render_frame(frame, time).unwrap();
+            let background = Vec3::splat(0.1);
+            let covered = b.pixels.iter().filter(|p| **p != background).count();
+            assert!(
+                covered > b.pixels.len() / 10,
+                "{lod} t = {time}: the quad vanished"
+            );
+            let (share, mean, largest) = difference(&a, &b);
+            assert!(
+                share <= MAX_DIFFERING_SHARE && mean <= MAX_MEAN_ABS,
+                "{lod} t = {time}: {:.3}% of pixels differ (mean {mean:.2e}, largest {largest})",
+                share * 100.0
+            );
+        }
+    }
+}
+
+/// A frame whose update fails (an instance placed at infinity) leaves no stale state: the
+/// next frame, back in range, equals that frame rendered by a fresh renderer.
+#[test]
+fn a_failed_frame_leaves_no_stale_placements() {
+    let scene = || {
+        let mut scene = facing_quad_scene(3.0, 2.0, 64, 0.8);
+        let quad_node = scene.roots[0];
+        let z = -3.0;
+        scene.animations.push(AnimationDesc {
+            name: "away and back".into(),
+            channels: vec![mipray::scene::ChannelDesc {
+                node: quad_node,
+                target: ChannelTarget::Translation,
+                interpolation: mipray::scene::Interpolation::Step,
+                times: vec![0.0, 1.0, 2.0, 3.0],
+                values: vec![
+                    0.0,
+                    0.0,
+                    z,
+                    f32::INFINITY,
+                    0.0,
+                    z,
+                    f32::INFINITY,
+                    0.0,
+                    z,
+                    0.3,
+                    0.0,
+                    z,
+                ],
+                components: 3,
+            }],
+        });
+        scene
+    };
+    for layout in [BvhLayout::Flat, BvhLayout::TwoLevel] {
+        let mut r = Renderer::new(scene(), settings(LodMethod::Paper, layout));
+        r.render_frame(0, 0.0).unwrap();
+        assert!(
+            r.render_frame(1, 1.0).is_err(),
+            "{layout:?}: the overflow is an error"
+        );
+        assert!(
+            r.render_frame(2, 2.0).is_err(),
+            "{layout:?}: still an error at frame 2"
+        );
+        let (after, _) = r.render_frame(3, 3.0).unwrap();
+        let (fresh, _) = Renderer::new(scene(), settings(LodMethod::Paper, layout))
+            .render_frame(3, 3.0)
+            .unwrap();
+        assert!(
+            after.pixels == fresh.pixels,
+            "{layout:?}: frame 3 after the failed frames differs from a fresh one {:?}",
+            difference(&after, &fresh)
+        );
     }
 }
 

@@ -13,13 +13,13 @@
 
 use std::time::Duration;
 
-use glam::{Affine3A, Mat4, Vec3A};
+use glam::{Affine3A, Mat4, Vec2, Vec3, Vec3A};
 use obvhs::{BvhBuildParams, aabb::Aabb, bvh2::builder::build_bvh2};
 
 use super::triangles::ShearedRay;
 use super::wide::{PACKET, RayBoxes, WideBvh};
 use super::{Accel, AccelError, Closest, Hit, Within};
-use crate::geometry::FrameTriangles;
+use crate::geometry::{FrameTriangles, Placement};
 
 /// One instance of a shared mesh, as the frame loop describes it.
 #[derive(Debug, Clone, Copy)]
@@ -48,6 +48,30 @@ struct Placed {
     index: u32,
 }
 
+/// An instance whose transform collapses a dimension (a zero scale): it cannot be entered
+/// by an inverse transform, but a flat mesh flattened along its normal is still seen, so its
+/// triangles are placed in world space for the frame (rare; walked after the top level).
+struct Collapsed {
+    index: u32,
+    source_base: u32,
+    /// World-space triangles; `source` holds each one's slot in the mesh.
+    triangles: FrameTriangles,
+    accel: Accel,
+    /// Per slot, the mesh's own triangle index (the tie rule's source, before the base).
+    local_source: Vec<u32>,
+}
+
+impl Collapsed {
+    fn within(&self) -> Within<'_> {
+        Within {
+            source: &self.local_source,
+            source_base: self.source_base,
+            instance: self.index,
+            reported: Some(&self.triangles.source),
+        }
+    }
+}
+
 /// Bottom-level trees of the shared meshes and the top-level tree over their instances.
 #[derive(Default)]
 pub struct TwoLevelAccel {
@@ -57,6 +81,20 @@ pub struct TwoLevelAccel {
     placed: Vec<Placed>,
     /// Boxes of the last `set_instances`, reused.
     boxes: Vec<Aabb>,
+    /// Instances of this frame with a collapsed transform.
+    collapsed: Vec<Collapsed>,
+}
+
+/// What an instance's transform allows this frame.
+enum Placing {
+    /// Entered by its inverse transform; its world box.
+    Inverse(Affine3A, Aabb),
+    /// A finite transform without an inverse.
+    Collapsed,
+    /// Overflowing or NaN.
+    NonFinite,
+    /// An empty mesh.
+    Nothing,
 }
 
 impl TwoLevelAccel {
@@ -94,10 +132,9 @@ impl TwoLevelAccel {
         self.meshes.iter().map(|m| m.triangles.len()).sum()
     }
 
-    /// Instances in the top-level tree (those with an empty mesh or a transform that
-    /// cannot be inverted are left out: they have no area to hit).
+    /// Instances rays can hit this frame (those with an empty mesh are left out).
     pub fn instance_count(&self) -> usize {
-        self.placed.len()
+        self.placed.len() + self.collapsed.len()
     }
 
     /// Places the instances for this frame and rebuilds the top-level tree over their
@@ -111,13 +148,24 @@ impl TwoLevelAccel {
         self.boxes.clear();
         self.tlas = WideBvh::default();
         self.placed.clear();
+        self.collapsed.clear();
         for (index, instance) in instances.iter().enumerate() {
-            let Some((object_from_world, aabb)) = self.placement(instance) else {
-                continue;
+            let (object_from_world, aabb) = match self.placing(instance) {
+                Placing::Inverse(inverse, aabb) => (inverse, aabb),
+                Placing::Nothing => continue,
+                Placing::NonFinite => {
+                    self.collapsed.clear();
+                    return Err(index);
+                }
+                Placing::Collapsed => {
+                    let Some(collapsed) = self.collapse(instance, index as u32) else {
+                        self.collapsed.clear();
+                        return Err(index);
+                    };
+                    self.collapsed.push(collapsed);
+                    continue;
+                }
             };
-            if !(aabb.min.is_finite() && aabb.max.is_finite()) {
-                return Err(index);
-            }
             placed.push(Placed {
                 mesh: instance.mesh,
                 object_from_world,
@@ -145,21 +193,64 @@ impl TwoLevelAccel {
         Ok(())
     }
 
-    /// An instance's inverse transform and world box; `None` when it has nothing to hit.
-    /// An instance's inverse transform and world box; `None` when it has nothing to hit
-    /// (an empty mesh, or a finite transform that cannot be inverted: a collapsed node).
-    fn placement(&self, instance: &TlasInstance) -> Option<(Affine3A, Aabb)> {
-        let bounds = self.meshes.get(instance.mesh as usize)?.bounds?;
+    /// What instance `instance`'s transform allows this frame.
+    fn placing(&self, instance: &TlasInstance) -> Placing {
+        let Some(bounds) = self
+            .meshes
+            .get(instance.mesh as usize)
+            .and_then(|m| m.bounds)
+        else {
+            return Placing::Nothing;
+        };
         let to_world = Affine3A::from_mat4(instance.world_from_object);
         let world_box = transformed_box(&bounds, &to_world);
         if !(world_box.min.is_finite() && world_box.max.is_finite()) {
-            return Some((Affine3A::IDENTITY, world_box)); // reported by the caller
+            return Placing::NonFinite;
         }
         let inverse = to_world.inverse();
         let invertible = to_world.matrix3.determinant() != 0.0
             && inverse.matrix3.is_finite()
             && inverse.translation.is_finite();
-        invertible.then_some((inverse, world_box))
+        if invertible {
+            Placing::Inverse(inverse, world_box)
+        } else {
+            Placing::Collapsed
+        }
+    }
+
+    /// A collapsed instance's triangles placed in world space, as the flat path places them
+    /// (`None` if a vertex overflows).
+    fn collapse(&self, instance: &TlasInstance, index: u32) -> Option<Collapsed> {
+        let mesh = &self.meshes[instance.mesh as usize].triangles;
+        let placement = Placement::new(instance.world_from_object);
+        let n = mesh.len();
+        let mut triangles = FrameTriangles {
+            positions: (0..n)
+                .map(|k| {
+                    placement
+                        .place_triangle(mesh.positions[k], mesh.normals[k], mesh.uvs[k])
+                        .0
+                })
+                .collect(),
+            normals: vec![[Vec3::ZERO; 3]; n],
+            uvs: vec![[Vec2::ZERO; 3]; n],
+            material: vec![0; n],
+            log2_pb: vec![0.0; n],
+            source: (0..n as u32).collect(),
+        };
+        let accel = Accel::build(&mut triangles).ok()?;
+        let local_source = triangles
+            .source
+            .iter()
+            .map(|&k| mesh.source[k as usize])
+            .collect();
+        Some(Collapsed {
+            index,
+            source_base: instance.source_base,
+            triangles,
+            accel,
+            local_source,
+        })
     }
 
     /// The closest hit with `t` in `[0, t_max)` over the world-space tree `world` (over
@@ -183,11 +274,20 @@ impl TwoLevelAccel {
             t_max,
             &mut best,
         );
+        let mut limit = limit;
         self.tlas.traverse(&ray, limit, |first, _, limit| {
             let placed = &self.placed[first as usize];
             *limit = self.closest_in_instance(placed, origin, direction, *limit, &mut best);
             true
         });
+        if let Some(hit) = best.hit {
+            limit = limit.min(hit.t.next_up());
+        }
+        for c in &self.collapsed {
+            limit = c
+                .accel
+                .closest_within(&c.within(), &ray, &sheared, limit, &mut best);
+        }
         best.hit
     }
 
@@ -224,6 +324,17 @@ impl TwoLevelAccel {
                 let placed = &self.placed[first as usize];
                 *limit = self.closest_in_instance(placed, origin, direction, *limit, &mut best[r]);
             });
+        for c in &self.collapsed {
+            for r in 0..n {
+                limits[r] = c.accel.closest_within(
+                    &c.within(),
+                    &boxes[r],
+                    &sheared[r],
+                    limits[r],
+                    &mut best[r],
+                );
+            }
+        }
         for (hit, best) in hits.iter_mut().zip(&best[..n]) {
             *hit = best.hit;
         }
@@ -245,6 +356,7 @@ impl TwoLevelAccel {
             source: &mesh.triangles.source,
             source_base: placed.source_base,
             instance: placed.index,
+            reported: None,
         };
         mesh.accel.closest_within(
             &within,
@@ -272,13 +384,19 @@ impl TwoLevelAccel {
             return false;
         }
         let ray = RayBoxes::new(origin, direction);
-        self.tlas.traverse(&ray, t_max, |first, _, _| {
+        let go_on = self.tlas.traverse(&ray, t_max, |first, _, _| {
             let placed = &self.placed[first as usize];
             let (o, d) = object_ray(&placed.object_from_world, origin, direction);
             self.meshes[placed.mesh as usize]
                 .accel
                 .visit_hits(o, d, t_max, |slot, t| visit(placed.index, slot, t))
-        })
+        });
+        go_on
+            && self.collapsed.iter().all(|c| {
+                c.accel.visit_hits(origin, direction, t_max, |slot, t| {
+                    visit(c.index, c.triangles.source[slot as usize], t)
+                })
+            })
     }
 }
 
@@ -288,6 +406,7 @@ fn world_within(triangles: &FrameTriangles) -> Within<'_> {
         source: &triangles.source,
         source_base: 0,
         instance: Hit::WORLD,
+        reported: None,
     }
 }
 
@@ -440,7 +559,7 @@ mod tests {
     }
 
     #[test]
-    fn collapsed_and_empty_instances_are_left_out() {
+    fn collapsed_instances_are_hit_in_world_space_and_empty_ones_left_out() {
         let tri = [Vec3A::ZERO, Vec3A::X, Vec3A::Y];
         let mut two = TwoLevelAccel::new(vec![soup(&[tri]), soup(&[])]).unwrap();
         let world_tris = soup(&[]);
@@ -451,28 +570,47 @@ mod tests {
             source_base,
         };
         let instances = [
-            instance(0, Mat4::from_scale(Vec3::new(1.0, 0.0, 1.0)), 0),
+            // Flattened along its own normal: still a triangle, seen from +z.
+            instance(0, Mat4::from_scale(Vec3::new(2.0, 2.0, 0.0)), 0),
             instance(1, Mat4::IDENTITY, 1),
             instance(0, Mat4::from_translation(Vec3::new(0.0, 0.0, -2.0)), 2),
+            // Flattened within its plane: a segment, never hit.
+            instance(0, Mat4::from_scale(Vec3::new(1.0, 0.0, 1.0)), 3),
         ];
         two.set_instances(&instances).unwrap();
-        assert_eq!(two.instance_count(), 1);
-        let hit = two
-            .closest_hit(
-                &world,
-                &world_tris,
-                Vec3A::new(0.2, 0.2, 5.0),
-                Vec3A::NEG_Z,
-                f32::INFINITY,
-            )
-            .unwrap();
-        assert_eq!((hit.instance, hit.triangle), (2, 0));
-        assert!((hit.t - 7.0).abs() < 1e-5);
-        two.set_instances(&[]).unwrap();
-        assert!(
-            two.closest_hit(&world, &world_tris, Vec3A::ZERO, Vec3A::X, f32::INFINITY)
-                .is_none()
+        assert_eq!(two.instance_count(), 3);
+        let trace = |two: &TwoLevelAccel, origin| {
+            two.closest_hit(&world, &world_tris, origin, Vec3A::NEG_Z, f32::INFINITY)
+        };
+        let near = trace(&two, Vec3A::new(0.2, 0.2, 5.0)).unwrap();
+        assert_eq!((near.instance, near.triangle), (0, 0));
+        assert!((near.t - 5.0).abs() < 1e-5);
+        // Only the collapsed instance covers (1.2, 0.2): the translated one ends at x + y = 1.
+        let far_only = trace(&two, Vec3A::new(1.2, 0.2, 5.0)).unwrap();
+        assert_eq!(far_only.instance, 0);
+        let mut packet = [None; 2];
+        let rays = [
+            (Vec3A::new(0.2, 0.2, 5.0), Vec3A::NEG_Z),
+            (Vec3A::new(0.2, 0.2, -1.0), Vec3A::NEG_Z),
+        ];
+        two.closest_hits(&world, &world_tris, &rays, f32::INFINITY, &mut packet);
+        assert_eq!(packet[0], Some(near));
+        assert_eq!(packet[1].map(|h| h.instance), Some(2));
+        let mut seen = Vec::new();
+        two.visit_hits(
+            &world,
+            Vec3A::new(0.2, 0.2, 5.0),
+            Vec3A::NEG_Z,
+            f32::INFINITY,
+            |i, _, _| {
+                seen.push(i);
+                true
+            },
         );
+        seen.sort_unstable();
+        assert_eq!(seen, [0, 2]);
+        two.set_instances(&[]).unwrap();
+        assert!(trace(&two, Vec3A::ZERO).is_none());
         // An overflowing transform is reported (by index), not built into the tree.
         let overflow = instance(0, Mat4::from_scale(Vec3::splat(f32::MAX)), 0);
         let nan = instance(0, Mat4::from_translation(Vec3::splat(f32::NAN)), 0);

@@ -117,6 +117,9 @@ struct Within<'a> {
     source: &'a [u32],
     source_base: u32,
     instance: u32,
+    /// Per slot, the slot its hits report (`None`: the slot itself); a collapsed instance's
+    /// world-space copy reports its mesh's slots.
+    reported: Option<&'a [u32]>,
 }
 
 /// Which refit ran.
@@ -298,6 +301,7 @@ impl Accel {
             source: &triangles.source,
             source_base: 0,
             instance: Hit::WORLD,
+            reported: None,
         };
         self.wide.traverse(&ray, t_max, |first, count, limit| {
             self.closest_in_leaf(&within, &sheared, first, count, limit, &mut best);
@@ -350,6 +354,7 @@ impl Accel {
             source: &triangles.source,
             source_base: 0,
             instance: Hit::WORLD,
+            reported: None,
         };
         self.closest_hits_within(
             &within,
@@ -400,7 +405,7 @@ impl Accel {
                 };
                 if better {
                     best.hit = Some(Hit {
-                        triangle: slot,
+                        triangle: within.reported.map_or(slot, |r| r[slot as usize]),
                         instance: within.instance,
                         t,
                         bary,

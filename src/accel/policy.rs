@@ -16,8 +16,9 @@ pub enum BvhLayout {
     /// One tree over every triangle in world space, refitted as they move.
     #[default]
     Flat,
-    /// A tree per shared mesh in object space, one over the deforming triangles in world
-    /// space, and a top-level tree over the instances placing them ([`super::TwoLevelAccel`]).
+    /// A tree per shared mesh in object space, a top-level tree over the instances placing
+    /// them, and one world-space tree over the rest (what deforms or stands still; see
+    /// [`super::TwoLevelAccel`]).
     TwoLevel,
 }
 

@@ -60,7 +60,7 @@ impl DirtySet {
     /// motion, and clears those entries: the parallel counterpart of [`Self::mark`] called in
     /// that order. The ranges are cut into chunks that are counted, then filled at their
     /// offsets, on rayon's threads; every read is sequential. Precondition: the set was just
-    /// [`reset`](Self::reset) for `slot_of_source.len()` slots.
+    /// [`reset`](Self::reset) for every slot `slot_of_source` names.
     pub fn assign_in_source_order(
         &mut self,
         visited: impl Iterator<Item = Range<u32>>,

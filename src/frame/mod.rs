@@ -194,8 +194,9 @@ impl Renderer {
     }
 
     /// The frame's world-space triangles in BVH order (valid after `prepare`): every
-    /// triangle under the flat BVH; under the two-level one only the deforming instances'
-    /// (placed instances keep theirs in object space).
+    /// triangle under the flat BVH; under the two-level one only the world tree's (skinned,
+    /// morphed and static instances: the shared meshes' instances keep theirs in object
+    /// space).
     pub fn triangles(&self) -> &FrameTriangles {
         &self.triangles
     }
@@ -292,12 +293,21 @@ impl Renderer {
             time_s,
             source,
         };
-        if self.instances.is_none() {
-            self.first_frame(&scales, &mut stats).map_err(accel_error)?;
+        let first = self.instances.is_none();
+        let updated = if first {
+            self.first_frame(&scales, &mut stats)
         } else {
             self.update_moved(&scales, &mut stats);
-            self.check_moved_finite().map_err(accel_error)?;
-            self.update_accel(&mut stats).map_err(accel_error)?;
+            self.check_moved_finite()
+                .and_then(|()| self.update_accel(&mut stats))
+        };
+        if let Err(source) = updated {
+            // The carried state is half updated: the next frame starts afresh.
+            self.instances = None;
+            self.two_level = None;
+            return Err(accel_error(source));
+        }
+        if !first {
             let t = Instant::now();
             if self.settings.lod.needs_log2_pb() {
                 self.update_dirty_log2_pb(&mut stats);

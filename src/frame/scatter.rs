@@ -6,7 +6,7 @@
 //! through raw pointers. Invariant that makes it sound: `Renderer::slot_of_source` maps the
 //! sources that have a slot one-to-one onto the slots (`index_slots` inverts
 //! `FrameTriangles::source`, itself a permutation of those sources after every build; under
-//! the two-level BVH only deforming instances' triangles have slots, and only they are
+//! the two-level BVH only the world tree's triangles have slots, and only they are
 //! written), and each source triangle is visited by exactly one task, so no two tasks ever
 //! touch the same slot (nor the same source's motion entry).
 

@@ -99,10 +99,25 @@ impl Renderer {
                 two.mesh_of.push(None);
                 continue;
             }
-            let mesh = *mesh_of_key.entry(key).or_insert_with(|| {
-                meshes.push(self.object_triangles(i));
-                meshes.len() as u32 - 1
-            });
+            let mesh = match mesh_of_key.get(&key) {
+                Some(&mesh) => mesh,
+                None => {
+                    let triangles = self.object_triangles(i);
+                    // Named by the scene's source triangle, as the flat path names it.
+                    let first = self.geometry.instance_triangles[i].start as usize;
+                    for (local, tri) in triangles.positions.iter().enumerate() {
+                        if let Some(v) = tri.iter().find(|v| !v.is_finite()) {
+                            return Err(AccelError::NonFiniteVertex {
+                                triangle: first + local,
+                                vertex: v.to_array(),
+                            });
+                        }
+                    }
+                    meshes.push(triangles);
+                    mesh_of_key.insert(key, meshes.len() as u32 - 1);
+                    meshes.len() as u32 - 1
+                }
+            };
             two.mesh_of.push(Some(mesh));
             two.placed.push(i as u32);
         }

@@ -1,13 +1,15 @@
 //! What rays are traced against: the flat tree over world-space triangles, or the two-level
 //! structure (shared object-space meshes placed by instances, plus a world-space tree for
-//! what deforms). The integrator asks for hits and for the hit triangle in world space and
+//! what deforms or stands still). The integrator asks for hits and for the hit triangle in world space and
 //! never sees which one it has.
 //!
 //! A hit on an instance is turned into world space at the hit, with the same arithmetic the
 //! flat path uses to write its triangles (`Placement::place_triangle`), and the distance and
 //! barycentrics are taken again from the world-space triangle with the same watertight test:
 //! where both structures find the same triangle, shading sees the same bits. Only which
-//! triangle is found can differ, where the object-space test rounds differently on an edge.
+//! triangle is found can differ: on an edge, or between coincident surfaces of an instance
+//! and another tree (its object-space `t` may round a few ulps away from the world-space
+//! one, so the tie rule by source triangle no longer decides between them).
 
 use glam::{Vec2, Vec3A};
 
@@ -30,7 +32,8 @@ pub enum SceneBvh<'a> {
 /// The two-level structure of a frame.
 #[derive(Clone, Copy)]
 pub struct Instanced<'a> {
-    /// Triangles of the deforming instances, in world space (the world tree's).
+    /// The world tree's triangles, in world space: skinned and morphed instances, and static
+    /// ones merged into it (see `frame/two_level.rs`).
     pub world_triangles: &'a FrameTriangles,
     pub world: &'a Accel,
     pub accel: &'a TwoLevelAccel,
