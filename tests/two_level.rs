@@ -297,6 +297,68 @@ fn a_failed_frame_leaves_no_stale_placements() {
     }
 }
 
+/// A static forest: 80 copies of a 2,048-triangle patch that never move (too many to merge
+/// into the world tree, so they stay instances under their own top-level tree, built once)
+/// and one moving copy. Same images and counters as flat, and nothing world-space.
+#[test]
+fn static_copies_stay_instances_beside_moving_ones() {
+    let forest = || {
+        let mut scene = generated::textured_scene();
+        scene.meshes.push(mipray::scene::MeshDesc {
+            name: "patch".into(),
+            primitives: vec![generated::patch(32, 32, 1.0, 1.0)],
+            ..Default::default()
+        });
+        let mesh = scene.meshes.len() - 1;
+        for k in 0..80 {
+            let at = Vec3::new(
+                (k % 10) as f32 * 1.1 - 5.0,
+                (k / 10) as f32 * 1.1 - 4.0,
+                -1.0,
+            );
+            add_root(
+                &mut scene,
+                node(
+                    "tree",
+                    Trs {
+                        translation: at,
+                        ..Default::default()
+                    },
+                    Some(mesh),
+                ),
+            );
+        }
+        generated::add_rigid_patches(&mut scene, 1, 8, 1.0, Vec3::new(0.0, 0.0, 0.5));
+        generated::add_camera(&mut scene, Vec3::new(0.0, 0.0, 9.0), 1.0);
+        scene
+    };
+    let mut flat = Renderer::new(forest(), settings(LodMethod::Paper, BvhLayout::Flat));
+    let mut two = Renderer::new(forest(), settings(LodMethod::Paper, BvhLayout::TwoLevel));
+    for frame in 0..6 {
+        let time = frame as f32 / FPS;
+        let (a, ra) = flat.render_frame(frame, time).unwrap();
+        let (b, rb) = two.render_frame(frame, time).unwrap();
+        let (share, mean, largest) = difference(&a, &b);
+        assert!(
+            share <= MAX_DIFFERING_SHARE && mean <= MAX_MEAN_ABS,
+            "frame {frame}: {:.3}% of pixels differ (mean {mean:.2e}, largest {largest})",
+            share * 100.0
+        );
+        assert_eq!(counters(&ra.update), counters(&rb.update), "frame {frame}");
+        assert_eq!(
+            two.triangles().len(),
+            0,
+            "frame {frame}: every copy is an instance"
+        );
+        if frame > 0 {
+            assert_eq!(
+                rb.update.moved_triangles, 128,
+                "frame {frame}: only the small patch moves"
+            );
+        }
+    }
+}
+
 #[test]
 fn a_two_level_frame_alone_equals_the_same_frame_of_a_sequence() {
     let mut sequence = Renderer::new(scene(), settings(LodMethod::Cones, BvhLayout::TwoLevel));

@@ -24,6 +24,8 @@ use crate::geometry::{FrameTriangles, Placement};
 /// One instance of a shared mesh, as the frame loop describes it.
 #[derive(Debug, Clone, Copy)]
 pub struct TlasInstance {
+    /// What hits on it report as [`Hit::instance`].
+    pub index: u32,
     /// Mesh `i` of [`TwoLevelAccel::new`].
     pub mesh: u32,
     pub world_from_object: Mat4,
@@ -72,18 +74,30 @@ impl Collapsed {
     }
 }
 
-/// Bottom-level trees of the shared meshes and the top-level tree over their instances.
+/// A top-level tree over some instances.
 #[derive(Default)]
-pub struct TwoLevelAccel {
-    meshes: Vec<MeshBlas>,
+struct TopLevel {
     tlas: WideBvh,
     /// Instances in top-level leaf order (a leaf's reference is its index here).
     placed: Vec<Placed>,
-    /// Boxes of the last `set_instances`, reused.
+    /// Boxes of the last build, reused.
     boxes: Vec<Aabb>,
-    /// Instances of this frame with a collapsed transform.
+    /// Instances with a collapsed transform, walked after the tree.
     collapsed: Vec<Collapsed>,
 }
+
+/// Bottom-level trees of the shared meshes and the top-level trees over their instances:
+/// one over the instances that never move (built once), one over those that do (rebuilt
+/// when one moves), so a moving car among a static forest of instances pays for itself.
+#[derive(Default)]
+pub struct TwoLevelAccel {
+    meshes: Vec<MeshBlas>,
+    /// `[fixed, moving]`.
+    levels: [TopLevel; 2],
+}
+
+const FIXED: usize = 0;
+const MOVING: usize = 1;
 
 /// What an instance's transform allows this frame.
 enum Placing {
@@ -134,35 +148,54 @@ impl TwoLevelAccel {
 
     /// Instances rays can hit this frame (those with an empty mesh are left out).
     pub fn instance_count(&self) -> usize {
-        self.placed.len() + self.collapsed.len()
+        self.levels
+            .iter()
+            .map(|l| l.placed.len() + l.collapsed.len())
+            .sum()
     }
 
-    /// Places the instances for this frame and rebuilds the top-level tree over their
-    /// world boxes.
+    /// Places the moving instances for this frame and rebuilds their top-level tree.
     ///
     /// # Errors
-    /// The index of the first instance whose world box is not finite (a transform that
-    /// overflows or is NaN); the tree is then left empty.
-    pub fn set_instances(&mut self, instances: &[TlasInstance]) -> Result<(), usize> {
+    /// The [`TlasInstance::index`] of the first instance whose world box is not finite (a
+    /// transform that overflows or is NaN); the tree is then left empty.
+    pub fn set_instances(&mut self, instances: &[TlasInstance]) -> Result<(), u32> {
+        self.set_level(MOVING, instances)
+    }
+
+    /// Places the instances that never move (once, on the first frame), as
+    /// [`TwoLevelAccel::set_instances`].
+    ///
+    /// # Errors
+    /// As [`TwoLevelAccel::set_instances`].
+    pub fn set_fixed_instances(&mut self, instances: &[TlasInstance]) -> Result<(), u32> {
+        self.set_level(FIXED, instances)
+    }
+
+    fn set_level(&mut self, level: usize, instances: &[TlasInstance]) -> Result<(), u32> {
+        let mut top = std::mem::take(&mut self.levels[level]);
+        let built = self.build_level(&mut top, instances);
+        if built.is_err() {
+            top = TopLevel::default();
+        }
+        self.levels[level] = top;
+        built
+    }
+
+    fn build_level(&self, top: &mut TopLevel, instances: &[TlasInstance]) -> Result<(), u32> {
         let mut placed = Vec::with_capacity(instances.len());
-        self.boxes.clear();
-        self.tlas = WideBvh::default();
-        self.placed.clear();
-        self.collapsed.clear();
-        for (index, instance) in instances.iter().enumerate() {
+        top.boxes.clear();
+        top.tlas = WideBvh::default();
+        top.placed.clear();
+        top.collapsed.clear();
+        for instance in instances {
             let (object_from_world, aabb) = match self.placing(instance) {
                 Placing::Inverse(inverse, aabb) => (inverse, aabb),
                 Placing::Nothing => continue,
-                Placing::NonFinite => {
-                    self.collapsed.clear();
-                    return Err(index);
-                }
+                Placing::NonFinite => return Err(instance.index),
                 Placing::Collapsed => {
-                    let Some(collapsed) = self.collapse(instance, index as u32) else {
-                        self.collapsed.clear();
-                        return Err(index);
-                    };
-                    self.collapsed.push(collapsed);
+                    let collapsed = self.collapse(instance).ok_or(instance.index)?;
+                    top.collapsed.push(collapsed);
                     continue;
                 }
             };
@@ -170,9 +203,9 @@ impl TwoLevelAccel {
                 mesh: instance.mesh,
                 object_from_world,
                 source_base: instance.source_base,
-                index: index as u32,
+                index: instance.index,
             });
-            self.boxes.push(aabb);
+            top.boxes.push(aabb);
         }
         if placed.is_empty() {
             return Ok(());
@@ -183,13 +216,13 @@ impl TwoLevelAccel {
             max_prims_per_leaf: 1,
             ..BvhBuildParams::medium_build()
         };
-        let bvh = build_bvh2(&self.boxes, params, &mut Duration::default());
-        self.placed = bvh
+        let bvh = build_bvh2(&top.boxes, params, &mut Duration::default());
+        top.placed = bvh
             .primitive_indices
             .iter()
             .map(|&i| placed[i as usize])
             .collect();
-        self.tlas = WideBvh::collapse(&bvh, |first, _| first);
+        top.tlas = WideBvh::collapse(&bvh, |first, _| first);
         Ok(())
     }
 
@@ -220,7 +253,7 @@ impl TwoLevelAccel {
 
     /// A collapsed instance's triangles placed in world space, as the flat path places them
     /// (`None` if a vertex overflows).
-    fn collapse(&self, instance: &TlasInstance, index: u32) -> Option<Collapsed> {
+    fn collapse(&self, instance: &TlasInstance) -> Option<Collapsed> {
         let mesh = &self.meshes[instance.mesh as usize].triangles;
         let placement = Placement::new(instance.world_from_object);
         let n = mesh.len();
@@ -245,7 +278,7 @@ impl TwoLevelAccel {
             .map(|&k| mesh.source[k as usize])
             .collect();
         Some(Collapsed {
-            index,
+            index: instance.index,
             source_base: instance.source_base,
             triangles,
             accel,
@@ -275,15 +308,17 @@ impl TwoLevelAccel {
             &mut best,
         );
         let mut limit = limit;
-        self.tlas.traverse(&ray, limit, |first, _, limit| {
-            let placed = &self.placed[first as usize];
-            *limit = self.closest_in_instance(placed, origin, direction, *limit, &mut best);
-            true
-        });
-        if let Some(hit) = best.hit {
-            limit = limit.min(hit.t.next_up());
+        for top in &self.levels {
+            top.tlas.traverse(&ray, limit, |first, _, limit| {
+                let placed = &top.placed[first as usize];
+                *limit = self.closest_in_instance(placed, origin, direction, *limit, &mut best);
+                true
+            });
+            if let Some(hit) = best.hit {
+                limit = limit.min(hit.t.next_up());
+            }
         }
-        for c in &self.collapsed {
+        for c in self.levels.iter().flat_map(|l| &l.collapsed) {
             limit = c
                 .accel
                 .closest_within(&c.within(), &ray, &sheared, limit, &mut best);
@@ -318,13 +353,16 @@ impl TwoLevelAccel {
             &mut limits[..n],
             &mut best[..n],
         );
-        self.tlas
-            .traverse_packet(&boxes[..n], &mut limits[..n], |r, first, _, limit| {
-                let (origin, direction) = rays[r];
-                let placed = &self.placed[first as usize];
-                *limit = self.closest_in_instance(placed, origin, direction, *limit, &mut best[r]);
-            });
-        for c in &self.collapsed {
+        for top in &self.levels {
+            top.tlas
+                .traverse_packet(&boxes[..n], &mut limits[..n], |r, first, _, limit| {
+                    let (origin, direction) = rays[r];
+                    let placed = &top.placed[first as usize];
+                    *limit =
+                        self.closest_in_instance(placed, origin, direction, *limit, &mut best[r]);
+                });
+        }
+        for c in self.levels.iter().flat_map(|l| &l.collapsed) {
             for r in 0..n {
                 limits[r] = c.accel.closest_within(
                     &c.within(),
@@ -384,19 +422,23 @@ impl TwoLevelAccel {
             return false;
         }
         let ray = RayBoxes::new(origin, direction);
-        let go_on = self.tlas.traverse(&ray, t_max, |first, _, _| {
-            let placed = &self.placed[first as usize];
-            let (o, d) = object_ray(&placed.object_from_world, origin, direction);
-            self.meshes[placed.mesh as usize]
-                .accel
-                .visit_hits(o, d, t_max, |slot, t| visit(placed.index, slot, t))
-        });
-        go_on
-            && self.collapsed.iter().all(|c| {
-                c.accel.visit_hits(origin, direction, t_max, |slot, t| {
-                    visit(c.index, c.triangles.source[slot as usize], t)
-                })
+        for top in &self.levels {
+            let go_on = top.tlas.traverse(&ray, t_max, |first, _, _| {
+                let placed = &top.placed[first as usize];
+                let (o, d) = object_ray(&placed.object_from_world, origin, direction);
+                self.meshes[placed.mesh as usize]
+                    .accel
+                    .visit_hits(o, d, t_max, |slot, t| visit(placed.index, slot, t))
+            });
+            if !go_on {
+                return false;
+            }
+        }
+        self.levels.iter().flat_map(|l| &l.collapsed).all(|c| {
+            c.accel.visit_hits(origin, direction, t_max, |slot, t| {
+                visit(c.index, c.triangles.source[slot as usize], t)
             })
+        })
     }
 }
 
@@ -480,6 +522,7 @@ mod tests {
                 Vec3::splat(0.5 + 0.2 * k as f32)
             };
             instances.push(TlasInstance {
+                index: k,
                 mesh: m,
                 world_from_object: Mat4::from_scale_rotation_translation(
                     scale,
@@ -489,7 +532,9 @@ mod tests {
                 source_base: 100 * k,
             });
         }
-        two.set_instances(&instances).unwrap();
+        // Half never move (their own top-level tree), half do.
+        two.set_fixed_instances(&instances[..4]).unwrap();
+        two.set_instances(&instances[4..]).unwrap();
         assert_eq!(two.instance_count(), 10);
         let (mut hits, mut rays) = (0, Vec::new());
         for r in 0..400 {
@@ -564,18 +609,20 @@ mod tests {
         let mut two = TwoLevelAccel::new(vec![soup(&[tri]), soup(&[])]).unwrap();
         let world_tris = soup(&[]);
         let world = Accel::default();
-        let instance = |mesh, world_from_object, source_base| TlasInstance {
+        // Instance k: index k, source base k.
+        let instance = |k: u32, mesh, world_from_object| TlasInstance {
+            index: k,
             mesh,
             world_from_object,
-            source_base,
+            source_base: k,
         };
         let instances = [
             // Flattened along its own normal: still a triangle, seen from +z.
-            instance(0, Mat4::from_scale(Vec3::new(2.0, 2.0, 0.0)), 0),
-            instance(1, Mat4::IDENTITY, 1),
-            instance(0, Mat4::from_translation(Vec3::new(0.0, 0.0, -2.0)), 2),
+            instance(0, 0, Mat4::from_scale(Vec3::new(2.0, 2.0, 0.0))),
+            instance(1, 1, Mat4::IDENTITY),
+            instance(2, 0, Mat4::from_translation(Vec3::new(0.0, 0.0, -2.0))),
             // Flattened within its plane: a segment, never hit.
-            instance(0, Mat4::from_scale(Vec3::new(1.0, 0.0, 1.0)), 3),
+            instance(3, 0, Mat4::from_scale(Vec3::new(1.0, 0.0, 1.0))),
         ];
         two.set_instances(&instances).unwrap();
         assert_eq!(two.instance_count(), 3);
@@ -612,10 +659,10 @@ mod tests {
         two.set_instances(&[]).unwrap();
         assert!(trace(&two, Vec3A::ZERO).is_none());
         // An overflowing transform is reported (by index), not built into the tree.
-        let overflow = instance(0, Mat4::from_scale(Vec3::splat(f32::MAX)), 0);
-        let nan = instance(0, Mat4::from_translation(Vec3::splat(f32::NAN)), 0);
-        assert_eq!(two.set_instances(&[instances[2], overflow]), Err(1));
-        assert_eq!(two.set_instances(&[nan]), Err(0));
+        let overflow = instance(7, 0, Mat4::from_scale(Vec3::splat(f32::MAX)));
+        let nan = instance(8, 0, Mat4::from_translation(Vec3::splat(f32::NAN)));
+        assert_eq!(two.set_instances(&[instances[2], overflow]), Err(7));
+        assert_eq!(two.set_fixed_instances(&[nan]), Err(8));
         assert_eq!(two.instance_count(), 0);
     }
 }

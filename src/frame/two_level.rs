@@ -6,8 +6,9 @@
 //! costs a top-level box that overlaps its neighbours and a ray setup per visit (Embree
 //! users merge static geometry the same way). The exception is a mesh whose static copies
 //! would cost more than [`FLATTEN_BUDGET`] extra triangles in world space (a forest of one
-//! tree): its static instances stay instances, which is what saves the memory. The
-//! top-level tree over the instances is rebuilt when a placement changed.
+//! tree): its static instances stay instances, which is what saves the memory, under their
+//! own top-level tree built once. The top-level tree over the moving instances is rebuilt
+//! when one of them moved.
 //!
 //! The `log2 P_b` of a placed instance follows the flat rules (`log2_pb.rs`), evaluated at
 //! the hit from the object-space constant and the instance's shape key (`PbRule`), so a
@@ -41,8 +42,17 @@ pub(super) struct TwoLevel {
     pub placed: Vec<u32>,
     /// Per placed instance: how its triangles are shaded this frame.
     pub shading: Vec<InstanceShading>,
+    /// Per placed instance: whether its node never moves (its top-level tree is built once).
+    pub fixed: Vec<bool>,
     /// Per scene instance: its textured triangles (what `lod_*` counters count).
     pub textured: Vec<usize>,
+}
+
+/// Which placed instances [`Renderer::place_instances`] places.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(super) enum Which {
+    All,
+    Moving,
 }
 
 /// What a frame's placed instances changed, counted as the flat update would.
@@ -120,6 +130,7 @@ impl Renderer {
             };
             two.mesh_of.push(Some(mesh));
             two.placed.push(i as u32);
+            two.fixed.push(fixed);
         }
         two.accel = TwoLevelAccel::new(meshes)?;
         self.two_level = Some(two);
@@ -150,39 +161,69 @@ impl Renderer {
         t
     }
 
-    /// This frame's placements of every placed instance and the top-level tree over them.
+    /// This frame's placements of the placed instances and the top-level tree over them:
+    /// every instance on the first frame (`Which::All`), then only those of moving nodes
+    /// (the others never move: their tree is built once).
     ///
     /// # Errors
     /// A placement that makes a vertex non-finite (as the flat path reports it: the first
     /// such triangle of the first such instance).
-    pub(super) fn place_instances(&mut self, states: &[InstanceState]) -> Result<(), AccelError> {
+    pub(super) fn place_instances(
+        &mut self,
+        states: &[InstanceState],
+        which: Which,
+    ) -> Result<(), AccelError> {
         let Some(two) = self.two_level.as_mut() else {
             return Ok(());
         };
-        two.shading.clear();
-        let mut tlas = Vec::with_capacity(two.placed.len() + 1);
-        for &i in &two.placed {
+        if which == Which::All {
+            two.shading.clear();
+            two.shading.resize(
+                two.placed.len(),
+                InstanceShading {
+                    placement: Placement::new(Mat4::IDENTITY),
+                    mesh: 0,
+                    source_base: 0,
+                    pb: PbRule::Shift { log2_scale: 0.0 },
+                },
+            );
+        }
+        let (mut fixed, mut moving) = (Vec::new(), Vec::new());
+        for (k, &i) in two.placed.iter().enumerate() {
             let i = i as usize;
+            if which == Which::Moving && two.fixed[k] {
+                continue;
+            }
             let state = states[i];
             let mesh = two.mesh_of[i].unwrap_or(0);
             let source_base = self.geometry.instance_triangles[i].start;
             let placement = Placement::new(state.world_from_object);
-            two.shading.push(InstanceShading {
+            two.shading[k] = InstanceShading {
                 placement,
                 mesh,
                 source_base,
                 pb: pb_rule(state.shape, placement),
-            });
-            tlas.push(TlasInstance {
+            };
+            let instance = TlasInstance {
+                index: k as u32,
                 mesh,
                 world_from_object: state.world_from_object,
                 source_base,
-            });
+            };
+            if two.fixed[k] {
+                fixed.push(instance);
+            } else {
+                moving.push(instance);
+            }
         }
-        let Err(k) = two.accel.set_instances(&tlas) else {
+        let mut placed = two.accel.set_instances(&moving);
+        if which == Which::All {
+            placed = two.accel.set_fixed_instances(&fixed).and(placed);
+        }
+        let Err(k) = placed else {
             return Ok(());
         };
-        let i = two.placed[k] as usize;
+        let i = two.placed[k as usize] as usize;
         let placement = Placement::new(states[i].world_from_object);
         let primitive = self.geometry.primitive(&self.scene, i);
         for source in self.geometry.instance_triangles[i].clone() {

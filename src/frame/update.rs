@@ -24,6 +24,7 @@ use super::posed::{
     write_all_triangles,
 };
 use super::scatter::SlotScatter;
+use super::two_level::Which;
 use super::{InstanceState, Motion, Renderer, UpdateStats, ms_since};
 use crate::accel::{Accel, AccelError, BvhLayout, TreeStep};
 use crate::anim::NodeShape;
@@ -101,7 +102,7 @@ impl Renderer {
         let t = Instant::now();
         self.accel = Accel::build(&mut self.triangles)?;
         self.index_slots();
-        self.place_instances(&states)?;
+        self.place_instances(&states, Which::All)?;
         stats.build_ms = build_ms + ms_since(t);
         stats.rebuild = true;
 
@@ -352,7 +353,7 @@ impl Renderer {
             // The top-level tree over the new placements: counted as refit.
             let t = Instant::now();
             let states = self.instances.take().unwrap_or_default();
-            let placed = self.place_instances(&states);
+            let placed = self.place_instances(&states, Which::Moving);
             self.instances = Some(states);
             placed?;
             stats.refit_ms += ms_since(t);
