@@ -84,6 +84,18 @@ struct TopLevel {
     boxes: Vec<Aabb>,
     /// Instances with a collapsed transform, walked after the tree.
     collapsed: Vec<Collapsed>,
+    /// The box of the only instance when there is one: a one-leaf tree keeps no box, and
+    /// entering an instance (transform, ray setup) costs more than testing it.
+    single: Option<Aabb>,
+}
+
+impl TopLevel {
+    /// Whether a ray may reach the instance at leaf `first` (always, in a tree with boxes:
+    /// the walk tested them).
+    #[inline(always)]
+    fn reaches(&self, ray: &RayBoxes, t_max: f32) -> bool {
+        self.single.is_none_or(|b| ray.enters_box(&b, t_max))
+    }
 }
 
 /// Bottom-level trees of the shared meshes and the top-level trees over their instances:
@@ -188,6 +200,7 @@ impl TwoLevelAccel {
         top.tlas = WideBvh::default();
         top.placed.clear();
         top.collapsed.clear();
+        top.single = None;
         for instance in instances {
             let (object_from_world, aabb) = match self.placing(instance) {
                 Placing::Inverse(inverse, aabb) => (inverse, aabb),
@@ -223,6 +236,9 @@ impl TwoLevelAccel {
             .map(|&i| placed[i as usize])
             .collect();
         top.tlas = WideBvh::collapse(&bvh, |first, _| first);
+        if let [only] = top.boxes[..] {
+            top.single = Some(only);
+        }
         Ok(())
     }
 
@@ -310,8 +326,10 @@ impl TwoLevelAccel {
         let mut limit = limit;
         for top in &self.levels {
             top.tlas.traverse(&ray, limit, |first, _, limit| {
-                let placed = &top.placed[first as usize];
-                *limit = self.closest_in_instance(placed, origin, direction, *limit, &mut best);
+                if top.reaches(&ray, *limit) {
+                    let placed = &top.placed[first as usize];
+                    *limit = self.closest_in_instance(placed, origin, direction, *limit, &mut best);
+                }
                 true
             });
             if let Some(hit) = best.hit {
@@ -356,10 +374,17 @@ impl TwoLevelAccel {
         for top in &self.levels {
             top.tlas
                 .traverse_packet(&boxes[..n], &mut limits[..n], |r, first, _, limit| {
-                    let (origin, direction) = rays[r];
-                    let placed = &top.placed[first as usize];
-                    *limit =
-                        self.closest_in_instance(placed, origin, direction, *limit, &mut best[r]);
+                    if top.reaches(&boxes[r], *limit) {
+                        let (origin, direction) = rays[r];
+                        let placed = &top.placed[first as usize];
+                        *limit = self.closest_in_instance(
+                            placed,
+                            origin,
+                            direction,
+                            *limit,
+                            &mut best[r],
+                        );
+                    }
                 });
         }
         for c in self.levels.iter().flat_map(|l| &l.collapsed) {
@@ -424,6 +449,9 @@ impl TwoLevelAccel {
         let ray = RayBoxes::new(origin, direction);
         for top in &self.levels {
             let go_on = top.tlas.traverse(&ray, t_max, |first, _, _| {
+                if !top.reaches(&ray, t_max) {
+                    return true;
+                }
                 let placed = &top.placed[first as usize];
                 let (o, d) = object_ray(&placed.object_from_world, origin, direction);
                 self.meshes[placed.mesh as usize]

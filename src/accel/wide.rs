@@ -184,6 +184,25 @@ impl RayBoxes {
     }
 }
 
+impl RayBoxes {
+    /// Whether the ray enters `aabb` before `t_max`: the slab test of one lane, for a box
+    /// kept outside a node (the lone leaf of a one-leaf tree keeps none).
+    #[inline(always)]
+    pub fn enters_box(&self, aabb: &Aabb, t_max: f32) -> bool {
+        let mut near = 0.0f32;
+        let mut far = f32::INFINITY;
+        let bounds = [aabb.min, aabb.max];
+        for axis in 0..3 {
+            let (origin, inverse) = (self.origin[axis].x, self.inverse[axis].x);
+            let front = bounds[self.front[axis] / 3][axis];
+            let back = bounds[self.back[axis] / 3][axis];
+            near = near.max((front - origin) * inverse);
+            far = far.min((back - origin) * inverse);
+        }
+        near <= (far * ROBUST_FAR).min(t_max)
+    }
+}
+
 /// Most rays in a packet.
 pub const PACKET: usize = 64;
 
@@ -748,6 +767,41 @@ mod tests {
         assert_eq!(
             reached(&wide, Vec3A::new(0.0, 0.0, -3.0), -Vec3A::Z).len(),
             0
+        );
+    }
+
+    /// A box kept outside the tree answers exactly as the same box in a node's lane.
+    #[test]
+    fn a_lone_box_answers_as_a_lane() {
+        let mut seed = 12345u64;
+        let mut next = move || {
+            seed ^= seed << 13;
+            seed ^= seed >> 7;
+            seed ^= seed << 17;
+            (seed >> 40) as f32 / (1u64 << 24) as f32 * 4.0 - 2.0
+        };
+        let mut agreed = [0; 2];
+        for _ in 0..2000 {
+            let a = Vec3A::new(next(), next(), next());
+            let b = Vec3A::new(next(), next(), next());
+            let aabb = Aabb::new(a.min(b), a.max(b));
+            let mut node = WideNode::UNUSED;
+            node.set_box(1, &aabb);
+            // Aimed near the box; axis-parallel directions too (a zero component).
+            let origin = Vec3A::new(next(), next(), next()) * 2.0;
+            let mut d = (a + b) * 0.5 + Vec3A::new(next(), next(), next()) * 0.5 - origin;
+            if next() > 1.0 {
+                d.y = 0.0;
+            }
+            let ray = RayBoxes::new(origin, d);
+            let limit = next().abs() * 3.0;
+            let lane = ray.enters_lane(&node, 1, limit);
+            assert_eq!(ray.enters_box(&aabb, limit), lane);
+            agreed[lane as usize] += 1;
+        }
+        assert!(
+            agreed[0] > 100 && agreed[1] > 100,
+            "{agreed:?}: both answers exercised"
         );
     }
 }
