@@ -18,7 +18,7 @@ use obvhs::{BvhBuildParams, aabb::Aabb, bvh2::builder::build_bvh2};
 
 use super::triangles::ShearedRay;
 use super::wide::{PACKET, RayBoxes, WideBvh};
-use super::{Accel, AccelError, Closest, Hit, Within};
+use super::{Accel, AccelError, Closest, Hit, Within, packet_rays};
 use crate::geometry::{FrameTriangles, Placement};
 
 /// One instance of a shared mesh, as the frame loop describes it.
@@ -317,7 +317,7 @@ impl TwoLevelAccel {
         let ray = RayBoxes::new(origin, direction);
         let sheared = ShearedRay::new(origin, direction);
         let limit = world.closest_within(
-            &world_within(world_triangles),
+            &Within::world(world_triangles),
             &ray,
             &sheared,
             t_max,
@@ -356,16 +356,11 @@ impl TwoLevelAccel {
         hits: &mut [Option<Hit>],
     ) {
         let n = rays.len().min(hits.len()).min(PACKET);
-        let mut boxes = [RayBoxes::default(); PACKET];
-        let mut sheared = [ShearedRay::default(); PACKET];
-        for (i, &(origin, direction)) in rays[..n].iter().enumerate() {
-            boxes[i] = RayBoxes::new(origin, direction);
-            sheared[i] = ShearedRay::new(origin, direction);
-        }
+        let (boxes, sheared) = packet_rays(&rays[..n]);
         let mut best = [Closest::default(); PACKET];
         let mut limits = [t_max; PACKET];
         world.closest_hits_within(
-            &world_within(world_triangles),
+            &Within::world(world_triangles),
             &boxes[..n],
             &sheared[..n],
             &mut limits[..n],
@@ -467,16 +462,6 @@ impl TwoLevelAccel {
                 visit(c.index, c.triangles.source[slot as usize], t)
             })
         })
-    }
-}
-
-/// The world tree's triangles as a closest-hit query sees them.
-fn world_within(triangles: &FrameTriangles) -> Within<'_> {
-    Within {
-        source: &triangles.source,
-        source_base: 0,
-        instance: Hit::WORLD,
-        reported: None,
     }
 }
 

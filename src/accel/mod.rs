@@ -122,6 +122,30 @@ struct Within<'a> {
     reported: Option<&'a [u32]>,
 }
 
+impl<'a> Within<'a> {
+    /// The world-space tree over `triangles` (their sources are the scene's).
+    fn world(triangles: &'a FrameTriangles) -> Within<'a> {
+        Within {
+            source: &triangles.source,
+            source_base: 0,
+            instance: Hit::WORLD,
+            reported: None,
+        }
+    }
+}
+
+/// The slab and hit-test constants of each ray of a packet (`rays.len() <= PACKET`; the
+/// rest are placeholders).
+fn packet_rays(rays: &[(Vec3A, Vec3A)]) -> ([RayBoxes; PACKET], [ShearedRay; PACKET]) {
+    let mut boxes = [RayBoxes::default(); PACKET];
+    let mut sheared = [ShearedRay::default(); PACKET];
+    for (i, &(origin, direction)) in rays.iter().take(PACKET).enumerate() {
+        boxes[i] = RayBoxes::new(origin, direction);
+        sheared[i] = ShearedRay::new(origin, direction);
+    }
+    (boxes, sheared)
+}
+
 /// Which refit ran.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum RefitKind {
@@ -297,16 +321,7 @@ impl Accel {
         let mut best = Closest::default();
         let ray = RayBoxes::new(origin, direction);
         let sheared = ShearedRay::new(origin, direction);
-        let within = Within {
-            source: &triangles.source,
-            source_base: 0,
-            instance: Hit::WORLD,
-            reported: None,
-        };
-        self.wide.traverse(&ray, t_max, |first, count, limit| {
-            self.closest_in_leaf(&within, &sheared, first, count, limit, &mut best);
-            true
-        });
+        self.closest_within(&Within::world(triangles), &ray, &sheared, t_max, &mut best);
         best.hit
     }
 
@@ -342,22 +357,11 @@ impl Accel {
         hits: &mut [Option<Hit>],
     ) {
         let n = rays.len().min(hits.len()).min(PACKET);
-        let mut boxes = [RayBoxes::default(); PACKET];
-        let mut sheared = [ShearedRay::default(); PACKET];
-        for (i, &(origin, direction)) in rays.iter().take(n).enumerate() {
-            boxes[i] = RayBoxes::new(origin, direction);
-            sheared[i] = ShearedRay::new(origin, direction);
-        }
+        let (boxes, sheared) = packet_rays(&rays[..n]);
         let mut best = [Closest::default(); PACKET];
         let mut limits = [t_max; PACKET];
-        let within = Within {
-            source: &triangles.source,
-            source_base: 0,
-            instance: Hit::WORLD,
-            reported: None,
-        };
         self.closest_hits_within(
-            &within,
+            &Within::world(triangles),
             &boxes[..n],
             &sheared[..n],
             &mut limits[..n],
