@@ -24,8 +24,8 @@ const MAX_DIFFERING_SHARE: f64 = 0.005;
 const MAX_MEAN_ABS: f64 = 1e-3;
 
 /// The dynamic scene (spinning, growing and stretched instances of one card mesh over the
-/// showcase's mirror, glass and textured floor), a textured skinned strip, and a mirrored
-/// card instance that turns and moves.
+/// showcase's mirror, glass and textured floor), a textured skinned strip, a mirrored card
+/// instance that turns, and a card sheared by turning under a stretched parent.
 fn scene() -> SceneDesc {
     let (mut scene, _) = dynamic_scene();
     merge_textured(
@@ -51,15 +51,40 @@ fn scene() -> SceneDesc {
             Some(card),
         ),
     );
-    let turn = |a: f32| Quat::from_rotation_y(a).to_array();
+    // A card turning about z under a parent stretched along x: a shear, whose `log2 P_b`
+    // comes from the world-space triangle.
+    scene
+        .nodes
+        .push(node("sheared", Trs::default(), Some(card)));
+    let sheared = scene.nodes.len() - 1;
+    let mut parent = node(
+        "stretching parent",
+        Trs {
+            translation: Vec3::new(-2.4, 2.0, -5.5),
+            scale: Vec3::new(1.8, 0.9, 1.0),
+            ..Default::default()
+        },
+        None,
+    );
+    parent.children.push(sheared);
+    add_root(&mut scene, parent);
+    let turn = |axis: Vec3, a: f32| Quat::from_axis_angle(axis, a).to_array();
     scene.animations.push(AnimationDesc {
-        name: "mirrored".into(),
-        channels: vec![channel(
-            mirrored,
-            ChannelTarget::Rotation,
-            &[0.0, 1.0],
-            &[turn(0.0), turn(1.2)].concat(),
-        )],
+        name: "mirrored and sheared".into(),
+        channels: vec![
+            channel(
+                mirrored,
+                ChannelTarget::Rotation,
+                &[0.0, 1.0],
+                &[turn(Vec3::Y, 0.0), turn(Vec3::Y, 1.2)].concat(),
+            ),
+            channel(
+                sheared,
+                ChannelTarget::Rotation,
+                &[0.0, 1.0],
+                &[turn(Vec3::Z, 0.3), turn(Vec3::Z, 1.1)].concat(),
+            ),
+        ],
     });
     scene
 }

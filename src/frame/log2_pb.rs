@@ -140,7 +140,8 @@ impl Renderer {
         )
     }
 
-    fn texture_size(&self, source: usize) -> Option<(u32, u32)> {
+    /// Level-0 size of the base-colour texture of source triangle `source`'s material.
+    pub(super) fn texture_size(&self, source: usize) -> Option<(u32, u32)> {
         let instance = self.geometry.instances[self.geometry.triangle_instance[source] as usize];
         let material = &self.geometry.materials[instance.material as usize];
         let texture = self.scene.textures.get(material.base_color_texture?)?;

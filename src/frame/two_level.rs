@@ -44,6 +44,8 @@ pub(super) struct TwoLevel {
     pub shading: Vec<InstanceShading>,
     /// Per placed instance: whether its node never moves (its top-level tree is built once).
     pub fixed: Vec<bool>,
+    /// Per placed instance: its base-colour texture's level-0 size ((1, 1) when none).
+    pub texture_size: Vec<(u32, u32)>,
     /// Per scene instance: its textured triangles (what `lod_*` counters count).
     pub textured: Vec<usize>,
 }
@@ -131,6 +133,9 @@ impl Renderer {
             two.mesh_of.push(Some(mesh));
             two.placed.push(i as u32);
             two.fixed.push(fixed);
+            let first = self.geometry.instance_triangles[i].start as usize;
+            two.texture_size
+                .push(self.texture_size(first).unwrap_or((1, 1)));
         }
         two.accel = TwoLevelAccel::new(meshes)?;
         self.two_level = Some(two);
@@ -184,7 +189,8 @@ impl Renderer {
                     placement: Placement::new(Mat4::IDENTITY),
                     mesh: 0,
                     source_base: 0,
-                    pb: PbRule::Shift { log2_scale: 0.0 },
+                    pb: PbRule::World,
+                    texture_size: (1, 1),
                 },
             );
         }
@@ -202,7 +208,8 @@ impl Renderer {
                 placement,
                 mesh,
                 source_base,
-                pb: pb_rule(state.shape, placement),
+                pb: pb_rule(state.shape),
+                texture_size: two.texture_size[k],
             };
             let instance = TlasInstance {
                 index: k as u32,
@@ -285,7 +292,7 @@ impl Renderer {
 }
 
 /// The `log2 P_b` rule of a placed instance with shape key `shape` (see `log2_pb.rs`).
-fn pb_rule(shape: Option<NodeShape>, placement: Placement) -> PbRule {
+fn pb_rule(shape: Option<NodeShape>) -> PbRule {
     match shape {
         Some(NodeShape {
             scale,
@@ -295,11 +302,11 @@ fn pb_rule(shape: Option<NodeShape>, placement: Placement) -> PbRule {
         },
         Some(shape) => {
             let [x, y, z] = shape.diagonal();
-            PbRule::Placed(Placement::new(Mat4::from_scale(Vec3::new(
+            PbRule::Stretched(Placement::new(Mat4::from_scale(Vec3::new(
                 x as f32, y as f32, z as f32,
             ))))
         }
-        None => PbRule::Placed(placement),
+        None => PbRule::World,
     }
 }
 

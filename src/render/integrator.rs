@@ -134,8 +134,7 @@ impl FrameScene<'_> {
     /// that triangle, see `scene_bvh`).
     #[inline]
     pub fn hit_triangle(&self, hit: &mut Hit, origin: Vec3A, direction: Vec3A) -> HitTriangle {
-        self.bvh
-            .hit_triangle(hit, origin, direction, self.materials, self.textures)
+        self.bvh.hit_triangle(hit, origin, direction)
     }
 
     /// Radiance leaving the hit `hit` (background when `None`) of a ray from `origin` along

@@ -178,7 +178,7 @@ impl FrameScene<'_> {
     }
 
     fn world_triangle(&self, at: TriangleRef) -> HitTriangle {
-        self.bvh.triangle(at, self.materials, self.textures)
+        self.bvh.triangle(at)
     }
 
     /// The hit of a ray with the plane of `triangle`, as a surface point.

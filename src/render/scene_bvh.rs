@@ -16,8 +16,6 @@ use glam::{Vec2, Vec3A};
 use crate::accel::{Accel, Hit, TriangleRef, TwoLevelAccel, intersect};
 use crate::geometry::{FrameTriangles, HitTriangle, Placement};
 use crate::lod::{PixelFootprint, log2_pb, shift_log2_pb};
-use crate::render::material::Material;
-use crate::texture::Texture;
 
 /// The acceleration structure of a frame, with the triangles its hits refer to.
 #[derive(Clone, Copy)]
@@ -55,6 +53,9 @@ pub struct InstanceShading {
     /// Its first source triangle: the mesh's triangle `i` is source `source_base + i`.
     pub source_base: u32,
     pub pb: PbRule,
+    /// Level-0 size of its base-colour texture ((1, 1) when untextured), for `PbRule`s
+    /// that compute the constant.
+    pub texture_size: (u32, u32),
 }
 
 /// Where a placed instance's `log2 P_b` comes from (the rules of `frame/log2_pb.rs`, here
@@ -63,9 +64,11 @@ pub struct InstanceShading {
 pub enum PbRule {
     /// A similarity: the object-space constant plus `log2 s`.
     Shift { log2_scale: f64 },
-    /// Anything else: the constant of the object-space triangle under this placement (the
-    /// exact axis stretch, or the world placement itself).
-    Placed(Placement),
+    /// An axis stretch: the constant of the object-space triangle under this placement (the
+    /// exact diagonal, whatever rotation the frame adds).
+    Stretched(Placement),
+    /// Anything else (a shear): the constant of the world-space triangle.
+    World,
 }
 
 impl SceneBvh<'_> {
@@ -131,15 +134,8 @@ impl SceneBvh<'_> {
     /// The hit triangle in world space. For a hit on an instance the hit's distance and
     /// barycentrics are replaced by the world-space triangle's own (see the module note).
     #[inline]
-    pub fn hit_triangle(
-        &self,
-        hit: &mut Hit,
-        origin: Vec3A,
-        direction: Vec3A,
-        materials: &[Material],
-        textures: &[Texture],
-    ) -> HitTriangle {
-        let triangle = self.triangle(hit.triangle_ref(), materials, textures);
+    pub fn hit_triangle(&self, hit: &mut Hit, origin: Vec3A, direction: Vec3A) -> HitTriangle {
+        let triangle = self.triangle(hit.triangle_ref());
         if let SceneBvh::TwoLevel(i) = self
             && hit.instance != Hit::WORLD
         {
@@ -158,12 +154,7 @@ impl SceneBvh<'_> {
 
     /// Triangle `at` in world space.
     #[inline]
-    pub fn triangle(
-        &self,
-        at: TriangleRef,
-        materials: &[Material],
-        textures: &[Texture],
-    ) -> HitTriangle {
+    pub fn triangle(&self, at: TriangleRef) -> HitTriangle {
         let slot = at.slot as usize;
         let i = match self {
             SceneBvh::Flat { triangles, .. } => return triangles.hit_triangle(slot),
@@ -185,14 +176,11 @@ impl SceneBvh<'_> {
         } else {
             match shading.pb {
                 PbRule::Shift { log2_scale } => shift_log2_pb(object_log2_pb, log2_scale),
-                PbRule::Placed(under) => {
+                PbRule::Stretched(under) => {
                     let (p, _, uv) = under.place_triangle(object.0, object.1, object.2);
-                    let size = materials
-                        .get(material as usize)
-                        .and_then(|m| textures.get(m.base_color_texture?))
-                        .map_or((1, 1), |t| t.pyramid.base_size());
-                    log2_pb(p, uv, size, i.footprint)
+                    log2_pb(p, uv, shading.texture_size, i.footprint)
                 }
+                PbRule::World => log2_pb(positions, uvs, shading.texture_size, i.footprint),
             }
         };
         HitTriangle {
