@@ -118,6 +118,25 @@ fn difference(a: &LinearImage, b: &LinearImage) -> (f64, f64, f32) {
     (differing as f64 / n, sum / (3.0 * n), largest)
 }
 
+/// Fails, naming `what`, unless `b` is within the layouts' tolerance of `a`.
+fn assert_close(a: &LinearImage, b: &LinearImage, what: &str) {
+    let (share, mean, largest) = difference(a, b);
+    assert!(
+        share <= MAX_DIFFERING_SHARE && mean <= MAX_MEAN_ABS,
+        "{what}: {:.3}% of pixels differ (mean {mean:.2e}, largest {largest})",
+        share * 100.0
+    );
+}
+
+/// Fails, naming `what` and how far off, unless the images are equal bit for bit.
+fn assert_same(a: &LinearImage, b: &LinearImage, what: &str) {
+    assert!(
+        a.pixels == b.pixels,
+        "{what}: differs {:?}",
+        difference(a, b)
+    );
+}
+
 /// The counters that say what changed (not what it cost).
 fn counters(u: &UpdateStats) -> [usize; 4] {
     [
@@ -138,12 +157,7 @@ fn two_level_frames_match_flat_for_every_lod_method() {
             let time = frame as f32 / FPS;
             let (a, ra) = flat.render_frame(frame, time).unwrap();
             let (b, rb) = two.render_frame(frame, time).unwrap();
-            let (share, mean, largest) = difference(&a, &b);
-            assert!(
-                share <= MAX_DIFFERING_SHARE && mean <= MAX_MEAN_ABS,
-                "{lod} frame {frame}: {:.3}% of pixels differ (mean {mean:.2e}, largest {largest})",
-                share * 100.0
-            );
+            assert_close(&a, &b, &format!("{lod} frame {frame}"));
             assert_eq!(
                 counters(&ra.update),
                 counters(&rb.update),
@@ -255,12 +269,7 @@ fn a_quad_flattened_along_its_normal_stays_visible() {
                 covered > b.pixels.len() / 10,
                 "{lod} t = {time}: the quad vanished"
             );
-            let (share, mean, largest) = difference(&a, &b);
-            assert!(
-                share <= MAX_DIFFERING_SHARE && mean <= MAX_MEAN_ABS,
-                "{lod} t = {time}: {:.3}% of pixels differ (mean {mean:.2e}, largest {largest})",
-                share * 100.0
-            );
+            assert_close(&a, &b, &format!("{lod} t = {time}"));
         }
     }
 }
@@ -314,10 +323,10 @@ fn a_failed_frame_leaves_no_stale_placements() {
         let (fresh, _) = Renderer::new(scene(), settings(LodMethod::Paper, layout))
             .render_frame(3, 3.0)
             .unwrap();
-        assert!(
-            after.pixels == fresh.pixels,
-            "{layout:?}: frame 3 after the failed frames differs from a fresh one {:?}",
-            difference(&after, &fresh)
+        assert_same(
+            &after,
+            &fresh,
+            &format!("{layout:?}: frame 3 after the failed frames, against a fresh one"),
         );
     }
 }
@@ -363,12 +372,7 @@ fn static_copies_stay_instances_beside_moving_ones() {
         let time = frame as f32 / FPS;
         let (a, ra) = flat.render_frame(frame, time).unwrap();
         let (b, rb) = two.render_frame(frame, time).unwrap();
-        let (share, mean, largest) = difference(&a, &b);
-        assert!(
-            share <= MAX_DIFFERING_SHARE && mean <= MAX_MEAN_ABS,
-            "frame {frame}: {:.3}% of pixels differ (mean {mean:.2e}, largest {largest})",
-            share * 100.0
-        );
+        assert_close(&a, &b, &format!("frame {frame}"));
         assert_eq!(counters(&ra.update), counters(&rb.update), "frame {frame}");
         assert_eq!(
             two.triangles().len(),
@@ -393,10 +397,10 @@ fn a_two_level_frame_alone_equals_the_same_frame_of_a_sequence() {
         if frame % 6 == 5 {
             let mut alone = Renderer::new(scene(), settings(LodMethod::Cones, BvhLayout::TwoLevel));
             let (b, _) = alone.render_frame(frame, time).unwrap();
-            assert!(
-                a.pixels == b.pixels,
-                "frame {frame}: alone differs from the sequence ({:?})",
-                difference(&a, &b)
+            assert_same(
+                &a,
+                &b,
+                &format!("frame {frame} alone, against the sequence"),
             );
         }
     }
