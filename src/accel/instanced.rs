@@ -356,20 +356,20 @@ impl TwoLevelAccel {
         hits: &mut [Option<Hit>],
     ) {
         let n = rays.len().min(hits.len()).min(PACKET);
-        let (boxes, sheared) = packet_rays(&rays[..n]);
+        let (packet, sheared) = packet_rays(&rays[..n]);
         let mut best = [Closest::default(); PACKET];
         let mut limits = [t_max; PACKET];
         world.closest_hits_within(
             &Within::world(world_triangles),
-            &boxes[..n],
-            &sheared[..n],
-            &mut limits[..n],
-            &mut best[..n],
+            &packet,
+            &sheared,
+            &mut limits,
+            &mut best,
         );
         for top in &self.levels {
             top.tlas
-                .traverse_packet(&boxes[..n], &mut limits[..n], |r, first, _, limit| {
-                    if top.reaches(&boxes[r], *limit) {
+                .traverse_packet(&packet, &mut limits, |r, first, _, limit| {
+                    if top.reaches(packet.ray(r), *limit) {
                         let (origin, direction) = rays[r];
                         let placed = &top.placed[first as usize];
                         *limit = self.closest_in_instance(
@@ -386,7 +386,7 @@ impl TwoLevelAccel {
             for r in 0..n {
                 limits[r] = c.accel.closest_within(
                     &c.within(),
-                    &boxes[r],
+                    packet.ray(r),
                     &sheared[r],
                     limits[r],
                     &mut best[r],

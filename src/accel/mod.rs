@@ -27,7 +27,7 @@ pub use policy::{BvhLayout, BvhPolicy, TreeStep};
 pub use triangles::intersect;
 use triangles::{PackedTriangles, ShearedRay};
 pub use wide::PACKET;
-use wide::{RayBoxes, WideBvh};
+use wide::{RayBoxes, RayPacket, WideBvh};
 
 /// Past this many triangles the edge and leaf-box refresh of a full refit runs on rayon's
 /// threads (below it the fork costs more than the work).
@@ -135,15 +135,13 @@ impl<'a> Within<'a> {
 }
 
 /// The slab and hit-test constants of each ray of a packet (`rays.len() <= PACKET`; the
-/// rest are placeholders).
-fn packet_rays(rays: &[(Vec3A, Vec3A)]) -> ([RayBoxes; PACKET], [ShearedRay; PACKET]) {
-    let mut boxes = [RayBoxes::default(); PACKET];
+/// hit-test constants past the rays are placeholders).
+fn packet_rays(rays: &[(Vec3A, Vec3A)]) -> (RayPacket, [ShearedRay; PACKET]) {
     let mut sheared = [ShearedRay::default(); PACKET];
     for (i, &(origin, direction)) in rays.iter().take(PACKET).enumerate() {
-        boxes[i] = RayBoxes::new(origin, direction);
         sheared[i] = ShearedRay::new(origin, direction);
     }
-    (boxes, sheared)
+    (RayPacket::new(rays), sheared)
 }
 
 /// Which refit ran.
@@ -357,15 +355,15 @@ impl Accel {
         hits: &mut [Option<Hit>],
     ) {
         let n = rays.len().min(hits.len()).min(PACKET);
-        let (boxes, sheared) = packet_rays(&rays[..n]);
+        let (packet, sheared) = packet_rays(&rays[..n]);
         let mut best = [Closest::default(); PACKET];
         let mut limits = [t_max; PACKET];
         self.closest_hits_within(
             &Within::world(triangles),
-            &boxes[..n],
-            &sheared[..n],
-            &mut limits[..n],
-            &mut best[..n],
+            &packet,
+            &sheared,
+            &mut limits,
+            &mut best,
         );
         for (hit, best) in hits.iter_mut().zip(&best[..n]) {
             *hit = best.hit;
@@ -376,13 +374,13 @@ impl Accel {
     fn closest_hits_within(
         &self,
         within: &Within,
-        boxes: &[RayBoxes],
-        sheared: &[ShearedRay],
-        limits: &mut [f32],
-        best: &mut [Closest],
+        packet: &RayPacket,
+        sheared: &[ShearedRay; PACKET],
+        limits: &mut [f32; PACKET],
+        best: &mut [Closest; PACKET],
     ) {
         self.wide
-            .traverse_packet(boxes, limits, |r, first, count, limit| {
+            .traverse_packet(packet, limits, |r, first, count, limit| {
                 self.closest_in_leaf(within, &sheared[r], first, count, limit, &mut best[r]);
             });
     }

@@ -20,6 +20,9 @@ use std::mem::MaybeUninit;
 use glam::{Vec3A, Vec4};
 use obvhs::{aabb::Aabb, bvh2::Bvh2};
 
+mod packet;
+pub use packet::RayPacket;
+
 /// Children per node.
 pub const WIDTH: usize = 4;
 
@@ -169,22 +172,6 @@ impl RayBoxes {
 }
 
 impl RayBoxes {
-    /// Whether the ray enters lane `lane` of `node` before `t_max`: the same arithmetic as
-    /// one lane of [`RayBoxes::enter`], for the leaves of a packet walk.
-    #[inline(always)]
-    fn enters_lane(&self, node: &WideNode, lane: usize, t_max: f32) -> bool {
-        let mut near = 0.0f32;
-        let mut far = f32::INFINITY;
-        for axis in 0..3 {
-            let (origin, inverse) = (self.origin[axis].x, self.inverse[axis].x);
-            near = near.max((node.bounds[self.front[axis]][lane] - origin) * inverse);
-            far = far.min((node.bounds[self.back[axis]][lane] - origin) * inverse);
-        }
-        near <= (far * ROBUST_FAR).min(t_max)
-    }
-}
-
-impl RayBoxes {
     /// Whether the ray enters `aabb` before `t_max`: the slab test of one lane, for a box
     /// kept outside a node (the lone leaf of a one-leaf tree keeps none).
     #[inline(always)]
@@ -205,18 +192,6 @@ impl RayBoxes {
 
 /// Most rays in a packet.
 pub const PACKET: usize = 64;
-
-/// A pending subtree of a packet walk: the child (as in [`WideNode::child`]) with its leaf
-/// count, the first ray of the packet that enters it, and the node and lane holding its box
-/// (a leaf's rays test that box one by one before its triangles).
-#[derive(Clone, Copy)]
-struct PacketEntry {
-    child: u32,
-    count: u32,
-    first: u32,
-    node: u32,
-    lane: u32,
-}
 
 /// `1 / x`, kept finite and signed for zero and tiny components so that slab distances are
 /// never NaN (`0 * inf`); 1e30 still puts an axis-parallel ray's far plane beyond any scene.
@@ -439,126 +414,6 @@ impl WideBvh {
             }
         }
     }
-}
-
-impl WideBvh {
-    /// Walks the tree once for a packet of rays (ranged traversal, Wald et al. 2007 and
-    /// Overbeck et al. 2008): a subtree is carried with the first ray of the packet that
-    /// enters it, found by testing the rays in order from the parent's first ray, so near
-    /// the root one box test usually decides for the whole packet. At a leaf every ray from
-    /// the first on tests the leaf's box with its own limit, and those inside call
-    /// `leaf(ray, leaf_ref, count, &mut limit)`.
-    ///
-    /// Every ray reaches every leaf whose box it enters before its limit (a ray that enters
-    /// a child is never before that child's first ray), so a closest-hit leaf finds exactly
-    /// what [`WideBvh::traverse`] finds for each ray alone. `rays.len() <= PACKET`.
-    pub fn traverse_packet(
-        &self,
-        rays: &[RayBoxes],
-        limits: &mut [f32],
-        mut leaf: impl FnMut(usize, u32, u32, &mut f32),
-    ) {
-        let n = rays.len().min(limits.len());
-        if let Some((first, count)) = self.root_leaf {
-            for (r, limit) in limits.iter_mut().enumerate().take(n) {
-                leaf(r, first, count, limit);
-            }
-            return;
-        }
-        if self.nodes.is_empty() || n == 0 {
-            return;
-        }
-        let needed = self.depth * WIDTH + 1;
-        if needed <= INLINE_STACK * 2 {
-            let mut stack = [const { MaybeUninit::uninit() }; INLINE_STACK * 2];
-            self.walk_packet(&mut stack, &rays[..n], &mut limits[..n], &mut leaf);
-        } else {
-            let mut stack = vec![MaybeUninit::uninit(); needed];
-            self.walk_packet(&mut stack, &rays[..n], &mut limits[..n], &mut leaf);
-        }
-    }
-
-    fn walk_packet(
-        &self,
-        stack: &mut [MaybeUninit<PacketEntry>],
-        rays: &[RayBoxes],
-        limits: &mut [f32],
-        leaf: &mut impl FnMut(usize, u32, u32, &mut f32),
-    ) {
-        let n = rays.len();
-        stack[0] = MaybeUninit::new(PacketEntry {
-            child: 0,
-            count: 0,
-            first: 0,
-            node: 0,
-            lane: 0,
-        });
-        let mut top = 1usize;
-        while top > 0 {
-            top -= 1;
-            // SAFETY: entries below `top` were all written before.
-            let entry = unsafe { stack[top].assume_init() };
-            let first = entry.first as usize;
-            if entry.child & LEAF != 0 {
-                let parent = &self.nodes[entry.node as usize];
-                let lane = entry.lane as usize;
-                for r in first..n {
-                    if rays[r].enters_lane(parent, lane, limits[r]) {
-                        leaf(r, entry.child & !LEAF, entry.count, &mut limits[r]);
-                    }
-                }
-                continue;
-            }
-            let node = &self.nodes[entry.child as usize];
-            // The first ray decides the order; later rays only claim children it missed.
-            let (near, entered) = rays[first].enter(node, limits[first]);
-            let mut first_of = [first as u32; WIDTH];
-            let used = used_lanes(node);
-            let mut missed = used & !entered;
-            let mut r = first + 1;
-            while missed != 0 && r < n {
-                let (_, m) = rays[r].enter(node, limits[r]);
-                let mut claimed = m & missed;
-                missed &= !claimed;
-                while claimed != 0 {
-                    let lane = claimed.trailing_zeros() as usize;
-                    claimed &= claimed - 1;
-                    first_of[lane] = r as u32;
-                }
-                r += 1;
-            }
-            let later = used & !entered & !missed;
-            let mut push = |lane: usize, top: &mut usize| {
-                stack[*top] = MaybeUninit::new(PacketEntry {
-                    child: node.child[lane],
-                    count: node.count[lane],
-                    first: first_of[lane],
-                    node: entry.child,
-                    lane: lane as u32,
-                });
-                *top += 1;
-            };
-            // Children the first ray missed go deepest (visited last), then the entered
-            // ones far to near, so the nearest is popped next.
-            let mut bits = later;
-            while bits != 0 {
-                let lane = bits.trailing_zeros() as usize;
-                bits &= bits - 1;
-                push(lane, &mut top);
-            }
-            for lane in lanes_far_to_near(near, entered) {
-                push(lane, &mut top);
-            }
-        }
-    }
-}
-
-/// The lanes of `node` that hold a child.
-#[inline(always)]
-fn used_lanes(node: &WideNode) -> u32 {
-    (0..WIDTH).fold(0, |m, lane| {
-        m | (((node.child[lane] != EMPTY) as u32) << lane)
-    })
 }
 
 /// The lanes set in `mask`, ordered by decreasing `near` distance.
@@ -795,7 +650,7 @@ mod tests {
             }
             let ray = RayBoxes::new(origin, d);
             let limit = next().abs() * 3.0;
-            let lane = ray.enters_lane(&node, 1, limit);
+            let lane = ray.enter(&node, limit).1 & 0b10 != 0;
             assert_eq!(ray.enters_box(&aabb, limit), lane);
             agreed[lane as usize] += 1;
         }

@@ -1,0 +1,460 @@
+//! Packets of coherent rays walking the wide tree together (ranged traversal, Wald et al.
+//! 2007 and Overbeck et al. 2008), with two tests that decide for many rays at once:
+//!
+//! - **Interval test per node** (Wald, Boulos and Shirley 2007, "Ray tracing deformable
+//!   scenes using dynamic bounding volume hierarchies"): when every ray of the packet starts
+//!   at one point (a pinhole camera's primary rays) and runs the same way along an axis, the
+//!   slab distances of all its rays lie between those of the smallest and the largest
+//!   inverse direction component. One SIMD slab test with those bounds tells which of a
+//!   node's four children no ray of the packet can enter, so the walk never searches the
+//!   packet ray by ray for a child nobody enters (which cost up to 63 box tests per lane).
+//!   It is exact in floating point, not only in real numbers: with one shared origin every
+//!   ray computes the same `plane - origin`, and a product rounded to nearest is monotonic
+//!   in each factor, so each ray's rounded distance lies between the rounded bounds.
+//! - **Four rays per box at a leaf**: the rays of the packet are kept as structure of
+//!   arrays too, and a leaf's box is tested against four rays per SIMD slab test. The
+//!   arithmetic is the scalar test's (the nearer of the two planes is the front one), so
+//!   each ray takes the same decision it would take alone.
+//!
+//! Neither test changes which leaves a ray reaches among those it can hit: they only prune
+//! boxes no ray enters, so a packet finds bit for bit what each of its rays finds alone.
+
+use std::mem::MaybeUninit;
+
+use glam::{Vec3A, Vec4};
+
+use super::{EMPTY, INLINE_STACK, LEAF, PACKET, ROBUST_FAR, RayBoxes, WIDTH, WideBvh, WideNode};
+
+/// The rays of a packet for the walk: each ray's slab constants, the same as structure of
+/// arrays (four rays per SIMD test at a leaf), and the interval bounds when they apply.
+pub struct RayPacket {
+    rays: [RayBoxes; PACKET],
+    /// `origin[axis][ray]`, `inverse[axis][ray]`; unused slots hold a ray that enters
+    /// nothing (never reported: the walk masks slots at or past `len`).
+    origin: [[f32; PACKET]; 3],
+    inverse: [[f32; PACKET]; 3],
+    frustum: Option<Frustum>,
+    len: usize,
+}
+
+/// Bounds on the slab distances of every ray of a packet sharing one origin.
+#[derive(Clone, Copy)]
+struct Frustum {
+    origin: [Vec4; 3],
+    /// Per axis, the smallest and largest inverse direction component over the packet.
+    inverse_min: [Vec4; 3],
+    inverse_max: [Vec4; 3],
+    /// Per axis, the `bounds` rows of the planes met first and last (as in `RayBoxes`).
+    front: [usize; 3],
+    back: [usize; 3],
+    /// Bit `axis` set when every ray runs the same way along it; the other axes bound
+    /// nothing (their rays meet the planes in different orders).
+    agreeing: u32,
+}
+
+impl RayPacket {
+    /// The packet of `rays` (`(origin, direction)`, at most [`PACKET`]).
+    #[inline]
+    pub fn new(rays: &[(Vec3A, Vec3A)]) -> RayPacket {
+        let mut packet = RayPacket {
+            rays: [RayBoxes::default(); PACKET],
+            origin: [[0.0; PACKET]; 3],
+            inverse: [[0.0; PACKET]; 3],
+            frustum: None,
+            len: 0,
+        };
+        packet.set(rays);
+        packet
+    }
+
+    /// Refills the packet with `rays` (at most [`PACKET`]; more are ignored).
+    #[inline]
+    pub fn set(&mut self, rays: &[(Vec3A, Vec3A)]) {
+        let len = rays.len().min(PACKET);
+        self.len = len;
+        for (i, &(origin, direction)) in rays[..len].iter().enumerate() {
+            let ray = RayBoxes::new(origin, direction);
+            for axis in 0..3 {
+                self.origin[axis][i] = origin[axis];
+                self.inverse[axis][i] = ray.inverse[axis].x;
+            }
+            self.rays[i] = ray;
+        }
+        self.frustum = Frustum::of(&self.rays[..len], rays);
+    }
+
+    /// Ray `r`'s slab constants.
+    pub fn ray(&self, r: usize) -> &RayBoxes {
+        &self.rays[r]
+    }
+
+    /// Calls `each(ray, &mut limit)` for every ray from `first` on that enters lane `lane`
+    /// of `node` before its limit, in ray order; returns whether any did. Four rays are
+    /// tested at once, all before the first of them is handed to `each`.
+    #[inline(always)]
+    fn enter_leaf(
+        &self,
+        node: &WideNode,
+        lane: usize,
+        first: usize,
+        limits: &mut [f32; PACKET],
+        mut each: impl FnMut(usize, &mut f32),
+    ) -> bool {
+        let mut any = false;
+        let lower = [0, 1, 2].map(|axis| Vec4::splat(node.bounds[axis][lane]));
+        let upper = [0, 1, 2].map(|axis| Vec4::splat(node.bounds[axis + 3][lane]));
+        let groups = self.len.div_ceil(4);
+        for group in first / 4..groups {
+            let at = group * 4;
+            let mut near = Vec4::ZERO;
+            let mut far = Vec4::splat(f32::INFINITY);
+            for axis in 0..3 {
+                let origin = Vec4::from_slice(&self.origin[axis][at..at + 4]);
+                let inverse = Vec4::from_slice(&self.inverse[axis][at..at + 4]);
+                let t_lower = (lower[axis] - origin) * inverse;
+                let t_upper = (upper[axis] - origin) * inverse;
+                near = near.max(t_lower.min(t_upper));
+                far = far.min(t_lower.max(t_upper));
+            }
+            let limit = Vec4::from_slice(&limits[at..at + 4]);
+            let mut mask = near.cmple((far * ROBUST_FAR).min(limit)).bitmask();
+            // Rays before `first` are not this subtree's; slots past `len` are no rays.
+            mask &= (0xf << first.saturating_sub(at).min(4)) & 0xf;
+            mask &= (1u32 << (self.len - at).min(4)) - 1;
+            any |= mask != 0;
+            while mask != 0 {
+                let k = mask.trailing_zeros() as usize;
+                mask &= mask - 1;
+                each(at + k, &mut limits[at + k]);
+            }
+        }
+        any
+    }
+}
+
+impl Frustum {
+    /// The bounds of `boxes` (the rays `rays`), or `None` when they do not share one origin.
+    fn of(boxes: &[RayBoxes], rays: &[(Vec3A, Vec3A)]) -> Option<Frustum> {
+        let (origin, _) = *rays.first()?;
+        let shared = rays
+            .iter()
+            .all(|&(o, _)| o.to_array().map(f32::to_bits) == origin.to_array().map(f32::to_bits));
+        if !shared {
+            return None;
+        }
+        let mut frustum = Frustum {
+            origin: origin.to_array().map(Vec4::splat),
+            inverse_min: [Vec4::ZERO; 3],
+            inverse_max: [Vec4::ZERO; 3],
+            front: boxes[0].front,
+            back: boxes[0].back,
+            agreeing: 0,
+        };
+        for axis in 0..3 {
+            let inverse = boxes.iter().map(|b| b.inverse[axis].x);
+            let min = inverse.clone().fold(f32::INFINITY, f32::min);
+            let max = inverse.fold(f32::NEG_INFINITY, f32::max);
+            frustum.inverse_min[axis] = Vec4::splat(min);
+            frustum.inverse_max[axis] = Vec4::splat(max);
+            if boxes.iter().all(|b| b.front[axis] == frustum.front[axis]) {
+                frustum.agreeing |= 1 << axis;
+            }
+        }
+        Some(frustum)
+    }
+
+    /// The lanes of `node` that some ray of the packet may enter before `t_max` (the
+    /// largest limit of the packet's rays). A lane left out is entered by no ray.
+    #[inline(always)]
+    fn may_enter(&self, node: &WideNode, t_max: f32) -> u32 {
+        let mut near = Vec4::ZERO;
+        let mut far = Vec4::splat(f32::INFINITY);
+        for axis in 0..3 {
+            if self.agreeing & (1 << axis) == 0 {
+                continue;
+            }
+            let front = Vec4::from_array(node.bounds[self.front[axis]]) - self.origin[axis];
+            let back = Vec4::from_array(node.bounds[self.back[axis]]) - self.origin[axis];
+            let (low, high) = (self.inverse_min[axis], self.inverse_max[axis]);
+            near = near.max((front * low).min(front * high));
+            far = far.min((back * low).max(back * high));
+        }
+        let far = (far * ROBUST_FAR).min(Vec4::splat(t_max));
+        near.cmple(far).bitmask()
+    }
+}
+
+/// A pending subtree of a packet walk: the child (as in [`WideNode::child`]) with its leaf
+/// count, the first ray of the packet that enters it, and the node and lane holding its box
+/// (a leaf's rays test that box before its triangles).
+#[derive(Clone, Copy)]
+struct PacketEntry {
+    child: u32,
+    count: u32,
+    first: u32,
+    node: u32,
+    lane: u32,
+}
+
+impl WideBvh {
+    /// Walks the tree once for a packet of rays: a subtree is carried with the first ray of
+    /// the packet that enters it, found by testing the rays in order from the parent's first
+    /// ray (children no ray can enter are dropped first by the interval test), so near the
+    /// root one box test usually decides for the whole packet. At a leaf every ray from the
+    /// first on tests the leaf's box with its own limit, and those inside call
+    /// `leaf(ray, leaf_ref, count, &mut limit)`; `limits[r]` is ray `r`'s limit.
+    ///
+    /// Every ray reaches every leaf whose box it enters before its limit (a ray that enters
+    /// a child is never before that child's first ray), so a closest-hit leaf finds exactly
+    /// what [`WideBvh::traverse`] finds for each ray alone.
+    pub fn traverse_packet(
+        &self,
+        packet: &RayPacket,
+        limits: &mut [f32; PACKET],
+        mut leaf: impl FnMut(usize, u32, u32, &mut f32),
+    ) {
+        let n = packet.len;
+        if let Some((first, count)) = self.root_leaf {
+            for (r, limit) in limits.iter_mut().enumerate().take(n) {
+                leaf(r, first, count, limit);
+            }
+            return;
+        }
+        if self.nodes.is_empty() || n == 0 {
+            return;
+        }
+        let needed = self.depth * WIDTH + 1;
+        if needed <= INLINE_STACK * 2 {
+            let mut stack = [const { MaybeUninit::uninit() }; INLINE_STACK * 2];
+            self.walk_packet(&mut stack, packet, limits, &mut leaf);
+        } else {
+            let mut stack = vec![MaybeUninit::uninit(); needed];
+            self.walk_packet(&mut stack, packet, limits, &mut leaf);
+        }
+    }
+
+    fn walk_packet(
+        &self,
+        stack: &mut [MaybeUninit<PacketEntry>],
+        packet: &RayPacket,
+        limits: &mut [f32; PACKET],
+        leaf: &mut impl FnMut(usize, u32, u32, &mut f32),
+    ) {
+        let n = packet.len;
+        let rays = &packet.rays;
+        // The largest limit of the packet: the interval test's `t_max`. Limits only
+        // shrink, so a stale value is still a bound; it is renewed after each leaf.
+        let largest_limit = |limits: &[f32; PACKET]| {
+            limits[..n]
+                .iter()
+                .copied()
+                .fold(f32::NEG_INFINITY, f32::max)
+        };
+        let mut packet_limit = largest_limit(limits);
+        stack[0] = MaybeUninit::new(PacketEntry {
+            child: 0,
+            count: 0,
+            first: 0,
+            node: 0,
+            lane: 0,
+        });
+        let mut top = 1usize;
+        while top > 0 {
+            top -= 1;
+            // SAFETY: entries below `top` were all written before.
+            let entry = unsafe { stack[top].assume_init() };
+            let first = entry.first as usize;
+            if entry.child & LEAF != 0 {
+                let parent = &self.nodes[entry.node as usize];
+                let (leaf_ref, count) = (entry.child & !LEAF, entry.count);
+                let any =
+                    packet.enter_leaf(parent, entry.lane as usize, first, limits, |r, limit| {
+                        leaf(r, leaf_ref, count, limit)
+                    });
+                if any {
+                    packet_limit = largest_limit(limits);
+                }
+                continue;
+            }
+            let node = &self.nodes[entry.child as usize];
+            let used = match &packet.frustum {
+                Some(frustum) => used_lanes(node) & frustum.may_enter(node, packet_limit),
+                None => used_lanes(node),
+            };
+            if used == 0 {
+                continue;
+            }
+            // The first ray decides the order; later rays only claim children it missed.
+            let (near, entered) = rays[first].enter(node, limits[first]);
+            let entered = entered & used;
+            let mut first_of = [first as u32; WIDTH];
+            let mut missed = used & !entered;
+            let mut r = first + 1;
+            while missed != 0 && r < n {
+                let (_, m) = rays[r].enter(node, limits[r]);
+                let mut claimed = m & missed;
+                missed &= !claimed;
+                while claimed != 0 {
+                    let lane = claimed.trailing_zeros() as usize;
+                    claimed &= claimed - 1;
+                    first_of[lane] = r as u32;
+                }
+                r += 1;
+            }
+            let later = used & !entered & !missed;
+            let mut push = |lane: usize, top: &mut usize| {
+                stack[*top] = MaybeUninit::new(PacketEntry {
+                    child: node.child[lane],
+                    count: node.count[lane],
+                    first: first_of[lane],
+                    node: entry.child,
+                    lane: lane as u32,
+                });
+                *top += 1;
+            };
+            // Children the first ray missed go deepest (visited last), then the entered
+            // ones far to near, so the nearest is popped next.
+            let mut bits = later;
+            while bits != 0 {
+                let lane = bits.trailing_zeros() as usize;
+                bits &= bits - 1;
+                push(lane, &mut top);
+            }
+            for lane in super::lanes_far_to_near(near, entered) {
+                push(lane, &mut top);
+            }
+        }
+    }
+}
+
+/// The lanes of `node` that hold a child.
+#[inline(always)]
+fn used_lanes(node: &WideNode) -> u32 {
+    (0..WIDTH).fold(0, |m, lane| {
+        m | (((node.child[lane] != EMPTY) as u32) << lane)
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use obvhs::aabb::Aabb;
+
+    /// A xorshift stream of floats in [-2, 2).
+    fn stream(mut seed: u64) -> impl FnMut() -> f32 {
+        move || {
+            seed ^= seed << 13;
+            seed ^= seed >> 7;
+            seed ^= seed << 17;
+            (seed >> 40) as f32 / (1u64 << 24) as f32 * 4.0 - 2.0
+        }
+    }
+
+    fn random_node(next: &mut impl FnMut() -> f32) -> WideNode {
+        let mut node = WideNode::UNUSED;
+        for lane in 0..WIDTH {
+            let a = Vec3A::new(next(), next(), next()) * 3.0;
+            let b = a + Vec3A::new(next(), next(), next()).abs() * 1.5;
+            node.set_box(lane, &Aabb::new(a, b));
+            node.child[lane] = lane as u32 + 1;
+        }
+        node
+    }
+
+    /// Packets of a camera's rays (one origin), with directions that agree in sign, that
+    /// straddle an axis, that have zero components of both signs, and rays from several
+    /// origins (no interval bounds).
+    fn packets(next: &mut impl FnMut() -> f32) -> Vec<Vec<(Vec3A, Vec3A)>> {
+        let eye = Vec3A::new(next(), next(), 8.0);
+        let aim = |x: f32, y: f32| (eye, Vec3A::new(x, y, -1.0).normalize());
+        let block: Vec<_> = (0..64)
+            .map(|i| aim(0.3 + (i % 8) as f32 * 0.02, -0.2 + (i / 8) as f32 * 0.02))
+            .collect();
+        let straddling: Vec<_> = (0..64)
+            .map(|i| aim(-0.3 + (i % 8) as f32 * 0.08, -0.3 + (i / 8) as f32 * 0.08))
+            .collect();
+        let zeros: Vec<_> = (0..37)
+            .map(|i| {
+                let x = [0.0, -0.0, 0.01, -0.01][i % 4];
+                (eye, Vec3A::new(x, (i / 4) as f32 * 0.05 - 0.2, -1.0))
+            })
+            .collect();
+        let scattered: Vec<_> = (0..50)
+            .map(|_| {
+                let o = Vec3A::new(next(), next(), next()) * 4.0;
+                (o, Vec3A::new(next(), next(), next()) - o * 0.3)
+            })
+            .collect();
+        vec![block, straddling, zeros, scattered]
+    }
+
+    #[test]
+    fn four_rays_at_a_leaf_decide_as_each_ray_alone() {
+        let mut next = stream(0x9e3779b97f4a7c15);
+        let mut entered = 0;
+        for _ in 0..200 {
+            let node = random_node(&mut next);
+            for rays in packets(&mut next) {
+                let packet = RayPacket::new(&rays);
+                let mut limits = [0.0; PACKET];
+                for limit in &mut limits {
+                    *limit = next().abs() * 12.0;
+                }
+                let first = (next().abs() * 10.0) as usize % rays.len();
+                for lane in 0..WIDTH {
+                    let mut found = Vec::new();
+                    let mut copy = limits;
+                    packet.enter_leaf(&node, lane, first, &mut copy, |r, _| found.push(r));
+                    let alone: Vec<usize> = (first..rays.len())
+                        .filter(|&r| packet.ray(r).enter(&node, limits[r]).1 & (1 << lane) != 0)
+                        .collect();
+                    assert_eq!(found, alone);
+                    entered += found.len();
+                }
+            }
+        }
+        assert!(
+            entered > 1000,
+            "only {entered} entries: the test means little"
+        );
+    }
+
+    #[test]
+    fn the_interval_test_never_drops_a_box_a_ray_enters_and_drops_some() {
+        let mut next = stream(0x2545f4914f6cdd1d);
+        let (mut dropped, mut kept) = (0, 0);
+        for _ in 0..300 {
+            let node = random_node(&mut next);
+            for rays in packets(&mut next) {
+                let packet = RayPacket::new(&rays);
+                let limit = next().abs() * 10.0;
+                let Some(frustum) = &packet.frustum else {
+                    continue;
+                };
+                let may = frustum.may_enter(&node, limit);
+                let any = (0..rays.len()).fold(0, |m, r| m | packet.ray(r).enter(&node, limit).1);
+                assert_eq!(any & !may, 0, "a lane some ray enters was dropped");
+                dropped += (0b1111 & !may).count_ones();
+                kept += may.count_ones();
+            }
+        }
+        assert!(
+            dropped > 500 && kept > 100,
+            "dropped {dropped}, kept {kept}"
+        );
+    }
+
+    #[test]
+    fn only_packets_from_one_origin_get_interval_bounds() {
+        let mut next = stream(7);
+        let sets = packets(&mut next);
+        let bounded: Vec<bool> = sets
+            .iter()
+            .map(|rays| RayPacket::new(rays).frustum.is_some())
+            .collect();
+        assert_eq!(bounded, [true, true, true, false]);
+        // The straddling packet runs both ways along x and y: only z bounds it.
+        let straddling = RayPacket::new(&sets[1]).frustum.unwrap();
+        assert_eq!(straddling.agreeing, 0b100);
+    }
+}
