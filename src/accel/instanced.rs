@@ -18,7 +18,7 @@ use obvhs::{BvhBuildParams, aabb::Aabb, bvh2::builder::build_bvh2};
 
 use super::triangles::ShearedRay;
 use super::wide::{PACKET, RayBoxes, WideBvh};
-use super::{Accel, AccelError, Closest, Hit, Within, packet_rays};
+use super::{Accel, AccelError, Closest, Hit, PacketQuery, Within};
 use crate::geometry::{FrameTriangles, Placement};
 
 /// One instance of a shared mesh, as the frame loop describes it.
@@ -356,46 +356,45 @@ impl TwoLevelAccel {
         hits: &mut [Option<Hit>],
     ) {
         let n = rays.len().min(hits.len()).min(PACKET);
-        let (packet, sheared) = packet_rays(&rays[..n]);
-        let mut best = [Closest::default(); PACKET];
-        let mut limits = [t_max; PACKET];
-        world.closest_hits_within(
-            &Within::world(world_triangles),
-            &packet,
-            &sheared,
-            &mut limits,
-            &mut best,
-        );
-        for top in &self.levels {
-            top.tlas
-                .traverse_packet(&packet, &mut limits, |r, first, _, limit| {
-                    if top.reaches(packet.ray(r), *limit) {
-                        let (origin, direction) = rays[r];
-                        let placed = &top.placed[first as usize];
-                        *limit = self.closest_in_instance(
-                            placed,
-                            origin,
-                            direction,
-                            *limit,
-                            &mut best[r],
-                        );
-                    }
-                });
-        }
-        for c in self.levels.iter().flat_map(|l| &l.collapsed) {
-            for r in 0..n {
-                limits[r] = c.accel.closest_within(
-                    &c.within(),
-                    packet.ray(r),
-                    &sheared[r],
-                    limits[r],
-                    &mut best[r],
-                );
+        PacketQuery::with(&rays[..n], t_max, |q| {
+            world.closest_hits_within(&Within::world(world_triangles), q);
+            let PacketQuery {
+                packet,
+                sheared,
+                best,
+                limits,
+            } = q;
+            for top in &self.levels {
+                top.tlas
+                    .traverse_packet(packet, limits, |r, first, _, limit| {
+                        if top.reaches(packet.ray(r), *limit) {
+                            let (origin, direction) = rays[r];
+                            let placed = &top.placed[first as usize];
+                            *limit = self.closest_in_instance(
+                                placed,
+                                origin,
+                                direction,
+                                *limit,
+                                &mut best[r],
+                            );
+                        }
+                    });
             }
-        }
-        for (hit, best) in hits.iter_mut().zip(&best[..n]) {
-            *hit = best.hit;
-        }
+            for c in self.levels.iter().flat_map(|l| &l.collapsed) {
+                for r in 0..n {
+                    limits[r] = c.accel.closest_within(
+                        &c.within(),
+                        packet.ray(r),
+                        &sheared[r],
+                        limits[r],
+                        &mut best[r],
+                    );
+                }
+            }
+            for (hit, best) in hits.iter_mut().zip(&best[..n]) {
+                *hit = best.hit;
+            }
+        });
     }
 
     /// Continues a closest-hit query in one instance's tree; returns the new limit.
