@@ -431,8 +431,8 @@ fn refitted_tree_finds_the_same_hits_as_a_fresh_build() {
         let fresh = Accel::build(&mut fresh_triangles).unwrap();
         let mut hits = 0;
         for (i, &(o, d)) in rays.iter().enumerate() {
-            let a = r.accel().closest_hit(r.triangles(), o, d, f32::INFINITY);
-            let b = fresh.closest_hit(&fresh_triangles, o, d, f32::INFINITY);
+            let a = r.accel().closest_hit(o, d, f32::INFINITY);
+            let b = fresh.closest_hit(o, d, f32::INFINITY);
             let a = a.map(|h| {
                 (
                     r.triangles().source[h.triangle as usize],

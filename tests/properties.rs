@@ -101,7 +101,7 @@ type HitKey = Option<(u32, u32, [u32; 2])>;
 
 fn closest(accel: &Accel, triangles: &FrameTriangles, origin: Vec3, dir: Vec3) -> HitKey {
     accel
-        .closest_hit(triangles, origin.into(), dir.into(), f32::INFINITY)
+        .closest_hit(origin.into(), dir.into(), f32::INFINITY)
         .map(|h| {
             (
                 triangles.source[h.triangle as usize],

@@ -56,20 +56,19 @@ struct Placed {
 struct Collapsed {
     index: u32,
     source_base: u32,
-    /// World-space triangles; `source` holds each one's slot in the mesh.
-    triangles: FrameTriangles,
+    /// The tree over the world-space copies (their packs hold the mesh's own triangle
+    /// index as the tie rule's source, before the base).
     accel: Accel,
-    /// Per slot, the mesh's own triangle index (the tie rule's source, before the base).
-    local_source: Vec<u32>,
+    /// Per slot, the mesh slot it copies (what hits report).
+    mesh_slot: Vec<u32>,
 }
 
 impl Collapsed {
     fn within(&self) -> Within<'_> {
         Within {
-            source: &self.local_source,
             source_base: self.source_base,
             instance: self.index,
-            reported: Some(&self.triangles.source),
+            reported: Some(&self.mesh_slot),
         }
     }
 }
@@ -285,30 +284,36 @@ impl TwoLevelAccel {
             uvs: vec![[Vec2::ZERO; 3]; n],
             material: vec![0; n],
             log2_pb: vec![0.0; n],
-            source: (0..n as u32).collect(),
+            source: mesh.source.clone(),
         };
         let accel = Accel::build(&mut triangles).ok()?;
-        let local_source = triangles
+        // Back from each copy's source to the mesh slot it copies (sources are unique).
+        let mut slot_of_source: Vec<(u32, u32)> = (0..n as u32)
+            .map(|k| (mesh.source[k as usize], k))
+            .collect();
+        slot_of_source.sort_unstable();
+        let mesh_slot = triangles
             .source
             .iter()
-            .map(|&k| mesh.source[k as usize])
+            .map(|source| {
+                let at = slot_of_source.partition_point(|&(s, _)| s < *source);
+                slot_of_source[at].1
+            })
             .collect();
         Some(Collapsed {
             index: instance.index,
             source_base: instance.source_base,
-            triangles,
             accel,
-            local_source,
+            mesh_slot,
         })
     }
 
-    /// The closest hit with `t` in `[0, t_max)` over the world-space tree `world` (over
-    /// `world_triangles`) and every instance; ties to the lowest source triangle, as
+    /// The closest hit with `t` in `[0, t_max)` over the world-space tree `world` and every
+    /// instance; ties to the lowest source triangle, as
     /// [`Accel::closest_hit`].
     pub fn closest_hit(
         &self,
         world: &Accel,
-        world_triangles: &FrameTriangles,
         origin: Vec3A,
         direction: Vec3A,
         t_max: f32,
@@ -316,13 +321,7 @@ impl TwoLevelAccel {
         let mut best = Closest::default();
         let ray = RayBoxes::new(origin, direction);
         let sheared = ShearedRay::new(origin, direction);
-        let limit = world.closest_within(
-            &Within::world(world_triangles),
-            &ray,
-            &sheared,
-            t_max,
-            &mut best,
-        );
+        let limit = world.closest_within(&Within::world(), &ray, &sheared, t_max, &mut best);
         let mut limit = limit;
         for top in &self.levels {
             top.tlas.traverse(&ray, limit, |first, _, limit| {
@@ -350,14 +349,13 @@ impl TwoLevelAccel {
     pub fn closest_hits(
         &self,
         world: &Accel,
-        world_triangles: &FrameTriangles,
         rays: &[(Vec3A, Vec3A)],
         t_max: f32,
         hits: &mut [Option<Hit>],
     ) {
         let n = rays.len().min(hits.len()).min(PACKET);
         PacketQuery::with(&rays[..n], t_max, |q| {
-            world.closest_hits_within(&Within::world(world_triangles), q);
+            world.closest_hits_within(&Within::world(), q);
             let PacketQuery {
                 packet,
                 sheared,
@@ -410,7 +408,6 @@ impl TwoLevelAccel {
         let mesh = &self.meshes[placed.mesh as usize];
         let (o, d) = object_ray(&placed.object_from_world, origin, direction);
         let within = Within {
-            source: &mesh.triangles.source,
             source_base: placed.source_base,
             instance: placed.index,
             reported: None,
@@ -458,7 +455,7 @@ impl TwoLevelAccel {
         }
         self.levels.iter().flat_map(|l| &l.collapsed).all(|c| {
             c.accel.visit_hits(origin, direction, t_max, |slot, t| {
-                visit(c.index, c.triangles.source[slot as usize], t)
+                visit(c.index, c.mesh_slot[slot as usize], t)
             })
         })
     }
@@ -583,7 +580,7 @@ mod tests {
                     }
                 }
             }
-            let found = two.closest_hit(&world, &world_tris, origin, direction, f32::INFINITY);
+            let found = two.closest_hit(&world, origin, direction, f32::INFINITY);
             match (expected, found) {
                 (None, None) => {}
                 (Some((id, _, t)), Some(hit)) => {
@@ -605,12 +602,9 @@ mod tests {
         // Packets answer as single rays.
         for chunk in rays.chunks(PACKET) {
             let mut packet = vec![None; chunk.len()];
-            two.closest_hits(&world, &world_tris, chunk, f32::INFINITY, &mut packet);
+            two.closest_hits(&world, chunk, f32::INFINITY, &mut packet);
             for (&(o, d), hit) in chunk.iter().zip(packet) {
-                assert_eq!(
-                    hit,
-                    two.closest_hit(&world, &world_tris, o, d, f32::INFINITY)
-                );
+                assert_eq!(hit, two.closest_hit(&world, o, d, f32::INFINITY));
             }
         }
     }
@@ -619,7 +613,6 @@ mod tests {
     fn collapsed_instances_are_hit_in_world_space_and_empty_ones_left_out() {
         let tri = [Vec3A::ZERO, Vec3A::X, Vec3A::Y];
         let mut two = TwoLevelAccel::new(vec![soup(&[tri]), soup(&[])]).unwrap();
-        let world_tris = soup(&[]);
         let world = Accel::default();
         // Instance k: index k, source base k.
         let instance = |k: u32, mesh, world_from_object| TlasInstance {
@@ -639,7 +632,7 @@ mod tests {
         two.set_instances(&instances).unwrap();
         assert_eq!(two.instance_count(), 3);
         let trace = |two: &TwoLevelAccel, origin| {
-            two.closest_hit(&world, &world_tris, origin, Vec3A::NEG_Z, f32::INFINITY)
+            two.closest_hit(&world, origin, Vec3A::NEG_Z, f32::INFINITY)
         };
         let near = trace(&two, Vec3A::new(0.2, 0.2, 5.0)).unwrap();
         assert_eq!((near.instance, near.triangle), (0, 0));
@@ -652,7 +645,7 @@ mod tests {
             (Vec3A::new(0.2, 0.2, 5.0), Vec3A::NEG_Z),
             (Vec3A::new(0.2, 0.2, -1.0), Vec3A::NEG_Z),
         ];
-        two.closest_hits(&world, &world_tris, &rays, f32::INFINITY, &mut packet);
+        two.closest_hits(&world, &rays, f32::INFINITY, &mut packet);
         assert_eq!(packet[0], Some(near));
         assert_eq!(packet[1].map(|h| h.instance), Some(2));
         let mut seen = Vec::new();

@@ -111,11 +111,9 @@ impl Default for Closest {
     }
 }
 
-/// Which tree a closest-hit query is walking: how its slots map to source triangles (the
-/// tie rule) and the instance its hits report.
+/// Which tree a closest-hit query is walking: the base of its source triangles (the tie
+/// rule; the packs hold each slot's source relative to it) and the instance its hits report.
 struct Within<'a> {
-    /// Per slot, the source id relative to `source_base`.
-    source: &'a [u32],
     source_base: u32,
     instance: u32,
     /// Per slot, the slot its hits report (`None`: the slot itself); a collapsed instance's
@@ -124,10 +122,9 @@ struct Within<'a> {
 }
 
 impl<'a> Within<'a> {
-    /// The world-space tree over `triangles` (their sources are the scene's).
-    fn world(triangles: &'a FrameTriangles) -> Within<'a> {
+    /// The world-space tree (its sources are the scene's).
+    fn world() -> Within<'a> {
         Within {
-            source: &triangles.source,
             source_base: 0,
             instance: Hit::WORLD,
             reported: None,
@@ -255,7 +252,12 @@ impl Accel {
         for (i, leaf) in leaves.iter().enumerate() {
             let (first, count) = (leaf.first as usize, leaf.count as usize);
             leaf_of_slot[first..first + count].fill(i as u32);
-            let first_pack = packed.push_leaf(&triangles.positions, leaf.first, leaf.count);
+            let first_pack = packed.push_leaf(
+                &triangles.positions,
+                &triangles.source,
+                leaf.first,
+                leaf.count,
+            );
             wide.set_leaf_ref(leaf.lane, first_pack);
         }
         let mut accel = Accel {
@@ -358,17 +360,11 @@ impl Accel {
     /// (a shared edge, coplanar triangles) the lowest source triangle wins, so the result
     /// does not depend on the tree's shape: a refitted tree and a fresh build agree.
     #[inline]
-    pub fn closest_hit(
-        &self,
-        triangles: &FrameTriangles,
-        origin: Vec3A,
-        direction: Vec3A,
-        t_max: f32,
-    ) -> Option<Hit> {
+    pub fn closest_hit(&self, origin: Vec3A, direction: Vec3A, t_max: f32) -> Option<Hit> {
         let mut best = Closest::default();
         let ray = RayBoxes::new(origin, direction);
         let sheared = ShearedRay::new(origin, direction);
-        self.closest_within(&Within::world(triangles), &ray, &sheared, t_max, &mut best);
+        self.closest_within(&Within::world(), &ray, &sheared, t_max, &mut best);
         best.hit
     }
 
@@ -396,16 +392,10 @@ impl Accel {
     /// [`Accel::closest_hit`] for a packet of up to [`PACKET`] rays `(origin, direction)`
     /// walked together (coherent rays such as a tile's primary rays); `hits[i]` receives
     /// exactly what `closest_hit` returns for ray `i`.
-    pub fn closest_hits(
-        &self,
-        triangles: &FrameTriangles,
-        rays: &[(Vec3A, Vec3A)],
-        t_max: f32,
-        hits: &mut [Option<Hit>],
-    ) {
+    pub fn closest_hits(&self, rays: &[(Vec3A, Vec3A)], t_max: f32, hits: &mut [Option<Hit>]) {
         let n = rays.len().min(hits.len()).min(PACKET);
         PacketQuery::with(&rays[..n], t_max, |q| {
-            self.closest_hits_within(&Within::world(triangles), q);
+            self.closest_hits_within(&Within::world(), q);
             for (hit, best) in hits.iter_mut().zip(&q.best[..n]) {
                 *hit = best.hit;
             }
@@ -440,8 +430,8 @@ impl Accel {
     ) {
         let cut = *limit;
         self.triangles
-            .hits_in_leaf(ray, first, count, cut, |slot, t, bary| {
-                let source = within.source_base + within.source[slot as usize];
+            .hits_in_leaf(ray, first, count, cut, |slot, source, t, bary| {
+                let source = within.source_base + source;
                 let better = match best.hit {
                     None => true,
                     Some(h) => t < h.t || (t == h.t && source < best.source),
@@ -476,7 +466,9 @@ impl Accel {
         let sheared = ShearedRay::new(origin, direction);
         self.wide.traverse(&ray, t_max, |first, count, _| {
             self.triangles
-                .hits_in_leaf(&sheared, first, count, t_max, |slot, t, _| visit(slot, t))
+                .hits_in_leaf(&sheared, first, count, t_max, |slot, _, t, _| {
+                    visit(slot, t)
+                })
         })
     }
 }
@@ -539,7 +531,7 @@ pub(super) mod tests {
         let mut tris = soup(&[tri(-5.0), tri(-2.0), tri(-9.0)]);
         let accel = Accel::build(&mut tris).unwrap();
         let hit = accel
-            .closest_hit(&tris, Vec3A::ZERO, Vec3A::NEG_Z, f32::INFINITY)
+            .closest_hit(Vec3A::ZERO, Vec3A::NEG_Z, f32::INFINITY)
             .unwrap();
         assert!((hit.t - 2.0).abs() < 1e-6);
         assert_eq!(tris.source[hit.triangle as usize], 1);
@@ -551,12 +543,7 @@ pub(super) mod tests {
         assert_eq!(count, 3);
         assert!(
             accel
-                .closest_hit(
-                    &tris,
-                    Vec3A::new(5.0, 0.0, 0.0),
-                    Vec3A::NEG_Z,
-                    f32::INFINITY
-                )
+                .closest_hit(Vec3A::new(5.0, 0.0, 0.0), Vec3A::NEG_Z, f32::INFINITY)
                 .is_none()
         );
     }
@@ -576,14 +563,9 @@ pub(super) mod tests {
         ];
         let mut tris = soup(&[floor, wall]);
         let accel = Accel::build(&mut tris).unwrap();
-        let down = accel.closest_hit(
-            &tris,
-            Vec3A::new(0.0, 5.0, 0.0),
-            Vec3A::NEG_Y,
-            f32::INFINITY,
-        );
+        let down = accel.closest_hit(Vec3A::new(0.0, 5.0, 0.0), Vec3A::NEG_Y, f32::INFINITY);
         assert!((down.unwrap().t - 5.0).abs() < 1e-6);
-        let side = accel.closest_hit(&tris, Vec3A::new(-2.0, 0.0, 0.0), Vec3A::X, f32::INFINITY);
+        let side = accel.closest_hit(Vec3A::new(-2.0, 0.0, 0.0), Vec3A::X, f32::INFINITY);
         assert!((side.unwrap().t - 5.0).abs() < 1e-6);
     }
 
@@ -602,7 +584,7 @@ pub(super) mod tests {
         let accel = Accel::build(&mut tris).unwrap();
         assert!(
             accel
-                .closest_hit(&tris, Vec3A::ZERO, Vec3A::X, f32::INFINITY)
+                .closest_hit(Vec3A::ZERO, Vec3A::X, f32::INFINITY)
                 .is_none()
         );
     }
@@ -654,7 +636,7 @@ pub(super) mod tests {
             let origin = rng.point(30.0);
             let direction = (rng.point(2.0) - origin * 0.05).normalize();
             let wide = accel
-                .closest_hit(tris, origin, direction, f32::INFINITY)
+                .closest_hit(origin, direction, f32::INFINITY)
                 .map(|h| (tris.source[h.triangle as usize], h.t));
             assert_eq!(wide, brute_force(tris, origin, direction));
             hits += wide.is_some() as usize;
@@ -718,9 +700,9 @@ pub(super) mod tests {
             (&scattered[..13], 25.0),
         ] {
             let mut hits = vec![None; rays.len()];
-            accel.closest_hits(&tris, rays, t_max, &mut hits);
+            accel.closest_hits(rays, t_max, &mut hits);
             for (&(o, d), hit) in rays.iter().zip(&hits) {
-                assert_eq!(*hit, accel.closest_hit(&tris, o, d, t_max));
+                assert_eq!(*hit, accel.closest_hit(o, d, t_max));
                 found += hit.is_some() as usize;
             }
         }
@@ -747,7 +729,7 @@ pub(super) mod tests {
             (Vec3A::new(9.0, 0.0, 0.0), Vec3A::NEG_Z),
         ];
         let mut hits = [None; 2];
-        accel.closest_hits(&tris, &rays, f32::INFINITY, &mut hits);
+        accel.closest_hits(&rays, f32::INFINITY, &mut hits);
         assert_eq!(hits[0].map(|h| h.t), Some(2.0));
         assert!(hits[1].is_none());
         // Move the near one behind the far one: the refit must move the packed copy too.
@@ -756,7 +738,7 @@ pub(super) mod tests {
         accel.refit(&tris, &moved);
         assert_eq!(
             accel
-                .closest_hit(&tris, Vec3A::ZERO, Vec3A::NEG_Z, f32::INFINITY)
+                .closest_hit(Vec3A::ZERO, Vec3A::NEG_Z, f32::INFINITY)
                 .map(|h| h.t),
             Some(5.0)
         );
@@ -768,13 +750,13 @@ pub(super) mod tests {
         assert_eq!(accel.refit(&one, &[0]), RefitKind::Full);
         assert_eq!(
             accel
-                .closest_hit(&one, Vec3A::ZERO, Vec3A::NEG_Z, f32::INFINITY)
+                .closest_hit(Vec3A::ZERO, Vec3A::NEG_Z, f32::INFINITY)
                 .map(|h| h.t),
             Some(4.0)
         );
         let mut empty = soup(&[]);
         let accel = Accel::build(&mut empty).unwrap();
-        accel.closest_hits(&empty, &rays, f32::INFINITY, &mut hits);
+        accel.closest_hits(&rays, f32::INFINITY, &mut hits);
         assert_eq!(hits, [None, None]);
         assert!(accel.visit_hits(Vec3A::ZERO, Vec3A::X, f32::INFINITY, |_, _| false));
     }
@@ -803,9 +785,9 @@ pub(super) mod tests {
         ));
         assert!(rays.len() <= PACKET);
         let mut hits = vec![None; rays.len()];
-        accel.closest_hits(&tris, &rays, f32::INFINITY, &mut hits);
+        accel.closest_hits(&rays, f32::INFINITY, &mut hits);
         for (&(o, d), hit) in rays.iter().zip(&hits) {
-            assert_eq!(*hit, accel.closest_hit(&tris, o, d, f32::INFINITY));
+            assert_eq!(*hit, accel.closest_hit(o, d, f32::INFINITY));
         }
         assert!(hits.iter().filter(|h| h.is_some()).count() > 5);
     }
@@ -853,9 +835,7 @@ pub(super) mod tests {
                 for target in targets {
                     rays += 1;
                     let direction = (target - eye).normalize();
-                    misses += accel
-                        .closest_hit(&tris, eye, direction, f32::INFINITY)
-                        .is_none() as usize;
+                    misses += accel.closest_hit(eye, direction, f32::INFINITY).is_none() as usize;
                 }
             }
         }

@@ -76,24 +76,16 @@ impl SceneBvh<'_> {
     #[inline]
     pub fn closest_hit(&self, origin: Vec3A, direction: Vec3A, t_max: f32) -> Option<Hit> {
         match self {
-            SceneBvh::Flat { triangles, accel } => {
-                accel.closest_hit(triangles, origin, direction, t_max)
-            }
-            SceneBvh::TwoLevel(i) => {
-                i.accel
-                    .closest_hit(i.world, i.world_triangles, origin, direction, t_max)
-            }
+            SceneBvh::Flat { accel, .. } => accel.closest_hit(origin, direction, t_max),
+            SceneBvh::TwoLevel(i) => i.accel.closest_hit(i.world, origin, direction, t_max),
         }
     }
 
     /// [`SceneBvh::closest_hit`] for a packet of coherent rays.
     pub fn closest_hits(&self, rays: &[(Vec3A, Vec3A)], t_max: f32, hits: &mut [Option<Hit>]) {
         match self {
-            SceneBvh::Flat { triangles, accel } => accel.closest_hits(triangles, rays, t_max, hits),
-            SceneBvh::TwoLevel(i) => {
-                i.accel
-                    .closest_hits(i.world, i.world_triangles, rays, t_max, hits)
-            }
+            SceneBvh::Flat { accel, .. } => accel.closest_hits(rays, t_max, hits),
+            SceneBvh::TwoLevel(i) => i.accel.closest_hits(i.world, rays, t_max, hits),
         }
     }
 
