@@ -142,10 +142,15 @@ pub struct RayBoxes {
 impl RayBoxes {
     #[inline(always)]
     pub fn new(origin: Vec3A, direction: Vec3A) -> RayBoxes {
-        let inverse = direction.to_array().map(safe_inverse);
+        RayBoxes::from_inverse(origin.to_array(), direction.to_array().map(safe_inverse))
+    }
+
+    /// The constants from the origin and the (safe) inverse direction.
+    #[inline(always)]
+    fn from_inverse(origin: [f32; 3], inverse: [f32; 3]) -> RayBoxes {
         let negative = inverse.map(|v| (v < 0.0) as usize);
         RayBoxes {
-            origin: origin.to_array().map(Vec4::splat),
+            origin: origin.map(Vec4::splat),
             inverse: inverse.map(Vec4::splat),
             front: [0, 1, 2].map(|axis| axis + 3 * negative[axis]),
             back: [0, 1, 2].map(|axis| axis + 3 * (1 - negative[axis])),
@@ -202,6 +207,13 @@ fn safe_inverse(x: f32) -> f32 {
     } else {
         1.0 / x
     }
+}
+
+/// [`safe_inverse`] of four values at once (bit for bit the same).
+#[inline(always)]
+fn safe_inverse4(x: Vec4) -> Vec4 {
+    let tiny = x.abs().cmplt(Vec4::splat(1e-30));
+    Vec4::select(tiny, Vec4::splat(1e30).copysign(x), Vec4::ONE / x)
 }
 
 impl WideBvh {
@@ -626,6 +638,30 @@ mod tests {
     }
 
     /// A box kept outside the tree answers exactly as the same box in a node's lane.
+    #[test]
+    fn four_inverses_at_once_equal_one_at_a_time() {
+        let values = [
+            0.0,
+            -0.0,
+            1e-31,
+            -1e-31,
+            1e-30,
+            -1e-30,
+            3.0,
+            -0.7,
+            f32::MIN_POSITIVE,
+            f32::MAX,
+            f32::INFINITY,
+            f32::NEG_INFINITY,
+        ];
+        for group in values.chunks_exact(4) {
+            let four = safe_inverse4(Vec4::from_slice(group)).to_array();
+            for (x, inv) in group.iter().zip(four) {
+                assert_eq!(inv.to_bits(), safe_inverse(*x).to_bits(), "1 / {x}");
+            }
+        }
+    }
+
     #[test]
     fn a_lone_box_answers_as_a_lane() {
         let mut seed = 12345u64;

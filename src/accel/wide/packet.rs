@@ -23,7 +23,10 @@ use std::mem::MaybeUninit;
 
 use glam::{Vec3A, Vec4};
 
-use super::{EMPTY, INLINE_STACK, LEAF, PACKET, ROBUST_FAR, RayBoxes, WIDTH, WideBvh, WideNode};
+use super::{
+    EMPTY, INLINE_STACK, LEAF, PACKET, ROBUST_FAR, RayBoxes, WIDTH, WideBvh, WideNode,
+    safe_inverse4,
+};
 
 /// The rays of a packet for the walk: each ray's slab constants, the same as structure of
 /// arrays (four rays per SIMD test at a leaf), and the interval bounds when they apply.
@@ -72,15 +75,24 @@ impl RayPacket {
     pub fn set(&mut self, rays: &[(Vec3A, Vec3A)]) {
         let len = rays.len().min(PACKET);
         self.len = len;
+        // Directions into `inverse`, inverted there four at a time (the same IEEE division
+        // as one at a time), then each ray's splatted constants from those.
         for (i, &(origin, direction)) in rays[..len].iter().enumerate() {
-            let ray = RayBoxes::new(origin, direction);
             for axis in 0..3 {
                 self.origin[axis][i] = origin[axis];
-                self.inverse[axis][i] = ray.inverse[axis].x;
+                self.inverse[axis][i] = direction[axis];
             }
-            self.rays[i] = ray;
         }
-        self.frustum = Frustum::of(&self.rays[..len], rays);
+        for row in &mut self.inverse {
+            for group in row[..len.next_multiple_of(4)].chunks_exact_mut(4) {
+                safe_inverse4(Vec4::from_slice(group)).write_to_slice(group);
+            }
+        }
+        for i in 0..len {
+            let at = |a: &[[f32; PACKET]; 3]| [a[0][i], a[1][i], a[2][i]];
+            self.rays[i] = RayBoxes::from_inverse(at(&self.origin), at(&self.inverse));
+        }
+        self.frustum = Frustum::of(&self.origin, &self.inverse, len);
     }
 
     /// Ray `r`'s slab constants.
@@ -133,30 +145,48 @@ impl RayPacket {
 }
 
 impl Frustum {
-    /// The bounds of `boxes` (the rays `rays`), or `None` when they do not share one origin.
-    fn of(boxes: &[RayBoxes], rays: &[(Vec3A, Vec3A)]) -> Option<Frustum> {
-        let (origin, _) = *rays.first()?;
-        let shared = rays
-            .iter()
-            .all(|&(o, _)| o.to_array().map(f32::to_bits) == origin.to_array().map(f32::to_bits));
-        if !shared {
+    /// The bounds of the first `len` rays of a packet (`origin[axis][ray]`,
+    /// `inverse[axis][ray]`), or `None` when they do not share one origin (or a direction
+    /// is NaN).
+    fn of(
+        origin: &[[f32; PACKET]; 3],
+        inverse: &[[f32; PACKET]; 3],
+        len: usize,
+    ) -> Option<Frustum> {
+        if len == 0 {
             return None;
         }
         let mut frustum = Frustum {
-            origin: origin.to_array().map(Vec4::splat),
+            origin: [0, 1, 2].map(|axis| Vec4::splat(origin[axis][0])),
             inverse_min: [Vec4::ZERO; 3],
             inverse_max: [Vec4::ZERO; 3],
-            front: boxes[0].front,
-            back: boxes[0].back,
+            front: [0; 3],
+            back: [0; 3],
             agreeing: 0,
         };
         for axis in 0..3 {
-            let inverse = boxes.iter().map(|b| b.inverse[axis].x);
-            let min = inverse.clone().fold(f32::INFINITY, f32::min);
-            let max = inverse.fold(f32::NEG_INFINITY, f32::max);
+            let o = origin[axis][0].to_bits();
+            if origin[axis][..len].iter().any(|v| v.to_bits() != o) {
+                return None;
+            }
+            let row = &inverse[axis][..len];
+            let (mut min, mut max) = (row[0], row[0]);
+            let mut negative = 0;
+            for &v in row {
+                if v.is_nan() {
+                    return None;
+                }
+                min = min.min(v);
+                max = max.max(v);
+                negative += (v < 0.0) as usize;
+            }
             frustum.inverse_min[axis] = Vec4::splat(min);
             frustum.inverse_max[axis] = Vec4::splat(max);
-            if boxes.iter().all(|b| b.front[axis] == frustum.front[axis]) {
+            // As `RayBoxes`: a negative inverse meets the upper plane first.
+            let down = (negative == len) as usize;
+            frustum.front[axis] = axis + 3 * down;
+            frustum.back[axis] = axis + 3 * (1 - down);
+            if negative == 0 || negative == len {
                 frustum.agreeing |= 1 << axis;
             }
         }
