@@ -350,7 +350,8 @@ impl WideBvh {
                 bits &= bits - 1;
                 push(lane, &mut top);
             }
-            for lane in super::lanes_far_to_near(near, entered) {
+            let (lanes, count) = super::lanes_near_to_far(near, entered);
+            for &lane in lanes[..count].iter().rev() {
                 push(lane, &mut top);
             }
         }
