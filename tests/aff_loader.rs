@@ -232,8 +232,8 @@ fn fixture_uses_every_command() {
     assert_eq!(tex.name, "checker.ppm");
     let level = &tex.pyramid.levels[0];
     assert_eq!((level.width, level.height), (2, 2));
-    assert_eq!(level.texels[0], Vec4::new(1.0, 0.0, 0.0, 1.0));
-    assert_eq!(level.texels[2], Vec4::new(0.0, 0.0, 1.0, 1.0));
+    assert_eq!(level.texel(0), Vec4::new(1.0, 0.0, 0.0, 1.0));
+    assert_eq!(level.texel(2), Vec4::new(0.0, 0.0, 1.0, 1.0));
     assert_eq!(tex.sampler.wrap_s, mipray::texture::WrapMode::Repeat);
 
     // The xs node: T R S from the command, its mesh expanded per attribute.

@@ -94,11 +94,10 @@ pub(crate) fn write_textures(
             std::fs::create_dir_all(parent).map_err(io_error(parent))?;
         }
         let level = &texture.pyramid.levels[0];
-        let opaque = level.texels.iter().all(|t| t.w == 1.0);
+        let opaque = level.texels().all(|t| t.w == 1.0);
         let image = if opaque {
             let bytes = level
-                .texels
-                .iter()
+                .texels()
                 .flat_map(|t| [t.x, t.y, t.z].map(encode_srgb8))
                 .collect();
             DynamicImage::ImageRgb8(
@@ -107,8 +106,7 @@ pub(crate) fn write_textures(
         } else {
             let alpha = |a: f32| (a.clamp(0.0, 1.0) * 255.0 + 0.5) as u8;
             let bytes = level
-                .texels
-                .iter()
+                .texels()
                 .flat_map(|t| {
                     [
                         encode_srgb8(t.x),

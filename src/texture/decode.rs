@@ -38,6 +38,56 @@ pub fn srgb_to_linear(c: f32) -> f32 {
 static SRGB8_LUT: LazyLock<[f32; 256]> =
     LazyLock::new(|| std::array::from_fn(|i| srgb_eotf(i as f64 / 255.0) as f32));
 
+/// 8-bit alpha -> [0, 1], as `expand_u8` computes it, built once.
+static ALPHA8_LUT: LazyLock<[f32; 256]> =
+    LazyLock::new(|| std::array::from_fn(|i| unorm8(i as u8)));
+
+fn unorm8(v: u8) -> f32 {
+    f32::from(v) / 255.0
+}
+
+/// The two tables that decode an 8-bit sRGB image's pixels, as `expand_u8` decodes them.
+#[derive(Debug, Clone, Copy)]
+pub(super) struct Srgb8Tables {
+    colour: &'static [f32; 256],
+    alpha: &'static [f32; 256],
+}
+
+impl Srgb8Tables {
+    pub(super) fn get() -> Srgb8Tables {
+        Srgb8Tables {
+            colour: &SRGB8_LUT,
+            alpha: &ALPHA8_LUT,
+        }
+    }
+
+    /// The texel of pixel `codes` (red, green, blue, alpha).
+    #[inline(always)]
+    pub(super) fn texel(&self, codes: [u8; 4]) -> Vec4 {
+        Vec4::new(
+            self.colour[codes[0] as usize],
+            self.colour[codes[1] as usize],
+            self.colour[codes[2] as usize],
+            self.alpha[codes[3] as usize],
+        )
+    }
+
+    /// The codes [`Srgb8Tables::texel`] turns into exactly `texel`, if there are any.
+    pub(super) fn codes(&self, texel: Vec4) -> Option<[u8; 4]> {
+        let find = |table: &[f32; 256], value: f32| {
+            // Both tables increase strictly, so a value has at most one code.
+            let at = table.partition_point(|&entry| entry < value);
+            (at < 256 && table[at].to_bits() == value.to_bits()).then_some(at as u8)
+        };
+        Some([
+            find(self.colour, texel.x)?,
+            find(self.colour, texel.y)?,
+            find(self.colour, texel.z)?,
+            find(self.alpha, texel.w)?,
+        ])
+    }
+}
+
 /// Expands interleaved 1..=4-channel pixels to RGBA with separate colour and alpha maps.
 fn expand<T: Copy>(
     raw: &[T],
@@ -59,7 +109,7 @@ fn expand<T: Copy>(
 }
 
 fn expand_u8(raw: &[u8], channels: usize, srgb: bool) -> Vec<Vec4> {
-    let unorm = |v: u8| f32::from(v) / 255.0;
+    let unorm = unorm8;
     if srgb {
         let lut = &*SRGB8_LUT;
         expand(raw, channels, |v| lut[v as usize], unorm)

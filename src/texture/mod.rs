@@ -50,7 +50,67 @@ pub struct MipLevel {
     pub width: u32,
     pub height: u32,
     /// `width * height` texels; texel `(x, y)` is at `y * width + x`.
-    pub texels: Vec<Vec4>,
+    texels: Texels,
+}
+
+/// How a level keeps its texels. Level 0 of an 8-bit image keeps the 8-bit codes (4 bytes
+/// per texel instead of 16) and decodes them through the tables its loader used, so every
+/// lookup returns the same `Vec4` bit for bit; texture lookups of whole frames wait on
+/// texel loads (the hottest instructions of `sample_trilinear`), and a quarter of the bytes
+/// keeps more of a texture in cache. Everything else (reduced levels, 16-bit and float
+/// images) stays linear `f32`.
+#[derive(Debug, Clone)]
+enum Texels {
+    Linear(Vec<Vec4>),
+    /// sRGB-encoded colour codes and linear alpha codes, with the decoding tables (held
+    /// here so a lookup does not go through the tables' lazy initialisation).
+    Srgb8 {
+        codes: Vec<[u8; 4]>,
+        tables: decode::Srgb8Tables,
+    },
+}
+
+impl MipLevel {
+    /// A level of `width * height` linear texels (the caller checks the length).
+    fn linear(width: u32, height: u32, texels: Vec<Vec4>) -> MipLevel {
+        MipLevel {
+            width,
+            height,
+            texels: Texels::Linear(texels),
+        }
+    }
+
+    /// Texel `i` (`y * width + x`).
+    #[inline(always)]
+    pub fn texel(&self, i: usize) -> Vec4 {
+        match &self.texels {
+            Texels::Linear(t) => t[i],
+            Texels::Srgb8 { codes, tables } => tables.texel(codes[i]),
+        }
+    }
+
+    /// Every texel in order.
+    pub fn texels(&self) -> impl ExactSizeIterator<Item = Vec4> + '_ {
+        (0..self.width as usize * self.height as usize).map(|i| self.texel(i))
+    }
+
+    /// Whether the level keeps 8-bit codes (see [`Texels`]).
+    pub fn is_8bit(&self) -> bool {
+        matches!(self.texels, Texels::Srgb8 { .. })
+    }
+
+    /// Keeps the texels as 8-bit codes when every one of them is exactly what the 8-bit
+    /// sRGB decoding produces for some code; otherwise leaves the level as it is.
+    fn store_8bit_if_exact(&mut self) {
+        let Texels::Linear(texels) = &self.texels else {
+            return;
+        };
+        let tables = decode::Srgb8Tables::get();
+        let codes: Option<Vec<[u8; 4]>> = texels.iter().map(|&t| tables.codes(t)).collect();
+        if let Some(codes) = codes {
+            self.texels = Texels::Srgb8 { codes, tables };
+        }
+    }
 }
 
 /// A MIP pyramid: level 0 is the source image; each next level halves each side (floor,

@@ -69,11 +69,10 @@ fn reduce(level: &MipLevel) -> MipLevel {
     // x pass: sh rows of dw texels, kept in f64 so the y pass adds no extra rounding.
     let mut rows = vec![DVec4::ZERO; dw * sh];
     for y in 0..sh {
-        let src = &level.texels[y * sw..(y + 1) * sw];
         for j in 0..dw {
             rows[y * dw + j] = xtaps[xstarts[j]..xstarts[j + 1]]
                 .iter()
-                .map(|t| src[t.src].as_dvec4() * t.weight)
+                .map(|t| level.texel(y * sw + t.src).as_dvec4() * t.weight)
                 .sum();
         }
     }
@@ -87,11 +86,7 @@ fn reduce(level: &MipLevel) -> MipLevel {
             texels.push(acc.as_vec4());
         }
     }
-    MipLevel {
-        width: dw as u32,
-        height: dh as u32,
-        texels,
-    }
+    MipLevel::linear(dw as u32, dh as u32, texels)
 }
 
 impl MipPyramid {
@@ -116,15 +111,13 @@ impl MipPyramid {
         }
         let count = 1 + width.max(height).ilog2() as usize;
         let mut levels = Vec::with_capacity(count);
-        levels.push(MipLevel {
-            width,
-            height,
-            texels,
-        });
+        levels.push(MipLevel::linear(width, height, texels));
         while let Some(last) = levels.last().filter(|l| l.width > 1 || l.height > 1) {
             let next = reduce(last);
             levels.push(next);
         }
+        // After the reduction, which reads level 0 in f32 either way.
+        levels[0].store_8bit_if_exact();
         debug_assert_eq!(levels.len(), count);
         Ok(Self { levels })
     }
@@ -160,19 +153,19 @@ mod tests {
     fn sizes(w: u32, h: u32) -> Vec<(u32, u32)> {
         let p = MipPyramid::from_linear_rgba(w, h, noise(w, h)).unwrap();
         for l in &p.levels {
-            assert_eq!(l.texels.len(), (l.width * l.height) as usize);
+            assert_eq!(l.texels().len(), (l.width * l.height) as usize);
         }
         p.levels.iter().map(|l| (l.width, l.height)).collect()
     }
 
     fn mean(level: &MipLevel) -> [f64; 4] {
         let mut acc = [0.0f64; 4];
-        for t in &level.texels {
+        for t in level.texels() {
             for c in 0..4 {
                 acc[c] += f64::from(t[c]);
             }
         }
-        acc.map(|a| a / level.texels.len() as f64)
+        acc.map(|a| a / level.texels().len() as f64)
     }
 
     #[test]
@@ -244,13 +237,77 @@ mod tests {
             vec![Vec4::splat(0.0), Vec4::splat(3.0), Vec4::splat(6.0)],
         )
         .unwrap();
-        assert!((p.levels[1].texels[0].x - 3.0).abs() < 1e-6);
+        assert!((p.levels[1].texel(0).x - 3.0).abs() < 1e-6);
         // 5 -> 2: destination 0 covers [0, 2.5): texels 0, 1 fully and half of texel 2.
         let src: Vec<Vec4> = [1.0, 2.0, 4.0, 8.0, 16.0].map(Vec4::splat).to_vec();
         let p = MipPyramid::from_linear_rgba(5, 1, src).unwrap();
-        let l1 = &p.levels[1].texels;
+        let l1: Vec<Vec4> = p.levels[1].texels().collect();
         assert!((l1[0].x - (1.0 + 2.0 + 0.5 * 4.0) / 2.5).abs() < 1e-6);
         assert!((l1[1].x - (0.5 * 4.0 + 8.0 + 16.0) / 2.5).abs() < 1e-6);
+    }
+
+    #[test]
+    fn level_zero_of_an_8bit_image_keeps_its_codes_and_samples_bit_for_bit() {
+        use crate::texture::{ColorEncoding, Sampler, decode_texels};
+        use glam::Vec2;
+        // A 64 x 48 RGBA PNG of varied codes (every value 0..=255 on some channel).
+        let image = image::RgbaImage::from_fn(64, 48, |x, y| {
+            image::Rgba([
+                (x * 4 + y) as u8,
+                (y * 5) as u8,
+                (x * y % 256) as u8,
+                (255 - x) as u8,
+            ])
+        });
+        let mut png = Vec::new();
+        image
+            .write_to(&mut std::io::Cursor::new(&mut png), image::ImageFormat::Png)
+            .unwrap();
+        let (w, h, texels) = decode_texels(&png, ColorEncoding::Srgb).unwrap();
+        let compact = MipPyramid::from_linear_rgba(w, h, texels.clone()).unwrap();
+        assert!(compact.levels[0].is_8bit());
+        assert!(compact.levels[1..].iter().all(|l| !l.is_8bit()));
+        // Every texel reads back as decoded.
+        let same =
+            |a: Vec4, b: Vec4| a.to_array().map(f32::to_bits) == b.to_array().map(f32::to_bits);
+        assert!(
+            compact.levels[0]
+                .texels()
+                .zip(&texels)
+                .all(|(a, b)| same(a, *b))
+        );
+        // One texel nudged by an ulp is no code's value: that level stays f32.
+        let mut nudged = texels.clone();
+        nudged[5].x = f32::from_bits(nudged[5].x.to_bits() + 1);
+        let linear = MipPyramid::from_linear_rgba(w, h, nudged).unwrap();
+        assert!(!linear.levels[0].is_8bit());
+        // Lookups equal those of the same pyramid with level 0 kept in f32.
+        let mut reference = compact.clone();
+        reference.levels[0] = MipLevel::linear(w, h, texels.clone());
+        let mut seed = 1u64;
+        for _ in 0..2000 {
+            seed = seed
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            let uv = Vec2::new(
+                (seed >> 40) as f32 / 16777216.0 * 3.0 - 1.0,
+                (seed >> 16 & 0xffffff) as f32 / 16777216.0,
+            );
+            let lod = (seed >> 60) as f32 * 0.4;
+            let sampler = Sampler::default();
+            assert!(same(
+                compact.sample_trilinear(uv, lod, sampler),
+                reference.sample_trilinear(uv, lod, sampler)
+            ));
+            assert!(same(
+                compact.sample_bilinear(0, uv, sampler),
+                reference.sample_bilinear(0, uv, sampler)
+            ));
+        }
+        // The reduced levels were computed from the same values.
+        for (a, b) in compact.levels[1..].iter().zip(&reference.levels[1..]) {
+            assert!(a.texels().zip(b.texels()).all(|(x, y)| same(x, y)));
+        }
     }
 
     #[test]
@@ -258,8 +315,8 @@ mod tests {
         let c = Vec4::new(0.25, 0.5, 0.75, 1.0);
         let p = MipPyramid::from_linear_rgba(7, 5, vec![c; 35]).unwrap();
         for level in &p.levels {
-            for t in &level.texels {
-                assert!((*t - c).abs().max_element() < 1e-6);
+            for t in level.texels() {
+                assert!((t - c).abs().max_element() < 1e-6);
             }
         }
     }
