@@ -365,7 +365,7 @@ impl TwoLevelAccel {
             for top in &self.levels {
                 top.tlas
                     .traverse_packet(packet, limits, |r, first, _, limit| {
-                        if top.reaches(packet.ray(r), *limit) {
+                        if top.reaches(&packet.ray(r), *limit) {
                             let (origin, direction) = rays[r];
                             let placed = &top.placed[first as usize];
                             *limit = self.closest_in_instance(
@@ -382,7 +382,7 @@ impl TwoLevelAccel {
                 for r in 0..n {
                     limits[r] = c.accel.closest_within(
                         &c.within(),
-                        packet.ray(r),
+                        &packet.ray(r),
                         &sheared[r],
                         limits[r],
                         &mut best[r],

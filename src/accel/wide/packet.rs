@@ -6,8 +6,9 @@
 //!   at one point (a pinhole camera's primary rays) and runs the same way along an axis, the
 //!   slab distances of all its rays lie between those of the smallest and the largest
 //!   inverse direction component. One SIMD slab test with those bounds tells which of a
-//!   node's four children no ray of the packet can enter, so the walk never searches the
-//!   packet ray by ray for a child nobody enters (which cost up to 63 box tests per lane).
+//!   node's four children no ray of the packet can enter; the others are walked, nearest
+//!   bound first, with no ray-by-ray test above the leaves. (Packets from several origins
+//!   fall back to ranged traversal: each child carried from the first ray that enters it.)
 //!   It is exact in floating point, not only in real numbers: with one shared origin every
 //!   ray computes the same `plane - origin`, and a product rounded to nearest is monotonic
 //!   in each factor, so each ray's rounded distance lies between the rounded bounds.
@@ -21,17 +22,17 @@
 
 use std::mem::MaybeUninit;
 
-use glam::{Vec3A, Vec4};
+use glam::{BVec4A, Vec3A, Vec4};
 
 use super::{
     EMPTY, INLINE_STACK, LEAF, PACKET, ROBUST_FAR, RayBoxes, WIDTH, WideBvh, WideNode,
     safe_inverse4,
 };
 
-/// The rays of a packet for the walk: each ray's slab constants, the same as structure of
-/// arrays (four rays per SIMD test at a leaf), and the interval bounds when they apply.
+/// The rays of a packet for the walk, as structure of arrays (four rays per SIMD test at a
+/// leaf; one ray's splatted slab constants are made when a walk needs them), and the
+/// interval bounds when they apply.
 pub struct RayPacket {
-    rays: [RayBoxes; PACKET],
     /// `origin[axis][ray]`, `inverse[axis][ray]`; unused slots hold a ray that enters
     /// nothing (never reported: the walk masks slots at or past `len`).
     origin: [[f32; PACKET]; 3],
@@ -60,7 +61,6 @@ impl RayPacket {
     #[inline]
     pub fn new(rays: &[(Vec3A, Vec3A)]) -> RayPacket {
         let mut packet = RayPacket {
-            rays: [RayBoxes::default(); PACKET],
             origin: [[0.0; PACKET]; 3],
             inverse: [[0.0; PACKET]; 3],
             frustum: None,
@@ -88,16 +88,14 @@ impl RayPacket {
                 safe_inverse4(Vec4::from_slice(group)).write_to_slice(group);
             }
         }
-        for i in 0..len {
-            let at = |a: &[[f32; PACKET]; 3]| [a[0][i], a[1][i], a[2][i]];
-            self.rays[i] = RayBoxes::from_inverse(at(&self.origin), at(&self.inverse));
-        }
         self.frustum = Frustum::of(&self.origin, &self.inverse, len);
     }
 
     /// Ray `r`'s slab constants.
-    pub fn ray(&self, r: usize) -> &RayBoxes {
-        &self.rays[r]
+    #[inline(always)]
+    pub fn ray(&self, r: usize) -> RayBoxes {
+        let at = |a: &[[f32; PACKET]; 3]| [a[0][r], a[1][r], a[2][r]];
+        RayBoxes::from_inverse(at(&self.origin), at(&self.inverse))
     }
 
     /// Calls `each(ray, &mut limit)` for every ray from `first` on that enters lane `lane`
@@ -169,19 +167,25 @@ impl Frustum {
             if origin[axis][..len].iter().any(|v| v.to_bits() != o) {
                 return None;
             }
-            let row = &inverse[axis][..len];
-            let (mut min, mut max) = (row[0], row[0]);
-            let mut negative = 0;
-            for &v in row {
-                if v.is_nan() {
-                    return None;
-                }
+            // Four at a time; the slots of the last group past `len` repeat ray 0.
+            let row = &inverse[axis];
+            let first = Vec4::splat(row[0]);
+            let (mut min, mut max) = (first, first);
+            let (mut negative, mut nan) = (0, 0);
+            for at in (0..len).step_by(4) {
+                let live = (1u32 << (len - at).min(4)) - 1;
+                let lanes = BVec4A::new(live & 1 != 0, live & 2 != 0, live & 4 != 0, live & 8 != 0);
+                let v = Vec4::select(lanes, Vec4::from_slice(&row[at..at + 4]), first);
                 min = min.min(v);
                 max = max.max(v);
-                negative += (v < 0.0) as usize;
+                negative += (v.cmplt(Vec4::ZERO).bitmask() & live).count_ones() as usize;
+                nan |= v.cmpne(v).bitmask();
             }
-            frustum.inverse_min[axis] = Vec4::splat(min);
-            frustum.inverse_max[axis] = Vec4::splat(max);
+            if nan != 0 {
+                return None;
+            }
+            frustum.inverse_min[axis] = Vec4::splat(min.min_element());
+            frustum.inverse_max[axis] = Vec4::splat(max.max_element());
             // As `RayBoxes`: a negative inverse meets the upper plane first.
             let down = (negative == len) as usize;
             frustum.front[axis] = axis + 3 * down;
@@ -196,7 +200,7 @@ impl Frustum {
     /// The lanes of `node` that some ray of the packet may enter before `t_max` (the
     /// largest limit of the packet's rays). A lane left out is entered by no ray.
     #[inline(always)]
-    fn may_enter(&self, node: &WideNode, t_max: f32) -> u32 {
+    fn may_enter(&self, node: &WideNode, t_max: f32) -> (Vec4, u32) {
         let mut near = Vec4::ZERO;
         let mut far = Vec4::splat(f32::INFINITY);
         for axis in 0..3 {
@@ -210,7 +214,7 @@ impl Frustum {
             far = far.min((back * low).max(back * high));
         }
         let far = (far * ROBUST_FAR).min(Vec4::splat(t_max));
-        near.cmple(far).bitmask()
+        (near, near.cmple(far).bitmask())
     }
 }
 
@@ -227,12 +231,11 @@ struct PacketEntry {
 }
 
 impl WideBvh {
-    /// Walks the tree once for a packet of rays: a subtree is carried with the first ray of
-    /// the packet that enters it, found by testing the rays in order from the parent's first
-    /// ray (children no ray can enter are dropped first by the interval test), so near the
-    /// root one box test usually decides for the whole packet. At a leaf every ray from the
-    /// first on tests the leaf's box with its own limit, and those inside call
-    /// `leaf(ray, leaf_ref, count, &mut limit)`; `limits[r]` is ray `r`'s limit.
+    /// Walks the tree once for a packet of rays. With one origin, the interval test picks
+    /// the children to walk; otherwise a subtree is carried with the first ray of the packet
+    /// that enters it, found by testing the rays in order from the parent's first ray. At a
+    /// leaf every ray from the first on tests the leaf's box with its own limit, and those
+    /// inside call `leaf(ray, leaf_ref, count, &mut limit)`; `limits[r]` is ray `r`'s limit.
     ///
     /// Every ray reaches every leaf whose box it enters before its limit (a ray that enters
     /// a child is never before that child's first ray), so a closest-hit leaf finds exactly
@@ -271,7 +274,6 @@ impl WideBvh {
         leaf: &mut impl FnMut(usize, u32, u32, &mut f32),
     ) {
         let n = packet.len;
-        let rays = &packet.rays;
         // The largest limit of the packet: the interval test's `t_max`. Limits only
         // shrink, so a stale value is still a bound; it is renewed after each leaf.
         let largest_limit = |limits: &[f32; PACKET]| {
@@ -307,21 +309,37 @@ impl WideBvh {
                 continue;
             }
             let node = &self.nodes[entry.child as usize];
-            let used = match &packet.frustum {
-                Some(frustum) => used_lanes(node) & frustum.may_enter(node, packet_limit),
-                None => used_lanes(node),
+            let mut push = |lane: usize, first: u32, top: &mut usize| {
+                stack[*top] = MaybeUninit::new(PacketEntry {
+                    child: node.child[lane],
+                    count: node.count[lane],
+                    first,
+                    node: entry.child,
+                    lane: lane as u32,
+                });
+                *top += 1;
             };
-            if used == 0 {
+            if let Some(frustum) = &packet.frustum {
+                // One origin: the interval test alone decides which children the packet
+                // walks, far to near by where the packet can first enter them, each from the
+                // parent's first ray. Searching for each child's first ray cost more than
+                // the leaf tests it spared (8% of a primary-ray frame).
+                let (near, may) = frustum.may_enter(node, packet_limit);
+                let (lanes, count) = super::lanes_near_to_far(near, used_lanes(node) & may);
+                for &lane in lanes[..count].iter().rev() {
+                    push(lane, first as u32, &mut top);
+                }
                 continue;
             }
-            // The first ray decides the order; later rays only claim children it missed.
-            let (near, entered) = rays[first].enter(node, limits[first]);
-            let entered = entered & used;
+            // Rays from several origins: the first ray decides the order; later rays only
+            // claim children it missed, and a child is carried from the first that enters it.
+            let used = used_lanes(node);
+            let (near, entered) = packet.ray(first).enter(node, limits[first]);
             let mut first_of = [first as u32; WIDTH];
             let mut missed = used & !entered;
             let mut r = first + 1;
             while missed != 0 && r < n {
-                let (_, m) = rays[r].enter(node, limits[r]);
+                let (_, m) = packet.ray(r).enter(node, limits[r]);
                 let mut claimed = m & missed;
                 missed &= !claimed;
                 while claimed != 0 {
@@ -331,28 +349,17 @@ impl WideBvh {
                 }
                 r += 1;
             }
-            let later = used & !entered & !missed;
-            let mut push = |lane: usize, top: &mut usize| {
-                stack[*top] = MaybeUninit::new(PacketEntry {
-                    child: node.child[lane],
-                    count: node.count[lane],
-                    first: first_of[lane],
-                    node: entry.child,
-                    lane: lane as u32,
-                });
-                *top += 1;
-            };
-            // Children the first ray missed go deepest (visited last), then the entered
-            // ones far to near, so the nearest is popped next.
-            let mut bits = later;
+            // Children the first ray missed go deepest (visited last), then the entered ones
+            // far to near, so the nearest is popped next.
+            let mut bits = used & !entered & !missed;
             while bits != 0 {
                 let lane = bits.trailing_zeros() as usize;
                 bits &= bits - 1;
-                push(lane, &mut top);
+                push(lane, first_of[lane], &mut top);
             }
             let (lanes, count) = super::lanes_near_to_far(near, entered);
             for &lane in lanes[..count].iter().rev() {
-                push(lane, &mut top);
+                push(lane, first_of[lane], &mut top);
             }
         }
     }
@@ -462,7 +469,7 @@ mod tests {
                 let Some(frustum) = &packet.frustum else {
                     continue;
                 };
-                let may = frustum.may_enter(&node, limit);
+                let (_, may) = frustum.may_enter(&node, limit);
                 let any = (0..rays.len()).fold(0, |m, r| m | packet.ray(r).enter(&node, limit).1);
                 assert_eq!(any & !may, 0, "a lane some ray enters was dropped");
                 dropped += (0b1111 & !may).count_ones();
