@@ -46,6 +46,39 @@ fn unorm8(v: u8) -> f32 {
     f32::from(v) / 255.0
 }
 
+/// Where each value of a strictly increasing table of non-negative floats sits, by the top
+/// 16 bits of the value: `start[b]..start[b + 1]` are the codes whose bits start with `b`
+/// (at most a few), so finding a value's code is a lookup, not a search.
+struct CodeIndex {
+    table: &'static [f32; 256],
+    start: Vec<u16>,
+}
+
+impl CodeIndex {
+    fn new(table: &'static [f32; 256]) -> CodeIndex {
+        let mut start = vec![0u16; (1 << 16) + 1];
+        for &value in table {
+            start[(value.to_bits() >> 16) as usize + 1] += 1;
+        }
+        for b in 1..start.len() {
+            start[b] += start[b - 1];
+        }
+        CodeIndex { table, start }
+    }
+
+    /// The code whose table value is exactly `value` (bit for bit), if any.
+    #[inline]
+    fn code(&self, value: f32) -> Option<u8> {
+        let bucket = (value.to_bits() >> 16) as usize;
+        (self.start[bucket]..self.start[bucket + 1])
+            .find(|&code| self.table[code as usize].to_bits() == value.to_bits())
+            .map(|code| code as u8)
+    }
+}
+
+static SRGB8_INDEX: LazyLock<CodeIndex> = LazyLock::new(|| CodeIndex::new(&SRGB8_LUT));
+static ALPHA8_INDEX: LazyLock<CodeIndex> = LazyLock::new(|| CodeIndex::new(&ALPHA8_LUT));
+
 /// The two tables that decode an 8-bit sRGB image's pixels, as `expand_u8` decodes them.
 #[derive(Debug, Clone, Copy)]
 pub(super) struct Srgb8Tables {
@@ -74,16 +107,12 @@ impl Srgb8Tables {
 
     /// The codes [`Srgb8Tables::texel`] turns into exactly `texel`, if there are any.
     pub(super) fn codes(&self, texel: Vec4) -> Option<[u8; 4]> {
-        let find = |table: &[f32; 256], value: f32| {
-            // Both tables increase strictly, so a value has at most one code.
-            let at = table.partition_point(|&entry| entry < value);
-            (at < 256 && table[at].to_bits() == value.to_bits()).then_some(at as u8)
-        };
+        let (colour, alpha) = (&*SRGB8_INDEX, &*ALPHA8_INDEX);
         Some([
-            find(self.colour, texel.x)?,
-            find(self.colour, texel.y)?,
-            find(self.colour, texel.z)?,
-            find(self.alpha, texel.w)?,
+            colour.code(texel.x)?,
+            colour.code(texel.y)?,
+            colour.code(texel.z)?,
+            alpha.code(texel.w)?,
         ])
     }
 }
@@ -335,6 +364,24 @@ mod tests {
         let lut = &*SRGB8_LUT;
         assert!((lut[128] - 0.2158605).abs() < 1e-6, "{}", lut[128]);
         assert_eq!(lut[255], 1.0);
+        // Every table value finds its own code, and values between codes find none.
+        let tables = Srgb8Tables::get();
+        for code in 0..=255u8 {
+            let texel = tables.texel([code, 255 - code, code / 2, code]);
+            assert_eq!(
+                tables.codes(texel),
+                Some([code, 255 - code, code / 2, code])
+            );
+            let between = Vec4::new(
+                f32::from_bits(texel.x.to_bits() + 1),
+                texel.y,
+                texel.z,
+                texel.w,
+            );
+            assert_eq!(tables.codes(between), None, "{code}");
+        }
+        assert_eq!(tables.codes(Vec4::new(-0.0, 0.0, 0.0, 1.0)), None);
+        assert_eq!(tables.codes(Vec4::new(f32::NAN, 0.0, 0.0, 1.0)), None);
         assert_eq!(lut[0], 0.0);
         // Linear segment: 10/255 = 0.0392 <= 0.04045.
         assert!((lut[10] - 10.0 / 255.0 / 12.92).abs() < 1e-9);
