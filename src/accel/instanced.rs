@@ -439,7 +439,7 @@ impl TwoLevelAccel {
         }
         let ray = RayBoxes::new(origin, direction);
         for top in &self.levels {
-            let go_on = top.tlas.traverse(&ray, t_max, |first, _, _| {
+            let go_on = top.tlas.traverse_unordered(&ray, t_max, |first, _, _| {
                 if !top.reaches(&ray, t_max) {
                     return true;
                 }

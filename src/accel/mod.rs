@@ -464,12 +464,13 @@ impl Accel {
     ) -> bool {
         let ray = RayBoxes::new(origin, direction);
         let sheared = ShearedRay::new(origin, direction);
-        self.wide.traverse(&ray, t_max, |first, count, _| {
-            self.triangles
-                .hits_in_leaf(&sheared, first, count, t_max, |slot, _, t, _| {
-                    visit(slot, t)
-                })
-        })
+        self.wide
+            .traverse_unordered(&ray, t_max, |first, count, _| {
+                self.triangles
+                    .hits_in_leaf(&sheared, first, count, t_max, |slot, _, t, _| {
+                        visit(slot, t)
+                    })
+            })
     }
 }
 

@@ -9,9 +9,12 @@
 //! [`WideBvh::refit_leaf`]), and the SAH cost that decides rebuilds is measured on it, the
 //! tree rays actually walk.
 //!
-//! Traversal is near-first: the children a ray enters are sorted by entry distance, the
-//! nearest is visited next, the others go on a stack with their entry distance, and an
-//! entry whose distance is already beyond the closest hit so far is dropped when popped.
+//! Closest-hit traversal is near-first: the children a ray enters are sorted by entry
+//! distance, the nearest is visited next, the others go on a stack with their entry
+//! distance, and an entry whose distance is already beyond the closest hit so far is dropped
+//! when popped. Queries whose answer does not depend on the order of visits (shadow rays:
+//! any opaque hit, or every glass surface) skip the sort and take children in lane order
+//! ([`WideBvh::traverse_unordered`]), which traced BART Kitchen's shadow rays 1.4x faster.
 //! The traversal is generic over what a leaf does (closest hit, any hit, or a top-level
 //! tree entering instances), so every kind of ray shares this one loop.
 
@@ -362,6 +365,28 @@ impl WideBvh {
         t_max: f32,
         leaf: impl FnMut(u32, u32, &mut f32) -> bool,
     ) -> bool {
+        self.traverse_in::<true>(ray, t_max, leaf)
+    }
+
+    /// [`WideBvh::traverse`] for queries whose answer does not depend on the order of
+    /// visits (any hit, every hit): children are taken in lane order, not sorted.
+    #[inline(always)]
+    pub fn traverse_unordered(
+        &self,
+        ray: &RayBoxes,
+        t_max: f32,
+        leaf: impl FnMut(u32, u32, &mut f32) -> bool,
+    ) -> bool {
+        self.traverse_in::<false>(ray, t_max, leaf)
+    }
+
+    #[inline(always)]
+    fn traverse_in<const ORDERED: bool>(
+        &self,
+        ray: &RayBoxes,
+        t_max: f32,
+        leaf: impl FnMut(u32, u32, &mut f32) -> bool,
+    ) -> bool {
         if let Some((first, count)) = self.root_leaf {
             let mut leaf = leaf;
             let mut t = t_max;
@@ -375,18 +400,18 @@ impl WideBvh {
             // Left uninitialised: zeroing 1.5 KiB per ray showed as 7% of a primary-ray
             // profile (memset), and `walk` only reads entries it wrote.
             let mut stack = [const { MaybeUninit::uninit() }; INLINE_STACK];
-            self.walk(&mut stack, ray, t_max, leaf)
+            self.walk::<ORDERED>(&mut stack, ray, t_max, leaf)
         } else {
             // Only trees deeper than ~42 wide levels (pathological inputs) pay this.
             let mut stack = vec![MaybeUninit::uninit(); needed];
-            self.walk(&mut stack, ray, t_max, leaf)
+            self.walk::<ORDERED>(&mut stack, ray, t_max, leaf)
         }
     }
 
     /// The traversal loop. The stack holds at most `depth * (WIDTH - 1) + 1` entries: each
     /// level pushes at most `WIDTH - 1` siblings.
     #[inline(always)]
-    fn walk(
+    fn walk<const ORDERED: bool>(
         &self,
         stack: &mut [MaybeUninit<StackEntry>],
         ray: &RayBoxes,
@@ -401,7 +426,11 @@ impl WideBvh {
                     let node = &self.nodes[index as usize];
                     let (near, mask) = ray.enter(node, t_max);
                     if mask != 0 {
-                        current = push_far_take_near(node, near, mask, stack, &mut top);
+                        current = if ORDERED {
+                            push_far_take_near(node, near, mask, stack, &mut top)
+                        } else {
+                            push_rest_take_first(node, near, mask, stack, &mut top)
+                        };
                         continue;
                     }
                 }
@@ -477,6 +506,27 @@ fn push_far_take_near(
         *top += 1;
     }
     let lane = lanes[0];
+    ChildRef::decode(node.child[lane], node.count[lane])
+}
+
+/// Of the entered children (`mask`), returns the first in lane order and pushes the others.
+#[inline(always)]
+fn push_rest_take_first(
+    node: &WideNode,
+    near: Vec4,
+    mask: u32,
+    stack: &mut [MaybeUninit<StackEntry>],
+    top: &mut usize,
+) -> ChildRef {
+    let distances = near.to_array();
+    let lane = mask.trailing_zeros() as usize;
+    let mut rest = mask & (mask - 1);
+    while rest != 0 {
+        let other = rest.trailing_zeros() as usize;
+        rest &= rest - 1;
+        stack[*top] = MaybeUninit::new((node.child[other], node.count[other], distances[other]));
+        *top += 1;
+    }
     ChildRef::decode(node.child[lane], node.count[lane])
 }
 
@@ -565,6 +615,47 @@ mod tests {
         let b = binary.primitive_indices[slots[0] as usize];
         assert_eq!(b, 5);
         assert!(reached(&wide, Vec3A::new(11.5, 5.0, 0.5), Vec3A::NEG_Y).is_empty());
+    }
+
+    #[test]
+    fn unordered_walks_reach_the_same_leaves() {
+        let binary = build(300);
+        let wide = WideBvh::collapse(&binary, |first, _| first);
+        let walk = |unordered: bool, origin: Vec3A, direction: Vec3A, t_max: f32| {
+            let mut out = Vec::new();
+            let ray = RayBoxes::new(origin, direction);
+            let leaf = |first: u32, count: u32, _: &mut f32| {
+                out.extend(first..first + count);
+                true
+            };
+            if unordered {
+                wide.traverse_unordered(&ray, t_max, leaf);
+            } else {
+                wide.traverse(&ray, t_max, leaf);
+            }
+            out.sort();
+            out
+        };
+        let mut reached = 0;
+        for k in 0..500 {
+            let f = |i: u32| ((k * 7 + i).wrapping_mul(2654435761) >> 8) as f32 / 16777216.0;
+            // Along the row of boxes, both ways, slightly tilted.
+            let origin = Vec3A::new(f(0) * 620.0 - 10.0, f(1), f(2));
+            let along = if k % 2 == 0 { 1.0 } else { -1.0 };
+            let direction = Vec3A::new(along, (f(4) - 0.5) * 0.02, (f(5) - 0.5) * 0.02);
+            let t_max = if k % 3 == 0 {
+                f(6) * 100.0
+            } else {
+                f32::INFINITY
+            };
+            let ordered = walk(false, origin, direction, t_max);
+            assert_eq!(walk(true, origin, direction, t_max), ordered);
+            reached += ordered.len();
+        }
+        assert!(
+            reached > 200,
+            "only {reached} leaves reached: the test means little"
+        );
     }
 
     #[test]
