@@ -325,7 +325,8 @@ impl WideBvh {
                 // parent's first ray. Searching for each child's first ray cost more than
                 // the leaf tests it spared (8% of a primary-ray frame).
                 let (near, may) = frustum.may_enter(node, packet_limit);
-                let (lanes, count) = super::lanes_near_to_far(near, used_lanes(node) & may);
+                let (lanes, count) =
+                    super::lanes_near_to_far::<false>(near, used_lanes(node) & may);
                 for &lane in lanes[..count].iter().rev() {
                     push(lane, first as u32, &mut top);
                 }
@@ -357,7 +358,7 @@ impl WideBvh {
                 bits &= bits - 1;
                 push(lane, first_of[lane], &mut top);
             }
-            let (lanes, count) = super::lanes_near_to_far(near, entered);
+            let (lanes, count) = super::lanes_near_to_far::<false>(near, entered);
             for &lane in lanes[..count].iter().rev() {
                 push(lane, first_of[lane], &mut top);
             }
