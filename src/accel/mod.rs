@@ -444,8 +444,9 @@ impl Accel {
                         bary,
                     });
                     best.source = source;
-                    // Keep visiting boxes that start exactly at `t`, where a tie may hide.
-                    *limit = t.next_up();
+                    // Keep visiting boxes that start at `t` (up to rounding), where a tie
+                    // may hide.
+                    *limit = ray.tie_limit(t);
                 }
                 true
             });
@@ -619,6 +620,58 @@ pub(super) mod tests {
             }
         }
         best
+    }
+
+    /// Exact ties far from the ray origin: an 8 x 8 grid of unit quads at z = 0, each
+    /// triangle three times (the copies tie exactly), seen from cameras up to 1e6 away. The
+    /// lowest source must win whatever order the tree visits the copies in, for single rays
+    /// and packets alike.
+    #[test]
+    fn exact_ties_far_from_the_origin_go_to_the_lowest_source() {
+        let mut tris = Vec::new();
+        for j in 0..8 {
+            for i in 0..8 {
+                let (x, y) = (i as f32, j as f32);
+                let a = [
+                    Vec3A::new(x, y, 0.0),
+                    Vec3A::new(x + 1.0, y, 0.0),
+                    Vec3A::new(x + 1.0, y + 1.0, 0.0),
+                ];
+                let b = [a[0], a[2], Vec3A::new(x, y + 1.0, 0.0)];
+                tris.extend([a, b, a, b, a, b]);
+            }
+        }
+        // Shuffled, so copies land in different leaves with unrelated source ids.
+        let mut rng = Rng(0x5851f42d4c957f2d);
+        for i in (1..tris.len()).rev() {
+            let j = (rng.next() * (i + 1) as f32) as usize % (i + 1);
+            tris.swap(i, j);
+        }
+        let mut tris = soup(&tris);
+        let accel = Accel::build(&mut tris).unwrap();
+        let mut checked = 0;
+        for distance in [30.0f32, 1e3, 1e4, 1e5, 3e5, 1e6, 1e6, 1e6] {
+            for _ in 0..100 {
+                let eye =
+                    Vec3A::new(rng.next() * 2.0 - 1.0, rng.next() * 2.0 - 1.0, 1.0) * distance;
+                let rays: Vec<(Vec3A, Vec3A)> = (0..64)
+                    .map(|_| {
+                        let aim = Vec3A::new(rng.next() * 8.0, rng.next() * 8.0, 0.0);
+                        (eye, (aim - eye).normalize())
+                    })
+                    .collect();
+                let mut hits = vec![None; rays.len()];
+                accel.closest_hits(&rays, f32::INFINITY, &mut hits);
+                for (&(o, d), hit) in rays.iter().zip(&hits) {
+                    let single = accel.closest_hit(o, d, f32::INFINITY);
+                    let found = single.map(|h| (tris.source[h.triangle as usize], h.t));
+                    assert_eq!(found, brute_force(&tris, o, d), "eye {o} direction {d}");
+                    assert_eq!(*hit, single, "packet and single ray, eye {o}");
+                    checked += found.is_some() as usize;
+                }
+            }
+        }
+        assert!(checked > 8000, "only {checked} rays hit the grid");
     }
 
     fn random_soup(rng: &mut Rng, n: usize) -> FrameTriangles {

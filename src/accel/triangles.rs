@@ -182,7 +182,12 @@ pub struct ShearedRay {
     k: [usize; 3],
     /// `(dx / dz, dy / dz, 1 / dz)` in the permuted axes.
     shear: [Vec4; 3],
+    /// The origin's part of [`ShearedRay::tie_limit`]'s margin.
+    tie_offset: f32,
 }
+
+/// Relative margin of [`ShearedRay::tie_limit`].
+const TIE_MARGIN: f32 = 1.0 / 2_097_152.0;
 
 /// What a pack test found: the lanes hit, with their distance and barycentrics.
 pub struct PackHits {
@@ -216,7 +221,21 @@ impl ShearedRay {
             origin: origin.to_array().map(Vec4::splat),
             k: [kx, ky, kz],
             shear: shear.map(Vec4::splat),
+            tie_offset: origin.abs().max_element() * TIE_MARGIN,
         }
+    }
+
+    /// The limit a closest-hit query keeps after a hit at `t`, so that boxes where an exact
+    /// tie may hide are still visited: `t` plus 2^-21 (4 ulps of f32) of `t` and of the
+    /// origin's largest coordinate. Box entry distances and hit distances are both
+    /// computed from coordinates minus the origin, so their rounding scales with the larger
+    /// of the two (one ulp of `t` alone let exact ties seen from 1e5 away go by visit order;
+    /// 2^-23 already sufficed in the test). A margin only costs extra visits: a hit past `t`
+    /// is never taken over it. Rays nearly parallel to a box face can round its entry
+    /// distance further than this; such ties may still be decided by visit order.
+    #[inline(always)]
+    pub fn tie_limit(&self, t: f32) -> f32 {
+        t * (1.0 + TIE_MARGIN) + self.tie_offset
     }
 
     /// Tests the first `live` lanes of `pack`.
