@@ -321,19 +321,20 @@ impl TwoLevelAccel {
         let mut best = Closest::default();
         let ray = RayBoxes::new(origin, direction);
         let sheared = ShearedRay::new(origin, direction);
-        let limit = world.closest_within(&Within::world(), &ray, &sheared, t_max, &mut best);
-        let mut limit = limit;
+        let mut limit = world.closest_within(&Within::world(), &ray, &sheared, t_max, &mut best);
         for top in &self.levels {
-            top.tlas.traverse(&ray, limit, |first, _, limit| {
-                if top.reaches(&ray, *limit) {
+            // The limit each tree ends with carries on, as `Accel::closest_within` returns it.
+            let mut end = limit;
+            top.tlas.traverse(&ray, limit, |first, _, walk_limit| {
+                if top.reaches(&ray, *walk_limit) {
                     let placed = &top.placed[first as usize];
-                    *limit = self.closest_in_instance(placed, origin, direction, *limit, &mut best);
+                    *walk_limit =
+                        self.closest_in_instance(placed, origin, direction, *walk_limit, &mut best);
+                    end = *walk_limit;
                 }
                 true
             });
-            if let Some(hit) = best.hit {
-                limit = limit.min(hit.t.next_up());
-            }
+            limit = end;
         }
         for c in self.levels.iter().flat_map(|l| &l.collapsed) {
             limit = c
