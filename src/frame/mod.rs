@@ -14,6 +14,7 @@ mod clock;
 mod dirty;
 mod log2_pb;
 mod posed;
+mod prefetch;
 mod record;
 mod scatter;
 pub mod sequence;

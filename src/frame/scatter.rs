@@ -13,6 +13,7 @@
 use glam::{Vec2, Vec3, Vec3A};
 
 use super::Motion;
+use super::prefetch::prefetch_ptr;
 use crate::geometry::FrameTriangles;
 
 /// Mutable access to one slot of each per-slot array, handed to concurrent tasks.
@@ -81,6 +82,22 @@ impl<'a> SlotScatter<'a> {
                 &mut *self.normals.add(s),
                 &mut *self.uvs.add(s),
             );
+        }
+    }
+
+    /// Hints the cache to load slot `slot` of each per-slot array (no effect when out of
+    /// range): the write visits sources in order, so the slot a few sources ahead is known
+    /// long before its (scattered) write.
+    #[inline]
+    pub fn prefetch(&self, slot: u32) {
+        let s = slot as usize;
+        if s < self.slots {
+            // SAFETY: in bounds; a prefetch reads nothing and writes nothing.
+            unsafe {
+                prefetch_ptr(self.positions.add(s));
+                prefetch_ptr(self.normals.add(s));
+                prefetch_ptr(self.uvs.add(s));
+            }
         }
     }
 }

@@ -33,6 +33,9 @@ use crate::anim::NodeShape;
 /// rayon's split and join cost more than the work (tens of ns per item).
 const PARALLEL_MIN_ITEMS: usize = 8192;
 
+/// How many source triangles ahead the scattered write prefetches its slot.
+const PREFETCH_AHEAD: u32 = 16;
+
 /// Whether the frame update splits its steps across rayon's threads.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub enum UpdateParallelism {
@@ -258,6 +261,11 @@ impl Renderer {
                         .into_par_iter()
                         .with_min_len(WRITE_CHUNK)
                         .for_each(|source| {
+                            if let Some(&ahead) =
+                                slot_of_source.get((source + PREFETCH_AHEAD) as usize)
+                            {
+                                slots.prefetch(ahead);
+                            }
                             let slot = slot_of_source[source as usize];
                             // SAFETY: each source triangle is visited once and
                             // `slot_of_source` is one-to-one on the written sources (see

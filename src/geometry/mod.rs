@@ -220,13 +220,19 @@ impl SceneGeometry {
             v.swap(1, 2);
         }
         let p = v.map(|i| Vec3A::from(position(i)));
-        let geometric = Vec3::from((p[1] - p[0]).cross(p[2] - p[0]).normalize_or_zero());
+        // Computed only when a vertex needs it (a sqrt and a division: most of the cost of
+        // writing a deformed triangle that has its own normals).
+        let geometric = || Vec3::from((p[1] - p[0]).cross(p[2] - p[0]).normalize_or_zero());
         let normals = match normal {
-            Some(normal) => v.map(|i| {
-                let n = normal(i);
-                if n == Vec3::ZERO { geometric } else { n }
-            }),
-            None => [geometric; 3],
+            Some(normal) => {
+                let n = v.map(normal);
+                if n.contains(&Vec3::ZERO) {
+                    n.map(|n| if n == Vec3::ZERO { geometric() } else { n })
+                } else {
+                    n
+                }
+            }
+            None => [geometric(); 3],
         };
         (p, normals)
     }
