@@ -81,8 +81,6 @@ pub struct Accel {
     leaves: Vec<Leaf>,
     /// Per slot, its leaf's index in `leaves`.
     leaf_of_slot: Vec<u32>,
-    /// Leaf boxes of a full refit, reused from frame to frame.
-    leaf_boxes: Vec<Aabb>,
     /// SAH cost right after the last build (see [`Accel::sah_cost`]).
     build_cost: f32,
 }
@@ -265,7 +263,6 @@ impl Accel {
             triangles: packed,
             leaves,
             leaf_of_slot,
-            leaf_boxes: Vec::new(),
             build_cost: 0.0,
         };
         accel.build_cost = accel.sah_cost();
@@ -314,7 +311,7 @@ impl Accel {
             return RefitKind::None;
         }
         if moved_slots.len() as f64 > PARTIAL_REFIT_MAX_SHARE * self.leaves.len() as f64 {
-            self.refit_full(triangles);
+            self.refit_full(triangles, triangles.len() >= PARALLEL_REFIT_MIN);
             RefitKind::Full
         } else {
             self.refit_partial(triangles, moved_slots);
@@ -322,24 +319,27 @@ impl Accel {
         }
     }
 
-    fn refit_full(&mut self, triangles: &FrameTriangles) {
+    /// Refits every leaf and inner box (on rayon's threads when `parallel`: each box is a
+    /// pure function of its triangles, so the split changes no bit).
+    fn refit_full(&mut self, triangles: &FrameTriangles, parallel: bool) {
         let positions = &triangles.positions;
-        let parallel = positions.len() >= PARALLEL_REFIT_MIN;
         self.triangles.update_all(positions, parallel);
-        let boxes = &mut self.leaf_boxes;
-        boxes.resize(self.leaves.len(), Aabb::empty());
-        let fill =
-            |(aabb, leaf): (&mut Aabb, &Leaf)| *aabb = leaf_box(positions, leaf.first, leaf.count);
+        // Leaves in slot order (their triangles read in order), each box written straight
+        // into its lane: a list of boxes then a serial pass of scattered lane writes cost
+        // as much again.
+        let box_of = |leaf: &Leaf| (leaf.lane, leaf_box(positions, leaf.first, leaf.count));
         if parallel {
-            boxes
-                .par_iter_mut()
-                .zip(self.leaves.par_iter())
-                .for_each(fill);
+            let lanes = self.wide.leaf_lanes_writer();
+            self.leaves.par_iter().with_min_len(512).for_each(|leaf| {
+                let (lane, aabb) = box_of(leaf);
+                // SAFETY: every leaf has its own lane (`Leaf::lane` is one-to-one).
+                unsafe { lanes.set_leaf_box(lane, &aabb) };
+            });
         } else {
-            boxes.iter_mut().zip(&self.leaves).for_each(fill);
-        }
-        for (leaf, aabb) in self.leaves.iter().zip(boxes.iter()) {
-            self.wide.set_leaf_box(leaf.lane, aabb);
+            for leaf in &self.leaves {
+                let (lane, aabb) = box_of(leaf);
+                self.wide.set_leaf_box(lane, &aabb);
+            }
         }
         self.wide.refit_inner();
     }
@@ -764,6 +764,37 @@ pub(super) mod tests {
             found > 40,
             "too few hits ({found}) for the test to mean much"
         );
+    }
+
+    /// The parallel full refit (leaf boxes written into their lanes from several tasks)
+    /// leaves the tree bit for bit as the sequential one does.
+    #[test]
+    fn parallel_full_refit_equals_sequential() {
+        let mut rng = Rng(0x51f15eed);
+        let mut tris = random_soup(&mut rng, 5000);
+        let mut accel = Accel::build(&mut tris).unwrap();
+        let original = tris.clone();
+        for tri in &mut tris.positions {
+            let shift = rng.point(3.0);
+            for v in tri.iter_mut() {
+                *v = *v * 1.5 + shift;
+            }
+        }
+        accel.refit_full(&tris, false);
+        let sequential = accel.wide.bounds_bits();
+        // Back to the original boxes (so a lane the parallel refit skipped would show), then
+        // the moved triangles again, in parallel.
+        accel.refit_full(&original, true);
+        assert_ne!(accel.wide.bounds_bits(), sequential);
+        accel.refit_full(&tris, true);
+        assert_eq!(accel.wide.bounds_bits(), sequential);
+        // And the refitted tree finds what a fresh build over the moved triangles finds.
+        let fresh = Accel::build(&mut tris.clone()).unwrap();
+        for _ in 0..300 {
+            let (o, d) = (rng.point(40.0), rng.point(2.0).normalize_or_zero());
+            let hit = |a: &Accel| a.closest_hit(o, d, f32::INFINITY).map(|h| h.t.to_bits());
+            assert_eq!(hit(&accel), hit(&fresh));
+        }
     }
 
     #[test]

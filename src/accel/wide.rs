@@ -93,6 +93,48 @@ impl WideNode {
     }
 }
 
+/// Concurrent writes of leaf boxes into distinct lanes ([`WideBvh::leaf_lanes_writer`]).
+/// Two leaves may share a node but never a lane, and a lane's six bounds are its own `f32`s,
+/// so tasks writing distinct lanes touch distinct memory; no reference to a whole node is
+/// ever formed while they run.
+pub struct LeafLanes<'a> {
+    nodes: *mut WideNode,
+    len: usize,
+    one_leaf: bool,
+    _nodes: std::marker::PhantomData<&'a mut [WideNode]>,
+}
+
+// SAFETY: the pointer comes from an exclusive borrow held for 'a; `set_leaf_box`'s contract
+// keeps every lane to one task at a time.
+unsafe impl Sync for LeafLanes<'_> {}
+
+impl LeafLanes<'_> {
+    /// [`WideBvh::set_leaf_box`] for lane `at` (`node * WIDTH + lane`).
+    ///
+    /// # Safety
+    /// No other call for the same `at` may run at the same time.
+    ///
+    /// # Panics
+    /// If `at` names no node.
+    #[inline]
+    pub unsafe fn set_leaf_box(&self, at: u32, aabb: &Aabb) {
+        if self.one_leaf {
+            return; // as `WideBvh::set_leaf_box`: a one-leaf tree keeps no box
+        }
+        let (node, lane) = (at as usize / WIDTH, at as usize % WIDTH);
+        assert!(node < self.len, "node {node} of {}", self.len);
+        // SAFETY: in bounds (checked); each write goes to one `f32` of this lane, which no
+        // other task writes (the caller's contract), through a raw place (no `&mut` node).
+        unsafe {
+            let bounds = std::ptr::addr_of_mut!((*self.nodes.add(node)).bounds);
+            for axis in 0..3 {
+                (*bounds)[axis][lane] = aabb.min[axis];
+                (*bounds)[axis + 3][lane] = aabb.max[axis];
+            }
+        }
+    }
+}
+
 /// A reference to a subtree: an inner node or a leaf's slot range.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 enum ChildRef {
@@ -281,6 +323,26 @@ impl WideBvh {
     pub fn set_leaf_box(&mut self, at: u32, aabb: &Aabb) {
         if self.root_leaf.is_none() {
             self.set_lane(at, aabb);
+        }
+    }
+
+    /// Every node's bounds as bits (tests compare trees bit for bit).
+    #[cfg(test)]
+    pub fn bounds_bits(&self) -> Vec<u32> {
+        self.nodes
+            .iter()
+            .flat_map(|n| n.bounds.iter().flatten().map(|v| v.to_bits()))
+            .collect()
+    }
+
+    /// Writes leaf boxes into their lanes from concurrent tasks (a full refit's leaves,
+    /// one task per leaf).
+    pub fn leaf_lanes_writer(&mut self) -> LeafLanes<'_> {
+        LeafLanes {
+            nodes: self.nodes.as_mut_ptr(),
+            len: self.nodes.len(),
+            one_leaf: self.root_leaf.is_some(),
+            _nodes: std::marker::PhantomData,
         }
     }
 
