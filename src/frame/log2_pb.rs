@@ -17,7 +17,7 @@ use super::prefetch::prefetch;
 use super::{InstanceState, Motion, Renderer, UpdateStats};
 use crate::anim::NodeShape;
 use crate::geometry::{Placement, SceneGeometry};
-use crate::lod::{PixelFootprint, log2_pb, shift_log2_pb};
+use crate::lod::{PixelFootprint, log2_pb, log2_pb_with_uv_area, shift_log2_pb, uv_area};
 use crate::scene::SceneDesc;
 
 /// How many entries ahead the `log2 P_b` pass prefetches its slots.
@@ -109,7 +109,6 @@ impl Renderer {
         let t = &self.triangles;
         prefetch(&t.source, s);
         prefetch(&t.positions, s);
-        prefetch(&t.uvs, s);
     }
 
     /// One triangle's `log2 P_b` by the rule for its instance's shape; `None` when
@@ -132,11 +131,13 @@ impl Renderer {
             // Stretch: the object-space triangle under the exact diagonal (a canonical value,
             // whatever rotation the frame adds).
             Some(shape) => self.stretched_log2_pb(source, shape),
+            // Deforming: from its world vertices, with the uv area its slot's uvs have (the
+            // source's, perhaps in the other winding: the same area).
             None => {
                 let size = self.texture_size(source).unwrap_or((1, 1));
-                log2_pb(
+                log2_pb_with_uv_area(
                     self.triangles.positions[s],
-                    self.triangles.uvs[s],
+                    self.uv_area[source],
                     size,
                     self.footprint,
                 )
@@ -201,4 +202,14 @@ pub(super) fn object_space_log2_pb(
         }
     }
     out
+}
+
+/// Each source triangle's [`uv_area`] (what the `log2 P_b` of a deforming triangle reads
+/// instead of its slot's uvs: they never move).
+pub(super) fn source_uv_areas(geometry: &SceneGeometry) -> Vec<f64> {
+    geometry
+        .triangle_uvs
+        .iter()
+        .map(|&uv| uv_area(uv))
+        .collect()
 }

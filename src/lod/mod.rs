@@ -30,7 +30,9 @@ pub use diffs_aniso::RayDiffsAniso;
 pub use none::NoLod;
 pub use paper::PathLength;
 pub use paper_cos::PathLengthCos;
-pub use pb::{LOG2_PB_LIMIT, PixelFootprint, log2_pb, shift_log2_pb};
+pub use pb::{
+    LOG2_PB_LIMIT, PixelFootprint, log2_pb, log2_pb_with_uv_area, shift_log2_pb, uv_area,
+};
 
 use std::fmt;
 use std::str::FromStr;

@@ -52,10 +52,28 @@ pub fn log2_pb(
     texture_size: (u32, u32),
     footprint: PixelFootprint,
 ) -> f32 {
+    log2_pb_with_uv_area(p, uv_area(uv), texture_size, footprint)
+}
+
+/// The area of a triangle in texture coordinates (in `f64`; the same for either winding,
+/// bit for bit: swapping two vertices negates the cross product exactly).
+#[inline]
+pub fn uv_area(uv: [Vec2; 3]) -> f64 {
+    let [t0, t1, t2] = uv.map(|t| DVec2::new(t.x as f64, t.y as f64));
+    0.5 * (t1 - t0).perp_dot(t2 - t0).abs()
+}
+
+/// [`log2_pb`] with the triangle's [`uv_area`] already known (a deforming mesh's uvs stay
+/// put while its vertices move): the same value, bit for bit.
+#[inline]
+pub fn log2_pb_with_uv_area(
+    p: [Vec3A; 3],
+    uv_area: f64,
+    texture_size: (u32, u32),
+    footprint: PixelFootprint,
+) -> f32 {
     let [p0, p1, p2] = p.map(|v| DVec3::new(v.x as f64, v.y as f64, v.z as f64));
     let world_area = 0.5 * (p1 - p0).cross(p2 - p0).length();
-    let [t0, t1, t2] = uv.map(|t| DVec2::new(t.x as f64, t.y as f64));
-    let uv_area = 0.5 * (t1 - t0).perp_dot(t2 - t0).abs();
     let texels = texture_size.0 as f64 * texture_size.1 as f64;
     if !(world_area.is_finite() && uv_area.is_finite()) {
         return LOG2_PB_LIMIT;
@@ -99,6 +117,24 @@ mod tests {
         Vec2::new(1.0, 1.0),
         Vec2::new(1.0, 0.0),
     ];
+
+    /// The frame loop reads a deforming triangle's uv area from its source uvs while its
+    /// slot may hold them in the other winding (a mirrored node): the same bits.
+    #[test]
+    fn uv_area_is_the_same_bits_in_either_winding() {
+        let mut seed = 0x853c49e6748fea9bu64;
+        let mut next = || {
+            seed ^= seed << 13;
+            seed ^= seed >> 7;
+            seed ^= seed << 17;
+            (seed >> 40) as f32 / (1u64 << 24) as f32 * 3.0 - 1.0
+        };
+        for _ in 0..10_000 {
+            let uv = [0, 1, 2].map(|_| Vec2::new(next(), next() * 1e3));
+            let swapped = [uv[0], uv[2], uv[1]];
+            assert_eq!(uv_area(uv).to_bits(), uv_area(swapped).to_bits(), "{uv:?}");
+        }
+    }
 
     #[test]
     fn matches_closed_form_for_facing_quad() {
