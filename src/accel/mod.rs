@@ -782,9 +782,9 @@ pub(super) mod tests {
         }
         accel.refit_full(&tris, false);
         let sequential = accel.wide.bounds_bits();
-        // Back to the original boxes (so a lane the parallel refit skipped would show), then
-        // the moved triangles again, in parallel.
-        accel.refit_full(&original, true);
+        // Back to the original boxes, sequentially (so a lane the parallel refit skipped
+        // would keep one and show), then the moved triangles again, in parallel.
+        accel.refit_full(&original, false);
         assert_ne!(accel.wide.bounds_bits(), sequential);
         accel.refit_full(&tris, true);
         assert_eq!(accel.wide.bounds_bits(), sequential);

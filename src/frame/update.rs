@@ -34,7 +34,7 @@ use crate::anim::NodeShape;
 const PARALLEL_MIN_ITEMS: usize = 8192;
 
 /// How many source triangles ahead the scattered write prefetches its slot.
-const PREFETCH_AHEAD: u32 = 16;
+const PREFETCH_AHEAD: usize = 16;
 
 /// Whether the frame update splits its steps across rayon's threads.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
@@ -262,7 +262,7 @@ impl Renderer {
                         .with_min_len(WRITE_CHUNK)
                         .for_each(|source| {
                             if let Some(&ahead) =
-                                slot_of_source.get((source + PREFETCH_AHEAD) as usize)
+                                slot_of_source.get(source as usize + PREFETCH_AHEAD)
                             {
                                 slots.prefetch(ahead);
                             }
