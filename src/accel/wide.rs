@@ -808,7 +808,7 @@ mod tests {
         );
     }
 
-    /// A box kept outside the tree answers exactly as the same box in a node's lane.
+    /// The sorting network hands out every entered lane once, nearest first.
     #[test]
     fn entered_lanes_come_out_nearest_first() {
         let mut seed = 0x9e3779b97f4a7c15u64;
@@ -881,6 +881,7 @@ mod tests {
         }
     }
 
+    /// A box kept outside the tree answers exactly as the same box in a node's lane.
     #[test]
     fn a_lone_box_answers_as_a_lane() {
         let mut seed = 12345u64;

@@ -224,14 +224,10 @@ impl SceneGeometry {
         // writing a deformed triangle that has its own normals).
         let geometric = || Vec3::from((p[1] - p[0]).cross(p[2] - p[0]).normalize_or_zero());
         let normals = match normal {
-            Some(normal) => {
-                let n = v.map(normal);
-                if n.contains(&Vec3::ZERO) {
-                    n.map(|n| if n == Vec3::ZERO { geometric() } else { n })
-                } else {
-                    n
-                }
-            }
+            Some(normal) => v.map(|i| {
+                let n = normal(i);
+                if n == Vec3::ZERO { geometric() } else { n }
+            }),
             None => [geometric(); 3],
         };
         (p, normals)
