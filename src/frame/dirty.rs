@@ -60,26 +60,38 @@ impl DirtySet {
     /// motion, and clears those entries: the parallel counterpart of [`Self::mark`] called in
     /// that order. The ranges are cut into chunks that are counted, then filled at their
     /// offsets, on rayon's threads; every read is sequential. Precondition: the set was just
-    /// [`reset`](Self::reset) for every slot `slot_of_source` names.
+    /// [`reset`](Self::reset) for every slot `slot_of_source` names. Fills `listed` with how
+    /// many entries each range gave, in order.
     pub fn assign_in_source_order(
         &mut self,
         visited: impl Iterator<Item = Range<u32>>,
         source_motion: &mut [Option<Motion>],
         slot_of_source: &[u32],
+        listed: &mut Vec<usize>,
     ) {
         debug_assert!(self.slots.is_empty());
-        let chunks: Vec<Range<usize>> = visited
-            .flat_map(|r| {
+        // Each chunk with the index of the range it comes from.
+        let visited: Vec<Range<u32>> = visited.collect();
+        let chunks: Vec<(usize, Range<usize>)> = visited
+            .iter()
+            .cloned()
+            .enumerate()
+            .flat_map(|(index, r)| {
                 let (start, end) = (r.start as usize, r.end as usize);
                 (start..end)
                     .step_by(LIST_CHUNK)
-                    .map(move |a| a..(a + LIST_CHUNK).min(end))
+                    .map(move |a| (index, a..(a + LIST_CHUNK).min(end)))
             })
             .collect();
         let counts: Vec<usize> = chunks
             .par_iter()
-            .map(|c| source_motion[c.clone()].iter().flatten().count())
+            .map(|(_, c)| source_motion[c.clone()].iter().flatten().count())
             .collect();
+        listed.clear();
+        listed.resize(visited.len(), 0);
+        for ((index, _), &count) in chunks.iter().zip(&counts) {
+            listed[*index] += count;
+        }
         let total = counts.iter().sum();
         self.slots.resize(total, 0);
         self.motions.resize(total, Motion::Rigid);
@@ -87,7 +99,7 @@ impl DirtySet {
         let mut jobs = Vec::with_capacity(chunks.len());
         let (mut input, mut consumed) = (source_motion, 0);
         let (mut slots, mut motions) = (&mut self.slots[..], &mut self.motions[..]);
-        for (chunk, &count) in chunks.iter().zip(&counts) {
+        for ((_, chunk), &count) in chunks.iter().zip(&counts) {
             let (_, rest) = std::mem::take(&mut input).split_at_mut(chunk.start - consumed);
             let (here, rest) = rest.split_at_mut(chunk.len());
             (input, consumed) = (rest, chunk.end);
@@ -113,6 +125,11 @@ impl DirtySet {
         for &slot in &self.slots {
             self.bits[slot as usize / 64] |= 1 << (slot % 64);
         }
+    }
+
+    /// The membership bits: bit `s % 64` of word `s / 64` is slot `s`.
+    pub fn words(&self) -> &[u64] {
+        &self.bits
     }
 
     #[inline]
@@ -160,7 +177,12 @@ mod tests {
         let n = 3 * LIST_CHUNK as u32 + 500;
         // A permutation of the slots, and visited ranges with gaps, one longer than a chunk.
         let slot_of_source: Vec<u32> = (0..n).map(|k| (k * 7919) % n).collect();
-        let visited = [3..40, 100..100 + 2 * LIST_CHUNK as u32 + 7, n - 300..n];
+        let visited = [
+            3..40,
+            50..50,
+            100..100 + 2 * LIST_CHUNK as u32 + 7,
+            n - 300..n,
+        ];
         let motion_at = |source: u32| match source % 5 {
             0 => Some(Motion::Rigid),
             1 => Some(Motion::Deformed),
@@ -177,8 +199,19 @@ mod tests {
         let mut motions: Vec<Option<Motion>> = (0..n).map(motion_at).collect();
         let mut listed = DirtySet::default();
         listed.reset(n as usize);
-        listed.assign_in_source_order(visited.iter().cloned(), &mut motions, &slot_of_source);
+        let mut per_range = Vec::new();
+        listed.assign_in_source_order(
+            visited.iter().cloned(),
+            &mut motions,
+            &slot_of_source,
+            &mut per_range,
+        );
         assert!(one_by_one.len() > LIST_CHUNK);
+        let expected: Vec<usize> = visited
+            .iter()
+            .map(|r| r.clone().filter(|&s| motion_at(s).is_some()).count())
+            .collect();
+        assert_eq!(per_range, expected);
         assert_eq!(listed.slots, one_by_one.slots);
         assert_eq!(listed.motions, one_by_one.motions);
         assert_eq!(listed.bits, one_by_one.bits);

@@ -43,7 +43,7 @@ use crate::render::{
     Camera, FrameScene, Instanced, Light, LinearImage, SceneBvh, TraceCounters, render_image,
 };
 use crate::scene::SceneDesc;
-use log2_pb::{DeformingUvAreas, object_space_log2_pb};
+use log2_pb::{DeformingTexelAreas, object_space_log2_pb};
 use posed::{VertexSource, posed_bounds};
 use update::UpdateScratch;
 
@@ -95,8 +95,8 @@ pub struct Renderer {
     /// Per source triangle: `log2 P_b` of the rest vertices in object space (NaN where the
     /// material is untextured).
     object_log2_pb: Vec<f32>,
-    /// The uv areas of the deforming instances' triangles (`lod::uv_area`).
-    uv_areas: DeformingUvAreas,
+    /// Per slot: the texel areas of the deforming instances' triangles (`lod::texel_area`).
+    texel_areas: DeformingTexelAreas,
     /// The frame's triangles in BVH order, carried over between frames.
     triangles: FrameTriangles,
     /// Inverse of `triangles.source`.
@@ -158,7 +158,6 @@ impl Renderer {
         };
         let footprint = PixelFootprint::new(yfov, settings.height);
         let object_log2_pb = object_space_log2_pb(&scene, &geometry, footprint);
-        let uv_areas = DeformingUvAreas::new(&geometry, &deforms);
         Renderer {
             scene,
             geometry,
@@ -167,7 +166,7 @@ impl Renderer {
             rest_bounds,
             footprint,
             object_log2_pb,
-            uv_areas,
+            texel_areas: DeformingTexelAreas::default(),
             triangles: FrameTriangles::default(),
             slot_of_source: Vec::new(),
             accel: Accel::default(),

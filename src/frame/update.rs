@@ -14,6 +14,7 @@
 //! writing (including the per-triangle "did its vertices change" test, fused with the write)
 //! as `animate_ms`.
 
+use std::ops::Range;
 use std::sync::atomic::AtomicBool;
 use std::time::Instant;
 
@@ -71,6 +72,11 @@ pub struct UpdateScratch {
     source_motion: Vec<Option<Motion>>,
     /// Whether this frame's write gave a moved triangle a non-finite vertex.
     moved_nonfinite: bool,
+    /// Per visited instance: how many dirty entries it gave (scratch of the listing).
+    listed: Vec<usize>,
+    /// The runs of the dirty list (entry indices, increasing) whose slots belong to deforming
+    /// instances: the `log2 P_b` update walks those slots in slot order instead.
+    pub(super) deformed_entries: Vec<Range<usize>>,
 }
 
 impl Renderer {
@@ -136,8 +142,8 @@ impl Renderer {
             .collect()
     }
 
-    /// Inverts `triangles.source`; sources without a slot (instances of shared meshes
-    /// under the two-level BVH) map to `u32::MAX`.
+    /// Inverts `triangles.source` (sources without a slot, instances of shared meshes
+    /// under the two-level BVH, map to `u32::MAX`) and remakes the per-slot texel areas.
     fn index_slots(&mut self) {
         self.slot_of_source.clear();
         self.slot_of_source
@@ -145,6 +151,7 @@ impl Renderer {
         for (slot, &source) in self.triangles.source.iter().enumerate() {
             self.slot_of_source[source as usize] = slot as u32;
         }
+        self.index_texel_areas();
     }
 
     /// Rewrites the triangles of every instance whose placement or deformation changed and
@@ -240,6 +247,7 @@ impl Renderer {
             plan,
             source_motion,
             moved_nonfinite,
+            ..
         } = &mut self.update;
         source_motion.resize(self.geometry.triangle_count(), None);
         let writer = TriangleWriter {
@@ -299,29 +307,54 @@ impl Renderer {
     }
 
     /// Lists the slots the write marked in the dirty set, in source-triangle order (the
-    /// order of instances, then of their triangles), and clears the marks.
+    /// order of instances, then of their triangles), and clears the marks; notes which runs
+    /// of the list the deforming instances gave.
     fn list_dirty(&mut self, visited: usize) {
         let UpdateScratch {
             plan,
             source_motion,
+            listed,
+            deformed_entries,
             ..
         } = &mut self.update;
         let ranges = &self.geometry.instance_triangles;
-        let visited_ranges = plan
-            .iter()
-            .enumerate()
-            .filter(|(_, r)| **r != Rewrite::Keep)
-            .map(|(i, _)| ranges[i].clone());
+        let visited_instances = || {
+            plan.iter()
+                .enumerate()
+                .filter(|(_, r)| **r != Rewrite::Keep)
+                .map(|(i, _)| i)
+        };
         if self.parallelism.splits(visited) {
-            self.dirty
-                .assign_in_source_order(visited_ranges, source_motion, &self.slot_of_source);
-            return;
-        }
-        for source in visited_ranges.flatten() {
-            if let Some(motion) = source_motion[source as usize].take() {
-                self.dirty
-                    .mark(self.slot_of_source[source as usize], motion);
+            self.dirty.assign_in_source_order(
+                visited_instances().map(|i| ranges[i].clone()),
+                source_motion,
+                &self.slot_of_source,
+                listed,
+            );
+        } else {
+            listed.clear();
+            for i in visited_instances() {
+                let before = self.dirty.len();
+                for source in ranges[i].clone() {
+                    if let Some(motion) = source_motion[source as usize].take() {
+                        self.dirty
+                            .mark(self.slot_of_source[source as usize], motion);
+                    }
+                }
+                listed.push(self.dirty.len() - before);
             }
+        }
+        deformed_entries.clear();
+        let mut start = 0;
+        for (i, &count) in visited_instances().zip(listed.iter()) {
+            let end = start + count;
+            if self.deforms[i] == VertexSource::Deformed && count > 0 {
+                match deformed_entries.last_mut() {
+                    Some(run) if run.end == start => run.end = end,
+                    _ => deformed_entries.push(start..end),
+                }
+            }
+            start = end;
         }
     }
 

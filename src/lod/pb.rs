@@ -52,7 +52,7 @@ pub fn log2_pb(
     texture_size: (u32, u32),
     footprint: PixelFootprint,
 ) -> f32 {
-    log2_pb_with_uv_area(p, uv_area(uv), texture_size, footprint)
+    log2_pb_with_texel_area(p, texel_area(uv_area(uv), texture_size), footprint)
 }
 
 /// The area of a triangle in texture coordinates (in `f64`; the same for either winding,
@@ -63,28 +63,32 @@ pub fn uv_area(uv: [Vec2; 3]) -> f64 {
     0.5 * (t1 - t0).perp_dot(t2 - t0).abs()
 }
 
-/// [`log2_pb`] with the triangle's [`uv_area`] already known (a deforming mesh's uvs stay
-/// put while its vertices move): the same value, bit for bit.
+/// The triangle's area in level-0 texels: its [`uv_area`] times the texture's texel count
+/// (the product [`log2_pb`] divides the world area by).
 #[inline]
-pub fn log2_pb_with_uv_area(
-    p: [Vec3A; 3],
-    uv_area: f64,
-    texture_size: (u32, u32),
-    footprint: PixelFootprint,
-) -> f32 {
+pub fn texel_area(uv_area: f64, texture_size: (u32, u32)) -> f64 {
+    uv_area * (texture_size.0 as f64 * texture_size.1 as f64)
+}
+
+/// [`log2_pb`] with the triangle's [`texel_area`] already known (a deforming mesh's uvs
+/// and texture stay put while its vertices move): the same value, bit for bit.
+///
+/// The guards read the product: it is finite exactly when the uv area is (a texture has
+/// 1..=16384² texels), and zero exactly when the uv area or the texel count is.
+#[inline]
+pub fn log2_pb_with_texel_area(p: [Vec3A; 3], texel_area: f64, footprint: PixelFootprint) -> f32 {
     let [p0, p1, p2] = p.map(|v| DVec3::new(v.x as f64, v.y as f64, v.z as f64));
     let world_area = 0.5 * (p1 - p0).cross(p2 - p0).length();
-    let texels = texture_size.0 as f64 * texture_size.1 as f64;
-    if !(world_area.is_finite() && uv_area.is_finite()) {
+    if !(world_area.is_finite() && texel_area.is_finite()) {
         return LOG2_PB_LIMIT;
     }
     if world_area <= 0.0 {
         return -LOG2_PB_LIMIT;
     }
-    if uv_area <= 0.0 || texels <= 0.0 {
+    if texel_area <= 0.0 {
         return LOG2_PB_LIMIT;
     }
-    let value = 0.5 * (world_area / (uv_area * texels)).log2() - footprint.log2_k;
+    let value = 0.5 * (world_area / texel_area).log2() - footprint.log2_k;
     (value as f32).clamp(-LOG2_PB_LIMIT, LOG2_PB_LIMIT)
 }
 
