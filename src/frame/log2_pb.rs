@@ -10,8 +10,6 @@
 //! sequential run equals a frame rendered alone (`tests/frame_loop.rs`, `tests/deform.rs`
 //! check it against a full recompute).
 
-use std::ops::Range;
-
 use glam::{Mat4, Vec3};
 use rayon::prelude::*;
 
@@ -31,17 +29,18 @@ const PREFETCH_AHEAD: usize = 16;
 impl Renderer {
     /// `log2 P_b` for the dirty triangles: recomputed where deformed, shifted where scaled,
     /// kept where rigid. The slots of deforming instances are walked in slot order from the
-    /// dirty bits ([`Self::update_deforming_log2_pb`]); the rest of the list entry by entry.
+    /// dirty bits ([`Self::update_deforming_log2_pb`]); the entries of placed instances that
+    /// scaled or changed shape one by one; rigid runs are not visited.
     pub(super) fn update_dirty_log2_pb(&mut self, stats: &mut UpdateStats) {
         let walked = !self.texel_areas.is_empty();
         if walked {
             stats.lod_recomputed += self.update_deforming_log2_pb();
         }
-        let rest = if walked {
-            entries_outside(&self.update.deformed_entries, self.dirty.len())
-        } else {
-            vec![0..self.dirty.len()]
-        };
+        let mut rest = self.update.reshaped_entries.clone();
+        if !walked {
+            // No table (nothing deforms, so normally no such runs): one by one as well.
+            rest.extend(self.update.deformed_entries.iter().cloned());
+        }
         let states = self.instances.take().unwrap_or_default();
         let mut values = std::mem::take(&mut self.log2_pb_values);
         for entries in rest {
@@ -154,6 +153,7 @@ impl Renderer {
         // Only the rule for triangles without a shape key reads the slot's vertices: other
         // passes would fetch them for nothing (a stretched 1M crowd's pass was 1.17x slower).
         let reads_vertices = states.iter().any(|state| state.shape.is_none());
+        let stretches = self.stretches(states);
         let value = |k: usize| {
             // The slots are scattered through the per-slot arrays: ask for the ones a few
             // entries ahead now (before, most of the pass's own time on a million deforming
@@ -164,7 +164,7 @@ impl Renderer {
             {
                 self.prefetch_slot(ahead as usize, reads_vertices);
             }
-            slot_at(k).and_then(|slot| self.log2_pb_of(slot, states))
+            slot_at(k).and_then(|slot| self.log2_pb_of(slot, states, &stretches))
         };
         // Below 8,192 triangles (`UpdateParallelism::Auto`) rayon's split and join cost more
         // than the work (a triangle's constant takes tens of ns).
@@ -190,10 +190,35 @@ impl Renderer {
         }
     }
 
+    /// Per instance: the stretch of its shape key as the placement
+    /// [`Self::stretched_log2_pb`] applies (`None` unless the key has a stretch), made once
+    /// per pass instead of once per triangle (a 1M stretched crowd's pass spent most of its
+    /// time inverting the same matrix).
+    fn stretches(&self, states: &[InstanceState]) -> Vec<Option<Stretch>> {
+        states
+            .iter()
+            .enumerate()
+            .map(|(instance, state)| {
+                let shape = state.shape.filter(|s| s.stretch.is_some())?;
+                let [x, y, z] = shape.diagonal();
+                let stretch = Mat4::from_scale(Vec3::new(x as f32, y as f32, z as f32));
+                Some(Stretch {
+                    placement: Placement::new(stretch),
+                    texture_size: self.instance_texture_size(instance).unwrap_or((1, 1)),
+                })
+            })
+            .collect()
+    }
+
     /// One triangle's `log2 P_b` by the rule for its instance's shape; `None` when
     /// untextured. The value depends only on the shape key and the vertices, never on the
     /// frames before: this is what keeps a sequential run equal to a fresh frame.
-    fn log2_pb_of(&self, slot: u32, states: &[InstanceState]) -> Option<f32> {
+    fn log2_pb_of(
+        &self,
+        slot: u32,
+        states: &[InstanceState],
+        stretches: &[Option<Stretch>],
+    ) -> Option<f32> {
         let s = slot as usize;
         let source = self.triangles.source[s] as usize;
         let object = self.object_log2_pb[source];
@@ -201,19 +226,16 @@ impl Renderer {
             return None;
         }
         let instance = self.geometry.triangle_instance[source] as usize;
-        Some(match states[instance].shape {
-            // Similarity: the object-space constant plus log2 s.
-            Some(NodeShape {
-                scale,
-                stretch: None,
-            }) => shift_log2_pb(object, scale.log2()),
+        Some(match (states[instance].shape, &stretches[instance]) {
             // Stretch: the object-space triangle under the exact diagonal (a canonical value,
             // whatever rotation the frame adds).
-            Some(shape) => self.stretched_log2_pb(source, shape),
+            (_, Some(stretch)) => self.stretched_log2_pb(source, stretch),
+            // Similarity: the object-space constant plus log2 s.
+            (Some(NodeShape { scale, .. }), None) => shift_log2_pb(object, scale.log2()),
             // Deforming (or sheared): from its world vertices, with the texel area of its
             // slot's uvs (for a deforming instance read from the table: the source's uvs,
             // perhaps in the other winding, the same area).
-            None => {
+            (None, None) => {
                 let area = self.texel_areas.of(s).unwrap_or_else(|| {
                     let size = self.texture_size(source).unwrap_or((1, 1));
                     texel_area(uv_area(self.triangles.uvs[s]), size)
@@ -223,28 +245,30 @@ impl Renderer {
         })
     }
 
-    /// `log2 P_b` of a source triangle's rest vertices under `diag(shape.diagonal())`.
-    fn stretched_log2_pb(&self, source: usize, shape: NodeShape) -> f32 {
+    /// `log2 P_b` of a source triangle's rest vertices under its instance's stretch.
+    fn stretched_log2_pb(&self, source: usize, stretch: &Stretch) -> f32 {
         let instance = self.geometry.triangle_instance[source] as usize;
         let primitive = self.geometry.primitive(&self.scene, instance);
-        let [x, y, z] = shape.diagonal();
-        let stretch = Mat4::from_scale(Vec3::new(x as f32, y as f32, z as f32));
-        let placement = Placement::new(stretch);
-        let (p, _) =
-            self.geometry
-                .world_triangle(source as u32, &placement, &primitive.positions, None);
-        let size = self.texture_size(source).unwrap_or((1, 1));
+        let placement = &stretch.placement;
+        let p = self
+            .geometry
+            .world_positions(source as u32, placement, &primitive.positions);
         log2_pb(
             p,
-            self.geometry.oriented_uvs(source as u32, &placement),
-            size,
+            self.geometry.oriented_uvs(source as u32, placement),
+            stretch.texture_size,
             self.footprint,
         )
     }
 
     /// Level-0 size of the base-colour texture of source triangle `source`'s material.
     pub(super) fn texture_size(&self, source: usize) -> Option<(u32, u32)> {
-        let instance = self.geometry.instances[self.geometry.triangle_instance[source] as usize];
+        self.instance_texture_size(self.geometry.triangle_instance[source] as usize)
+    }
+
+    /// Level-0 size of the base-colour texture of instance `instance`'s material.
+    fn instance_texture_size(&self, instance: usize) -> Option<(u32, u32)> {
+        let instance = self.geometry.instances[instance];
         let material = &self.geometry.materials[instance.material as usize];
         let texture = self.scene.textures.get(material.base_color_texture?)?;
         Some(texture.pyramid.base_size())
@@ -280,6 +304,13 @@ pub(super) fn object_space_log2_pb(
         }
     }
     out
+}
+
+/// An instance's stretch for [`Renderer::stretched_log2_pb`]: `diag(shape.diagonal())` as a
+/// placement, and the instance's texture size.
+struct Stretch {
+    placement: Placement,
+    texture_size: (u32, u32),
 }
 
 /// Per BVH slot, the [`texel_area`] of a textured triangle of a deforming instance, made
@@ -336,36 +367,3 @@ impl DeformingTexelAreas {
 
 /// Bitset words (64 slots each) per task of the deforming walk.
 const WALK_WORDS: usize = 256;
-
-/// The entry ranges of `0..len` outside `runs` (increasing, disjoint).
-fn entries_outside(runs: &[Range<usize>], len: usize) -> Vec<Range<usize>> {
-    let mut outside = Vec::with_capacity(runs.len() + 1);
-    let mut start = 0;
-    for run in runs {
-        if run.start > start {
-            outside.push(start..run.start);
-        }
-        start = run.end;
-    }
-    if len > start {
-        outside.push(start..len);
-    }
-    outside
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    /// The list path takes exactly the entries the deforming runs leave: gaps before,
-    /// between and after the runs, nothing for runs that touch or cover everything.
-    #[test]
-    fn entries_outside_the_runs_are_the_gaps_between_them() {
-        assert_eq!(entries_outside(&[], 5), vec![0..5]);
-        assert_eq!(entries_outside(&[], 0), Vec::<Range<usize>>::new());
-        assert_eq!(entries_outside(&[0..5], 5), Vec::<Range<usize>>::new());
-        assert_eq!(entries_outside(&[2..4], 9), vec![0..2, 4..9]);
-        assert_eq!(entries_outside(&[0..2, 4..6, 8..9], 9), vec![2..4, 6..8]);
-        assert_eq!(entries_outside(&[1..3, 3..5], 7), vec![0..1, 5..7]);
-    }
-}

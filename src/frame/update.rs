@@ -77,6 +77,9 @@ pub struct UpdateScratch {
     /// The runs of the dirty list (entry indices, increasing) whose slots belong to deforming
     /// instances: the `log2 P_b` update walks those slots in slot order instead.
     pub(super) deformed_entries: Vec<Range<usize>>,
+    /// The runs of placed instances that scaled or changed shape: the entries the `log2
+    /// P_b` update visits one by one (rigid runs keep their constants and are skipped whole).
+    pub(super) reshaped_entries: Vec<Range<usize>>,
 }
 
 impl Renderer {
@@ -315,6 +318,7 @@ impl Renderer {
             source_motion,
             listed,
             deformed_entries,
+            reshaped_entries,
             ..
         } = &mut self.update;
         let ranges = &self.geometry.instance_triangles;
@@ -345,13 +349,19 @@ impl Renderer {
             }
         }
         deformed_entries.clear();
+        reshaped_entries.clear();
         let mut start = 0;
         for (i, &count) in visited_instances().zip(listed.iter()) {
             let end = start + count;
-            if self.deforms[i] == VertexSource::Deformed && count > 0 {
-                match deformed_entries.last_mut() {
+            let runs = match plan[i] {
+                Rewrite::Changed => Some(&mut *deformed_entries),
+                Rewrite::All(Motion::Rigid) | Rewrite::Keep => None,
+                Rewrite::All(_) => Some(&mut *reshaped_entries),
+            };
+            if let Some(runs) = runs.filter(|_| count > 0) {
+                match runs.last_mut() {
                     Some(run) if run.end == start => run.end = end,
-                    _ => deformed_entries.push(start..end),
+                    _ => runs.push(start..end),
                 }
             }
             start = end;

@@ -187,6 +187,22 @@ impl SceneGeometry {
         )
     }
 
+    /// The vertices [`Self::world_triangle`] returns, without its normals (bit for bit the
+    /// same: the same vertex order and placement).
+    #[inline]
+    pub fn world_positions(
+        &self,
+        source: u32,
+        placement: &Placement,
+        positions: &[Vec3],
+    ) -> [Vec3A; 3] {
+        let mut v = self.triangle_vertices[source as usize];
+        if placement.flips_winding {
+            v.swap(1, 2);
+        }
+        v.map(|i| Vec3A::from(placement.place_point(positions[i as usize])))
+    }
+
     /// [`Self::world_triangle`] from vertices already placed one by one (`positions` by
     /// [`Placement::place_point`], `normals` by [`Placement::place_normal`]): the same bits,
     /// with each shared vertex transformed once instead of once per triangle.
@@ -401,6 +417,13 @@ mod tests {
                         bits(direct),
                         bits(once),
                         "triangle {source}, normals {with_normals}"
+                    );
+                    // The vertices alone (the stretch rule of the `log2 P_b` update).
+                    let alone = geometry.world_positions(source, &placement, &positions);
+                    assert_eq!(
+                        bits((alone, [Vec3::ZERO; 3])).0,
+                        bits(direct).0,
+                        "triangle {source}: world_positions"
                     );
                     // The two-level path: the object-space triangle placed at a hit.
                     let v = geometry.triangle_vertices[source as usize];
