@@ -522,3 +522,80 @@ fn frame_alone_equals_frame_in_sequence_with_refit_and_rebuild() {
         }
     }
 }
+
+/// An untextured skinned strip beside the textured one (both bend every frame, on one
+/// thread and split): only textured deformed triangles get a recomputed `log2 P_b` and are
+/// counted, each equal to what a fresh renderer computes for the frame; the untextured
+/// strip's slots keep their 0.
+#[test]
+fn untextured_deforming_triangles_are_neither_recomputed_nor_counted() {
+    let scene = || {
+        let mut scene = skinned_dynamic_scene();
+        let plain = scene
+            .materials
+            .iter()
+            .position(|m| m.base_color_texture.is_none())
+            .expect("an untextured material");
+        merge_textured(
+            &mut scene,
+            common::deform_scenes::skinned_strip_scene(1.1),
+            plain,
+            glam::Vec3::new(1.0, 1.5, -3.0),
+        );
+        scene
+    };
+    let policy = BvhPolicy::Refit {
+        rebuild_threshold: BvhPolicy::DEFAULT_REBUILD_THRESHOLD,
+    };
+    for parallelism in [UpdateParallelism::Sequential, UpdateParallelism::Parallel] {
+        let mut r = Renderer::new(scene(), settings(policy));
+        r.set_update_parallelism(parallelism);
+        for frame in 0..12 {
+            let time = frame as f32 / FPS;
+            let update = r.prepare(frame, time).unwrap().update;
+            let (g, t) = (r.geometry(), r.triangles());
+            let textured = |slot: u32| {
+                let source = t.source[slot as usize] as usize;
+                let instance = g.instances[g.triangle_instance[source] as usize];
+                g.materials[instance.material as usize]
+                    .base_color_texture
+                    .is_some()
+            };
+            let deformed: Vec<u32> = r
+                .dirty()
+                .slots
+                .iter()
+                .zip(&r.dirty().motions)
+                .filter(|(_, m)| **m == mipray::frame::Motion::Deformed)
+                .map(|(&s, _)| s)
+                .collect();
+            let what = format!("{parallelism:?}, frame {frame}");
+            if frame > 0 {
+                let untextured = deformed.iter().filter(|&&s| !textured(s)).count();
+                assert!(
+                    untextured >= 6,
+                    "{what}: the plain strip bends ({untextured})"
+                );
+                assert_eq!(
+                    update.lod_recomputed,
+                    deformed.len() - untextured,
+                    "{what}: only textured triangles are counted"
+                );
+            }
+            let mut fresh = Renderer::new(scene(), settings(policy));
+            fresh.prepare(frame, time).unwrap();
+            let expected = by_source(&fresh);
+            for (slot, &source) in t.source.iter().enumerate() {
+                let value = t.log2_pb[slot];
+                if !textured(slot as u32) {
+                    assert_eq!(value, 0.0, "{what}: untextured triangle {source}");
+                }
+                assert!(
+                    value.to_bits() == expected[source as usize].to_bits(),
+                    "{what}: triangle {source}: {value} vs fresh {}",
+                    expected[source as usize]
+                );
+            }
+        }
+    }
+}
