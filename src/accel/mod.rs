@@ -83,6 +83,10 @@ pub struct Accel {
     leaf_of_slot: Vec<u32>,
     /// SAH cost right after the last build (see [`Accel::sah_cost`]).
     build_cost: f32,
+    /// `sah_cost() / build_cost` of the tree as it is, kept from the last build or refit:
+    /// the cost is a walk over every node, which a frame that moved nothing (a static scene)
+    /// must not pay, and which the refit's time should include.
+    sah_ratio: f32,
 }
 
 /// A leaf of the tree: its triangle slots and where the wide tree keeps its box.
@@ -264,8 +268,10 @@ impl Accel {
             leaves,
             leaf_of_slot,
             build_cost: 0.0,
+            sah_ratio: 1.0,
         };
         accel.build_cost = accel.sah_cost();
+        accel.sah_ratio = accel.cost_ratio();
         Ok(accel)
     }
 
@@ -295,8 +301,18 @@ impl Accel {
         }))
     }
 
-    /// `sah_cost() / cost right after the last build` (1 for an empty tree).
+    /// `sah_cost() / cost right after the last build` (1 for an empty tree), as of the last
+    /// build or refit.
     pub fn sah_ratio(&self) -> f32 {
+        if self.build_cost > 0.0 {
+            self.sah_ratio
+        } else {
+            1.0 // an empty or default tree
+        }
+    }
+
+    /// `sah_cost() / build_cost` computed now (1 for an empty tree).
+    fn cost_ratio(&self) -> f32 {
         if self.build_cost > 0.0 {
             self.sah_cost() / self.build_cost
         } else {
@@ -310,13 +326,16 @@ impl Accel {
         if moved_slots.is_empty() || self.leaves.is_empty() {
             return RefitKind::None;
         }
-        if moved_slots.len() as f64 > PARTIAL_REFIT_MAX_SHARE * self.leaves.len() as f64 {
+        let kind = if moved_slots.len() as f64 > PARTIAL_REFIT_MAX_SHARE * self.leaves.len() as f64
+        {
             self.refit_full(triangles, triangles.len() >= PARALLEL_REFIT_MIN);
             RefitKind::Full
         } else {
             self.refit_partial(triangles, moved_slots);
             RefitKind::Partial
-        }
+        };
+        self.sah_ratio = self.cost_ratio();
+        kind
     }
 
     /// Refits every leaf and inner box (on rayon's threads when `parallel`: each box is a
@@ -716,8 +735,12 @@ pub(super) mod tests {
             let shift = rng.point(10.0);
             tris.positions[slot as usize] = tris.positions[slot as usize].map(|v| v + shift);
         }
+        assert_eq!(accel.sah_ratio(), 1.0);
         assert_eq!(accel.refit(&tris, &moved), RefitKind::Partial);
         assert_matches_brute_force(&accel, &tris, &mut rng);
+        // The kept SAH ratio is the refitted tree's (the jumps changed its boxes).
+        assert!(accel.sah_ratio() != 1.0, "{}", accel.sah_ratio());
+        assert_eq!(accel.sah_ratio(), accel.sah_cost() / accel.build_cost);
         let all: Vec<u32> = (0..3000).collect();
         for p in &mut tris.positions {
             *p = p.map(|v| v * 1.5 + Vec3A::new(1.0, 0.0, 0.0));
