@@ -599,3 +599,60 @@ fn untextured_deforming_triangles_are_neither_recomputed_nor_counted() {
         }
     }
 }
+
+/// A card whose node mirrors and unmirrors mid-sequence (x scale +1, -1, +1, stepped) beside
+/// the skinned strip: the slots' uvs (which follow the winding, and which a write under an
+/// unchanged winding leaves alone) equal a fresh renderer's on every frame.
+#[test]
+fn slot_uvs_follow_a_winding_that_flips_mid_sequence() {
+    use mipray::scene::{ChannelTarget, Interpolation};
+    let scene = || {
+        let mut scene = skinned_dynamic_scene();
+        let card = scene
+            .meshes
+            .iter()
+            .position(|m| m.name == "card")
+            .expect("card mesh");
+        let flipping = add_root(
+            &mut scene,
+            node("flipping", at(glam::Vec3::new(2.5, 1.0, -5.0)), Some(card)),
+        );
+        let mut flip = channel(
+            flipping,
+            ChannelTarget::Scale,
+            &[0.0, 0.3, 0.6],
+            &[1.0, 1.0, 1.0, -1.0, 1.0, 1.0, 1.0, 1.0, 1.0],
+        );
+        flip.interpolation = Interpolation::Step;
+        scene.animations[0].channels.push(flip);
+        scene
+    };
+    let uvs_by_source = |r: &Renderer| {
+        let t = r.triangles();
+        let mut out = vec![[[0u32; 2]; 3]; t.len()];
+        for (slot, &source) in t.source.iter().enumerate() {
+            out[source as usize] = t.uvs[slot].map(|uv| uv.to_array().map(f32::to_bits));
+        }
+        out
+    };
+    let policy = BvhPolicy::Refit {
+        rebuild_threshold: BvhPolicy::DEFAULT_REBUILD_THRESHOLD,
+    };
+    let mut sequence = Renderer::new(scene(), settings(policy));
+    let mut flips = 0;
+    let mut last = None;
+    for frame in 0..FRAMES {
+        let time = frame as f32 / FPS;
+        sequence.prepare(frame, time).unwrap();
+        let mirrored = (0.3..0.6).contains(&time);
+        flips += (last.is_some_and(|l| l != mirrored)) as u32;
+        last = Some(mirrored);
+        let mut fresh = Renderer::new(scene(), settings(policy));
+        fresh.prepare(frame, time).unwrap();
+        assert!(
+            uvs_by_source(&sequence) == uvs_by_source(&fresh),
+            "frame {frame} (mirrored: {mirrored}): slot uvs differ from a fresh frame's"
+        );
+    }
+    assert_eq!(flips, 2, "the sequence mirrors and unmirrors the card");
+}
