@@ -811,6 +811,10 @@ pub(super) mod tests {
         assert_ne!(accel.wide.bounds_bits(), sequential);
         accel.refit_full(&tris, true);
         assert_eq!(accel.wide.bounds_bits(), sequential);
+        // Every pack lane holds its slot's moved triangle.
+        for (slot, tri) in tris.positions.iter().enumerate() {
+            assert_eq!(accel.triangles.triangle(slot as u32), *tri, "slot {slot}");
+        }
         // And the refitted tree finds what a fresh build over the moved triangles finds.
         let fresh = Accel::build(&mut tris.clone()).unwrap();
         for _ in 0..300 {
