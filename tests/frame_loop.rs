@@ -656,3 +656,83 @@ fn slot_uvs_follow_a_winding_that_flips_mid_sequence() {
     }
     assert_eq!(flips, 2, "the sequence mirrors and unmirrors the card");
 }
+
+/// Moving instances with no triangles first and last in source order, around rigid, scaled
+/// and stretched cards and the skinned strip: they visit nothing and list no dirty entry,
+/// which must not shift which entries the `log2 P_b` update takes for whose (one thread and
+/// split, flat and two-level), and the two-level build must not index past the last
+/// triangle for the last one. Every textured slot's constant equals a fresh frame's.
+#[test]
+fn moving_instances_without_triangles_shift_no_update() {
+    use mipray::scene::{ChannelTarget, MeshDesc, PrimitiveDesc};
+    let scene = || {
+        let mut scene = skinned_dynamic_scene();
+        scene.meshes.push(MeshDesc {
+            name: "empty".into(),
+            primitives: vec![PrimitiveDesc {
+                positions: vec![glam::Vec3::ZERO; 3],
+                uvs: Some(vec![glam::Vec2::ZERO; 3]),
+                material: Some(0),
+                ..Default::default()
+            }],
+            ..Default::default()
+        });
+        let empty = scene.meshes.len() - 1;
+        for (name, first) in [("empty first", true), ("empty last", false)] {
+            let node = add_root(
+                &mut scene,
+                node(name, at(glam::Vec3::new(0.0, -2.0, -4.0)), Some(empty)),
+            );
+            if first {
+                let root = scene.roots.pop().unwrap();
+                scene.roots.insert(0, root);
+            }
+            scene.animations[0].channels.push(channel(
+                node,
+                ChannelTarget::Translation,
+                &[0.0, 1.0],
+                &[0.0, -2.0, -4.0, 1.0, -2.0, -4.0],
+            ));
+        }
+        scene
+    };
+    let policy = BvhPolicy::Refit {
+        rebuild_threshold: BvhPolicy::DEFAULT_REBUILD_THRESHOLD,
+    };
+    for layout in [BvhLayout::Flat, BvhLayout::TwoLevel] {
+        let settings = || RenderSettings {
+            layout,
+            ..settings(policy)
+        };
+        for parallelism in [UpdateParallelism::Sequential, UpdateParallelism::Parallel] {
+            let mut r = Renderer::new(scene(), settings());
+            r.set_update_parallelism(parallelism);
+            for frame in 0..10 {
+                let time = frame as f32 / FPS;
+                let update = r.prepare(frame, time).unwrap().update;
+                if frame > 0 {
+                    assert!(update.lod_shifted > 0 || layout == BvhLayout::TwoLevel);
+                    assert!(update.lod_recomputed > 0, "{layout:?} frame {frame}");
+                }
+                let mut fresh = Renderer::new(scene(), settings());
+                fresh.prepare(frame, time).unwrap();
+                // Under two-level, only the world tree's slots (instances keep theirs at hits).
+                let by_source = |r: &Renderer| {
+                    let t = r.triangles();
+                    let mut out = vec![f32::NAN; r.geometry().triangle_count()];
+                    for (slot, &source) in t.source.iter().enumerate() {
+                        out[source as usize] = t.log2_pb[slot];
+                    }
+                    out
+                };
+                let (got, expected) = (by_source(&r), by_source(&fresh));
+                for (source, (x, y)) in got.iter().zip(&expected).enumerate() {
+                    assert!(
+                        x.to_bits() == y.to_bits(),
+                        "{layout:?} {parallelism:?} frame {frame}, triangle {source}: {x} vs fresh {y}"
+                    );
+                }
+            }
+        }
+    }
+}

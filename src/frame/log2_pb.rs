@@ -36,34 +36,50 @@ impl Renderer {
         if walked {
             stats.lod_recomputed += self.update_deforming_log2_pb();
         }
-        let mut rest = self.update.reshaped_entries.clone();
-        if !walked {
-            // No table (nothing deforms, so normally no such runs): one by one as well.
-            rest.extend(self.update.deformed_entries.iter().cloned());
+        // The entries visited one by one, gathered from their runs so the pass is set up
+        // once and splits across threads by their total (a scene that interleaves reshaped
+        // and rigid instances has a run per instance).
+        let mut entries = std::mem::take(&mut self.log2_pb_entries);
+        entries.clear();
+        let runs = self.update.reshaped_entries.iter();
+        // Without the table (nothing deforms, so no such runs in practice), deformed runs too.
+        let deformed = self.update.deformed_entries.iter().filter(|_| !walked);
+        for run in runs.chain(deformed) {
+            entries.extend(run.clone().map(|k| k as u32));
         }
         let states = self.instances.take().unwrap_or_default();
+        // Only placed instances without a shape key (sheared) read their slots' vertices
+        // here: the others' vertices would be prefetched for nothing.
+        let reads_vertices = states
+            .iter()
+            .zip(&self.deforms)
+            .any(|(state, &d)| state.shape.is_none() && !(walked && d == VertexSource::Deformed));
+        let pass = PassSetup {
+            reads_vertices,
+            stretches: self.stretches(&states),
+        };
         let mut values = std::mem::take(&mut self.log2_pb_values);
-        for entries in rest {
-            let (slots, motions) = (
-                &self.dirty.slots[entries.clone()],
-                &self.dirty.motions[entries.clone()],
-            );
-            self.log2_pb_values_into(
-                slots.len(),
-                |k| (motions[k] != Motion::Rigid).then_some(slots[k]),
-                &states,
-                &mut values,
-            );
-            for (k, value) in values.iter().enumerate() {
-                let Some(value) = *value else { continue };
-                self.triangles.log2_pb[slots[k] as usize] = value;
-                match motions[k] {
-                    Motion::Deformed => stats.lod_recomputed += 1,
-                    _ => stats.lod_shifted += 1,
-                }
+        let (slots, motions) = (&self.dirty.slots, &self.dirty.motions);
+        self.log2_pb_values_into(
+            entries.len(),
+            |j| {
+                let k = entries[j] as usize;
+                (motions[k] != Motion::Rigid).then_some(slots[k])
+            },
+            &states,
+            &pass,
+            &mut values,
+        );
+        for (&k, value) in entries.iter().zip(&values) {
+            let Some(value) = *value else { continue };
+            self.triangles.log2_pb[self.dirty.slots[k as usize] as usize] = value;
+            match self.dirty.motions[k as usize] {
+                Motion::Deformed => stats.lod_recomputed += 1,
+                _ => stats.lod_shifted += 1,
             }
         }
         self.log2_pb_values = values;
+        self.log2_pb_entries = entries;
         self.instances = Some(states);
     }
 
@@ -109,10 +125,15 @@ impl Renderer {
     /// `log2 P_b` of every triangle (the first frame); returns how many are textured.
     pub(super) fn recompute_all_log2_pb(&mut self, states: &[InstanceState]) -> usize {
         let mut values = std::mem::take(&mut self.log2_pb_values);
+        let pass = PassSetup {
+            reads_vertices: states.iter().any(|state| state.shape.is_none()),
+            stretches: self.stretches(states),
+        };
         self.log2_pb_values_into(
             self.triangles.len(),
             |k| Some(k as u32),
             states,
+            &pass,
             &mut values,
         );
         let mut textured = 0;
@@ -148,12 +169,9 @@ impl Renderer {
         count: usize,
         slot_at: impl Fn(usize) -> Option<u32> + Sync,
         states: &[InstanceState],
+        pass: &PassSetup,
         values: &mut Vec<Option<f32>>,
     ) {
-        // Only the rule for triangles without a shape key reads the slot's vertices: other
-        // passes would fetch them for nothing (a stretched 1M crowd's pass was 1.17x slower).
-        let reads_vertices = states.iter().any(|state| state.shape.is_none());
-        let stretches = self.stretches(states);
         let value = |k: usize| {
             // The slots are scattered through the per-slot arrays: ask for the ones a few
             // entries ahead now (before, most of the pass's own time on a million deforming
@@ -162,9 +180,9 @@ impl Renderer {
                 .then(|| slot_at(k + PREFETCH_AHEAD))
                 .flatten()
             {
-                self.prefetch_slot(ahead as usize, reads_vertices);
+                self.prefetch_slot(ahead as usize, pass.reads_vertices);
             }
-            slot_at(k).and_then(|slot| self.log2_pb_of(slot, states, &stretches))
+            slot_at(k).and_then(|slot| self.log2_pb_of(slot, states, &pass.stretches))
         };
         // Below 8,192 triangles (`UpdateParallelism::Auto`) rayon's split and join cost more
         // than the work (a triangle's constant takes tens of ns).
@@ -192,7 +210,7 @@ impl Renderer {
 
     /// Per instance: the stretch of its shape key as the placement
     /// [`Self::stretched_log2_pb`] applies (`None` unless the key has a stretch), made once
-    /// per pass instead of once per triangle (a 1M stretched crowd's pass spent most of its
+    /// per frame instead of once per triangle (a 1M stretched crowd's pass spent most of its
     /// time inverting the same matrix).
     fn stretches(&self, states: &[InstanceState]) -> Vec<Option<Stretch>> {
         states
@@ -267,7 +285,7 @@ impl Renderer {
     }
 
     /// Level-0 size of the base-colour texture of instance `instance`'s material.
-    fn instance_texture_size(&self, instance: usize) -> Option<(u32, u32)> {
+    pub(super) fn instance_texture_size(&self, instance: usize) -> Option<(u32, u32)> {
         let instance = self.geometry.instances[instance];
         let material = &self.geometry.materials[instance.material as usize];
         let texture = self.scene.textures.get(material.base_color_texture?)?;
@@ -306,6 +324,16 @@ pub(super) fn object_space_log2_pb(
     out
 }
 
+/// What a pass of [`Renderer::log2_pb_values_into`] needs, made once per frame.
+struct PassSetup {
+    /// Whether some triangle of the pass reads its slot's vertices (a placed instance
+    /// without a shape key): only then are they prefetched (a stretched 1M crowd's pass
+    /// was 1.17x slower fetching them for nothing).
+    reads_vertices: bool,
+    /// Per instance, see [`Renderer::stretches`].
+    stretches: Vec<Option<Stretch>>,
+}
+
 /// An instance's stretch for [`Renderer::stretched_log2_pb`]: `diag(shape.diagonal())` as a
 /// placement, and the instance's texture size.
 struct Stretch {
@@ -316,7 +344,8 @@ struct Stretch {
 /// Per BVH slot, the [`texel_area`] of a textured triangle of a deforming instance, made
 /// at each build of the tree: the uvs and texture of a skinned or morphed mesh never change
 /// while its vertices do, so its `log2 P_b` needs only the slot's vertices and this area.
-/// Empty when no instance deforms (8 bytes per slot only where something deforms).
+/// Empty when no instance deforms; otherwise 8 bytes for every slot of the world tree,
+/// remade in O(slots) after each build.
 #[derive(Debug, Default)]
 pub(super) struct DeformingTexelAreas {
     /// [`NOT_DEFORMING`] for the slots of other instances and untextured triangles.

@@ -116,6 +116,8 @@ pub struct Renderer {
     dirty: DirtySet,
     /// Scratch for the `log2 P_b` update: one value per updated slot, reused every frame.
     log2_pb_values: Vec<Option<f32>>,
+    /// Scratch for the `log2 P_b` update: the dirty entries it visits one by one.
+    log2_pb_entries: Vec<u32>,
     /// The shared meshes, placements and top-level tree under `--bvh two-level` (`None`
     /// for the flat tree, or before the first frame).
     two_level: Option<two_level::TwoLevel>,
@@ -178,6 +180,7 @@ impl Renderer {
             parallelism: UpdateParallelism::Auto,
             dirty: DirtySet::default(),
             log2_pb_values: Vec::new(),
+            log2_pb_entries: Vec::new(),
             two_level: None,
             placed_changes: Default::default(),
         }

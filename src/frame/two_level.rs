@@ -133,9 +133,9 @@ impl Renderer {
             two.mesh_of.push(Some(mesh));
             two.placed.push(i as u32);
             two.fixed.push(fixed);
-            let first = self.geometry.instance_triangles[i].start as usize;
+            // By instance, not by its first triangle: an instance may have none.
             two.texture_size
-                .push(self.texture_size(first).unwrap_or((1, 1)));
+                .push(self.instance_texture_size(i).unwrap_or((1, 1)));
         }
         two.accel = TwoLevelAccel::new(meshes)?;
         self.two_level = Some(two);
