@@ -83,10 +83,10 @@ pub struct Accel {
     leaf_of_slot: Vec<u32>,
     /// SAH cost right after the last build (see [`Accel::sah_cost`]).
     build_cost: f32,
-    /// `sah_cost() / build_cost` of the tree as it is, kept from the last build or refit:
-    /// the cost is a walk over every node, which a frame that moved nothing (a static scene)
-    /// must not pay, and which the refit's time should include.
-    sah_ratio: f32,
+    /// `sah_cost()` of the tree as it is, kept from the last build or refit: the cost is a
+    /// walk over every node, which a frame that moved nothing (a static scene) must not pay,
+    /// and which the refit's time should include.
+    cost: f32,
 }
 
 /// A leaf of the tree: its triangle slots and where the wide tree keeps its box.
@@ -268,10 +268,10 @@ impl Accel {
             leaves,
             leaf_of_slot,
             build_cost: 0.0,
-            sah_ratio: 1.0,
+            cost: 0.0,
         };
         accel.build_cost = accel.sah_cost();
-        accel.sah_ratio = accel.cost_ratio();
+        accel.cost = accel.build_cost;
         Ok(accel)
     }
 
@@ -305,16 +305,7 @@ impl Accel {
     /// build or refit.
     pub fn sah_ratio(&self) -> f32 {
         if self.build_cost > 0.0 {
-            self.sah_ratio
-        } else {
-            1.0 // an empty or default tree
-        }
-    }
-
-    /// `sah_cost() / build_cost` computed now (1 for an empty tree).
-    fn cost_ratio(&self) -> f32 {
-        if self.build_cost > 0.0 {
-            self.sah_cost() / self.build_cost
+            self.cost / self.build_cost
         } else {
             1.0
         }
@@ -334,7 +325,7 @@ impl Accel {
             self.refit_partial(triangles, moved_slots);
             RefitKind::Partial
         };
-        self.sah_ratio = self.cost_ratio();
+        self.cost = self.sah_cost();
         kind
     }
 

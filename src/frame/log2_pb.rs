@@ -39,12 +39,11 @@ impl Renderer {
         // The entries visited one by one, gathered from their runs so the pass is set up
         // once and splits across threads by their total (a scene that interleaves reshaped
         // and rigid instances has a run per instance).
+        // (The table is empty only when nothing deforms: then there are no deformed runs.)
+        debug_assert!(walked || self.update.deformed_entries.is_empty());
         let mut entries = std::mem::take(&mut self.log2_pb_entries);
         entries.clear();
-        let runs = self.update.reshaped_entries.iter();
-        // Without the table (nothing deforms, so no such runs in practice), deformed runs too.
-        let deformed = self.update.deformed_entries.iter().filter(|_| !walked);
-        for run in runs.chain(deformed) {
+        for run in &self.update.reshaped_entries {
             entries.extend(run.clone().map(|k| k as u32));
         }
         let states = self.instances.take().unwrap_or_default();
@@ -53,7 +52,7 @@ impl Renderer {
         let reads_vertices = states
             .iter()
             .zip(&self.deforms)
-            .any(|(state, &d)| state.shape.is_none() && !(walked && d == VertexSource::Deformed));
+            .any(|(state, &d)| state.shape.is_none() && d != VertexSource::Deformed);
         let pass = PassSetup {
             reads_vertices,
             stretches: self.stretches(&states),

@@ -254,10 +254,10 @@ pub struct TriangleWriter<'a> {
     pub posed: &'a PosedVertices,
     /// Per instance.
     pub plan: &'a [Rewrite],
-    /// Per instance: whether its slots already hold its uvs in this frame's winding (they
-    /// depend only on whether the placement mirrors), so the write leaves them alone.
-    /// Shorter than the instance list (empty): not kept.
-    pub uvs_kept: &'a [bool],
+    /// Per instance: whether the placement its slots' uvs were last written under mirrored
+    /// (`None`: never written; empty: none were). Uvs depend only on that, so a write under
+    /// the same winding leaves them alone.
+    pub uv_flips: &'a [Option<bool>],
     /// Set when a triangle written with new vertices has a non-finite one (so the ordered
     /// search for the first such triangle runs only then).
     pub moved_nonfinite: AtomicBool,
@@ -291,7 +291,7 @@ impl TriangleWriter<'_> {
             self.moved_nonfinite.store(true, Ordering::Relaxed);
         }
         *position = p;
-        if !self.uvs_kept.get(i).copied().unwrap_or(false) {
+        if self.uv_flips.get(i) != Some(&Some(placement.flips_winding)) {
             *uv = self.geometry.oriented_uvs(source, placement);
         }
         Some(motion)
@@ -395,7 +395,7 @@ pub fn write_all_triangles(
         geometry,
         posed,
         plan,
-        uvs_kept: &[],
+        uv_flips: &[],
         moved_nonfinite: AtomicBool::new(false),
     };
     let write = |(position, normal, uv, &source): (_, _, _, &u32)| {

@@ -76,8 +76,6 @@ pub struct UpdateScratch {
     /// (`None`: never written). Uvs change only with that, so a write under the same winding
     /// skips them (a fifth of the bytes a moved triangle writes).
     uv_flips: Vec<Option<bool>>,
-    /// Per instance, this frame: whether the write skips its uvs (scratch).
-    uvs_kept: Vec<bool>,
     /// Per visited instance: how many dirty entries it gave (scratch of the listing).
     listed: Vec<usize>,
     /// The runs of the dirty list (entry indices, increasing) whose slots belong to deforming
@@ -269,19 +267,14 @@ impl Renderer {
             source_motion,
             moved_nonfinite,
             uv_flips,
-            uvs_kept,
             ..
         } = &mut self.update;
         source_motion.resize(self.geometry.triangle_count(), None);
-        uvs_kept.clear();
-        uvs_kept.extend(plan.iter().enumerate().map(|(i, r)| {
-            *r != Rewrite::Keep && uv_flips[i] == Some(posed.placement(i).flips_winding)
-        }));
         let writer = TriangleWriter {
             geometry: &self.geometry,
             posed,
             plan,
-            uvs_kept,
+            uv_flips,
             moved_nonfinite: AtomicBool::new(false),
         };
         let ranges = &self.geometry.instance_triangles;

@@ -196,11 +196,19 @@ impl SceneGeometry {
         placement: &Placement,
         positions: &[Vec3],
     ) -> [Vec3A; 3] {
+        self.oriented_vertices(source, placement.flips_winding)
+            .map(|i| Vec3A::from(placement.place_point(positions[i as usize])))
+    }
+
+    /// Source triangle `source`'s vertex indices in the order the flat arrays use (the
+    /// last two swapped under a mirroring placement, so the winding stays front-facing).
+    #[inline]
+    fn oriented_vertices(&self, source: u32, flips_winding: bool) -> [u32; 3] {
         let mut v = self.triangle_vertices[source as usize];
-        if placement.flips_winding {
+        if flips_winding {
             v.swap(1, 2);
         }
-        v.map(|i| Vec3A::from(placement.place_point(positions[i as usize])))
+        v
     }
 
     /// [`Self::world_triangle`] from vertices already placed one by one (`positions` by
@@ -231,10 +239,7 @@ impl SceneGeometry {
         position: impl Fn(u32) -> Vec3,
         normal: Option<impl Fn(u32) -> Vec3>,
     ) -> ([Vec3A; 3], [Vec3; 3]) {
-        let mut v = self.triangle_vertices[source as usize];
-        if flips_winding {
-            v.swap(1, 2);
-        }
+        let v = self.oriented_vertices(source, flips_winding);
         let p = v.map(|i| Vec3A::from(position(i)));
         // Computed only when a vertex needs it (a sqrt and a division: most of the cost of
         // writing a deformed triangle that has its own normals).
