@@ -21,13 +21,16 @@
 use std::mem::MaybeUninit;
 
 use glam::{Vec3A, Vec4};
+
 use obvhs::{aabb::Aabb, bvh2::Bvh2};
 
+mod lanes;
 mod packet;
+pub use lanes::{Lanes, avx2_walks};
 pub use packet::RayPacket;
 
 /// Children per node.
-pub const WIDTH: usize = 4;
+pub const WIDTH: usize = 8;
 
 /// Marks a child reference as a leaf (the low bits are its first triangle slot).
 const LEAF: u32 = 1 << 31;
@@ -176,8 +179,8 @@ pub struct WideBvh {
 /// (`Default`: an all-zero placeholder for unused packet slots, never walked).
 #[derive(Clone, Copy, Default)]
 pub struct RayBoxes {
-    origin: [Vec4; 3],
-    inverse: [Vec4; 3],
+    origin: [Lanes; 3],
+    inverse: [Lanes; 3],
     /// Per axis, the plane the ray meets first and last (`bounds` rows): lower then upper
     /// when it runs toward higher coordinates. Indices, not branches, in the node test.
     front: [usize; 3],
@@ -195,8 +198,8 @@ impl RayBoxes {
     fn from_inverse(origin: [f32; 3], inverse: [f32; 3]) -> RayBoxes {
         let negative = inverse.map(|v| (v < 0.0) as usize);
         RayBoxes {
-            origin: origin.map(Vec4::splat),
-            inverse: inverse.map(Vec4::splat),
+            origin: origin.map(Lanes::splat),
+            inverse: inverse.map(Lanes::splat),
             front: [0, 1, 2].map(|axis| axis + 3 * negative[axis]),
             back: [0, 1, 2].map(|axis| axis + 3 * (1 - negative[axis])),
         }
@@ -205,19 +208,25 @@ impl RayBoxes {
     /// Entry distances of the four children and the mask of those the ray enters before
     /// `t_max` (bit `lane`).
     #[inline(always)]
-    fn enter(&self, node: &WideNode, t_max: f32) -> (Vec4, u32) {
-        let mut near = Vec4::ZERO;
-        let mut far = Vec4::splat(f32::INFINITY);
+    fn enter<const AVX: bool>(&self, node: &WideNode, t_max: f32) -> (Lanes, u32) {
+        let mut near = Lanes::splat(0.0);
+        let mut far = Lanes::splat(f32::INFINITY);
         for axis in 0..3 {
-            let front = Vec4::from_array(node.bounds[self.front[axis]]);
-            let back = Vec4::from_array(node.bounds[self.back[axis]]);
-            let t_front = (front - self.origin[axis]) * self.inverse[axis];
-            let t_back = (back - self.origin[axis]) * self.inverse[axis];
-            near = near.max(t_front);
-            far = far.min(t_back);
+            let front = Lanes(node.bounds[self.front[axis]]);
+            let back = Lanes(node.bounds[self.back[axis]]);
+            let t_front = front
+                .sub::<AVX>(self.origin[axis])
+                .mul::<AVX>(self.inverse[axis]);
+            let t_back = back
+                .sub::<AVX>(self.origin[axis])
+                .mul::<AVX>(self.inverse[axis]);
+            near = near.max::<AVX>(t_front);
+            far = far.min::<AVX>(t_back);
         }
-        let far = (far * ROBUST_FAR).min(Vec4::splat(t_max));
-        (near, near.cmple(far).bitmask())
+        let far = far
+            .mul::<AVX>(Lanes::splat(ROBUST_FAR))
+            .min::<AVX>(Lanes::splat(t_max));
+        (near, near.le_mask::<AVX>(far))
     }
 }
 
@@ -230,7 +239,7 @@ impl RayBoxes {
         let mut far = f32::INFINITY;
         let bounds = [aabb.min, aabb.max];
         for axis in 0..3 {
-            let (origin, inverse) = (self.origin[axis].x, self.inverse[axis].x);
+            let (origin, inverse) = (self.origin[axis].0[0], self.inverse[axis].0[0]);
             let front = bounds[self.front[axis] / 3][axis];
             let back = bounds[self.back[axis] / 3][axis];
             near = near.max((front - origin) * inverse);
@@ -462,18 +471,50 @@ impl WideBvh {
             // Left uninitialised: zeroing 1.5 KiB per ray showed as 7% of a primary-ray
             // profile (memset), and `walk` only reads entries it wrote.
             let mut stack = [const { MaybeUninit::uninit() }; INLINE_STACK];
-            self.walk::<ORDERED>(&mut stack, ray, t_max, leaf)
+            self.walk_on::<ORDERED>(&mut stack, ray, t_max, leaf)
         } else {
-            // Only trees deeper than ~42 wide levels (pathological inputs) pay this.
+            // Only trees deeper than ~18 wide levels (pathological inputs) pay this.
             let mut stack = vec![MaybeUninit::uninit(); needed];
-            self.walk::<ORDERED>(&mut stack, ray, t_max, leaf)
+            self.walk_on::<ORDERED>(&mut stack, ray, t_max, leaf)
         }
+    }
+
+    /// [`WideBvh::walk`] in its AVX2 copy where the CPU has AVX2, else the baseline one.
+    #[inline(always)]
+    fn walk_on<const ORDERED: bool>(
+        &self,
+        stack: &mut [MaybeUninit<StackEntry>],
+        ray: &RayBoxes,
+        t_max: f32,
+        leaf: impl FnMut(u32, u32, &mut f32) -> bool,
+    ) -> bool {
+        #[cfg(target_arch = "x86_64")]
+        if avx2_walks() {
+            // SAFETY: the CPU has AVX2 (detected).
+            return unsafe { self.walk_avx2::<ORDERED>(stack, ray, t_max, leaf) };
+        }
+        self.walk::<ORDERED, false>(stack, ray, t_max, leaf)
+    }
+
+    /// The AVX2 copy of [`WideBvh::walk`]: the walk, its node tests and the leaf callback
+    /// are all inlined here and compiled for AVX2 (the leaf's own arithmetic only changes
+    /// encoding: no fused multiply-add is formed, so it rounds as the baseline does).
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2")]
+    fn walk_avx2<const ORDERED: bool>(
+        &self,
+        stack: &mut [MaybeUninit<StackEntry>],
+        ray: &RayBoxes,
+        t_max: f32,
+        leaf: impl FnMut(u32, u32, &mut f32) -> bool,
+    ) -> bool {
+        self.walk::<ORDERED, true>(stack, ray, t_max, leaf)
     }
 
     /// The traversal loop. The stack holds at most `depth * (WIDTH - 1) + 1` entries: each
     /// level pushes at most `WIDTH - 1` siblings.
     #[inline(always)]
-    fn walk<const ORDERED: bool>(
+    fn walk<const ORDERED: bool, const AVX: bool>(
         &self,
         stack: &mut [MaybeUninit<StackEntry>],
         ray: &RayBoxes,
@@ -486,7 +527,7 @@ impl WideBvh {
             match current {
                 ChildRef::Node(index) => {
                     let node = &self.nodes[index as usize];
-                    let (near, mask) = ray.enter(node, t_max);
+                    let (near, mask) = ray.enter::<AVX>(node, t_max);
                     if mask != 0 {
                         current = if ORDERED {
                             push_far_take_near(node, near, mask, stack, &mut top)
@@ -523,11 +564,12 @@ impl WideBvh {
 /// among equal distances the higher lane comes first when `HIGH_LANE_FIRST`, else the lower.
 ///
 /// Branch-free: each lane's key is its distance's bits (non-negative floats order as
-/// integers) with the lane's tie rank in the two lowest bits, lanes not set sort last, and a
-/// five-exchange sorting network orders the four keys. The insertion sort this replaces
+/// integers) with the lane's tie rank in the three lowest bits, lanes not set sort last,
+/// and a sorting network orders the eight keys ([`SORT_EIGHT`]); two entered lanes, the
+/// most common case after one, take a single comparison. The insertion sort this replaces
 /// branched on every comparison and mispredicted often (its compare was the hottest line
-/// of single-ray traversal). Distances within four ulps may come out in either order, which
-/// only changes the order of visits, never what a query finds.
+/// of single-ray traversal). Distances within eight ulps may come out in either order,
+/// which only changes the order of visits, never what a query finds.
 ///
 /// Why the tie rank matters: a ray leaving a surface starts inside many boxes, all entered
 /// at 0. Single rays keep the insertion sort's order among them (higher lane first): lower
@@ -536,28 +578,69 @@ impl WideBvh {
 /// rays than the other way).
 #[inline(always)]
 fn lanes_near_to_far<const HIGH_LANE_FIRST: bool>(
-    near: Vec4,
+    near: Lanes,
     mask: u32,
 ) -> ([usize; WIDTH], usize) {
-    let near = near.to_array();
-    let rank = |lane: u32| if HIGH_LANE_FIRST { 3 - lane } else { lane };
+    const RANK: u32 = WIDTH as u32 - 1;
+    let near = near.0;
+    let rank = |lane: u32| if HIGH_LANE_FIRST { RANK - lane } else { lane };
+    // `& 0x7fff_ffff`: a -0.0 entry distance sorts as 0.
+    let key = |lane: usize| (near[lane].to_bits() & (0x7fff_ffff & !RANK)) | rank(lane as u32);
+    let n = mask.count_ones() as usize;
+    let mut lanes = [0; WIDTH];
+    if n == 2 {
+        let a = mask.trailing_zeros() as usize;
+        let b = (mask & (mask - 1)).trailing_zeros() as usize;
+        let a_first = key(a) < key(b);
+        lanes[0] = if a_first { a } else { b };
+        lanes[1] = if a_first { b } else { a };
+        return (lanes, 2);
+    }
     let mut keys: [u32; WIDTH] = std::array::from_fn(|lane| {
         if mask & (1 << lane) != 0 {
-            // `& 0x7fff_ffff`: a -0.0 entry distance sorts as 0.
-            (near[lane].to_bits() & 0x7fff_fffc) | rank(lane as u32)
+            key(lane)
         } else {
             u32::MAX
         }
     });
-    for (i, j) in [(0, 1), (2, 3), (0, 2), (1, 3), (1, 2)] {
-        let (a, b) = (keys[i], keys[j]);
-        keys[i] = a.min(b);
-        keys[j] = a.max(b);
+    sort_eight(&mut keys);
+    for (lane, k) in lanes.iter_mut().zip(keys) {
+        *lane = rank(k & RANK) as usize;
     }
-    (
-        keys.map(|k| rank(k & 3) as usize),
-        mask.count_ones() as usize,
-    )
+    (lanes, n)
+}
+
+/// Sorts eight keys with a sorting network of 19 exchanges, the fewest possible (Knuth,
+/// TAOCP vol. 3, 5.3.4), spelled out so that it compiles to straight-line minimum and
+/// maximum instructions (a loop over a table of pairs was not unrolled).
+/// `tests::the_eight_key_network_sorts_every_zero_one_input` checks it.
+#[inline(always)]
+fn sort_eight(k: &mut [u32; 8]) {
+    #[inline(always)]
+    fn exchange(k: &mut [u32; 8], i: usize, j: usize) {
+        let (a, b) = (k[i], k[j]);
+        k[i] = a.min(b);
+        k[j] = a.max(b);
+    }
+    exchange(k, 0, 2);
+    exchange(k, 1, 3);
+    exchange(k, 4, 6);
+    exchange(k, 5, 7);
+    exchange(k, 0, 4);
+    exchange(k, 1, 5);
+    exchange(k, 2, 6);
+    exchange(k, 3, 7);
+    exchange(k, 0, 1);
+    exchange(k, 2, 3);
+    exchange(k, 4, 5);
+    exchange(k, 6, 7);
+    exchange(k, 2, 4);
+    exchange(k, 3, 5);
+    exchange(k, 1, 4);
+    exchange(k, 3, 6);
+    exchange(k, 1, 2);
+    exchange(k, 3, 4);
+    exchange(k, 5, 6);
 }
 
 /// Of the entered children (`mask`), returns the nearest and pushes the others so that the
@@ -565,7 +648,7 @@ fn lanes_near_to_far<const HIGH_LANE_FIRST: bool>(
 #[inline(always)]
 fn push_far_take_near(
     node: &WideNode,
-    near: Vec4,
+    near: Lanes,
     mask: u32,
     stack: &mut [MaybeUninit<StackEntry>],
     top: &mut usize,
@@ -574,7 +657,7 @@ fn push_far_take_near(
         let lane = mask.trailing_zeros() as usize;
         return ChildRef::decode(node.child[lane], node.count[lane]);
     }
-    let distances = near.to_array();
+    let distances = near.0;
     let (lanes, n) = lanes_near_to_far::<true>(near, mask);
     for &farther in lanes[1..n].iter().rev() {
         stack[*top] =
@@ -589,12 +672,12 @@ fn push_far_take_near(
 #[inline(always)]
 fn push_rest_take_first(
     node: &WideNode,
-    near: Vec4,
+    near: Lanes,
     mask: u32,
     stack: &mut [MaybeUninit<StackEntry>],
     top: &mut usize,
 ) -> ChildRef {
-    let distances = near.to_array();
+    let distances = near.0;
     let lane = mask.trailing_zeros() as usize;
     let mut rest = mask & (mask - 1);
     while rest != 0 {
@@ -611,7 +694,8 @@ fn push_rest_take_first(
 /// children until there are four or only leaves remain.
 fn open_children(binary: &Bvh2, id: u32) -> ([u32; WIDTH], usize) {
     let first = binary.nodes[id as usize].first_index;
-    let mut lanes = [first, first + 1, 0, 0];
+    let mut lanes = [0; WIDTH];
+    (lanes[0], lanes[1]) = (first, first + 1);
     let mut n = 2;
     while n < WIDTH {
         let area = |c: u32| binary.nodes[c as usize].aabb().half_area();
@@ -818,43 +902,138 @@ mod tests {
             seed ^= seed << 17;
             seed
         };
-        for _ in 0..5000 {
-            let r = next();
+        let mut counts = [0; WIDTH + 1];
+        for _ in 0..20000 {
+            let (r, s) = (next(), next());
             // Distances over many magnitudes, with zeros (both signs) and exact repeats.
-            let near: [f32; 4] = std::array::from_fn(|i| match (r >> (8 * i)) & 7 {
+            let near: [f32; WIDTH] = std::array::from_fn(|i| match (r >> (8 * i)) & 7 {
                 0 => 0.0,
                 1 => -0.0,
                 2 => 1.5,
-                _ => f32::from_bits(((r >> (16 + 8 * i)) as u32 & 0x3fff_ffff) + 0x0080_0000),
+                _ => f32::from_bits(((s >> (4 * i)) as u32 & 0x3fff_ffff) + 0x0080_0000),
             });
-            let mask = (next() & 0xf) as u32;
+            let mask = (next() & 0xff) as u32;
             let (lanes, n) = if r & 1 == 0 {
-                lanes_near_to_far::<true>(Vec4::from_array(near), mask)
+                lanes_near_to_far::<true>(Lanes(near), mask)
             } else {
-                lanes_near_to_far::<false>(Vec4::from_array(near), mask)
+                lanes_near_to_far::<false>(Lanes(near), mask)
             };
+            counts[n] += 1;
             let mut sorted: Vec<usize> = lanes[..n].to_vec();
             sorted.sort_unstable();
-            let expected: Vec<usize> = (0..4).filter(|l| mask & (1 << l) != 0).collect();
+            let expected: Vec<usize> = (0..WIDTH).filter(|l| mask & (1 << l) != 0).collect();
             assert_eq!(sorted, expected, "every entered lane once, no other");
             for pair in lanes[..n].windows(2) {
                 let (a, b) = (near[pair[0]].abs(), near[pair[1]].abs());
-                // Ordered, up to the four ulps the lane bits take.
+                // Ordered, up to the eight ulps the lane bits take.
                 assert!(
-                    a.to_bits() >> 2 <= b.to_bits() >> 2,
+                    a.to_bits() >> 3 <= b.to_bits() >> 3,
                     "{near:?} {mask:b} -> {lanes:?}"
                 );
             }
+        }
+        assert!(
+            counts.iter().all(|&c| c > 0),
+            "every entered count: {counts:?}"
+        );
+    }
+
+    /// The AVX2 copy of the walk visits exactly the leaves the baseline copy visits, in the
+    /// same order, with the same limits (boxes scattered in 3D, rays from inside and
+    /// outside them, some axis-parallel, closest-hit limits shrinking at leaves).
+    #[cfg(target_arch = "x86_64")]
+    #[test]
+    fn the_avx2_walk_visits_what_the_baseline_walk_visits() {
+        if !std::arch::is_x86_feature_detected!("avx2") {
+            println!("skipped: this CPU has no AVX2, only the baseline walk runs here");
+            return;
+        }
+        let mut seed = 0x2545f4914f6cdd1du64;
+        let mut next = move || {
+            seed ^= seed << 13;
+            seed ^= seed >> 7;
+            seed ^= seed << 17;
+            (seed >> 40) as f32 / (1u64 << 24) as f32 * 20.0 - 10.0
+        };
+        let scattered: Vec<Aabb> = (0..700)
+            .map(|_| {
+                let a = Vec3A::new(next(), next(), next());
+                Aabb::new(a, a + Vec3A::new(next(), next(), next()).abs() * 0.5)
+            })
+            .collect();
+        let mut params = BvhBuildParams::medium_build();
+        params.max_prims_per_leaf = 2;
+        let binary = build_bvh2(&scattered, params, &mut Duration::default());
+        let wide = WideBvh::collapse(&binary, |first, _| first);
+        let mut visits = 0;
+        for k in 0..400 {
+            let origin = Vec3A::new(next(), next(), next()) * 1.2;
+            let mut direction = Vec3A::new(next(), next(), next());
+            if k % 5 == 0 {
+                direction.y = 0.0;
+            }
+            let ray = RayBoxes::new(origin, direction);
+            let walk = |avx: bool, ordered: bool| {
+                let mut seen = Vec::new();
+                let leaf = |first: u32, count: u32, t: &mut f32| {
+                    seen.push((first, count, t.to_bits()));
+                    *t *= 0.9; // a closest hit shrinking the limit
+                    true
+                };
+                let mut stack = [const { MaybeUninit::uninit() }; INLINE_STACK];
+                // SAFETY: AVX2 detected above.
+                match (avx, ordered) {
+                    (false, true) => wide.walk::<true, false>(&mut stack, &ray, 40.0, leaf),
+                    (false, false) => wide.walk::<false, false>(&mut stack, &ray, 40.0, leaf),
+                    (true, true) => unsafe { wide.walk_avx2::<true>(&mut stack, &ray, 40.0, leaf) },
+                    (true, false) => unsafe {
+                        wide.walk_avx2::<false>(&mut stack, &ray, 40.0, leaf)
+                    },
+                };
+                seen
+            };
+            for ordered in [true, false] {
+                let baseline = walk(false, ordered);
+                assert_eq!(walk(true, ordered), baseline, "ray {k}, ordered {ordered}");
+                visits += baseline.len();
+            }
+        }
+        assert!(
+            visits > 2000,
+            "only {visits} leaf visits: the test means little"
+        );
+    }
+
+    /// The 0-1 principle: a network that sorts every sequence of zeros and ones sorts
+    /// every sequence.
+    #[test]
+    fn the_eight_key_network_sorts_every_zero_one_input() {
+        for bits in 0u32..256 {
+            let mut keys: [u32; 8] = std::array::from_fn(|i| (bits >> i) & 1);
+            sort_eight(&mut keys);
+            assert!(
+                keys.windows(2).all(|w| w[0] <= w[1]),
+                "{bits:08b} -> {keys:?}"
+            );
         }
     }
 
     #[test]
     fn equal_distances_come_out_in_the_chosen_lane_order() {
-        let zeros = Vec4::ZERO;
-        assert_eq!(lanes_near_to_far::<true>(zeros, 0b1111), ([3, 2, 1, 0], 4));
-        assert_eq!(lanes_near_to_far::<false>(zeros, 0b1111), ([0, 1, 2, 3], 4));
-        let (lanes, n) = lanes_near_to_far::<true>(Vec4::new(2.0, 0.0, 1.0, 0.0), 0b1011);
+        let zeros = Lanes::splat(0.0);
+        let all = (1 << WIDTH) - 1;
+        let down: [usize; WIDTH] = std::array::from_fn(|i| WIDTH - 1 - i);
+        let up: [usize; WIDTH] = std::array::from_fn(|i| i);
+        assert_eq!(lanes_near_to_far::<true>(zeros, all), (down, WIDTH));
+        assert_eq!(lanes_near_to_far::<false>(zeros, all), (up, WIDTH));
+        let mut near = Lanes::splat(5.0);
+        near.0[..4].copy_from_slice(&[2.0, 0.0, 1.0, 0.0]);
+        let (lanes, n) = lanes_near_to_far::<true>(near, 0b1011);
         assert_eq!(&lanes[..n], &[3, 1, 0]);
+        let (lanes, n) = lanes_near_to_far::<false>(near, 0b1010);
+        assert_eq!(&lanes[..n], &[1, 3]);
+        let (lanes, n) = lanes_near_to_far::<true>(near, 0b1010);
+        assert_eq!(&lanes[..n], &[3, 1]);
     }
 
     #[test]
@@ -906,7 +1085,7 @@ mod tests {
             }
             let ray = RayBoxes::new(origin, d);
             let limit = next().abs() * 3.0;
-            let lane = ray.enter(&node, limit).1 & 0b10 != 0;
+            let lane = ray.enter::<false>(&node, limit).1 & 0b10 != 0;
             assert_eq!(ray.enters_box(&aabb, limit), lane);
             agreed[lane as usize] += 1;
         }

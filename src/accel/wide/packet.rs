@@ -25,7 +25,7 @@ use std::mem::MaybeUninit;
 use glam::{BVec4A, Vec3A, Vec4};
 
 use super::{
-    EMPTY, INLINE_STACK, LEAF, PACKET, ROBUST_FAR, RayBoxes, WIDTH, WideBvh, WideNode,
+    EMPTY, INLINE_STACK, LEAF, Lanes, PACKET, ROBUST_FAR, RayBoxes, WIDTH, WideBvh, WideNode,
     safe_inverse4,
 };
 
@@ -44,10 +44,10 @@ pub struct RayPacket {
 /// Bounds on the slab distances of every ray of a packet sharing one origin.
 #[derive(Clone, Copy)]
 struct Frustum {
-    origin: [Vec4; 3],
+    origin: [Lanes; 3],
     /// Per axis, the smallest and largest inverse direction component over the packet.
-    inverse_min: [Vec4; 3],
-    inverse_max: [Vec4; 3],
+    inverse_min: [Lanes; 3],
+    inverse_max: [Lanes; 3],
     /// Per axis, the `bounds` rows of the planes met first and last (as in `RayBoxes`).
     front: [usize; 3],
     back: [usize; 3],
@@ -155,9 +155,9 @@ impl Frustum {
             return None;
         }
         let mut frustum = Frustum {
-            origin: [0, 1, 2].map(|axis| Vec4::splat(origin[axis][0])),
-            inverse_min: [Vec4::ZERO; 3],
-            inverse_max: [Vec4::ZERO; 3],
+            origin: [0, 1, 2].map(|axis| Lanes::splat(origin[axis][0])),
+            inverse_min: [Lanes::splat(0.0); 3],
+            inverse_max: [Lanes::splat(0.0); 3],
             front: [0; 3],
             back: [0; 3],
             agreeing: 0,
@@ -184,8 +184,8 @@ impl Frustum {
             if nan != 0 {
                 return None;
             }
-            frustum.inverse_min[axis] = Vec4::splat(min.min_element());
-            frustum.inverse_max[axis] = Vec4::splat(max.max_element());
+            frustum.inverse_min[axis] = Lanes::splat(min.min_element());
+            frustum.inverse_max[axis] = Lanes::splat(max.max_element());
             // As `RayBoxes`: a negative inverse meets the upper plane first.
             let down = (negative == len) as usize;
             frustum.front[axis] = axis + 3 * down;
@@ -200,21 +200,23 @@ impl Frustum {
     /// The lanes of `node` that some ray of the packet may enter before `t_max` (the
     /// largest limit of the packet's rays). A lane left out is entered by no ray.
     #[inline(always)]
-    fn may_enter(&self, node: &WideNode, t_max: f32) -> (Vec4, u32) {
-        let mut near = Vec4::ZERO;
-        let mut far = Vec4::splat(f32::INFINITY);
+    fn may_enter<const AVX: bool>(&self, node: &WideNode, t_max: f32) -> (Lanes, u32) {
+        let mut near = Lanes::splat(0.0);
+        let mut far = Lanes::splat(f32::INFINITY);
         for axis in 0..3 {
             if self.agreeing & (1 << axis) == 0 {
                 continue;
             }
-            let front = Vec4::from_array(node.bounds[self.front[axis]]) - self.origin[axis];
-            let back = Vec4::from_array(node.bounds[self.back[axis]]) - self.origin[axis];
+            let front = Lanes(node.bounds[self.front[axis]]).sub::<AVX>(self.origin[axis]);
+            let back = Lanes(node.bounds[self.back[axis]]).sub::<AVX>(self.origin[axis]);
             let (low, high) = (self.inverse_min[axis], self.inverse_max[axis]);
-            near = near.max((front * low).min(front * high));
-            far = far.min((back * low).max(back * high));
+            near = near.max::<AVX>(front.mul::<AVX>(low).min::<AVX>(front.mul::<AVX>(high)));
+            far = far.min::<AVX>(back.mul::<AVX>(low).max::<AVX>(back.mul::<AVX>(high)));
         }
-        let far = (far * ROBUST_FAR).min(Vec4::splat(t_max));
-        (near, near.cmple(far).bitmask())
+        let far = far
+            .mul::<AVX>(Lanes::splat(ROBUST_FAR))
+            .min::<AVX>(Lanes::splat(t_max));
+        (near, near.le_mask::<AVX>(far))
     }
 }
 
@@ -259,14 +261,45 @@ impl WideBvh {
         let needed = self.depth * WIDTH + 1;
         if needed <= INLINE_STACK * 2 {
             let mut stack = [const { MaybeUninit::uninit() }; INLINE_STACK * 2];
-            self.walk_packet(&mut stack, packet, limits, &mut leaf);
+            self.walk_packet_on(&mut stack, packet, limits, &mut leaf);
         } else {
             let mut stack = vec![MaybeUninit::uninit(); needed];
-            self.walk_packet(&mut stack, packet, limits, &mut leaf);
+            self.walk_packet_on(&mut stack, packet, limits, &mut leaf);
         }
     }
 
-    fn walk_packet(
+    /// [`WideBvh::walk_packet`] in its AVX2 copy where the CPU has AVX2 (as `walk_on`).
+    #[inline(always)]
+    fn walk_packet_on(
+        &self,
+        stack: &mut [MaybeUninit<PacketEntry>],
+        packet: &RayPacket,
+        limits: &mut [f32; PACKET],
+        leaf: &mut impl FnMut(usize, u32, u32, &mut f32),
+    ) {
+        #[cfg(target_arch = "x86_64")]
+        if super::avx2_walks() {
+            // SAFETY: the CPU has AVX2 (detected).
+            return unsafe { self.walk_packet_avx2(stack, packet, limits, leaf) };
+        }
+        self.walk_packet::<false>(stack, packet, limits, leaf)
+    }
+
+    /// The AVX2 copy of [`WideBvh::walk_packet`] (see `WideBvh::walk_avx2`).
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2")]
+    fn walk_packet_avx2(
+        &self,
+        stack: &mut [MaybeUninit<PacketEntry>],
+        packet: &RayPacket,
+        limits: &mut [f32; PACKET],
+        leaf: &mut impl FnMut(usize, u32, u32, &mut f32),
+    ) {
+        self.walk_packet::<true>(stack, packet, limits, leaf)
+    }
+
+    #[inline(always)]
+    fn walk_packet<const AVX: bool>(
         &self,
         stack: &mut [MaybeUninit<PacketEntry>],
         packet: &RayPacket,
@@ -324,7 +357,7 @@ impl WideBvh {
                 // walks, far to near by where the packet can first enter them, each from the
                 // parent's first ray. Searching for each child's first ray cost more than
                 // the leaf tests it spared (8% of a primary-ray frame).
-                let (near, may) = frustum.may_enter(node, packet_limit);
+                let (near, may) = frustum.may_enter::<AVX>(node, packet_limit);
                 let (lanes, count) =
                     super::lanes_near_to_far::<false>(near, used_lanes(node) & may);
                 for &lane in lanes[..count].iter().rev() {
@@ -335,12 +368,12 @@ impl WideBvh {
             // Rays from several origins: the first ray decides the order; later rays only
             // claim children it missed, and a child is carried from the first that enters it.
             let used = used_lanes(node);
-            let (near, entered) = packet.ray(first).enter(node, limits[first]);
+            let (near, entered) = packet.ray(first).enter::<AVX>(node, limits[first]);
             let mut first_of = [first as u32; WIDTH];
             let mut missed = used & !entered;
             let mut r = first + 1;
             while missed != 0 && r < n {
-                let (_, m) = packet.ray(r).enter(node, limits[r]);
+                let (_, m) = packet.ray(r).enter::<AVX>(node, limits[r]);
                 let mut claimed = m & missed;
                 missed &= !claimed;
                 while claimed != 0 {
@@ -445,7 +478,9 @@ mod tests {
                     let mut copy = limits;
                     packet.enter_leaf(&node, lane, first, &mut copy, |r, _| found.push(r));
                     let alone: Vec<usize> = (first..rays.len())
-                        .filter(|&r| packet.ray(r).enter(&node, limits[r]).1 & (1 << lane) != 0)
+                        .filter(|&r| {
+                            packet.ray(r).enter::<false>(&node, limits[r]).1 & (1 << lane) != 0
+                        })
                         .collect();
                     assert_eq!(found, alone);
                     entered += found.len();
@@ -470,16 +505,57 @@ mod tests {
                 let Some(frustum) = &packet.frustum else {
                     continue;
                 };
-                let (_, may) = frustum.may_enter(&node, limit);
-                let any = (0..rays.len()).fold(0, |m, r| m | packet.ray(r).enter(&node, limit).1);
+                let (_, may) = frustum.may_enter::<false>(&node, limit);
+                let any = (0..rays.len())
+                    .fold(0, |m, r| m | packet.ray(r).enter::<false>(&node, limit).1);
                 assert_eq!(any & !may, 0, "a lane some ray enters was dropped");
-                dropped += (0b1111 & !may).count_ones();
+                dropped += (((1 << WIDTH) - 1) & !may).count_ones();
                 kept += may.count_ones();
             }
         }
         assert!(
             dropped > 500 && kept > 100,
             "dropped {dropped}, kept {kept}"
+        );
+    }
+
+    /// The node tests of the AVX2 copy (a ray's slab test, a packet's interval test) give
+    /// bit for bit the baseline's distances and masks.
+    #[cfg(target_arch = "x86_64")]
+    #[test]
+    fn avx2_node_tests_equal_the_baseline_ones() {
+        if !std::arch::is_x86_feature_detected!("avx2") {
+            println!("skipped: this CPU has no AVX2, only the baseline runs here");
+            return;
+        }
+        let bits = |(near, mask): (Lanes, u32)| (near.0.map(f32::to_bits), mask);
+        let mut next = stream(0x853c49e6748fea9b);
+        let (mut rays, mut bounded) = (0, 0);
+        for _ in 0..200 {
+            let node = random_node(&mut next);
+            for set in packets(&mut next) {
+                let packet = RayPacket::new(&set);
+                let limit = next().abs() * 12.0;
+                for r in 0..set.len() {
+                    let ray = packet.ray(r);
+                    assert_eq!(
+                        bits(ray.enter::<true>(&node, limit)),
+                        bits(ray.enter::<false>(&node, limit))
+                    );
+                    rays += 1;
+                }
+                if let Some(frustum) = &packet.frustum {
+                    assert_eq!(
+                        bits(frustum.may_enter::<true>(&node, limit)),
+                        bits(frustum.may_enter::<false>(&node, limit))
+                    );
+                    bounded += 1;
+                }
+            }
+        }
+        assert!(
+            rays > 10000 && bounded > 300,
+            "{rays} rays, {bounded} packets"
         );
     }
 
