@@ -1,5 +1,5 @@
 //! Acceleration structure: obvhs builds a binary tree over the frame's triangles, which is
-//! collapsed into the 4-wide tree that rays traverse and that is refitted ([`wide`]).
+//! collapsed into the 8-wide tree that rays traverse and that is refitted ([`wide`]).
 //!
 //! Built without spatial splits so it can be refitted later. After a build the triangle
 //! arrays are permuted into BVH order (`FrameTriangles::permute`), so a leaf's primitive

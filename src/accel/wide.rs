@@ -1,13 +1,17 @@
-//! The 4-wide BVH that rays traverse, collapsed from the binary tree that is built and
-//! refitted (Embree's BVH4 layout, read in `embree/kernels/bvh/bvh_node_aabb.h`).
+//! The 8-wide BVH that rays traverse, collapsed from the binary tree that is built and
+//! refitted (Embree's BVH8 layout for AVX, read in `embree/kernels/bvh/bvh_node_aabb.h`).
 //!
-//! Why wide: a binary tree costs one box test and one stack push or pop per level; four
+//! Why wide: a binary tree costs one box test and one stack push or pop per level; eight
 //! child boxes side by side in structure-of-arrays form are tested with one SIMD slab test
-//! (four lanes of SSE2, the x86-64 baseline, through glam's `Vec4`), which halves the levels
-//! and the memory traffic per ray. obvhs builds the binary tree; it is collapsed once per
-//! build and then dropped: refits work on the wide tree itself ([`WideBvh::refit_inner`],
-//! [`WideBvh::refit_leaf`]), and the SAH cost that decides rebuilds is measured on it, the
-//! tree rays actually walk.
+//! ([`Lanes`]: one 8-wide AVX instruction per step where the CPU has AVX2, two 4-wide SSE
+//! ones on the x86-64 baseline), which cuts the levels to a third and the stack traffic
+//! with them. The tree was 4-wide (SSE) until AVX2 was dispatched at run time: on BART
+//! Kitchen whole frames, 8 wide with AVX2 took 0.90x the 4-wide tree's time, 8 wide with
+//! SSE pairs 1.05x (BENCHMARKS.md, "an 8-wide tree with AVX2"), so a CPU without AVX2
+//! (older than Intel Haswell, 2013, or AMD Excavator, 2015) pays about 5%. obvhs builds the
+//! binary tree; it is collapsed once per build and then dropped: refits work on the wide
+//! tree itself ([`WideBvh::refit_inner`], [`WideBvh::refit_leaf`]), and the SAH cost that
+//! decides rebuilds is measured on it, the tree rays actually walk.
 //!
 //! Closest-hit traversal is near-first: the children a ray enters are sorted by entry
 //! distance, the nearest is visited next, the others go on a stack with their entry
@@ -47,8 +51,9 @@ type StackEntry = (u32, u32, f32);
 /// Stack entries a traversal keeps on the machine stack; deeper trees use a heap stack.
 const INLINE_STACK: usize = 128;
 
-/// One node: four child boxes as structure of arrays (`bounds[plane][lane]`, planes lower
-/// x, y, z then upper x, y, z), and what each child is. 128 bytes, two cache lines.
+/// One node: eight child boxes as structure of arrays (`bounds[plane][lane]`, planes lower
+/// x, y, z then upper x, y, z; each row one 32-byte vector), and what each child is. 256
+/// bytes, four cache lines.
 #[derive(Clone, Copy, Debug)]
 #[repr(C, align(64))]
 pub struct WideNode {
@@ -175,7 +180,7 @@ pub struct WideBvh {
     depth: usize,
 }
 
-/// The ray constants of the slab test, splatted across the four lanes once per ray
+/// The ray constants of the slab test, splatted across the lanes once per ray
 /// (`Default`: an all-zero placeholder for unused packet slots, never walked).
 #[derive(Clone, Copy, Default)]
 pub struct RayBoxes {
@@ -205,8 +210,8 @@ impl RayBoxes {
         }
     }
 
-    /// Entry distances of the four children and the mask of those the ray enters before
-    /// `t_max` (bit `lane`).
+    /// Entry distances of the node's children and the mask of those the ray enters before
+    /// `t_max` (bit `lane`); `AVX` only inside the AVX2 copy of a walk ([`Lanes`]).
     #[inline(always)]
     fn enter<const AVX: bool>(&self, node: &WideNode, t_max: f32) -> (Lanes, u32) {
         let mut near = Lanes::splat(0.0);
@@ -272,7 +277,7 @@ fn safe_inverse4(x: Vec4) -> Vec4 {
 
 impl WideBvh {
     /// Collapses a binary tree: each wide node takes a binary inner node's two children and
-    /// keeps opening its largest inner child (by surface area) until it has four.
+    /// keeps opening its largest inner child (by surface area) until it has eight.
     /// `leaf_ref(first, count)` gives what the tree stores for a leaf (and what the leaf
     /// callback of [`WideBvh::traverse`] receives as `first`): the first slot, or the first
     /// record of the leaf's own layout.
@@ -689,9 +694,9 @@ fn push_rest_take_first(
     ChildRef::decode(node.child[lane], node.count[lane])
 }
 
-/// The up to four binary nodes a wide node over binary inner node `id` holds: start from
+/// The up to eight binary nodes a wide node over binary inner node `id` holds: start from
 /// its two children and replace the inner one with the largest surface area by its own two
-/// children until there are four or only leaves remain.
+/// children until there are eight or only leaves remain.
 fn open_children(binary: &Bvh2, id: u32) -> ([u32; WIDTH], usize) {
     let first = binary.nodes[id as usize].first_index;
     let mut lanes = [0; WIDTH];

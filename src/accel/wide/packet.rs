@@ -6,7 +6,7 @@
 //!   at one point (a pinhole camera's primary rays) and runs the same way along an axis, the
 //!   slab distances of all its rays lie between those of the smallest and the largest
 //!   inverse direction component. One SIMD slab test with those bounds tells which of a
-//!   node's four children no ray of the packet can enter; the others are walked, nearest
+//!   node's eight children no ray of the packet can enter; the others are walked, nearest
 //!   bound first, with no ray-by-ray test above the leaves. (Packets from several origins
 //!   fall back to ranged traversal: each child carried from the first ray that enters it.)
 //!   It is exact in floating point, not only in real numbers: with one shared origin every
