@@ -382,8 +382,8 @@ fn the_avx2_and_baseline_walks_render_identical_frames() {
             let out_dir = format!("{bvh}-{simd}");
             let out = Command::new(env!("CARGO_BIN_EXE_mipray"))
                 .args([
-                    "render", "kitchen", "--size", "96x54", "--frames", "20..23", "--lod",
-                    "paper", "--bvh", bvh, "--out", &out_dir,
+                    "render", "kitchen", "--size", "96x54", "--frames", "20..23", "--lod", "paper",
+                    "--bvh", bvh, "--out", &out_dir,
                 ])
                 .env("MIPRAY_SIMD", simd)
                 .current_dir(dir.path())

@@ -325,15 +325,21 @@ impl TwoLevelAccel {
         for top in &self.levels {
             // The limit each tree ends with carries on, as `Accel::closest_within` returns it.
             let mut end = limit;
-            top.tlas.traverse(&ray, limit, |first, _, walk_limit| {
-                if top.reaches(&ray, *walk_limit) {
-                    let placed = &top.placed[first as usize];
-                    *walk_limit =
-                        self.closest_in_instance(placed, origin, direction, *walk_limit, &mut best);
-                    end = *walk_limit;
-                }
-                true
-            });
+            top.tlas
+                .traverse(&ray, limit, |first: u32, _: u32, walk_limit: &mut f32| {
+                    if top.reaches(&ray, *walk_limit) {
+                        let placed = &top.placed[first as usize];
+                        *walk_limit = self.closest_in_instance(
+                            placed,
+                            origin,
+                            direction,
+                            *walk_limit,
+                            &mut best,
+                        );
+                        end = *walk_limit;
+                    }
+                    true
+                });
             limit = end;
         }
         for c in self.levels.iter().flat_map(|l| &l.collapsed) {
@@ -440,16 +446,21 @@ impl TwoLevelAccel {
         }
         let ray = RayBoxes::new(origin, direction);
         for top in &self.levels {
-            let go_on = top.tlas.traverse_unordered(&ray, t_max, |first, _, _| {
-                if !top.reaches(&ray, t_max) {
-                    return true;
-                }
-                let placed = &top.placed[first as usize];
-                let (o, d) = object_ray(&placed.object_from_world, origin, direction);
-                self.meshes[placed.mesh as usize]
-                    .accel
-                    .visit_hits(o, d, t_max, |slot, t| visit(placed.index, slot, t))
-            });
+            let go_on =
+                top.tlas
+                    .traverse_unordered(&ray, t_max, |first: u32, _: u32, _: &mut f32| {
+                        if !top.reaches(&ray, t_max) {
+                            return true;
+                        }
+                        let placed = &top.placed[first as usize];
+                        let (o, d) = object_ray(&placed.object_from_world, origin, direction);
+                        self.meshes[placed.mesh as usize].accel.visit_hits(
+                            o,
+                            d,
+                            t_max,
+                            |slot, t| visit(placed.index, slot, t),
+                        )
+                    });
             if !go_on {
                 return false;
             }

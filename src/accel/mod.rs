@@ -28,7 +28,7 @@ pub use policy::{BvhLayout, BvhPolicy, TreeStep};
 pub use triangles::intersect;
 use triangles::{PackedTriangles, ShearedRay};
 pub use wide::PACKET;
-use wide::{RayBoxes, RayPacket, WideBvh};
+use wide::{LeafVisit, RayBoxes, RayPacket, WideBvh};
 
 /// Past this many triangles the edge and leaf-box refresh of a full refit runs on rayon's
 /// threads (below it the fork costs more than the work).
@@ -391,11 +391,17 @@ impl Accel {
         best: &mut Closest,
     ) -> f32 {
         let mut end = t_max;
-        self.wide.traverse(ray, t_max, |first, count, limit| {
-            self.closest_in_leaf(within, sheared, first, count, limit, best);
-            end = *limit;
-            true
-        });
+        self.wide.traverse(
+            ray,
+            t_max,
+            ClosestLeaf {
+                accel: self,
+                within,
+                sheared,
+                best,
+                end: &mut end,
+            },
+        );
         end
     }
 
@@ -476,12 +482,32 @@ impl Accel {
         let ray = RayBoxes::new(origin, direction);
         let sheared = ShearedRay::new(origin, direction);
         self.wide
-            .traverse_unordered(&ray, t_max, |first, count, _| {
+            .traverse_unordered(&ray, t_max, |first: u32, count: u32, _: &mut f32| {
                 self.triangles
                     .hits_in_leaf(&sheared, first, count, t_max, |slot, _, t, _| {
                         visit(slot, t)
                     })
             })
+    }
+}
+
+/// The closest-hit leaf test as a [`LeafVisit`] whose method is always inlined, so it is
+/// compiled into the walk (its AVX2 copy included) rather than called per leaf.
+struct ClosestLeaf<'a> {
+    accel: &'a Accel,
+    within: &'a Within<'a>,
+    sheared: &'a ShearedRay,
+    best: &'a mut Closest,
+    end: &'a mut f32,
+}
+
+impl LeafVisit for ClosestLeaf<'_> {
+    #[inline(always)]
+    fn visit(&mut self, first: u32, count: u32, limit: &mut f32) -> bool {
+        self.accel
+            .closest_in_leaf(self.within, self.sheared, first, count, limit, self.best);
+        *self.end = *limit;
+        true
     }
 }
 

@@ -45,6 +45,21 @@ const EMPTY: u32 = u32::MAX;
 /// a ray grazes (Ize 2013, "Robust BVH ray traversal": 1 + 2 gamma(3), rounded up).
 const ROBUST_FAR: f32 = 1.0 + 4.0 * f32::EPSILON;
 
+/// What a walk does at a leaf: `visit(first, count, &mut t_max)` may shrink `t_max` and
+/// returns false to stop the walk. Closures implement it; a query whose leaf work should be
+/// compiled into the walk itself (the closest-hit leaf test, into the AVX2 copy) implements
+/// it on a struct with an `#[inline(always)]` method, which a closure cannot carry.
+pub trait LeafVisit {
+    fn visit(&mut self, first: u32, count: u32, t_max: &mut f32) -> bool;
+}
+
+impl<F: FnMut(u32, u32, &mut f32) -> bool> LeafVisit for F {
+    #[inline(always)]
+    fn visit(&mut self, first: u32, count: u32, t_max: &mut f32) -> bool {
+        self(first, count, t_max)
+    }
+}
+
 /// A pending subtree: child reference, leaf count, entry distance.
 type StackEntry = (u32, u32, f32);
 
@@ -435,24 +450,14 @@ impl WideBvh {
     /// boxes beyond it are skipped) or return false to stop (any hit). Returns false when a
     /// leaf stopped the walk.
     #[inline(always)]
-    pub fn traverse(
-        &self,
-        ray: &RayBoxes,
-        t_max: f32,
-        leaf: impl FnMut(u32, u32, &mut f32) -> bool,
-    ) -> bool {
+    pub fn traverse(&self, ray: &RayBoxes, t_max: f32, leaf: impl LeafVisit) -> bool {
         self.traverse_in::<true>(ray, t_max, leaf)
     }
 
     /// [`WideBvh::traverse`] for queries whose answer does not depend on the order of
     /// visits (any hit, every hit): children are taken in lane order, not sorted.
     #[inline(always)]
-    pub fn traverse_unordered(
-        &self,
-        ray: &RayBoxes,
-        t_max: f32,
-        leaf: impl FnMut(u32, u32, &mut f32) -> bool,
-    ) -> bool {
+    pub fn traverse_unordered(&self, ray: &RayBoxes, t_max: f32, leaf: impl LeafVisit) -> bool {
         self.traverse_in::<false>(ray, t_max, leaf)
     }
 
@@ -461,12 +466,12 @@ impl WideBvh {
         &self,
         ray: &RayBoxes,
         t_max: f32,
-        leaf: impl FnMut(u32, u32, &mut f32) -> bool,
+        leaf: impl LeafVisit,
     ) -> bool {
         if let Some((first, count)) = self.root_leaf {
             let mut leaf = leaf;
             let mut t = t_max;
-            return leaf(first, count, &mut t);
+            return leaf.visit(first, count, &mut t);
         }
         if self.nodes.is_empty() {
             return true;
@@ -491,7 +496,7 @@ impl WideBvh {
         stack: &mut [MaybeUninit<StackEntry>],
         ray: &RayBoxes,
         t_max: f32,
-        leaf: impl FnMut(u32, u32, &mut f32) -> bool,
+        leaf: impl LeafVisit,
     ) -> bool {
         #[cfg(target_arch = "x86_64")]
         if avx2_walks() {
@@ -511,7 +516,7 @@ impl WideBvh {
         stack: &mut [MaybeUninit<StackEntry>],
         ray: &RayBoxes,
         t_max: f32,
-        leaf: impl FnMut(u32, u32, &mut f32) -> bool,
+        leaf: impl LeafVisit,
     ) -> bool {
         self.walk::<ORDERED, true>(stack, ray, t_max, leaf)
     }
@@ -524,7 +529,7 @@ impl WideBvh {
         stack: &mut [MaybeUninit<StackEntry>],
         ray: &RayBoxes,
         mut t_max: f32,
-        mut leaf: impl FnMut(u32, u32, &mut f32) -> bool,
+        mut leaf: impl LeafVisit,
     ) -> bool {
         let mut top = 0usize;
         let mut current = ChildRef::Node(0);
@@ -543,7 +548,7 @@ impl WideBvh {
                     }
                 }
                 ChildRef::Leaf { first, count } => {
-                    if !leaf(first, count, &mut t_max) {
+                    if !leaf.visit(first, count, &mut t_max) {
                         return false;
                     }
                 }
