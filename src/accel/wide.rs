@@ -756,7 +756,7 @@ mod tests {
         wide.traverse(
             &RayBoxes::new(origin, direction),
             f32::INFINITY,
-            |first, count, _| {
+            |first: u32, count: u32, _: &mut f32| {
                 out.extend(first..first + count);
                 true
             },
@@ -843,12 +843,16 @@ mod tests {
         // A leaf that sets the limit at its first box's entry: only boxes that start before
         // it are visited afterwards, and the first box reached is the nearest one.
         let mut visited = Vec::new();
-        wide.traverse(&ray, f32::INFINITY, |first, _, t_max| {
-            let b = binary.primitive_indices[first as usize];
-            visited.push(b);
-            *t_max = (*t_max).min(5.0 + b as f32 * 2.0 + 1.0);
-            true
-        });
+        wide.traverse(
+            &ray,
+            f32::INFINITY,
+            |first: u32, _: u32, t_max: &mut f32| {
+                let b = binary.primitive_indices[first as usize];
+                visited.push(b);
+                *t_max = (*t_max).min(5.0 + b as f32 * 2.0 + 1.0);
+                true
+            },
+        );
         assert_eq!(visited, vec![0]);
     }
 
