@@ -735,6 +735,22 @@ mod tests {
     use std::time::Duration;
 
     /// A row of unit boxes along x.
+    /// A xorshift64 stream.
+    fn xorshift(mut seed: u64) -> impl FnMut() -> u64 {
+        move || {
+            seed ^= seed << 13;
+            seed ^= seed >> 7;
+            seed ^= seed << 17;
+            seed
+        }
+    }
+
+    /// Floats in `[low, low + span)` from [`xorshift`] (24 bits each).
+    fn uniform(seed: u64, low: f32, span: f32) -> impl FnMut() -> f32 {
+        let mut next = xorshift(seed);
+        move || (next() >> 40) as f32 / (1u64 << 24) as f32 * span + low
+    }
+
     fn boxes(n: usize) -> Vec<Aabb> {
         (0..n)
             .map(|i| {
@@ -916,13 +932,7 @@ mod tests {
     /// The sorting network hands out every entered lane once, nearest first.
     #[test]
     fn entered_lanes_come_out_nearest_first() {
-        let mut seed = 0x9e3779b97f4a7c15u64;
-        let mut next = || {
-            seed ^= seed << 13;
-            seed ^= seed >> 7;
-            seed ^= seed << 17;
-            seed
-        };
+        let mut next = xorshift(0x9e3779b97f4a7c15);
         let mut counts = [0; WIDTH + 1];
         for _ in 0..20000 {
             let (r, s) = (next(), next());
@@ -969,13 +979,7 @@ mod tests {
             println!("skipped: this CPU has no AVX2, only the baseline walk runs here");
             return;
         }
-        let mut seed = 0x2545f4914f6cdd1du64;
-        let mut next = move || {
-            seed ^= seed << 13;
-            seed ^= seed >> 7;
-            seed ^= seed << 17;
-            (seed >> 40) as f32 / (1u64 << 24) as f32 * 20.0 - 10.0
-        };
+        let mut next = uniform(0x2545f4914f6cdd1d, -10.0, 20.0);
         let scattered: Vec<Aabb> = (0..700)
             .map(|_| {
                 let a = Vec3A::new(next(), next(), next());
@@ -1029,13 +1033,7 @@ mod tests {
     /// tree's own left-to-right order (what the lane-order walks of shadow rays rely on).
     #[test]
     fn lanes_keep_the_binary_trees_left_to_right_order() {
-        let mut seed = 0x9e3779b97f4a7c15u64;
-        let mut next = move || {
-            seed ^= seed << 13;
-            seed ^= seed >> 7;
-            seed ^= seed << 17;
-            (seed >> 40) as f32 / (1u64 << 24) as f32 * 20.0
-        };
+        let mut next = uniform(0x9e3779b97f4a7c15, 0.0, 20.0);
         let scattered: Vec<Aabb> = (0..500)
             .map(|_| {
                 let a = Vec3A::new(next(), next(), next());
@@ -1132,13 +1130,7 @@ mod tests {
     /// A box kept outside the tree answers exactly as the same box in a node's lane.
     #[test]
     fn a_lone_box_answers_as_a_lane() {
-        let mut seed = 12345u64;
-        let mut next = move || {
-            seed ^= seed << 13;
-            seed ^= seed >> 7;
-            seed ^= seed << 17;
-            (seed >> 40) as f32 / (1u64 << 24) as f32 * 4.0 - 2.0
-        };
+        let mut next = uniform(12345, -2.0, 4.0);
         let mut agreed = [0; 2];
         for _ in 0..2000 {
             let a = Vec3A::new(next(), next(), next());
