@@ -18,7 +18,7 @@ use obvhs::{BvhBuildParams, aabb::Aabb, bvh2::builder::build_bvh2};
 
 use super::triangles::ShearedRay;
 use super::wide::{PACKET, RayBoxes, WideBvh};
-use super::{Accel, AccelError, Closest, Hit, PacketQuery, Within};
+use super::{Accel, AccelError, Closest, Hit, ObjectPacket, PacketQuery, Within};
 use crate::geometry::{FrameTriangles, Placement};
 
 /// One instance of a shared mesh, as the frame loop describes it.
@@ -38,7 +38,16 @@ struct MeshBlas {
     triangles: FrameTriangles,
     accel: Accel,
     bounds: Option<Aabb>,
+    /// Boxes that together hold every triangle, tighter than `bounds` (the subtrees
+    /// [`HULL_LEVELS`] below the root): an instance's world box is the union of their
+    /// transformed boxes, which for a turned instance is much smaller than the transformed
+    /// box of `bounds`, so fewer rays enter it for nothing.
+    hull: Vec<Aabb>,
 }
+
+/// How many wide levels below a mesh's root its hull boxes lie (up to `WIDTH^levels`
+/// boxes, each transformed per instance and frame: eight corners).
+const HULL_LEVELS: usize = 2;
 
 /// An instance as rays read it, stored in top-level leaf order.
 #[derive(Clone, Copy)]
@@ -107,6 +116,10 @@ pub struct TwoLevelAccel {
     levels: [TopLevel; 2],
 }
 
+/// Fewest rays of a packet that enter an instance as a packet of their own; fewer enter it
+/// one by one (a packet's setup costs more than it saves for a ray or two).
+const INSTANCE_PACKET: usize = 4;
+
 const FIXED: usize = 0;
 const MOVING: usize = 1;
 
@@ -134,10 +147,15 @@ impl TwoLevelAccel {
             .map(|mut triangles| {
                 let accel = Accel::build(&mut triangles)?;
                 let bounds = accel.bounds(&triangles);
+                let mut hull = accel.wide.boxes_at_depth(HULL_LEVELS);
+                if hull.is_empty() {
+                    hull.extend(bounds);
+                }
                 Ok(MeshBlas {
                     triangles,
                     accel,
                     bounds,
+                    hull,
                 })
             })
             .collect::<Result<Vec<_>, AccelError>>()?;
@@ -243,15 +261,17 @@ impl TwoLevelAccel {
 
     /// What instance `instance`'s transform allows this frame.
     fn placing(&self, instance: &TlasInstance) -> Placing {
-        let Some(bounds) = self
+        let Some(mesh) = self
             .meshes
             .get(instance.mesh as usize)
-            .and_then(|m| m.bounds)
+            .filter(|m| m.bounds.is_some())
         else {
             return Placing::Nothing;
         };
         let to_world = Affine3A::from_mat4(instance.world_from_object);
-        let world_box = transformed_box(&bounds, &to_world);
+        let world_box = mesh.hull.iter().fold(Aabb::empty(), |a, b| {
+            a.union(&transformed_box(b, &to_world))
+        });
         if !(world_box.min.is_finite() && world_box.max.is_finite()) {
             return Placing::NonFinite;
         }
@@ -368,18 +388,39 @@ impl TwoLevelAccel {
                 sheared,
                 best,
                 limits,
+                object,
             } = q;
             for top in &self.levels {
                 top.tlas
-                    .traverse_packet(packet, limits, |r, first, _, limit| {
-                        if top.reaches(&packet.ray(r), *limit) {
+                    .traverse_packet_gathered(packet, limits, |entering, first, _, limits| {
+                        let mut inside = [0u8; PACKET];
+                        let mut k = 0;
+                        for &r in entering {
+                            if top.reaches(&packet.ray(r as usize), limits[r as usize]) {
+                                inside[k] = r;
+                                k += 1;
+                            }
+                        }
+                        let placed = &top.placed[first as usize];
+                        if k >= INSTANCE_PACKET {
+                            self.closest_in_instance_packet(
+                                placed,
+                                rays,
+                                &inside[..k],
+                                limits,
+                                best,
+                                object,
+                            );
+                            return;
+                        }
+                        for &r in &inside[..k] {
+                            let r = r as usize;
                             let (origin, direction) = rays[r];
-                            let placed = &top.placed[first as usize];
-                            *limit = self.closest_in_instance(
+                            limits[r] = self.closest_in_instance(
                                 placed,
                                 origin,
                                 direction,
-                                *limit,
+                                limits[r],
                                 &mut best[r],
                             );
                         }
@@ -426,6 +467,51 @@ impl TwoLevelAccel {
             t_max,
             best,
         )
+    }
+
+    /// [`TwoLevelAccel::closest_in_instance`] for the rays `inside` of a packet of world
+    /// rays `rays` (their queries `best`, limits `limits`), walked as one packet of their
+    /// own in the instance's object space: each ray is transformed as it would be alone, and
+    /// a packet finds for each ray what it finds alone, so the hits are the same bits.
+    fn closest_in_instance_packet(
+        &self,
+        placed: &Placed,
+        rays: &[(Vec3A, Vec3A)],
+        inside: &[u8],
+        limits: &mut [f32; PACKET],
+        best: &mut [Closest; PACKET],
+        object: &mut ObjectPacket,
+    ) {
+        let mesh = &self.meshes[placed.mesh as usize];
+        for (s, &r) in inside.iter().enumerate() {
+            let (origin, direction) = rays[r as usize];
+            let (o, d) = object_ray(&placed.object_from_world, origin, direction);
+            object.object_rays[s] = (o, d);
+            object.sheared[s] = ShearedRay::new(o, d);
+            object.limits[s] = limits[r as usize];
+        }
+        object.packet.set(&object.object_rays[..inside.len()]);
+        let within = Within {
+            source_base: placed.source_base,
+            instance: placed.index,
+            reported: None,
+        };
+        let ObjectPacket {
+            packet,
+            sheared,
+            limits: object_limits,
+            ..
+        } = object;
+        mesh.accel
+            .wide
+            .traverse_packet(packet, object_limits, |s, first, count, limit| {
+                let r = inside[s] as usize;
+                mesh.accel
+                    .closest_in_leaf(&within, &sheared[s], first, count, limit, &mut best[r]);
+            });
+        for (s, &r) in inside.iter().enumerate() {
+            limits[r as usize] = object_limits[s];
+        }
     }
 
     /// Visits every hit with `t` in `[0, t_max)` in the world tree and every instance as
@@ -619,6 +705,62 @@ mod tests {
                 assert_eq!(hit, two.closest_hit(&world, o, d, f32::INFINITY));
             }
         }
+    }
+
+    /// Pinhole packets aimed at instances, so that whole packets (and parts of packets,
+    /// below and above [`INSTANCE_PACKET`] rays) enter an instance together: each ray finds
+    /// the same bits as alone, with one instance (no top-level boxes) and with many.
+    #[test]
+    fn rays_entering_an_instance_together_find_what_each_finds_alone() {
+        let mut rng = Rng(11);
+        let meshes = [random_mesh(&mut rng, 60), random_mesh(&mut rng, 35)];
+        let mut two = TwoLevelAccel::new(meshes.iter().map(|m| soup(m)).collect()).unwrap();
+        let mut world_tris = soup(&random_mesh(&mut rng, 30));
+        for s in world_tris.source.iter_mut() {
+            *s += 1000;
+        }
+        let world = Accel::build(&mut world_tris).unwrap();
+        let instances: Vec<TlasInstance> = (0..6u32)
+            .map(|k| TlasInstance {
+                index: k,
+                mesh: k % 2,
+                world_from_object: Mat4::from_scale_rotation_translation(
+                    Vec3::splat(0.6 + 0.3 * k as f32) * if k == 4 { -1.0 } else { 1.0 },
+                    Quat::from_rotation_z(0.7 * k as f32) * Quat::from_rotation_x(0.4),
+                    Vec3::from(rng.point(6.0)),
+                ),
+                source_base: 100 * k,
+            })
+            .collect();
+        let mut compared = 0;
+        for set in [&instances[..1], &instances[..]] {
+            two.set_instances(set).unwrap();
+            for (k, inst) in set.iter().enumerate() {
+                let aim = Vec3A::from(inst.world_from_object.w_axis.truncate());
+                // Narrow packets (every ray in the instance's box) to wide ones (a few).
+                for spread in [0.02f32, 0.1, 0.4, 1.5] {
+                    let origin = aim + Vec3A::new(9.0, 4.0 - k as f32, 7.0);
+                    let forward = (aim - origin).normalize();
+                    let right = forward.cross(Vec3A::Y).normalize();
+                    let up = right.cross(forward);
+                    let rays: Vec<(Vec3A, Vec3A)> = (0..PACKET)
+                        .map(|i| {
+                            let (x, y) = ((i % 8) as f32 / 7.0 - 0.5, (i / 8) as f32 / 7.0 - 0.5);
+                            let d = forward + (right * x + up * y) * spread;
+                            (origin, d.normalize())
+                        })
+                        .collect();
+                    let mut packet = vec![None; PACKET];
+                    two.closest_hits(&world, &rays, f32::INFINITY, &mut packet);
+                    for (i, (&(o, d), hit)) in rays.iter().zip(&packet).enumerate() {
+                        let alone = two.closest_hit(&world, o, d, f32::INFINITY);
+                        assert_eq!(*hit, alone, "instance {k}, spread {spread}, ray {i}");
+                        compared += hit.is_some_and(|h| h.instance != Hit::WORLD) as usize;
+                    }
+                }
+            }
+        }
+        assert!(compared > 300, "only {compared} rays hit an instance");
     }
 
     #[test]

@@ -143,6 +143,18 @@ struct PacketQuery {
     sheared: [ShearedRay; PACKET],
     best: [Closest; PACKET],
     limits: [f32; PACKET],
+    /// Where the two-level structure takes the rays that enter an instance together.
+    object: ObjectPacket,
+}
+
+/// The rays of a packet that enter one instance, in its object space: ray `s` here is ray
+/// `rays[s]` of the world packet.
+struct ObjectPacket {
+    packet: RayPacket,
+    sheared: [ShearedRay; PACKET],
+    limits: [f32; PACKET],
+    /// `(origin, direction)` in object space, what `packet` is set from.
+    object_rays: [(Vec3A, Vec3A); PACKET],
 }
 
 thread_local! {
@@ -156,6 +168,12 @@ impl PacketQuery {
             sheared: [ShearedRay::default(); PACKET],
             best: [Closest::default(); PACKET],
             limits: [0.0; PACKET],
+            object: ObjectPacket {
+                packet: RayPacket::new(&[]),
+                sheared: [ShearedRay::default(); PACKET],
+                limits: [0.0; PACKET],
+                object_rays: [(Vec3A::ZERO, Vec3A::ZERO); PACKET],
+            },
         })
     }
 
@@ -425,6 +443,7 @@ impl Accel {
             sheared,
             best,
             limits,
+            ..
         } = query;
         self.wide
             .traverse_packet(packet, limits, |r, first, count, limit| {

@@ -341,6 +341,33 @@ impl WideBvh {
         self.nodes.first().map(WideNode::bounds_union)
     }
 
+    /// The boxes of the subtrees `levels` wide levels below the root (a leaf met higher
+    /// up is its own box): together they hold every triangle, more tightly than the root
+    /// box, which is what a transformed copy of them needs (empty when the tree keeps no
+    /// boxes: one leaf or none).
+    pub fn boxes_at_depth(&self, levels: usize) -> Vec<Aabb> {
+        let mut boxes = Vec::new();
+        if self.nodes.is_empty() {
+            return boxes;
+        }
+        let mut frontier = vec![(0u32, 1usize)];
+        while let Some((index, level)) = frontier.pop() {
+            let node = &self.nodes[index as usize];
+            for lane in 0..WIDTH {
+                let child = node.child[lane];
+                if child == EMPTY {
+                    continue;
+                }
+                if child & LEAF != 0 || level >= levels {
+                    boxes.push(node.lane_box(lane));
+                } else {
+                    frontier.push((child, level + 1));
+                }
+            }
+        }
+        boxes
+    }
+
     /// Every leaf's `(node * WIDTH + lane)`, in the order `collapse` called `leaf_ref`.
     pub fn leaf_lanes(&self) -> &[u32] {
         &self.leaf_lanes

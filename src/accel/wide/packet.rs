@@ -246,13 +246,34 @@ impl WideBvh {
         &self,
         packet: &RayPacket,
         limits: &mut [f32; PACKET],
-        mut leaf: impl FnMut(usize, u32, u32, &mut f32),
+        leaf: impl FnMut(usize, u32, u32, &mut f32),
+    ) {
+        self.traverse_packet_with(packet, limits, EachRay(leaf));
+    }
+
+    /// [`WideBvh::traverse_packet`] calling the leaf once with all the rays that enter it
+    /// (in ray order): `leaf(rays, leaf_ref, count, limits)`. For leaves whose work is
+    /// cheaper for many rays together than one ray at a time (a top-level leaf: the rays
+    /// enter its instance as a packet of their own).
+    pub fn traverse_packet_gathered(
+        &self,
+        packet: &RayPacket,
+        limits: &mut [f32; PACKET],
+        leaf: impl FnMut(&[u8], u32, u32, &mut [f32; PACKET]),
+    ) {
+        self.traverse_packet_with(packet, limits, Gathered(leaf));
+    }
+
+    #[inline(always)]
+    fn traverse_packet_with(
+        &self,
+        packet: &RayPacket,
+        limits: &mut [f32; PACKET],
+        mut leaf: impl PacketLeaf,
     ) {
         let n = packet.len;
         if let Some((first, count)) = self.root_leaf {
-            for (r, limit) in limits.iter_mut().enumerate().take(n) {
-                leaf(r, first, count, limit);
-            }
+            leaf.enter_all(n, first, count, limits);
             return;
         }
         if self.nodes.is_empty() || n == 0 {
@@ -275,7 +296,7 @@ impl WideBvh {
         stack: &mut [MaybeUninit<PacketEntry>],
         packet: &RayPacket,
         limits: &mut [f32; PACKET],
-        leaf: &mut impl FnMut(usize, u32, u32, &mut f32),
+        leaf: &mut impl PacketLeaf,
     ) {
         #[cfg(target_arch = "x86_64")]
         if super::avx2_walks() {
@@ -293,7 +314,7 @@ impl WideBvh {
         stack: &mut [MaybeUninit<PacketEntry>],
         packet: &RayPacket,
         limits: &mut [f32; PACKET],
-        leaf: &mut impl FnMut(usize, u32, u32, &mut f32),
+        leaf: &mut impl PacketLeaf,
     ) {
         self.walk_packet::<true>(stack, packet, limits, leaf)
     }
@@ -304,7 +325,7 @@ impl WideBvh {
         stack: &mut [MaybeUninit<PacketEntry>],
         packet: &RayPacket,
         limits: &mut [f32; PACKET],
-        leaf: &mut impl FnMut(usize, u32, u32, &mut f32),
+        leaf: &mut impl PacketLeaf,
     ) {
         let n = packet.len;
         // The largest limit of the packet: the interval test's `t_max`. Limits only
@@ -332,10 +353,15 @@ impl WideBvh {
             if entry.child & LEAF != 0 {
                 let parent = &self.nodes[entry.node as usize];
                 let (leaf_ref, count) = (entry.child & !LEAF, entry.count);
-                let any =
-                    packet.enter_leaf(parent, entry.lane as usize, first, limits, |r, limit| {
-                        leaf(r, leaf_ref, count, limit)
-                    });
+                let any = leaf.enter(
+                    packet,
+                    parent,
+                    entry.lane as usize,
+                    first,
+                    leaf_ref,
+                    count,
+                    limits,
+                );
                 if any {
                     packet_limit = largest_limit(limits);
                 }
@@ -395,6 +421,92 @@ impl WideBvh {
             for &lane in lanes[..count].iter().rev() {
                 push(lane, first_of[lane], &mut top);
             }
+        }
+    }
+}
+
+/// What a packet walk does at a leaf (the box of lane `lane` of `node`): the rays from
+/// `first` on that enter the box before their limits run the leaf; returns whether any did.
+trait PacketLeaf {
+    #[allow(clippy::too_many_arguments)]
+    fn enter(
+        &mut self,
+        packet: &RayPacket,
+        node: &WideNode,
+        lane: usize,
+        first: usize,
+        leaf_ref: u32,
+        count: u32,
+        limits: &mut [f32; PACKET],
+    ) -> bool;
+
+    /// The leaf of a one-leaf tree (no box kept): every ray of the `n` runs it.
+    fn enter_all(&mut self, n: usize, leaf_ref: u32, count: u32, limits: &mut [f32; PACKET]);
+}
+
+/// The leaf run ray by ray, as each ray is found inside the box.
+struct EachRay<F>(F);
+
+impl<F: FnMut(usize, u32, u32, &mut f32)> PacketLeaf for EachRay<F> {
+    #[inline(always)]
+    fn enter(
+        &mut self,
+        packet: &RayPacket,
+        node: &WideNode,
+        lane: usize,
+        first: usize,
+        leaf_ref: u32,
+        count: u32,
+        limits: &mut [f32; PACKET],
+    ) -> bool {
+        packet.enter_leaf(node, lane, first, limits, |r, limit| {
+            (self.0)(r, leaf_ref, count, limit)
+        })
+    }
+
+    fn enter_all(&mut self, n: usize, leaf_ref: u32, count: u32, limits: &mut [f32; PACKET]) {
+        for (r, limit) in limits.iter_mut().enumerate().take(n) {
+            (self.0)(r, leaf_ref, count, limit);
+        }
+    }
+}
+
+// Ray indices of a gathered leaf are bytes.
+const _: () = assert!(PACKET <= 256);
+
+/// The leaf run once with every ray inside the box. A ray's box test reads only its own
+/// limit, which only its own leaf work lowers, so gathering the rays first decides for
+/// each what [`EachRay`] decides.
+struct Gathered<F>(F);
+
+impl<F: FnMut(&[u8], u32, u32, &mut [f32; PACKET])> PacketLeaf for Gathered<F> {
+    #[inline(always)]
+    fn enter(
+        &mut self,
+        packet: &RayPacket,
+        node: &WideNode,
+        lane: usize,
+        first: usize,
+        leaf_ref: u32,
+        count: u32,
+        limits: &mut [f32; PACKET],
+    ) -> bool {
+        let mut rays = [0u8; PACKET];
+        let mut inside = 0;
+        packet.enter_leaf(node, lane, first, limits, |r, _| {
+            rays[inside] = r as u8;
+            inside += 1;
+        });
+        if inside > 0 {
+            (self.0)(&rays[..inside], leaf_ref, count, limits);
+        }
+        inside > 0
+    }
+
+    fn enter_all(&mut self, n: usize, leaf_ref: u32, count: u32, limits: &mut [f32; PACKET]) {
+        let rays: [u8; PACKET] = std::array::from_fn(|r| r as u8);
+        if n > 0 {
+            (self.0)(&rays[..n], leaf_ref, count, limits);
         }
     }
 }
