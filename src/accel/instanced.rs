@@ -37,11 +37,11 @@ pub struct TlasInstance {
 struct MeshBlas {
     triangles: FrameTriangles,
     accel: Accel,
-    bounds: Option<Aabb>,
-    /// Boxes that together hold every triangle, tighter than `bounds` (the subtrees
+    /// Boxes that together hold every triangle (empty for an empty mesh), tighter than its
+    /// root box (the subtrees
     /// [`HULL_LEVELS`] below the root): an instance's world box is the union of their
     /// transformed boxes, which for a turned instance is much smaller than the transformed
-    /// box of `bounds`, so fewer rays enter it for nothing.
+    /// root box, so fewer rays enter it for nothing.
     hull: Vec<Aabb>,
 }
 
@@ -154,7 +154,6 @@ impl TwoLevelAccel {
                 Ok(MeshBlas {
                     triangles,
                     accel,
-                    bounds,
                     hull,
                 })
             })
@@ -264,7 +263,7 @@ impl TwoLevelAccel {
         let Some(mesh) = self
             .meshes
             .get(instance.mesh as usize)
-            .filter(|m| m.bounds.is_some())
+            .filter(|m| !m.hull.is_empty())
         else {
             return Placing::Nothing;
         };
