@@ -66,7 +66,7 @@ fn axis(t: f32, n: u32, mode: WrapMode) -> (usize, usize, f32) {
 #[inline(always)]
 fn floor(x: f64) -> f64 {
     const INTEGERS_FROM: f64 = 4_503_599_627_370_496.0; // 2^52
-    if !(x.abs() < INTEGERS_FROM) {
+    if x.abs() >= INTEGERS_FROM {
         return x;
     }
     let truncated = x as i64 as f64;
