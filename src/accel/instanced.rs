@@ -1,8 +1,10 @@
 //! The two-level structure: one bottom-level tree per shared mesh (object space, built
 //! once), a top-level tree over the instances that place them (rebuilt from the instances'
 //! boxes when they move, one instance per leaf), and beside them the world-space tree over
-//! everything else (the flat [`Accel`] the frame loop refits), which every query walks
-//! first: its hit, usually the nearest, then prunes the top-level walk. Rigid motion then costs a transform per
+//! everything else (the flat [`Accel`] the frame loop refits). Closest-hit queries walk the
+//! instances first and the world tree with the limit they leave; any-hit (shadow) queries
+//! walk the world tree first, whose large occluders stop most of them before an instance is
+//! entered (both orders measured, BENCHMARKS.md). Rigid motion then costs a transform per
 //! instance instead of a rewrite of every triangle (Embree's and OptiX's instancing).
 //!
 //! A ray enters an instance by its inverse transform without renormalising the direction,
@@ -373,9 +375,10 @@ impl TwoLevelAccel {
         best.hit
     }
 
-    /// [`TwoLevelAccel::closest_hit`] for a packet of up to [`PACKET`] rays: the world tree
-    /// and the top-level tree are each walked once for the packet, each instance reached by
-    /// each ray alone.
+    /// [`TwoLevelAccel::closest_hit`] for a packet of up to [`PACKET`] rays: the top-level
+    /// trees and the world tree are each walked once for the packet; the rays that enter an
+    /// instance together (at least `INSTANCE_PACKET`) walk it as a packet of their own,
+    /// fewer one by one.
     pub fn closest_hits(
         &self,
         world: &Accel,
