@@ -21,7 +21,7 @@ const REPEAT_FAST_LIMIT: f64 = 1e15;
 
 /// The two texel indices (already wrapped into `0..n`) and the weight of the second one,
 /// for a lookup at texture coordinate `t` along an axis of `n` texels.
-#[inline(always)]
+#[inline]
 fn axis(t: f32, n: u32, mode: WrapMode) -> (usize, usize, f32) {
     // Non-finite coordinates would poison the weights; 0 is an arbitrary but valid point.
     let t = if t.is_finite() { f64::from(t) } else { 0.0 };
@@ -35,16 +35,6 @@ fn axis(t: f32, n: u32, mode: WrapMode) -> (usize, usize, f32) {
         let i0 = x0 as usize;
         return (i0, i0 + 1, frac);
     }
-    let (i0, i1) = wrapped(x0, n, mode);
-    (i0, i1, frac)
-}
-
-/// [`axis`]'s two texel indices for a floor `x0` whose pair leaves the level: the wrap
-/// modes (kept out of line, so the common case inlines small).
-#[cold]
-#[inline(never)]
-fn wrapped(x0: f64, n: u32, mode: WrapMode) -> (usize, usize) {
-    let n_f = f64::from(n);
     // Repeat with a moderate coordinate (tiled floors reach u = 100 and more): one integer
     // remainder, a mask for power-of-two sizes, instead of an f64 `fmod` and two more.
     if mode == WrapMode::Repeat && x0.abs() < REPEAT_FAST_LIMIT {
@@ -56,7 +46,7 @@ fn wrapped(x0: f64, n: u32, mode: WrapMode) -> (usize, usize) {
             i.rem_euclid(n)
         };
         let i1 = if i0 + 1 == n { 0 } else { i0 + 1 };
-        return (i0 as usize, i1 as usize);
+        return (i0 as usize, i1 as usize, frac);
     }
     // Reduce x0 to a small range with the same wrapped result before converting to an
     // integer: `rem_euclid` on f64 is exact, and the bounds keep `i0 + 1` in range too.
@@ -66,7 +56,7 @@ fn wrapped(x0: f64, n: u32, mode: WrapMode) -> (usize, usize) {
         WrapMode::ClampToEdge => x0.clamp(-1.0, n_f),
     } as i64;
     let n = i64::from(n);
-    (wrap(i0, n, mode), wrap(i0 + 1, n, mode))
+    (wrap(i0, n, mode), wrap(i0 + 1, n, mode), frac)
 }
 
 /// `x.floor()` for a finite `x`, without the libm call the baseline x86-64 target makes for
