@@ -61,15 +61,16 @@ fn axis(t: f32, n: u32, mode: WrapMode) -> (usize, usize, f32) {
 
 /// `x.floor()` for a finite `x`, without the libm call the baseline x86-64 target makes for
 /// it (no SSE4.1 `roundsd`): two per bilinear lookup showed as a call in every texture
-/// sample. Below 2^52 the conversion through `i64` truncates exactly; from 2^52 on every
-/// `f64` is an integer already. (`x` is never -0.0 here: `t * n - 0.5` rounds to +0.)
+/// sample. Below 2^52 the conversion through `i64` truncates exactly (the sign copied back
+/// keeps -0.0 and the negative fractions' -0.0 as `floor` has them); from 2^52 on every
+/// `f64` is an integer already.
 #[inline(always)]
 fn floor(x: f64) -> f64 {
     const INTEGERS_FROM: f64 = 4_503_599_627_370_496.0; // 2^52
     if x.abs() >= INTEGERS_FROM {
         return x;
     }
-    let truncated = x as i64 as f64;
+    let truncated = (x as i64 as f64).copysign(x);
     if truncated > x {
         truncated - 1.0
     } else {
@@ -501,6 +502,8 @@ mod tests {
         let mut x: u64 = 0x2545_f491_4f6c_dd1d;
         let mut values = vec![
             0.0,
+            -0.0,
+            -0.25,
             0.5,
             -0.5,
             1.0,
