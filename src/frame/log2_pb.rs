@@ -19,7 +19,8 @@ use super::{InstanceState, Motion, Renderer, UpdateStats};
 use crate::anim::NodeShape;
 use crate::geometry::{Placement, SceneGeometry};
 use crate::lod::{
-    PixelFootprint, log2_pb, log2_pb_with_texel_area, shift_log2_pb, texel_area, uv_area,
+    PixelFootprint, log2_pb, log2_pb_with_texel_term, shift_log2_pb, texel_area, texel_term,
+    uv_area,
 };
 use crate::scene::SceneDesc;
 
@@ -99,8 +100,8 @@ impl Renderer {
                 while bits != 0 {
                     let s = base + w * 64 + bits.trailing_zeros() as usize;
                     bits &= bits - 1;
-                    let Some(area) = areas.of(s) else { continue };
-                    out[s - base] = log2_pb_with_texel_area(positions[s], area, footprint);
+                    let Some(term) = areas.of(s) else { continue };
+                    out[s - base] = log2_pb_with_texel_term(positions[s], term, footprint);
                     written += 1;
                 }
             }
@@ -250,14 +251,14 @@ impl Renderer {
             // Similarity: the object-space constant plus log2 s.
             (Some(NodeShape { scale, .. }), None) => shift_log2_pb(object, scale.log2()),
             // Deforming (or sheared): from its world vertices, with the texel area of its
-            // slot's uvs (for a deforming instance read from the table: the source's uvs,
-            // perhaps in the other winding, the same area).
+            // slot's uvs (for a deforming instance its term read from the table: the source's
+            // uvs, perhaps in the other winding, the same area).
             (None, None) => {
-                let area = self.texel_areas.of(s).unwrap_or_else(|| {
+                let term = self.texel_areas.of(s).unwrap_or_else(|| {
                     let size = self.texture_size(source).unwrap_or((1, 1));
-                    texel_area(uv_area(self.triangles.uvs[s]), size)
+                    texel_term(texel_area(uv_area(self.triangles.uvs[s]), size))
                 });
-                log2_pb_with_texel_area(self.triangles.positions[s], area, self.footprint)
+                log2_pb_with_texel_term(self.triangles.positions[s], term, self.footprint)
             }
         })
     }
@@ -340,19 +341,18 @@ struct Stretch {
     texture_size: (u32, u32),
 }
 
-/// Per BVH slot, the [`texel_area`] of a textured triangle of a deforming instance, made
+/// Per BVH slot, the [`texel_term`] of a textured triangle of a deforming instance, made
 /// at each build of the tree: the uvs and texture of a skinned or morphed mesh never change
-/// while its vertices do, so its `log2 P_b` needs only the slot's vertices and this area.
+/// while its vertices do, so its `log2 P_b` needs only the slot's vertices and this term
+/// (its `log2` taken once, not per frame).
 /// Empty when no instance deforms; otherwise 8 bytes for every slot of the world tree,
 /// remade in O(slots) after each build.
 #[derive(Debug, Default)]
 pub(super) struct DeformingTexelAreas {
-    /// [`NOT_DEFORMING`] for the slots of other instances and untextured triangles.
+    /// NaN for the slots of other instances and untextured triangles (a term is never NaN:
+    /// areas are never negative, and a non-finite one gives `+inf`).
     per_slot: Vec<f64>,
 }
-
-/// The per-slot marker of a slot the table has no area for (areas are >= 0 or NaN).
-const NOT_DEFORMING: f64 = -1.0;
 
 impl DeformingTexelAreas {
     fn new(renderer: &Renderer) -> Self {
@@ -367,11 +367,14 @@ impl DeformingTexelAreas {
             let instance = geometry.triangle_instance[source as usize] as usize;
             let textured = !object_log2_pb[source as usize].is_nan();
             if deforms[instance] != VertexSource::Deformed || !textured {
-                return NOT_DEFORMING;
+                return f64::NAN;
             }
             let size = renderer.texture_size(source as usize).unwrap_or((1, 1));
             // The source's uvs: a slot may hold them in the other winding, the same area.
-            texel_area(uv_area(geometry.triangle_uvs[source as usize]), size)
+            texel_term(texel_area(
+                uv_area(geometry.triangle_uvs[source as usize]),
+                size,
+            ))
         };
         let per_slot = if renderer.parallelism.splits(triangles.len()) {
             triangles.source.par_iter().map(area).collect()
@@ -385,11 +388,11 @@ impl DeformingTexelAreas {
         self.per_slot.is_empty()
     }
 
-    /// Slot `s`'s texel area, if it belongs to a deforming instance and is textured.
+    /// Slot `s`'s texel term, if it belongs to a deforming instance and is textured.
     #[inline]
     fn of(&self, s: usize) -> Option<f64> {
-        let area = *self.per_slot.get(s)?;
-        (area != NOT_DEFORMING).then_some(area)
+        let term = *self.per_slot.get(s)?;
+        (!term.is_nan()).then_some(term)
     }
 }
 

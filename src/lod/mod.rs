@@ -31,8 +31,8 @@ pub use none::NoLod;
 pub use paper::PathLength;
 pub use paper_cos::PathLengthCos;
 pub use pb::{
-    LOG2_PB_LIMIT, PixelFootprint, log2_pb, log2_pb_with_texel_area, shift_log2_pb, texel_area,
-    uv_area,
+    LOG2_PB_LIMIT, PixelFootprint, log2_pb, log2_pb_with_texel_area, log2_pb_with_texel_term,
+    shift_log2_pb, texel_area, texel_term, uv_area,
 };
 
 use std::fmt;

@@ -72,23 +72,49 @@ pub fn texel_area(uv_area: f64, texture_size: (u32, u32)) -> f64 {
 
 /// [`log2_pb`] with the triangle's [`texel_area`] already known (a deforming mesh's uvs
 /// and texture stay put while its vertices move): the same value, bit for bit.
-///
-/// The guards read the product: it is finite exactly when the uv area is (a texture has
-/// 1..=16384² texels), and zero exactly when the uv area or the texel count is.
 #[inline]
 pub fn log2_pb_with_texel_area(p: [Vec3A; 3], texel_area: f64, footprint: PixelFootprint) -> f32 {
+    log2_pb_with_texel_term(p, texel_term(texel_area), footprint)
+}
+
+/// The part of `log2 P_b` a triangle's [`texel_area`] `T` contributes, `0.5 log2(T) + 0.5`
+/// (the `0.5` is the halving of the world area's cross product), so that
+/// `log2 P_b = 0.25 log2(|e1 x e2|^2) - texel_term - log2 k` needs neither a square root nor
+/// a division per triangle (a deforming mesh keeps this term per triangle: its uvs and
+/// texture never change). Zero area gives `-inf`, a non-finite area `+inf`: the guards of
+/// [`log2_pb_with_texel_term`] read them.
+#[inline]
+pub fn texel_term(texel_area: f64) -> f64 {
+    if texel_area.is_finite() {
+        0.5 * texel_area.log2() + 0.5
+    } else {
+        f64::INFINITY
+    }
+}
+
+/// [`log2_pb`] from the triangle's [`texel_term`]: the same value, bit for bit.
+///
+/// The guards read the squared cross product `cc` and the term: `cc` is finite exactly when
+/// the world area is (edges of f32 vertices are at most ~7e38, so `cc` stays below 1e157),
+/// and zero exactly when it is (the smallest nonzero product of f32 differences squared is
+/// ~1e-180, far above f64's underflow); the term is `+inf` exactly when the texel area is not
+/// finite and `-inf` exactly when it is zero.
+#[inline]
+pub fn log2_pb_with_texel_term(p: [Vec3A; 3], texel_term: f64, footprint: PixelFootprint) -> f32 {
     let [p0, p1, p2] = p.map(|v| DVec3::new(v.x as f64, v.y as f64, v.z as f64));
-    let world_area = 0.5 * (p1 - p0).cross(p2 - p0).length();
-    if !(world_area.is_finite() && texel_area.is_finite()) {
+    let cross = (p1 - p0).cross(p2 - p0);
+    let cc = cross.dot(cross);
+    if !(cc.is_finite() && texel_term != f64::INFINITY) {
         return LOG2_PB_LIMIT;
     }
-    if world_area <= 0.0 {
+    if cc <= 0.0 {
         return -LOG2_PB_LIMIT;
     }
-    if texel_area <= 0.0 {
+    if texel_term == f64::NEG_INFINITY {
         return LOG2_PB_LIMIT;
     }
-    let value = 0.5 * (world_area / texel_area).log2() - footprint.log2_k;
+    // 0.5 log2(A / T) with A = 0.5 sqrt(cc): 0.25 log2(cc) - 0.5 - 0.5 log2(T).
+    let value = 0.25 * cc.log2() - texel_term - footprint.log2_k;
     (value as f32).clamp(-LOG2_PB_LIMIT, LOG2_PB_LIMIT)
 }
 
@@ -242,6 +268,71 @@ mod tests {
             log2_pb(quad_triangle(1.0, 0.0), UV, (0, 0), fp),
             LOG2_PB_LIMIT
         );
+    }
+
+    /// The texel-term form (no square root, no division) against the formula as derived,
+    /// `0.5 log2(A / T) - log2 k` with `A` half the cross product's length, on random
+    /// triangles from tiny to huge and textures from 1 to 16384^2 texels: the same f32 or
+    /// its neighbour (the two round differently in f64 before the f32 cast).
+    #[test]
+    fn texel_term_form_matches_the_derived_formula() {
+        let fp = PixelFootprint::new(FOV, 480);
+        let mut state = 0x2545_f491_4f6c_dd1du64;
+        let mut next = || {
+            state ^= state << 13;
+            state ^= state >> 7;
+            state ^= state << 17;
+            (state >> 11) as f64 / (1u64 << 53) as f64
+        };
+        let (mut same, mut neighbour) = (0, 0);
+        for _ in 0..20_000 {
+            let scale = 2f64.powf(next() * 80.0 - 40.0) as f32;
+            let offset = 2f64.powf(next() * 40.0) as f32 * if next() < 0.5 { -1.0 } else { 1.0 };
+            let mut vertex =
+                || Vec3A::new(next() as f32, next() as f32, next() as f32) * scale + offset;
+            let p = [vertex(), vertex(), vertex()];
+            let uv = [0, 1, 2].map(|_| Vec2::new(next() as f32, next() as f32));
+            let size = (1 + (next() * 16383.0) as u32, 1 + (next() * 16383.0) as u32);
+            let texels = texel_area(uv_area(uv), size);
+            let [p0, p1, p2] = p.map(|v| DVec3::new(v.x as f64, v.y as f64, v.z as f64));
+            let area = 0.5 * (p1 - p0).cross(p2 - p0).length();
+            if area <= 0.0 || texels <= 0.0 {
+                continue;
+            }
+            let derived = ((0.5 * (area / texels).log2() - fp.log2_k) as f32)
+                .clamp(-LOG2_PB_LIMIT, LOG2_PB_LIMIT);
+            let ours = log2_pb(p, uv, size, fp);
+            assert_eq!(ours, log2_pb_with_texel_term(p, texel_term(texels), fp));
+            let ulps = (ours.to_bits() as i64 - derived.to_bits() as i64).abs();
+            assert!(ulps <= 1, "{p:?} {uv:?} {size:?}: {ours} vs {derived}");
+            if ulps == 0 {
+                same += 1;
+            } else {
+                neighbour += 1;
+            }
+        }
+        assert!(same > 100 * neighbour, "{same} equal, {neighbour} one ulp apart");
+    }
+
+    /// The term's guards: a zero texel area gives the finest level, a non-finite one too;
+    /// a zero world area the coarsest unless the texel area is not finite.
+    #[test]
+    fn texel_term_keeps_the_guards_of_the_areas() {
+        let fp = PixelFootprint::new(FOV, 480);
+        let quad = quad_triangle(1.0, 0.0);
+        let line = [Vec3A::ZERO, Vec3A::X, Vec3A::X * 2.0];
+        assert_eq!(texel_term(0.0), f64::NEG_INFINITY);
+        assert_eq!(log2_pb_with_texel_term(quad, texel_term(0.0), fp), LOG2_PB_LIMIT);
+        for bad in [f64::INFINITY, f64::NAN] {
+            assert_eq!(texel_term(bad), f64::INFINITY);
+            assert_eq!(log2_pb_with_texel_term(quad, texel_term(bad), fp), LOG2_PB_LIMIT);
+            assert_eq!(log2_pb_with_texel_term(line, texel_term(bad), fp), LOG2_PB_LIMIT);
+        }
+        assert_eq!(log2_pb_with_texel_term(line, texel_term(1.0), fp), -LOG2_PB_LIMIT);
+        assert_eq!(log2_pb_with_texel_term(line, texel_term(0.0), fp), -LOG2_PB_LIMIT);
+        let huge = [Vec3A::ZERO, Vec3A::X * 3e38, Vec3A::Y * 3e38];
+        let value = log2_pb_with_texel_term(huge, texel_term(1.0), fp);
+        assert!(value.is_finite() && value > 100.0, "{value}");
     }
 
     #[test]
