@@ -27,7 +27,7 @@
 //! in slot order) from its own inputs only, so results are bit-identical across calls and
 //! thread counts: skinning of large meshes runs in vertex chunks on rayon's threads.
 
-use glam::{Mat3, Mat4, Vec3};
+use glam::{Mat3A, Mat4, Vec3, Vec3A};
 use rayon::prelude::*;
 
 use super::Pose;
@@ -60,7 +60,7 @@ pub fn primitive_deforms(scene: &SceneDesc, node: usize, mesh: usize, primitive:
 /// `normals` stays empty when the primitive has no normals) and returns their space:
 /// [`VertexSpace::World`] when skinned, else [`VertexSpace::Object`]. Morph targets use
 /// `pose.morph_weights[node]`; skinning uses the joint matrices of the node's skin. Normals
-/// are unit length. A primitive that does not deform comes out as its base geometry in
+/// are unit length (zero where one degenerates). A primitive that does not deform comes out as its base geometry in
 /// object space.
 ///
 /// Pure function of its inputs; every output is finite (see the module docs for the
@@ -176,7 +176,7 @@ impl Skinning<'_> {
     /// Each vertex is a pure function of its own inputs, so the split changes no bit.
     fn apply(&self, influences: Influences, positions: &mut [Vec3], normals: &mut [Vec3]) {
         let Influences { joints, weights } = influences;
-        let rigid_normals = cofactor(Mat3::from_mat4(self.world_from_node));
+        let rigid_normals = cofactor(Mat3A::from_mat4(self.world_from_node));
         let skin_range = |first: usize, positions: &mut [Vec3], normals: &mut [Vec3]| {
             for (k, position) in positions.iter_mut().enumerate() {
                 let v = first + k;
@@ -212,7 +212,7 @@ impl Skinning<'_> {
         &self,
         joints: &[u16; 4],
         weights: &[f32; 4],
-        rigid_normals: &(Mat3, f32),
+        rigid_normals: &(Mat3A, f32),
         position: &mut Vec3,
         normal: Option<&mut Vec3>,
     ) {
@@ -224,7 +224,7 @@ impl Skinning<'_> {
             Some((m, p)) => {
                 *position = p;
                 if let Some(n) = normal {
-                    *n = transform_normal(&cofactor(Mat3::from_mat4(m)), Mat3::from_mat4(m), *n);
+                    *n = transform_normal(&cofactor(Mat3A::from_mat4(m)), Mat3A::from_mat4(m), *n);
                 }
             }
             None => {
@@ -234,7 +234,7 @@ impl Skinning<'_> {
                     if let Some(n) = normal {
                         *n = transform_normal(
                             rigid_normals,
-                            Mat3::from_mat4(self.world_from_node),
+                            Mat3A::from_mat4(self.world_from_node),
                             *n,
                         );
                     }
@@ -265,8 +265,8 @@ impl Skinning<'_> {
 
 /// The normal transform of a linear map `m` and its sign: `(cofactor(m), sign(det m))`,
 /// where `cofactor(m) = det(m) * m^-T` has columns `c1 x c2`, `c2 x c0`, `c0 x c1`.
-fn cofactor(m: Mat3) -> (Mat3, f32) {
-    let cofactor = Mat3::from_cols(
+fn cofactor(m: Mat3A) -> (Mat3A, f32) {
+    let cofactor = Mat3A::from_cols(
         m.y_axis.cross(m.z_axis),
         m.z_axis.cross(m.x_axis),
         m.x_axis.cross(m.y_axis),
@@ -276,13 +276,16 @@ fn cofactor(m: Mat3) -> (Mat3, f32) {
 }
 
 /// `normalize(sign * cofactor * n)`; when that degenerates (singular map), `normalize(m n)`;
-/// failing that, `n` unchanged.
-fn transform_normal(normal_from_object: &(Mat3, f32), m: Mat3, n: Vec3) -> Vec3 {
+/// failing that, `n` normalized, or zero (so skinned normals are always unit or zero, as
+/// world-space normals must be: they are not placed again).
+fn transform_normal(normal_from_object: &(Mat3A, f32), m: Mat3A, n: Vec3) -> Vec3 {
     let (cofactor, sign) = *normal_from_object;
-    (sign * (cofactor * n))
+    let n = Vec3A::from(n);
+    let out = (sign * (cofactor * n))
         .try_normalize()
         .or_else(|| (m * n).try_normalize())
-        .unwrap_or(n)
+        .unwrap_or_else(|| n.normalize_or_zero());
+    Vec3::from(out)
 }
 
 #[cfg(test)]
@@ -324,7 +327,7 @@ mod tests {
         };
         let (mut chunked, mut chunked_normals) = (positions.clone(), normals.clone());
         skinning.apply(influences, &mut chunked, &mut chunked_normals);
-        let rigid_normals = cofactor(Mat3::from_mat4(skinning.world_from_node));
+        let rigid_normals = cofactor(Mat3A::from_mat4(skinning.world_from_node));
         for v in 0..count {
             let (mut p, mut n) = (positions[v], normals[v]);
             skinning.skin_vertex(
@@ -351,10 +354,10 @@ mod tests {
 
     #[test]
     fn cofactor_is_the_inverse_transpose_up_to_a_positive_scale() {
-        let m = Mat3::from_cols(
-            Vec3::new(2.0, 0.3, 0.0),
-            Vec3::new(-0.5, 1.0, 0.2),
-            Vec3::new(0.1, 0.0, -3.0),
+        let m = Mat3A::from_cols(
+            Vec3A::new(2.0, 0.3, 0.0),
+            Vec3A::new(-0.5, 1.0, 0.2),
+            Vec3A::new(0.1, 0.0, -3.0),
         );
         let (c, sign) = cofactor(m);
         assert!(m.determinant() < 0.0 && sign == -1.0);
@@ -365,11 +368,11 @@ mod tests {
             assert!(ours.abs_diff_eq(expected, 1e-6), "{ours} vs {expected}");
         }
         // A rotation maps normals like vectors.
-        let r = Mat3::from_quat(Quat::from_rotation_y(0.7));
+        let r = Mat3A::from_quat(Quat::from_rotation_y(0.7));
         let n = Vec3::new(0.0, 0.6, 0.8);
         assert!(transform_normal(&cofactor(r), r, n).abs_diff_eq(r * n, 1e-6));
         // A singular map (flattened z) still gives a unit normal.
-        let flat = Mat3::from_diagonal(Vec3::new(1.0, 1.0, 0.0));
+        let flat = Mat3A::from_diagonal(Vec3::new(1.0, 1.0, 0.0));
         let out = transform_normal(&cofactor(flat), flat, Vec3::new(1.0, 0.0, 1.0).normalize());
         assert!((out.length() - 1.0).abs() < 1e-6 && out.is_finite());
     }

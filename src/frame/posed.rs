@@ -145,8 +145,13 @@ fn pose_instance(
     parallel: bool,
 ) {
     if deforms[i] == VertexSource::Deformed {
-        *placement = deform_instance(scene, geometry, pose, i, out);
-        place_in_place(placement, out, parallel);
+        let (deformed_placement, space) = deform_instance(scene, geometry, pose, i, out);
+        *placement = deformed_placement;
+        // Skinned vertices come out in world space with unit (or zero) normals: the identity
+        // placement would only copy them (a pass over a million vertices for nothing).
+        if space == VertexSpace::Object {
+            place_in_place(placement, out, parallel);
+        }
     } else {
         let primitive = geometry.primitive(scene, i);
         place_rest(
@@ -160,14 +165,15 @@ fn pose_instance(
 }
 
 /// Writes deforming instance `i`'s vertices into `out`; returns the placement that takes
-/// them to world space (its node's for object-space vertices, the identity for skinned).
+/// them to world space (its node's for object-space vertices, the identity for skinned)
+/// and the space they are in.
 fn deform_instance(
     scene: &SceneDesc,
     geometry: &SceneGeometry,
     pose: &Pose,
     i: usize,
     out: &mut WorldVertices,
-) -> Placement {
+) -> (Placement, VertexSpace) {
     let instance = geometry.instances[i];
     let space = deform_primitive(
         scene,
@@ -178,10 +184,11 @@ fn deform_instance(
         &mut out.positions,
         &mut out.normals,
     );
-    Placement::new(match space {
+    let placement = Placement::new(match space {
         VertexSpace::Object => pose.world_from_node[instance.node as usize],
         VertexSpace::World => Mat4::IDENTITY,
-    })
+    });
+    (placement, space)
 }
 
 /// Places `out`'s (deformed) vertices in place.
