@@ -532,12 +532,12 @@ impl TwoLevelAccel {
         t_max: f32,
         mut visit: impl FnMut(u32, u32, f32) -> bool,
     ) -> bool {
-        if !world.visit_hits(origin, direction, t_max, |slot, t| {
+        let ray = RayBoxes::new(origin, direction);
+        if !world.visit_hits_of(&ray, &ShearedRay::new(origin, direction), t_max, |slot, t| {
             visit(Hit::WORLD, slot, t)
         }) {
             return false;
         }
-        let ray = RayBoxes::new(origin, direction);
         for top in &self.levels {
             let go_on =
                 top.tlas

@@ -496,14 +496,27 @@ impl Accel {
         origin: Vec3A,
         direction: Vec3A,
         t_max: f32,
-        mut visit: impl FnMut(u32, f32) -> bool,
+        visit: impl FnMut(u32, f32) -> bool,
     ) -> bool {
         let ray = RayBoxes::new(origin, direction);
         let sheared = ShearedRay::new(origin, direction);
+        self.visit_hits_of(&ray, &sheared, t_max, visit)
+    }
+
+    /// [`Accel::visit_hits`] for a ray whose constants are already made (the two-level
+    /// structure reuses them for its top-level walk).
+    #[inline]
+    fn visit_hits_of(
+        &self,
+        ray: &RayBoxes,
+        sheared: &ShearedRay,
+        t_max: f32,
+        mut visit: impl FnMut(u32, f32) -> bool,
+    ) -> bool {
         self.wide
-            .traverse_unordered(&ray, t_max, |first: u32, count: u32, _: &mut f32| {
+            .traverse_unordered(ray, t_max, |first: u32, count: u32, _: &mut f32| {
                 self.triangles
-                    .hits_in_leaf(&sheared, first, count, t_max, |slot, _, t, _| {
+                    .hits_in_leaf(sheared, first, count, t_max, |slot, _, t, _| {
                         visit(slot, t)
                     })
             })
