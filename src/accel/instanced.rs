@@ -533,9 +533,12 @@ impl TwoLevelAccel {
         mut visit: impl FnMut(u32, u32, f32) -> bool,
     ) -> bool {
         let ray = RayBoxes::new(origin, direction);
-        if !world.visit_hits_of(&ray, &ShearedRay::new(origin, direction), t_max, |slot, t| {
-            visit(Hit::WORLD, slot, t)
-        }) {
+        if !world.visit_hits_of(
+            &ray,
+            &ShearedRay::new(origin, direction),
+            t_max,
+            |slot, t| visit(Hit::WORLD, slot, t),
+        ) {
             return false;
         }
         for top in &self.levels {

@@ -516,9 +516,7 @@ impl Accel {
         self.wide
             .traverse_unordered(ray, t_max, |first: u32, count: u32, _: &mut f32| {
                 self.triangles
-                    .hits_in_leaf(sheared, first, count, t_max, |slot, _, t, _| {
-                        visit(slot, t)
-                    })
+                    .hits_in_leaf(sheared, first, count, t_max, |slot, _, t, _| visit(slot, t))
             })
     }
 }

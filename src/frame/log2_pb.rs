@@ -250,16 +250,24 @@ impl Renderer {
             (_, Some(stretch)) => self.stretched_log2_pb(source, stretch),
             // Similarity: the object-space constant plus log2 s.
             (Some(NodeShape { scale, .. }), None) => shift_log2_pb(object, scale.log2()),
-            // Deforming (or sheared): from its world vertices, with the texel area of its
-            // slot's uvs (for a deforming instance its term read from the table: the source's
-            // uvs, perhaps in the other winding, the same area).
-            (None, None) => {
-                let term = self.texel_areas.of(s).unwrap_or_else(|| {
+            // Deforming (or sheared): from its world vertices. A deforming triangle's texel
+            // term is read from the table (the source's uvs, perhaps in the other winding:
+            // the same area); a sheared one takes the plain form from its slot's uvs. Each
+            // triangle always gets the same form.
+            (None, None) => match self.texel_areas.of(s) {
+                Some(term) => {
+                    log2_pb_with_texel_term(self.triangles.positions[s], term, self.footprint)
+                }
+                None => {
                     let size = self.texture_size(source).unwrap_or((1, 1));
-                    texel_term(texel_area(uv_area(self.triangles.uvs[s]), size))
-                });
-                log2_pb_with_texel_term(self.triangles.positions[s], term, self.footprint)
-            }
+                    log2_pb(
+                        self.triangles.positions[s],
+                        self.triangles.uvs[s],
+                        size,
+                        self.footprint,
+                    )
+                }
+            },
         })
     }
 

@@ -70,11 +70,26 @@ pub fn texel_area(uv_area: f64, texture_size: (u32, u32)) -> f64 {
     uv_area * (texture_size.0 as f64 * texture_size.1 as f64)
 }
 
-/// [`log2_pb`] with the triangle's [`texel_area`] already known (a deforming mesh's uvs
-/// and texture stay put while its vertices move): the same value, bit for bit.
+/// [`log2_pb`] with the triangle's [`texel_area`] already known: the same value, bit for
+/// bit.
+///
+/// The guards read the product: it is finite exactly when the uv area is (a texture has
+/// 1..=16384² texels), and zero exactly when the uv area or the texel count is.
 #[inline]
 pub fn log2_pb_with_texel_area(p: [Vec3A; 3], texel_area: f64, footprint: PixelFootprint) -> f32 {
-    log2_pb_with_texel_term(p, texel_term(texel_area), footprint)
+    let [p0, p1, p2] = p.map(|v| DVec3::new(v.x as f64, v.y as f64, v.z as f64));
+    let world_area = 0.5 * (p1 - p0).cross(p2 - p0).length();
+    if !(world_area.is_finite() && texel_area.is_finite()) {
+        return LOG2_PB_LIMIT;
+    }
+    if world_area <= 0.0 {
+        return -LOG2_PB_LIMIT;
+    }
+    if texel_area <= 0.0 {
+        return LOG2_PB_LIMIT;
+    }
+    let value = 0.5 * (world_area / texel_area).log2() - footprint.log2_k;
+    (value as f32).clamp(-LOG2_PB_LIMIT, LOG2_PB_LIMIT)
 }
 
 /// The part of `log2 P_b` a triangle's [`texel_area`] `T` contributes, `0.5 log2(T) + 0.5`
@@ -92,7 +107,11 @@ pub fn texel_term(texel_area: f64) -> f64 {
     }
 }
 
-/// [`log2_pb`] from the triangle's [`texel_term`]: the same value, bit for bit.
+/// `log2 P_b` from the triangle's [`texel_term`]: the value [`log2_pb`] gives or its f32
+/// neighbour (the two round differently in f64; tested). The form for triangles whose term
+/// is kept (a deforming mesh's, recomputed every frame): one `log2` per triangle and frame,
+/// no square root, no division. A triangle gets its constant from one form or the other for
+/// the whole run, so frames never mix the two roundings for it.
 ///
 /// The guards read the squared cross product `cc` and the term: `cc` is finite exactly when
 /// the world area is (edges of f32 vertices are at most ~7e38, so `cc` stays below 1e157),
@@ -271,9 +290,10 @@ mod tests {
     }
 
     /// The texel-term form (no square root, no division) against the formula as derived,
-    /// `0.5 log2(A / T) - log2 k` with `A` half the cross product's length, on random
-    /// triangles from tiny to huge and textures from 1 to 16384^2 texels: the same f32 or
-    /// its neighbour (the two round differently in f64 before the f32 cast).
+    /// `0.5 log2(A / T) - log2 k` with `A` half the cross product's length (which `log2_pb`
+    /// computes exactly so), on random triangles from tiny to huge and textures from 1 to
+    /// 16384^2 texels: the same f32 or its neighbour (the two round differently in f64
+    /// before the f32 cast), mostly the same.
     #[test]
     fn texel_term_form_matches_the_derived_formula() {
         let fp = PixelFootprint::new(FOV, 480);
@@ -301,8 +321,8 @@ mod tests {
             }
             let derived = ((0.5 * (area / texels).log2() - fp.log2_k) as f32)
                 .clamp(-LOG2_PB_LIMIT, LOG2_PB_LIMIT);
-            let ours = log2_pb(p, uv, size, fp);
-            assert_eq!(ours, log2_pb_with_texel_term(p, texel_term(texels), fp));
+            assert_eq!(log2_pb(p, uv, size, fp).to_bits(), derived.to_bits());
+            let ours = log2_pb_with_texel_term(p, texel_term(texels), fp);
             let ulps = (ours.to_bits() as i64 - derived.to_bits() as i64).abs();
             assert!(ulps <= 1, "{p:?} {uv:?} {size:?}: {ours} vs {derived}");
             if ulps == 0 {
@@ -311,7 +331,10 @@ mod tests {
                 neighbour += 1;
             }
         }
-        assert!(same > 100 * neighbour, "{same} equal, {neighbour} one ulp apart");
+        assert!(
+            same > 100 * neighbour,
+            "{same} equal, {neighbour} one ulp apart"
+        );
     }
 
     /// The term's guards: a zero texel area gives the finest level, a non-finite one too;
@@ -322,14 +345,29 @@ mod tests {
         let quad = quad_triangle(1.0, 0.0);
         let line = [Vec3A::ZERO, Vec3A::X, Vec3A::X * 2.0];
         assert_eq!(texel_term(0.0), f64::NEG_INFINITY);
-        assert_eq!(log2_pb_with_texel_term(quad, texel_term(0.0), fp), LOG2_PB_LIMIT);
+        assert_eq!(
+            log2_pb_with_texel_term(quad, texel_term(0.0), fp),
+            LOG2_PB_LIMIT
+        );
         for bad in [f64::INFINITY, f64::NAN] {
             assert_eq!(texel_term(bad), f64::INFINITY);
-            assert_eq!(log2_pb_with_texel_term(quad, texel_term(bad), fp), LOG2_PB_LIMIT);
-            assert_eq!(log2_pb_with_texel_term(line, texel_term(bad), fp), LOG2_PB_LIMIT);
+            assert_eq!(
+                log2_pb_with_texel_term(quad, texel_term(bad), fp),
+                LOG2_PB_LIMIT
+            );
+            assert_eq!(
+                log2_pb_with_texel_term(line, texel_term(bad), fp),
+                LOG2_PB_LIMIT
+            );
         }
-        assert_eq!(log2_pb_with_texel_term(line, texel_term(1.0), fp), -LOG2_PB_LIMIT);
-        assert_eq!(log2_pb_with_texel_term(line, texel_term(0.0), fp), -LOG2_PB_LIMIT);
+        assert_eq!(
+            log2_pb_with_texel_term(line, texel_term(1.0), fp),
+            -LOG2_PB_LIMIT
+        );
+        assert_eq!(
+            log2_pb_with_texel_term(line, texel_term(0.0), fp),
+            -LOG2_PB_LIMIT
+        );
         let huge = [Vec3A::ZERO, Vec3A::X * 3e38, Vec3A::Y * 3e38];
         let value = log2_pb_with_texel_term(huge, texel_term(1.0), fp);
         assert!(value.is_finite() && value > 100.0, "{value}");
