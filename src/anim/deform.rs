@@ -78,20 +78,44 @@ pub fn deform_primitive(
     normals: &mut Vec<Vec3>,
 ) -> VertexSpace {
     let desc = &scene.meshes[mesh].primitives[primitive];
+    let morph_weights = &pose.morph_weights[node];
+    let morphs = desc
+        .morph_targets
+        .iter()
+        .zip(morph_weights)
+        .any(|(t, &w)| w != 0.0 && (t.positions.is_some() || t.normals.is_some()));
+    if let (Some((skin, influences)), false) = (skin_of(scene, node, desc), morphs) {
+        // Skinned straight from the rest vertices: no copy of them first, and no morph pass
+        // that would change nothing (two passes over every vertex, a third of the time).
+        positions.resize(desc.positions.len(), Vec3::ZERO);
+        let rest_normals = desc.normals.as_deref().unwrap_or_default();
+        normals.resize(rest_normals.len(), Vec3::ZERO);
+        let skinning = Skinning {
+            joint_matrices: &pose.joint_matrices[skin],
+            world_from_node: pose.world_from_node[node],
+        };
+        skinning.apply(
+            influences,
+            Some((&desc.positions, rest_normals)),
+            positions,
+            normals,
+        );
+        return VertexSpace::World;
+    }
     positions.clear();
     positions.extend_from_slice(&desc.positions);
     normals.clear();
     if let Some(base) = &desc.normals {
         normals.extend_from_slice(base);
     }
-    apply_morph(desc, &pose.morph_weights[node], positions, normals);
+    apply_morph(desc, morph_weights, positions, normals);
     match skin_of(scene, node, desc) {
         Some((skin, influences)) => {
             let skinning = Skinning {
                 joint_matrices: &pose.joint_matrices[skin],
                 world_from_node: pose.world_from_node[node],
             };
-            skinning.apply(influences, positions, normals);
+            skinning.apply(influences, None, positions, normals);
             VertexSpace::World
         }
         None => VertexSpace::Object,
@@ -172,14 +196,28 @@ const PARALLEL_MIN_VERTICES: usize = 8192;
 const SKIN_CHUNK: usize = 4096;
 
 impl Skinning<'_> {
-    /// Skins every vertex; past [`PARALLEL_MIN_VERTICES`] in chunks on rayon's threads.
-    /// Each vertex is a pure function of its own inputs, so the split changes no bit.
-    fn apply(&self, influences: Influences, positions: &mut [Vec3], normals: &mut [Vec3]) {
+    /// Skins every vertex of `positions` and `normals` in place, or, with `rest` (positions
+    /// and normals, the latter as many as `normals` holds), skins the rest vertices into
+    /// them; past [`PARALLEL_MIN_VERTICES`] in chunks on rayon's threads. Each vertex is a
+    /// pure function of its own inputs, so the split changes no bit.
+    fn apply(
+        &self,
+        influences: Influences,
+        rest: Option<(&[Vec3], &[Vec3])>,
+        positions: &mut [Vec3],
+        normals: &mut [Vec3],
+    ) {
         let Influences { joints, weights } = influences;
         let rigid_normals = cofactor(Mat3A::from_mat4(self.world_from_node));
         let skin_range = |first: usize, positions: &mut [Vec3], normals: &mut [Vec3]| {
             for (k, position) in positions.iter_mut().enumerate() {
                 let v = first + k;
+                if let Some((rest_positions, rest_normals)) = rest {
+                    *position = rest_positions[v];
+                    if let Some(n) = normals.get_mut(k) {
+                        *n = rest_normals[v];
+                    }
+                }
                 self.skin_vertex(
                     &joints[v],
                     &weights[v],
@@ -294,7 +332,8 @@ mod tests {
     use glam::Quat;
 
     /// Past `PARALLEL_MIN_VERTICES` the vertex chunks run on several threads: every vertex
-    /// must equal the one skinned alone, bit for bit (fallbacks included).
+    /// must equal the one skinned alone, bit for bit (fallbacks included), in place or
+    /// from the rest vertices.
     #[test]
     fn chunked_skinning_equals_skinning_vertex_by_vertex() {
         let joint_matrices = [
@@ -326,7 +365,21 @@ mod tests {
             weights: &weights,
         };
         let (mut chunked, mut chunked_normals) = (positions.clone(), normals.clone());
-        skinning.apply(influences, &mut chunked, &mut chunked_normals);
+        skinning.apply(influences, None, &mut chunked, &mut chunked_normals);
+        // Skinned from the rest vertices into other buffers: the same bits.
+        let (mut from_rest, mut from_rest_normals) =
+            (vec![Vec3::NAN; count], vec![Vec3::NAN; count]);
+        skinning.apply(
+            influences,
+            Some((&positions, &normals)),
+            &mut from_rest,
+            &mut from_rest_normals,
+        );
+        let bits = |v: &[Vec3]| -> Vec<[u32; 3]> {
+            v.iter().map(|p| p.to_array().map(f32::to_bits)).collect()
+        };
+        assert!(bits(&from_rest) == bits(&chunked));
+        assert!(bits(&from_rest_normals) == bits(&chunked_normals));
         let rigid_normals = cofactor(Mat3A::from_mat4(skinning.world_from_node));
         for v in 0..count {
             let (mut p, mut n) = (positions[v], normals[v]);
@@ -348,7 +401,7 @@ mod tests {
         }
         // Without normals the positions are the same.
         let mut no_normals = positions.clone();
-        skinning.apply(influences, &mut no_normals, &mut []);
+        skinning.apply(influences, None, &mut no_normals, &mut []);
         assert!(no_normals == chunked);
     }
 
