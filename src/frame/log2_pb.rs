@@ -18,9 +18,10 @@ use super::prefetch::prefetch;
 use super::{InstanceState, Motion, Renderer, UpdateStats};
 use crate::anim::NodeShape;
 use crate::geometry::{Placement, SceneGeometry};
+use crate::lod::log2::log2_in_place;
 use crate::lod::{
-    PixelFootprint, log2_pb, log2_pb_with_texel_term, shift_log2_pb, texel_area, texel_term,
-    uv_area,
+    PixelFootprint, cross_squared, log2_pb, log2_pb_from_parts, log2_pb_with_texel_term,
+    shift_log2_pb, texel_area, texel_term, uv_area,
 };
 use crate::scene::SceneDesc;
 
@@ -92,18 +93,34 @@ impl Renderer {
     fn update_deforming_log2_pb(&mut self) -> usize {
         let (areas, footprint) = (&self.texel_areas, self.footprint);
         let positions = &self.triangles.positions;
+        // Per bitset word: the squared cross products of its slots, then their logarithms in
+        // one batch (vectorised: `lod::log2`), then the constants; the same bits as
+        // `log2_pb_with_texel_term` one slot at a time.
         let walk = |first_word: usize, words: &[u64], out: &mut [f32]| {
             let base = first_word * 64;
             let mut written = 0;
+            let mut slots = [0usize; 64];
+            let mut terms = [0f64; 64];
+            let mut cc = [0f64; 64];
+            let mut logs = [0f64; 64];
             for (w, &word) in words.iter().enumerate() {
                 let mut bits = word;
+                let mut n = 0;
                 while bits != 0 {
                     let s = base + w * 64 + bits.trailing_zeros() as usize;
                     bits &= bits - 1;
                     let Some(term) = areas.of(s) else { continue };
-                    out[s - base] = log2_pb_with_texel_term(positions[s], term, footprint);
-                    written += 1;
+                    slots[n] = s;
+                    terms[n] = term;
+                    cc[n] = cross_squared(positions[s]);
+                    n += 1;
                 }
+                logs[..n].copy_from_slice(&cc[..n]);
+                log2_in_place(&mut logs[..n]);
+                for k in 0..n {
+                    out[slots[k] - base] = log2_pb_from_parts(cc[k], logs[k], terms[k], footprint);
+                }
+                written += n;
             }
             written
         };

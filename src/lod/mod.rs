@@ -17,6 +17,7 @@
 mod cones;
 mod diffs;
 mod diffs_aniso;
+pub mod log2;
 mod none;
 mod paper;
 mod paper_cos;
@@ -31,8 +32,9 @@ pub use none::NoLod;
 pub use paper::PathLength;
 pub use paper_cos::PathLengthCos;
 pub use pb::{
-    LOG2_PB_LIMIT, PixelFootprint, log2_pb, log2_pb_with_texel_area, log2_pb_with_texel_term,
-    shift_log2_pb, texel_area, texel_term, uv_area,
+    LOG2_PB_LIMIT, PixelFootprint, cross_squared, log2_pb, log2_pb_from_parts,
+    log2_pb_with_texel_area, log2_pb_with_texel_term, shift_log2_pb, texel_area, texel_term,
+    uv_area,
 };
 
 use std::fmt;

@@ -120,9 +120,28 @@ pub fn texel_term(texel_area: f64) -> f64 {
 /// finite and `-inf` exactly when it is zero.
 #[inline]
 pub fn log2_pb_with_texel_term(p: [Vec3A; 3], texel_term: f64, footprint: PixelFootprint) -> f32 {
+    let cc = cross_squared(p);
+    log2_pb_from_parts(cc, super::log2::log2(cc), texel_term, footprint)
+}
+
+/// `|e1 x e2|^2` of a triangle, in `f64` (edges of f32 vertices are exact there).
+#[inline]
+pub fn cross_squared(p: [Vec3A; 3]) -> f64 {
     let [p0, p1, p2] = p.map(|v| DVec3::new(v.x as f64, v.y as f64, v.z as f64));
     let cross = (p1 - p0).cross(p2 - p0);
-    let cc = cross.dot(cross);
+    cross.dot(cross)
+}
+
+/// [`log2_pb_with_texel_term`] from its parts: `cc` ([`cross_squared`]) and its `log2`
+/// (`lod::log2`, perhaps taken in a batch: the same bits), so a pass over many triangles can
+/// take the logarithms together.
+#[inline]
+pub fn log2_pb_from_parts(
+    cc: f64,
+    log2_cc: f64,
+    texel_term: f64,
+    footprint: PixelFootprint,
+) -> f32 {
     if !(cc.is_finite() && texel_term != f64::INFINITY) {
         return LOG2_PB_LIMIT;
     }
@@ -133,7 +152,7 @@ pub fn log2_pb_with_texel_term(p: [Vec3A; 3], texel_term: f64, footprint: PixelF
         return LOG2_PB_LIMIT;
     }
     // 0.5 log2(A / T) with A = 0.5 sqrt(cc): 0.25 log2(cc) - 0.5 - 0.5 log2(T).
-    let value = 0.25 * cc.log2() - texel_term - footprint.log2_k;
+    let value = 0.25 * log2_cc - texel_term - footprint.log2_k;
     (value as f32).clamp(-LOG2_PB_LIMIT, LOG2_PB_LIMIT)
 }
 
