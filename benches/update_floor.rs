@@ -5,8 +5,8 @@
 //! 1M triangles (a 1,000 x 500-quad grid) skinned to 8 joints, two influences per vertex,
 //! then one pass over the triangles in spatial (Morton) order, the order a BVH's leaves
 //! have. That pass gathers the posed vertices and writes a packed copy (36 B), the leaf
-//! boxes (4 triangles per leaf) and the `log2 P_b` constant (one `log2`, the texel term
-//! tabled). Last comes an 8-wide bottom-up refit of the boxes above the leaves.
+//! boxes (4 triangles per leaf) and the `log2 P_b` constant (one `log2` per triangle,
+//! taken in batches with `lod::log2` as the frame loop takes them, the texel term tabled). Last comes an 8-wide bottom-up refit of the boxes above the leaves.
 //!
 //! It is optimistic on purpose, so its times are a floor and not a design:
 //! - no dirty tracking, no moved checks, no per-slot shading normals;
@@ -17,6 +17,7 @@
 //! Medians of 25 frames after 5 warm-up frames. Rayon's global pool is used as it comes
 //! (`RAYON_NUM_THREADS` sets it).
 use glam::{Mat3A, Mat4, Vec3, Vec3A};
+use mipray::lod::log2::log2_in_place;
 use rayon::prelude::*;
 use std::time::Instant;
 
@@ -136,6 +137,7 @@ fn floor<const WITH_LOG2: bool, const WITH_PACKS: bool>() -> [f64; 4] {
             .zip(leaves.par_chunks_mut(1024))
             .enumerate()
             .for_each(|(c, ((pk, lp), lv))| {
+                let mut cc = [0f64; 4096];
                 for k in 0..pk.len() {
                     let tri = c * 4096 + k;
                     let [a, b, d] = index[tri].map(|i| posed[i as usize]);
@@ -144,9 +146,7 @@ fn floor<const WITH_LOG2: bool, const WITH_PACKS: bool>() -> [f64; 4] {
                     }
                     let [p0, p1, p2] = [a, b, d].map(|v| v.as_dvec3());
                     let cr = (p1 - p0).cross(p2 - p0);
-                    let cc = cr.dot(cr);
-                    let log = if WITH_LOG2 { cc.log2() } else { cc };
-                    lp[k] = (0.25 * log - term[tri] + 7.0) as f32;
+                    cc[k] = cr.dot(cr);
                     let leaf = &mut lv[k / 4];
                     let (lo, hi) = (Vec3A::from(a.min(b).min(d)), Vec3A::from(a.max(b).max(d)));
                     if k % 4 == 0 {
@@ -155,6 +155,14 @@ fn floor<const WITH_LOG2: bool, const WITH_PACKS: bool>() -> [f64; 4] {
                         leaf.min = leaf.min.min(lo);
                         leaf.max = leaf.max.max(hi);
                     }
+                }
+                // The logarithms in one batch, as the frame loop takes them (`lod::log2`).
+                let cc = &mut cc[..pk.len()];
+                if WITH_LOG2 {
+                    log2_in_place(cc);
+                }
+                for (k, log) in cc.iter().enumerate() {
+                    lp[k] = (0.25 * log - term[c * 4096 + k] + 7.0) as f32;
                 }
             });
         let t2 = Instant::now();
