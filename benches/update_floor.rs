@@ -210,7 +210,8 @@ fn main() {
     );
     println!("| variant | skinning | triangle pass | refit above the leaves | total |");
     println!("|---|---:|---:|---:|---:|");
-    let variants: [(&str, fn() -> [f64; 4]); 3] = [
+    type Variant = (&'static str, fn() -> [f64; 4]);
+    let variants: [Variant; 3] = [
         ("packs + boxes + log2 P_b", floor::<true, true>),
         ("packs + boxes, no log2", floor::<false, true>),
         ("boxes only, no packs, no log2", floor::<false, false>),
