@@ -34,7 +34,7 @@ impl Renderer {
     /// dirty bits ([`Self::update_deforming_log2_pb`]); the entries of placed instances that
     /// scaled or changed shape one by one; rigid runs are not visited.
     pub(super) fn update_dirty_log2_pb(&mut self, stats: &mut UpdateStats) {
-        let walked = !self.texel_areas.is_empty();
+        let walked = !self.texel_terms.is_empty();
         if walked {
             stats.lod_recomputed += self.update_deforming_log2_pb();
         }
@@ -85,13 +85,13 @@ impl Renderer {
     }
 
     /// `log2 P_b` of every dirty slot of a deforming instance, from its world vertices and
-    /// its texel area ([`DeformingTexelAreas`]); returns how many it wrote (the textured
-    /// ones). The walk goes through the dirty bits in slot order, so positions, areas and
+    /// its texel term ([`DeformingTexelTerms`]); returns how many it wrote (the textured
+    /// ones). The walk goes through the dirty bits in slot order, so positions, terms and
     /// constants stream through memory instead of being fetched slot by scattered slot
     /// (the pass was ~15 ms of a million skinned triangles' update, most of it waiting on
     /// those loads), and each task writes its own range of slots.
     fn update_deforming_log2_pb(&mut self) -> usize {
-        let (areas, footprint) = (&self.texel_areas, self.footprint);
+        let (table, footprint) = (&self.texel_terms, self.footprint);
         let positions = &self.triangles.positions;
         // Per bitset word: the squared cross products of its slots, then their logarithms in
         // one batch (vectorised: `lod::log2`), then the constants; the same bits as
@@ -109,7 +109,7 @@ impl Renderer {
                 while bits != 0 {
                     let s = base + w * 64 + bits.trailing_zeros() as usize;
                     bits &= bits - 1;
-                    let Some(term) = areas.of(s) else { continue };
+                    let Some(term) = table.of(s) else { continue };
                     slots[n] = s;
                     terms[n] = term;
                     cc[n] = cross_squared(positions[s]);
@@ -164,16 +164,16 @@ impl Renderer {
         textured
     }
 
-    /// Makes [`DeformingTexelAreas`] for the slots as they are now (after every build of
+    /// Makes [`DeformingTexelTerms`] for the slots as they are now (after every build of
     /// the tree, which orders the slots); nothing when no instance deforms or the LOD
     /// method has no `log2 P_b`.
-    pub(super) fn index_texel_areas(&mut self) {
+    pub(super) fn index_texel_terms(&mut self) {
         let needed =
             self.settings.lod.needs_log2_pb() && self.deforms.contains(&VertexSource::Deformed);
-        self.texel_areas = if needed {
-            DeformingTexelAreas::new(self)
+        self.texel_terms = if needed {
+            DeformingTexelTerms::new(self)
         } else {
-            DeformingTexelAreas::default()
+            DeformingTexelTerms::default()
         };
     }
 
@@ -271,7 +271,7 @@ impl Renderer {
             // term is read from the table (the source's uvs, perhaps in the other winding:
             // the same area); a sheared one takes the plain form from its slot's uvs. Each
             // triangle always gets the same form.
-            (None, None) => match self.texel_areas.of(s) {
+            (None, None) => match self.texel_terms.of(s) {
                 Some(term) => {
                     log2_pb_with_texel_term(self.triangles.positions[s], term, self.footprint)
                 }
@@ -373,13 +373,13 @@ struct Stretch {
 /// Empty when no instance deforms; otherwise 8 bytes for every slot of the world tree,
 /// remade in O(slots) after each build.
 #[derive(Debug, Default)]
-pub(super) struct DeformingTexelAreas {
+pub(super) struct DeformingTexelTerms {
     /// NaN for the slots of other instances and untextured triangles (a term is never NaN:
     /// areas are never negative, and a non-finite one gives `+inf`).
     per_slot: Vec<f64>,
 }
 
-impl DeformingTexelAreas {
+impl DeformingTexelTerms {
     fn new(renderer: &Renderer) -> Self {
         let Renderer {
             geometry,
@@ -406,7 +406,7 @@ impl DeformingTexelAreas {
         } else {
             triangles.source.iter().map(area).collect()
         };
-        DeformingTexelAreas { per_slot }
+        DeformingTexelTerms { per_slot }
     }
 
     fn is_empty(&self) -> bool {

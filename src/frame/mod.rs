@@ -43,7 +43,7 @@ use crate::render::{
     Camera, FrameScene, Instanced, Light, LinearImage, SceneBvh, TraceCounters, render_image,
 };
 use crate::scene::SceneDesc;
-use log2_pb::{DeformingTexelAreas, object_space_log2_pb};
+use log2_pb::{DeformingTexelTerms, object_space_log2_pb};
 use posed::{VertexSource, posed_bounds};
 use update::UpdateScratch;
 
@@ -95,8 +95,8 @@ pub struct Renderer {
     /// Per source triangle: `log2 P_b` of the rest vertices in object space (NaN where the
     /// material is untextured).
     object_log2_pb: Vec<f32>,
-    /// Per slot: the texel areas of the deforming instances' triangles (`lod::texel_area`).
-    texel_areas: DeformingTexelAreas,
+    /// Per slot: the texel terms of the deforming instances' triangles (`lod::texel_term`).
+    texel_terms: DeformingTexelTerms,
     /// The frame's triangles in BVH order, carried over between frames.
     triangles: FrameTriangles,
     /// Inverse of `triangles.source`.
@@ -168,7 +168,7 @@ impl Renderer {
             rest_bounds,
             footprint,
             object_log2_pb,
-            texel_areas: DeformingTexelAreas::default(),
+            texel_terms: DeformingTexelTerms::default(),
             triangles: FrameTriangles::default(),
             slot_of_source: Vec::new(),
             accel: Accel::default(),

@@ -170,7 +170,7 @@ impl Renderer {
         for (slot, &source) in self.triangles.source.iter().enumerate() {
             self.slot_of_source[source as usize] = slot as u32;
         }
-        self.index_texel_areas();
+        self.index_texel_terms();
     }
 
     /// Rewrites the triangles of every instance whose placement or deformation changed and
