@@ -70,23 +70,7 @@ enum Texels {
     },
 }
 
-/// A level's texels as stored, for lookups that read several of them (the storage is
-/// matched once, not per texel).
-enum TexelsRef<'a> {
-    Linear(&'a [Vec4]),
-    Srgb8(&'a [[u8; 4]], &'a decode::Srgb8Tables),
-}
-
 impl MipLevel {
-    /// The level's texels as stored.
-    #[inline]
-    fn storage(&self) -> TexelsRef<'_> {
-        match &self.texels {
-            Texels::Linear(t) => TexelsRef::Linear(t),
-            Texels::Srgb8 { codes, tables } => TexelsRef::Srgb8(codes, tables),
-        }
-    }
-
     /// A level of `width * height` linear texels (the caller checks the length).
     fn linear(width: u32, height: u32, texels: Vec<Vec4>) -> MipLevel {
         MipLevel {

@@ -13,7 +13,7 @@
 
 use glam::{Vec2, Vec4};
 
-use super::{MipLevel, MipPyramid, Sampler, TexelsRef, WrapMode};
+use super::{MipLevel, MipPyramid, Sampler, Texels, WrapMode};
 
 /// Largest `|texel index|` the integer Repeat path takes (exact in f64 and far from i64
 /// overflow); beyond it the exact f64 reduction below is used.
@@ -98,9 +98,9 @@ fn bilinear(level: &MipLevel, uv: Vec2, sampler: Sampler) -> Vec4 {
     let (y0, y1, fy) = axis(uv.y, level.height, sampler.wrap_t);
     let w = level.width as usize;
     // The texel storage is matched once per lookup, not once per texel.
-    match level.storage() {
-        TexelsRef::Linear(texels) => blend(|i| texels[i], w, (x0, x1, fx), (y0, y1, fy)),
-        TexelsRef::Srgb8(codes, tables) => {
+    match &level.texels {
+        Texels::Linear(texels) => blend(|i| texels[i], w, (x0, x1, fx), (y0, y1, fy)),
+        Texels::Srgb8 { codes, tables } => {
             blend(|i| tables.texel(codes[i]), w, (x0, x1, fx), (y0, y1, fy))
         }
     }
