@@ -33,8 +33,7 @@ pub use paper::PathLength;
 pub use paper_cos::PathLengthCos;
 pub use pb::{
     LOG2_PB_LIMIT, PixelFootprint, cross_squared, log2_pb, log2_pb_from_parts,
-    log2_pb_with_texel_area, log2_pb_with_texel_term, shift_log2_pb, texel_area, texel_term,
-    uv_area,
+    log2_pb_with_texel_term, shift_log2_pb, texel_area, texel_term, uv_area,
 };
 
 use std::fmt;

@@ -46,13 +46,30 @@ impl PixelFootprint {
 
 /// `log2 P_b` of one triangle: world vertices `p`, texture coordinates `uv`, level-0 texture
 /// size `texture_size` (width, height), camera `footprint`.
+///
+/// The guards read the texel area (the uv area times the texel count): it is finite exactly
+/// when the uv area is (a texture has 1..=16384² texels), and zero exactly when the uv area
+/// or the texel count is.
 pub fn log2_pb(
     p: [Vec3A; 3],
     uv: [Vec2; 3],
     texture_size: (u32, u32),
     footprint: PixelFootprint,
 ) -> f32 {
-    log2_pb_with_texel_area(p, texel_area(uv_area(uv), texture_size), footprint)
+    let texel_area = texel_area(uv_area(uv), texture_size);
+    let [p0, p1, p2] = p.map(|v| DVec3::new(v.x as f64, v.y as f64, v.z as f64));
+    let world_area = 0.5 * (p1 - p0).cross(p2 - p0).length();
+    if !(world_area.is_finite() && texel_area.is_finite()) {
+        return LOG2_PB_LIMIT;
+    }
+    if world_area <= 0.0 {
+        return -LOG2_PB_LIMIT;
+    }
+    if texel_area <= 0.0 {
+        return LOG2_PB_LIMIT;
+    }
+    let value = 0.5 * (world_area / texel_area).log2() - footprint.log2_k;
+    (value as f32).clamp(-LOG2_PB_LIMIT, LOG2_PB_LIMIT)
 }
 
 /// The area of a triangle in texture coordinates (in `f64`; the same for either winding,
@@ -68,28 +85,6 @@ pub fn uv_area(uv: [Vec2; 3]) -> f64 {
 #[inline]
 pub fn texel_area(uv_area: f64, texture_size: (u32, u32)) -> f64 {
     uv_area * (texture_size.0 as f64 * texture_size.1 as f64)
-}
-
-/// [`log2_pb`] with the triangle's [`texel_area`] already known: the same value, bit for
-/// bit.
-///
-/// The guards read the product: it is finite exactly when the uv area is (a texture has
-/// 1..=16384² texels), and zero exactly when the uv area or the texel count is.
-#[inline]
-pub fn log2_pb_with_texel_area(p: [Vec3A; 3], texel_area: f64, footprint: PixelFootprint) -> f32 {
-    let [p0, p1, p2] = p.map(|v| DVec3::new(v.x as f64, v.y as f64, v.z as f64));
-    let world_area = 0.5 * (p1 - p0).cross(p2 - p0).length();
-    if !(world_area.is_finite() && texel_area.is_finite()) {
-        return LOG2_PB_LIMIT;
-    }
-    if world_area <= 0.0 {
-        return -LOG2_PB_LIMIT;
-    }
-    if texel_area <= 0.0 {
-        return LOG2_PB_LIMIT;
-    }
-    let value = 0.5 * (world_area / texel_area).log2() - footprint.log2_k;
-    (value as f32).clamp(-LOG2_PB_LIMIT, LOG2_PB_LIMIT)
 }
 
 /// The part of `log2 P_b` a triangle's [`texel_area`] `T` contributes, `0.5 log2(T) + 0.5`
