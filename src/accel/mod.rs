@@ -28,6 +28,7 @@ pub use policy::{BvhLayout, BvhPolicy, TreeStep};
 pub use triangles::intersect;
 use triangles::{PackedTriangles, ShearedRay};
 pub use wide::PACKET;
+pub(crate) use wide::avx2_walks;
 use wide::{LeafVisit, RayBoxes, RayPacket, WideBvh};
 
 /// Past this many triangles the edge and leaf-box refresh of a full refit runs on rayon's

@@ -1,5 +1,6 @@
 //! `log2` of positive normal `f64` values, one at a time or in batches that the compiler
-//! vectorises (two lanes on the x86-64 baseline, four in the AVX2 copy chosen at run time).
+//! vectorises (two lanes on the x86-64 baseline, four in the AVX2 copy, chosen at run time by
+//! `accel::avx2_walks` as the walks are).
 //!
 //! The deforming meshes' `log2 P_b` pass takes one `log2` per triangle and frame, and libm's
 //! is a call the loop cannot vectorise: about 3 of a million triangles' ~4.4 ms
@@ -53,7 +54,7 @@ pub fn log2(x: f64) -> f64 {
 /// Replaces every value of `values` with its [`log2`], the same bits as one at a time.
 pub fn log2_in_place(values: &mut [f64]) {
     #[cfg(target_arch = "x86_64")]
-    if avx2() {
+    if crate::accel::avx2_walks() {
         // SAFETY: the CPU has AVX2 (detected).
         unsafe { log2_in_place_avx2(values) };
         return;
@@ -73,18 +74,6 @@ fn log2_each(values: &mut [f64]) {
 #[target_feature(enable = "avx2")]
 fn log2_in_place_avx2(values: &mut [f64]) {
     log2_each(values);
-}
-
-/// Whether the CPU has AVX2 and `MIPRAY_SIMD` is not `baseline` (decided once, as the
-/// walks decide).
-#[cfg(target_arch = "x86_64")]
-fn avx2() -> bool {
-    use std::sync::OnceLock;
-    static CHOICE: OnceLock<bool> = OnceLock::new();
-    *CHOICE.get_or_init(|| {
-        let forced_baseline = std::env::var("MIPRAY_SIMD").is_ok_and(|v| v == "baseline");
-        std::arch::is_x86_feature_detected!("avx2") && !forced_baseline
-    })
 }
 
 #[cfg(test)]

@@ -92,8 +92,9 @@ impl Lanes {
     }
 }
 
-/// Whether the walks run their AVX2 copy: the CPU has AVX2 and `MIPRAY_SIMD` is not
-/// `baseline` (which forces the x86-64 baseline copy, for comparisons). Decided once.
+/// Whether the walks run their AVX2 copy (and `lod::log2` its batches'): the CPU has AVX2
+/// and `MIPRAY_SIMD` is not `baseline` (which forces the x86-64 baseline copy, for
+/// comparisons). Decided once.
 #[inline]
 pub fn avx2_walks() -> bool {
     use std::sync::OnceLock;
