@@ -60,8 +60,8 @@ pub fn primitive_deforms(scene: &SceneDesc, node: usize, mesh: usize, primitive:
 /// `normals` stays empty when the primitive has no normals) and returns their space:
 /// [`VertexSpace::World`] when skinned, else [`VertexSpace::Object`]. Morph targets use
 /// `pose.morph_weights[node]`; skinning uses the joint matrices of the node's skin. Normals
-/// are unit length (zero where one degenerates). A primitive that does not deform comes out as its base geometry in
-/// object space.
+/// are unit length (zero where one degenerates). A primitive that does not deform comes out
+/// as its base geometry in object space.
 ///
 /// Pure function of its inputs; every output is finite (see the module docs for the
 /// fallbacks). `pose` must have been evaluated for `scene`.
