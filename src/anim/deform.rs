@@ -84,18 +84,21 @@ pub fn deform_primitive(
         .iter()
         .zip(morph_weights)
         .any(|(t, &w)| w != 0.0 && (t.positions.is_some() || t.normals.is_some()));
-    if let (Some((skin, influences)), false) = (skin_of(scene, node, desc), morphs) {
+    let skinned = skin_of(scene, node, desc).map(|(skin, influences)| {
+        let skinning = Skinning {
+            joint_matrices: &pose.joint_matrices[skin],
+            world_from_node: pose.world_from_node[node],
+        };
+        (skinning, influences)
+    });
+    if let (Some((skinning, influences)), false) = (&skinned, morphs) {
         // Skinned straight from the rest vertices: no copy of them first, and no morph pass
         // that would change nothing (two passes over every vertex, a third of the time).
         positions.resize(desc.positions.len(), Vec3::ZERO);
         let rest_normals = desc.normals.as_deref().unwrap_or_default();
         normals.resize(rest_normals.len(), Vec3::ZERO);
-        let skinning = Skinning {
-            joint_matrices: &pose.joint_matrices[skin],
-            world_from_node: pose.world_from_node[node],
-        };
         skinning.apply(
-            influences,
+            *influences,
             Some((&desc.positions, rest_normals)),
             positions,
             normals,
@@ -109,12 +112,8 @@ pub fn deform_primitive(
         normals.extend_from_slice(base);
     }
     apply_morph(desc, morph_weights, positions, normals);
-    match skin_of(scene, node, desc) {
-        Some((skin, influences)) => {
-            let skinning = Skinning {
-                joint_matrices: &pose.joint_matrices[skin],
-                world_from_node: pose.world_from_node[node],
-            };
+    match skinned {
+        Some((skinning, influences)) => {
             skinning.apply(influences, None, positions, normals);
             VertexSpace::World
         }

@@ -388,7 +388,7 @@ impl DeformingTexelTerms {
             object_log2_pb,
             ..
         } = renderer;
-        let area = |&source: &u32| {
+        let term = |&source: &u32| {
             let instance = geometry.triangle_instance[source as usize] as usize;
             let textured = !object_log2_pb[source as usize].is_nan();
             if deforms[instance] != VertexSource::Deformed || !textured {
@@ -402,9 +402,9 @@ impl DeformingTexelTerms {
             ))
         };
         let per_slot = if renderer.parallelism.splits(triangles.len()) {
-            triangles.source.par_iter().map(area).collect()
+            triangles.source.par_iter().map(term).collect()
         } else {
-            triangles.source.iter().map(area).collect()
+            triangles.source.iter().map(term).collect()
         };
         DeformingTexelTerms { per_slot }
     }
