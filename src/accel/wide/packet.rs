@@ -258,7 +258,7 @@ impl WideBvh {
         &self,
         packet: &RayPacket,
         limits: &mut [f32; PACKET],
-        leaf: impl FnMut(&[u8], u32, u32, &mut [f32; PACKET]),
+        leaf: impl GatheredLeaf,
     ) {
         self.traverse_packet_with(packet, limits, Gathered(leaf));
     }
@@ -272,7 +272,7 @@ impl WideBvh {
     ) {
         let n = packet.len;
         if let Some((first, count)) = self.root_leaf {
-            leaf.enter_all(n, first, count, limits);
+            leaf.enter_all::<false>(n, first, count, limits);
             return;
         }
         if self.nodes.is_empty() || n == 0 {
@@ -340,7 +340,7 @@ impl WideBvh {
             if entry.child & LEAF != 0 {
                 let parent = &self.nodes[entry.node as usize];
                 let (leaf_ref, count) = (entry.child & !LEAF, entry.count);
-                let any = leaf.enter(
+                let any = leaf.enter::<AVX>(
                     packet,
                     parent,
                     entry.lane as usize,
@@ -435,7 +435,7 @@ impl<P: PacketLeaf> simd::Kernel for PacketWalk<'_, P> {
 /// `first` on that enter the box before their limits run the leaf; returns whether any did.
 trait PacketLeaf {
     #[allow(clippy::too_many_arguments)]
-    fn enter(
+    fn enter<const AVX: bool>(
         &mut self,
         packet: &RayPacket,
         node: &WideNode,
@@ -447,7 +447,40 @@ trait PacketLeaf {
     ) -> bool;
 
     /// The leaf of a one-leaf tree (no box kept): every ray of the `n` runs it.
-    fn enter_all(&mut self, n: usize, leaf_ref: u32, count: u32, limits: &mut [f32; PACKET]);
+    fn enter_all<const AVX: bool>(
+        &mut self,
+        n: usize,
+        leaf_ref: u32,
+        count: u32,
+        limits: &mut [f32; PACKET],
+    );
+}
+
+/// A leaf run once with every ray of a packet inside its box (in ray order):
+/// `visit(rays, leaf_ref, count, limits)`. `AVX` is true in the walk's AVX2 copy, so a leaf
+/// test that computes across rays can use [`crate::simd::F32x8`]'s AVX operations. Closures
+/// implement it (ignoring `AVX`).
+pub trait GatheredLeaf {
+    fn visit<const AVX: bool>(
+        &mut self,
+        rays: &[u8],
+        leaf_ref: u32,
+        count: u32,
+        limits: &mut [f32; PACKET],
+    );
+}
+
+impl<F: FnMut(&[u8], u32, u32, &mut [f32; PACKET])> GatheredLeaf for F {
+    #[inline(always)]
+    fn visit<const AVX: bool>(
+        &mut self,
+        rays: &[u8],
+        leaf_ref: u32,
+        count: u32,
+        limits: &mut [f32; PACKET],
+    ) {
+        self(rays, leaf_ref, count, limits)
+    }
 }
 
 /// The leaf run ray by ray, as each ray is found inside the box.
@@ -455,7 +488,7 @@ struct EachRay<F>(F);
 
 impl<F: FnMut(usize, u32, u32, &mut f32)> PacketLeaf for EachRay<F> {
     #[inline(always)]
-    fn enter(
+    fn enter<const AVX: bool>(
         &mut self,
         packet: &RayPacket,
         node: &WideNode,
@@ -470,7 +503,13 @@ impl<F: FnMut(usize, u32, u32, &mut f32)> PacketLeaf for EachRay<F> {
         })
     }
 
-    fn enter_all(&mut self, n: usize, leaf_ref: u32, count: u32, limits: &mut [f32; PACKET]) {
+    fn enter_all<const AVX: bool>(
+        &mut self,
+        n: usize,
+        leaf_ref: u32,
+        count: u32,
+        limits: &mut [f32; PACKET],
+    ) {
         for (r, limit) in limits.iter_mut().enumerate().take(n) {
             (self.0)(r, leaf_ref, count, limit);
         }
@@ -485,9 +524,9 @@ const _: () = assert!(PACKET <= 256);
 /// each what [`EachRay`] decides.
 struct Gathered<F>(F);
 
-impl<F: FnMut(&[u8], u32, u32, &mut [f32; PACKET])> PacketLeaf for Gathered<F> {
+impl<G: GatheredLeaf> PacketLeaf for Gathered<G> {
     #[inline(always)]
-    fn enter(
+    fn enter<const AVX: bool>(
         &mut self,
         packet: &RayPacket,
         node: &WideNode,
@@ -504,15 +543,22 @@ impl<F: FnMut(&[u8], u32, u32, &mut [f32; PACKET])> PacketLeaf for Gathered<F> {
             inside += 1;
         });
         if inside > 0 {
-            (self.0)(&rays[..inside], leaf_ref, count, limits);
+            self.0
+                .visit::<AVX>(&rays[..inside], leaf_ref, count, limits);
         }
         inside > 0
     }
 
-    fn enter_all(&mut self, n: usize, leaf_ref: u32, count: u32, limits: &mut [f32; PACKET]) {
+    fn enter_all<const AVX: bool>(
+        &mut self,
+        n: usize,
+        leaf_ref: u32,
+        count: u32,
+        limits: &mut [f32; PACKET],
+    ) {
         let rays: [u8; PACKET] = std::array::from_fn(|r| r as u8);
         if n > 0 {
-            (self.0)(&rays[..n], leaf_ref, count, limits);
+            self.0.visit::<AVX>(&rays[..n], leaf_ref, count, limits);
         }
     }
 }
