@@ -6,9 +6,11 @@
 //! with [`Percentiles`] (min / median / nearest-rank p95 / max), computes the preprocessing
 //! share of frame time and the rebuild count, and writes an SVG plot ([`write_svg`]).
 //! Fields missing from older records are absent, never 0: a quantity no record has is left
-//! out of the table and the plot.
+//! out of the table and the plot. [`require_frames`] checks that an expected range is all
+//! there (`report --expect-frames`, a farm's merge step).
 
 pub(crate) mod chart;
+mod complete;
 mod error;
 mod load;
 mod metrics;
@@ -21,6 +23,7 @@ mod summary_json;
 
 use std::path::{Path, PathBuf};
 
+pub use complete::{frame_folders, missing_frames, require_frames};
 pub use error::ReportError;
 pub use load::{Sequence, is_stats_file_name, load_records, load_sequence};
 pub use metrics::{
