@@ -85,6 +85,28 @@ impl ShearedLanes {
         }
     }
 
+    /// Vertex `i` of triangle `lane` relative to each ray's origin, sheared into the ray's
+    /// frame: `(x, y)` in the ray's plane and `z` along it (one lane of `intersect_pack`).
+    #[inline(always)]
+    fn sheared_vertex<const AVX: bool>(
+        &self,
+        pack: &TrianglePack,
+        i: usize,
+        lane: usize,
+    ) -> (F32x8, F32x8, F32x8) {
+        let [kx, ky, kz] = self.k;
+        let [sx, sy, _] = self.shear;
+        let v = &pack.v[i];
+        let z = F32x8::splat(v[kz][lane]).sub::<AVX>(self.origin[kz]);
+        let x = F32x8::splat(v[kx][lane])
+            .sub::<AVX>(self.origin[kx])
+            .sub::<AVX>(sx.mul::<AVX>(z));
+        let y = F32x8::splat(v[ky][lane])
+            .sub::<AVX>(self.origin[ky])
+            .sub::<AVX>(sy.mul::<AVX>(z));
+        (x, y, z)
+    }
+
     /// Tests triangle `lane` of `pack` against every ray of the group; a ray's hit counts
     /// when `t` lies in `[0, t_max)` of that ray's lane.
     #[inline(always)]
@@ -94,42 +116,27 @@ impl ShearedLanes {
         lane: usize,
         t_max: &F32x8,
     ) -> LaneHits {
-        let [kx, ky, kz] = self.k;
-        let [sx, sy, sz] = self.shear;
-        // Vertex `i` relative to each ray's origin, sheared (one lane of `intersect_pack`).
-        let sheared = |i: usize| {
-            let v = &pack.v[i];
-            let z = F32x8::splat(v[kz][lane]).sub::<AVX>(self.origin[kz]);
-            let x = F32x8::splat(v[kx][lane])
-                .sub::<AVX>(self.origin[kx])
-                .sub::<AVX>(sx.mul::<AVX>(z));
-            let y = F32x8::splat(v[ky][lane])
-                .sub::<AVX>(self.origin[ky])
-                .sub::<AVX>(sy.mul::<AVX>(z));
-            (x, y, z)
-        };
-        let (ax, ay, az) = sheared(0);
-        let (bx, by, bz) = sheared(1);
-        let (cx, cy, cz) = sheared(2);
-        let edge =
-            |p: F32x8, q: F32x8, r: F32x8, s: F32x8| p.mul::<AVX>(q).sub::<AVX>(r.mul::<AVX>(s));
-        let mut u = edge(cx, by, cy, bx);
-        let mut v = edge(ax, cy, ay, cx);
-        let mut w = edge(bx, ay, by, ax);
+        // Plain functions, not closures: a closure is compiled on its own, without the AVX2
+        // copy's target features, and then cannot inline the AVX operations.
+        let (ax, ay, az) = self.sheared_vertex::<AVX>(pack, 0, lane);
+        let (bx, by, bz) = self.sheared_vertex::<AVX>(pack, 1, lane);
+        let (cx, cy, cz) = self.sheared_vertex::<AVX>(pack, 2, lane);
+        let mut u = edge_function::<AVX>(cx, by, cy, bx);
+        let mut v = edge_function::<AVX>(ax, cy, ay, cx);
+        let mut w = edge_function::<AVX>(bx, ay, by, ax);
+        let sz = self.shear[2];
         let zero = F32x8::splat(0.0);
         let on_edge =
             (u.eq_mask::<AVX>(zero) | v.eq_mask::<AVX>(zero) | w.eq_mask::<AVX>(zero)) & self.live;
         if on_edge != 0 {
             // Exactly on an edge in f32: decided in f64 (rare), as the pack test does.
-            let f =
-                |a: f32, b: f32, c: f32, d: f32| (a as f64 * b as f64 - c as f64 * d as f64) as f32;
             let mut bits = on_edge;
             while bits != 0 {
                 let l = bits.trailing_zeros() as usize;
                 bits &= bits - 1;
-                u.0[l] = f(cx.0[l], by.0[l], cy.0[l], bx.0[l]);
-                v.0[l] = f(ax.0[l], cy.0[l], ay.0[l], cx.0[l]);
-                w.0[l] = f(bx.0[l], ay.0[l], by.0[l], ax.0[l]);
+                u.0[l] = edge_function_f64(cx.0[l], by.0[l], cy.0[l], bx.0[l]);
+                v.0[l] = edge_function_f64(ax.0[l], cy.0[l], ay.0[l], cx.0[l]);
+                w.0[l] = edge_function_f64(bx.0[l], ay.0[l], by.0[l], ax.0[l]);
             }
         }
         let negative = u.lt_mask::<AVX>(zero) | v.lt_mask::<AVX>(zero) | w.lt_mask::<AVX>(zero);
@@ -163,6 +170,18 @@ impl ShearedLanes {
         }
         hits
     }
+}
+
+/// `p q - r s`, one of Woop's edge functions.
+#[inline(always)]
+fn edge_function<const AVX: bool>(p: F32x8, q: F32x8, r: F32x8, s: F32x8) -> F32x8 {
+    p.mul::<AVX>(q).sub::<AVX>(r.mul::<AVX>(s))
+}
+
+/// An edge function recomputed in f64 and rounded once (for a lane where it was exactly 0).
+#[inline(always)]
+fn edge_function_f64(p: f32, q: f32, r: f32, s: f32) -> f32 {
+    (p as f64 * q as f64 - r as f64 * s as f64) as f32
 }
 
 #[cfg(test)]

@@ -12,8 +12,8 @@
 //!   It is exact in floating point, not only in real numbers: with one shared origin every
 //!   ray computes the same `plane - origin`, and a product rounded to nearest is monotonic
 //!   in each factor, so each ray's rounded distance lies between the rounded bounds.
-//! - **Four rays per box at a leaf**: the rays of the packet are kept as structure of
-//!   arrays too, and a leaf's box is tested against four rays per SIMD slab test. The
+//! - **Eight rays per box at a leaf**: the rays of the packet are kept as structure of
+//!   arrays too, and a leaf's box is tested against eight rays per SIMD slab test. The
 //!   arithmetic is the scalar test's (the nearer of the two planes is the front one), so
 //!   each ray takes the same decision it would take alone.
 //!
@@ -26,7 +26,7 @@ use glam::{BVec4A, Vec3A, Vec4};
 
 use super::walk::{INLINE_STACK, safe_inverse4};
 use super::{EMPTY, LEAF, Lanes, PACKET, ROBUST_FAR, RayBoxes, WIDTH, WideBvh, WideNode};
-use crate::simd;
+use crate::simd::{self, F32x8};
 
 /// The rays of a packet for the walk, as structure of arrays (four rays per SIMD test at a
 /// leaf; one ray's splatted slab constants are made when a walk needs them), and the
@@ -98,10 +98,10 @@ impl RayPacket {
     }
 
     /// Calls `each(ray, &mut limit)` for every ray from `first` on that enters lane `lane`
-    /// of `node` before its limit, in ray order; returns whether any did. Four rays are
-    /// tested at once, all before the first of them is handed to `each`.
+    /// of `node` before its limit, in ray order; returns whether any did. Eight rays are
+    /// tested at once ([`F32x8`]), all before the first of them is handed to `each`.
     #[inline(always)]
-    fn enter_leaf(
+    fn enter_leaf<const AVX: bool>(
         &self,
         node: &WideNode,
         lane: usize,
@@ -110,26 +110,15 @@ impl RayPacket {
         mut each: impl FnMut(usize, &mut f32),
     ) -> bool {
         let mut any = false;
-        let lower = [0, 1, 2].map(|axis| Vec4::splat(node.bounds[axis][lane]));
-        let upper = [0, 1, 2].map(|axis| Vec4::splat(node.bounds[axis + 3][lane]));
-        let groups = self.len.div_ceil(4);
-        for group in first / 4..groups {
-            let at = group * 4;
-            let mut near = Vec4::ZERO;
-            let mut far = Vec4::splat(f32::INFINITY);
-            for axis in 0..3 {
-                let origin = Vec4::from_slice(&self.origin[axis][at..at + 4]);
-                let inverse = Vec4::from_slice(&self.inverse[axis][at..at + 4]);
-                let t_lower = (lower[axis] - origin) * inverse;
-                let t_upper = (upper[axis] - origin) * inverse;
-                near = near.max(t_lower.min(t_upper));
-                far = far.min(t_lower.max(t_upper));
-            }
-            let limit = Vec4::from_slice(&limits[at..at + 4]);
-            let mut mask = near.cmple((far * ROBUST_FAR).min(limit)).bitmask();
+        let lower = [0, 1, 2].map(|axis| F32x8::splat(node.bounds[axis][lane]));
+        let upper = [0, 1, 2].map(|axis| F32x8::splat(node.bounds[axis + 3][lane]));
+        let groups = self.len.div_ceil(8);
+        for group in first / 8..groups {
+            let at = group * 8;
+            let mut mask = self.enter_box::<AVX>(&lower, &upper, at, limits);
             // Rays before `first` are not this subtree's; slots past `len` are no rays.
-            mask &= (0xf << first.saturating_sub(at).min(4)) & 0xf;
-            mask &= (1u32 << (self.len - at).min(4)) - 1;
+            mask &= (0xff << first.saturating_sub(at).min(8)) & 0xff;
+            mask &= (1u32 << (self.len - at).min(8)) - 1;
             any |= mask != 0;
             while mask != 0 {
                 let k = mask.trailing_zeros() as usize;
@@ -138,6 +127,32 @@ impl RayPacket {
             }
         }
         any
+    }
+
+    /// The slab test of one box (`lower`, `upper`, splatted) for the eight rays from `at`:
+    /// bit `k` set when ray `at + k` enters it before its limit. Per ray the arithmetic of
+    /// the scalar test: the nearer of the two planes is the front one.
+    #[inline(always)]
+    fn enter_box<const AVX: bool>(
+        &self,
+        lower: &[F32x8; 3],
+        upper: &[F32x8; 3],
+        at: usize,
+        limits: &[f32; PACKET],
+    ) -> u32 {
+        let eight = |row: &[f32; PACKET]| F32x8(row[at..at + 8].try_into().expect("8 lanes"));
+        let mut near = F32x8::splat(0.0);
+        let mut far = F32x8::splat(f32::INFINITY);
+        for axis in 0..3 {
+            let origin = eight(&self.origin[axis]);
+            let inverse = eight(&self.inverse[axis]);
+            let t_lower = lower[axis].sub::<AVX>(origin).mul::<AVX>(inverse);
+            let t_upper = upper[axis].sub::<AVX>(origin).mul::<AVX>(inverse);
+            near = near.max::<AVX>(t_lower.min::<AVX>(t_upper));
+            far = far.min::<AVX>(t_lower.max::<AVX>(t_upper));
+        }
+        let limit = eight(limits);
+        near.le_mask::<AVX>(far.mul::<AVX>(F32x8::splat(ROBUST_FAR)).min::<AVX>(limit))
     }
 }
 
@@ -498,7 +513,7 @@ impl<F: FnMut(usize, u32, u32, &mut f32)> PacketLeaf for EachRay<F> {
         count: u32,
         limits: &mut [f32; PACKET],
     ) -> bool {
-        packet.enter_leaf(node, lane, first, limits, |r, limit| {
+        packet.enter_leaf::<AVX>(node, lane, first, limits, |r, limit| {
             (self.0)(r, leaf_ref, count, limit)
         })
     }
@@ -538,7 +553,7 @@ impl<G: GatheredLeaf> PacketLeaf for Gathered<G> {
     ) -> bool {
         let mut rays = [0u8; PACKET];
         let mut inside = 0;
-        packet.enter_leaf(node, lane, first, limits, |r, _| {
+        packet.enter_leaf::<AVX>(node, lane, first, limits, |r, _| {
             rays[inside] = r as u8;
             inside += 1;
         });
@@ -625,7 +640,7 @@ mod tests {
     }
 
     #[test]
-    fn four_rays_at_a_leaf_decide_as_each_ray_alone() {
+    fn eight_rays_at_a_leaf_decide_as_each_ray_alone() {
         let mut next = stream(0x9e3779b97f4a7c15);
         let mut entered = 0;
         for _ in 0..200 {
@@ -640,13 +655,20 @@ mod tests {
                 for lane in 0..WIDTH {
                     let mut found = Vec::new();
                     let mut copy = limits;
-                    packet.enter_leaf(&node, lane, first, &mut copy, |r, _| found.push(r));
+                    packet.enter_leaf::<false>(&node, lane, first, &mut copy, |r, _| found.push(r));
                     let alone: Vec<usize> = (first..rays.len())
                         .filter(|&r| {
                             packet.ray(r).enter::<false>(&node, limits[r]).1 & (1 << lane) != 0
                         })
                         .collect();
                     assert_eq!(found, alone);
+                    if crate::simd::Isa::cpu_has_avx2() {
+                        let mut found_avx = Vec::new();
+                        packet.enter_leaf::<true>(&node, lane, first, &mut copy, |r, _| {
+                            found_avx.push(r)
+                        });
+                        assert_eq!(found_avx, alone, "the AVX2 copy of the leaf box test");
+                    }
                     entered += found.len();
                 }
             }
