@@ -164,6 +164,41 @@ impl Accel {
             });
     }
 
+    /// [`Accel::visit_hits`] for a packet of up to [`PACKET`] rays `(origin, direction)`
+    /// walked together (shadow rays of a tile toward one light): ray `r`'s hits with `t` in
+    /// `[0, t_max[r])` are visited as `visit(r, slot, t)`, in an order that depends on the
+    /// tree, until `visit` returns false for that ray. Returns the mask of the rays stopped
+    /// early. Each ray meets exactly the triangles [`Accel::visit_hits`] meets for it alone
+    /// (the same watertight test per ray and triangle), in another order.
+    pub fn visit_hits_packet(
+        &self,
+        rays: &[(Vec3A, Vec3A)],
+        t_max: &[f32],
+        visit: impl FnMut(usize, u32, f32) -> bool,
+    ) -> u64 {
+        let n = rays.len().min(t_max.len()).min(PACKET);
+        if n == 0 {
+            return 0;
+        }
+        PacketQuery::with_filled(
+            |q| q.fill_occlusion(&rays[..n], &t_max[..n]),
+            |q| {
+                let mut ceilings = [0.0f32; PACKET];
+                ceilings[..n].copy_from_slice(&t_max[..n]);
+                let mut leaf = AnyHitPacketLeaf {
+                    accel: self,
+                    sheared: &q.sheared,
+                    t_max: &ceilings,
+                    visit,
+                    stopped: 0,
+                };
+                self.wide
+                    .traverse_packet_gathered(&q.packet, &mut q.limits, &mut leaf);
+                leaf.stopped
+            },
+        )
+    }
+
     /// Visits every triangle hit with `t` in `[0, t_max)`, as `visit(slot, t)`, in an order
     /// that depends on the tree, until `visit` returns false. Returns false when it was
     /// stopped early.
@@ -294,5 +329,86 @@ impl GatheredLeaf for ClosestPacketLeaf<'_> {
             limits,
             self.best,
         );
+    }
+}
+
+/// The limit of a ray whose any-hit query has stopped: below every entry distance, so the
+/// ray enters no more boxes, and negative, which ends the packet's walk once every ray has
+/// it.
+const STOPPED: f32 = -1.0;
+
+/// The any-hit leaf test of a packet: each ray visits its hits until its visitor stops it.
+struct AnyHitPacketLeaf<'a, F> {
+    accel: &'a Accel,
+    sheared: &'a [ShearedRay; PACKET],
+    /// Each ray's own search distance (its limit drops to [`STOPPED`] when it stops).
+    t_max: &'a [f32; PACKET],
+    visit: F,
+    stopped: u64,
+}
+
+impl<F: FnMut(usize, u32, f32) -> bool> GatheredLeaf for &mut AnyHitPacketLeaf<'_, F> {
+    #[inline(always)]
+    fn visit<const AVX: bool>(
+        &mut self,
+        rays: &[u8],
+        first: u32,
+        count: u32,
+        limits: &mut [f32; PACKET],
+    ) {
+        if rays.len() < ACROSS_RAYS_MIN {
+            for &r in rays {
+                let r = r as usize;
+                let visit = &mut self.visit;
+                let finished = !self.accel.triangles.hits_in_leaf(
+                    &self.sheared[r],
+                    first,
+                    count,
+                    self.t_max[r],
+                    |slot, _, t, _| visit(r, slot, t),
+                );
+                if finished {
+                    limits[r] = STOPPED;
+                    self.stopped |= 1 << r;
+                }
+            }
+            return;
+        }
+        let mut groups = [[0u8; PACKET]; PERMUTATIONS];
+        let mut sizes = [0usize; PERMUTATIONS];
+        for &r in rays {
+            let p = self.sheared[r as usize].permutation();
+            groups[p][sizes[p]] = r;
+            sizes[p] += 1;
+        }
+        for (group, &size) in groups.iter().zip(&sizes) {
+            for chunk in group[..size].chunks(RAYS) {
+                let lanes = ShearedLanes::gather(chunk.iter().map(|&r| &self.sheared[r as usize]));
+                let cut = F32x8(std::array::from_fn(|l| {
+                    self.t_max[chunk[l.min(chunk.len() - 1)] as usize]
+                }));
+                let mut alive = (1u32 << chunk.len()) - 1;
+                let visit = &mut self.visit;
+                self.accel.triangles.hits_in_leaf_across::<AVX>(
+                    &lanes,
+                    first,
+                    count,
+                    &cut,
+                    |l, slot, _, t, _| {
+                        if alive & (1 << l) != 0 && !visit(chunk[l] as usize, slot, t) {
+                            alive &= !(1 << l);
+                        }
+                    },
+                );
+                let mut finished = ((1u32 << chunk.len()) - 1) & !alive;
+                while finished != 0 {
+                    let l = finished.trailing_zeros() as usize;
+                    finished &= finished - 1;
+                    let r = chunk[l] as usize;
+                    limits[r] = STOPPED;
+                    self.stopped |= 1 << r;
+                }
+            }
+        }
     }
 }
