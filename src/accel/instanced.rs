@@ -396,6 +396,7 @@ impl TwoLevelAccel {
                 best,
                 limits,
                 object,
+                ..
             } = q;
             for top in &self.levels {
                 top.tlas.traverse_packet_gathered(

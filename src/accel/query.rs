@@ -10,7 +10,7 @@ use std::cell::RefCell;
 use glam::{Vec2, Vec3A};
 
 use super::triangles::ShearedRay;
-use super::wide::{PACKET, RayPacket};
+use super::wide::{PACKET, RayBoxes, RayPacket};
 
 /// The closest intersection along a ray.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -93,6 +93,8 @@ pub(super) struct PacketQuery {
     pub(super) sheared: [ShearedRay; PACKET],
     pub(super) best: [Closest; PACKET],
     pub(super) limits: [f32; PACKET],
+    /// Each ray's own slab constants (masked walks).
+    pub(super) boxes: [RayBoxes; PACKET],
     /// Where the two-level structure takes the rays that enter an instance together.
     pub(super) object: ObjectPacket,
 }
@@ -118,6 +120,7 @@ impl PacketQuery {
             sheared: [ShearedRay::default(); PACKET],
             best: [Closest::default(); PACKET],
             limits: [0.0; PACKET],
+            boxes: [RayBoxes::default(); PACKET],
             object: ObjectPacket {
                 packet: RayPacket::new(&[]),
                 sheared: [ShearedRay::default(); PACKET],
@@ -142,11 +145,23 @@ impl PacketQuery {
     /// up to `t_max[r]`; rays from several origins get interval bounds too.
     pub(super) fn fill_occlusion(&mut self, rays: &[(Vec3A, Vec3A)], t_max: &[f32]) {
         let n = rays.len().min(PACKET).min(t_max.len());
-        self.packet.set_from_several_origins(&rays[..n]);
-        for (sheared, &(origin, direction)) in self.sheared.iter_mut().zip(&rays[..n]) {
-            *sheared = ShearedRay::new(origin, direction);
+        for (k, &(origin, direction)) in rays[..n].iter().enumerate() {
+            self.sheared[k] = ShearedRay::new(origin, direction);
+            self.boxes[k] = RayBoxes::new(origin, direction);
         }
         self.limits[..n].copy_from_slice(&t_max[..n]);
+    }
+
+    /// Fills the query for closest hits of `rays` (at most [`PACKET`]) from any origins,
+    /// walked by the masked traversal (each ray's slab constants), with limit `t_max`.
+    pub(super) fn fill_masked(&mut self, rays: &[(Vec3A, Vec3A)], t_max: f32) {
+        let n = rays.len().min(PACKET);
+        for (k, &(origin, direction)) in rays[..n].iter().enumerate() {
+            self.sheared[k] = ShearedRay::new(origin, direction);
+            self.boxes[k] = RayBoxes::new(origin, direction);
+        }
+        self.best[..n].fill(Closest::default());
+        self.limits.fill(t_max);
     }
 
     /// Runs `query` on this thread's query filled for `rays` with limit `t_max` (a fresh

@@ -63,6 +63,46 @@ impl Accel {
         });
     }
 
+    /// [`Accel::closest_hits`] for rays from any origins (a bounce's reflected or refracted
+    /// rays), walked together by the masked traversal: each ray tests every node alone, so
+    /// `hits[i]` is exactly what `closest_hit` returns for ray `i`.
+    pub fn closest_hits_masked(
+        &self,
+        rays: &[(Vec3A, Vec3A)],
+        t_max: f32,
+        hits: &mut [Option<Hit>],
+    ) {
+        let n = rays.len().min(hits.len()).min(PACKET);
+        if n == 0 {
+            return;
+        }
+        PacketQuery::with_filled(
+            |q| q.fill_masked(&rays[..n], t_max),
+            |q| {
+                let PacketQuery {
+                    sheared,
+                    best,
+                    limits,
+                    boxes,
+                    ..
+                } = q;
+                self.wide.traverse_masked_ordered(
+                    &boxes[..n],
+                    limits,
+                    ClosestPacketLeaf {
+                        accel: self,
+                        within: &Within::world(),
+                        sheared,
+                        best,
+                    },
+                );
+                for (hit, best) in hits.iter_mut().zip(&best[..n]) {
+                    *hit = best.hit;
+                }
+            },
+        )
+    }
+
     /// Continues the closest-hit queries `best` of a packet (limits `limits`) in this tree.
     pub(in crate::accel) fn closest_hits_within(&self, within: &Within, query: &mut PacketQuery) {
         let PacketQuery {
@@ -193,7 +233,7 @@ impl Accel {
                     stopped: 0,
                 };
                 self.wide
-                    .traverse_packet_gathered(&q.packet, &mut q.limits, &mut leaf);
+                    .traverse_masked(&q.boxes[..n], &mut q.limits, &mut leaf);
                 leaf.stopped
             },
         )

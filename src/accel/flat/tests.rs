@@ -256,8 +256,12 @@ fn a_packet_finds_what_each_of_its_rays_finds_alone() {
     ] {
         let mut hits = vec![None; rays.len()];
         accel.closest_hits(rays, t_max, &mut hits);
-        for (&(o, d), hit) in rays.iter().zip(&hits) {
-            assert_eq!(*hit, accel.closest_hit(o, d, t_max));
+        let mut masked = vec![None; rays.len()];
+        accel.closest_hits_masked(rays, t_max, &mut masked);
+        for ((&(o, d), hit), masked) in rays.iter().zip(&hits).zip(&masked) {
+            let alone = accel.closest_hit(o, d, t_max);
+            assert_eq!(*hit, alone);
+            assert_eq!(*masked, alone, "the masked walk");
             found += hit.is_some() as usize;
         }
     }
