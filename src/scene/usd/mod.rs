@@ -108,7 +108,11 @@ fn open(path: &Path) -> Result<usd::Stage, String> {
     let name = path
         .to_str()
         .ok_or_else(|| "the path is not valid UTF-8".to_string())?;
-    usd::Stage::open(name).map_err(|e| format!("cannot open the stage: {e:#}"))
+    // Every layer the stage opens goes through the checking resolver (`guard.rs`).
+    usd::Stage::builder()
+        .resolver(guard::CheckingResolver(openusd::ar::DefaultResolver::new()))
+        .open(name)
+        .map_err(|e| format!("cannot open the stage: {e:#}"))
 }
 
 fn read_metadata(stage: &usd::Stage) -> Result<StageMetadata, String> {
