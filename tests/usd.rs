@@ -306,3 +306,66 @@ fn a_point_cache_marks_exactly_the_changed_triangles_deformed() {
         assert_eq!(counter(r, "nonfinite_samples"), 0);
     }
 }
+
+/// Two cameras of different lenses: the first is used by default, `--camera` picks the
+/// other by prim name or path (the exported camera shows which), and an unknown name is an
+/// error listing the cameras.
+#[test]
+fn camera_flag_picks_a_camera_by_prim_name_or_path() {
+    let stage = r#"#usda 1.0
+(
+    metersPerUnit = 1
+    upAxis = "Y"
+)
+def Mesh "Tri"
+{
+    uniform token subdivisionScheme = "none"
+    int[] faceVertexCounts = [3]
+    int[] faceVertexIndices = [0, 1, 2]
+    point3f[] points = [(0, 0, 0), (1, 0, 0), (0, 1, 0)]
+}
+def Camera "wide"
+{
+    float focalLength = 10
+    float verticalAperture = 20
+    double3 xformOp:translate = (0, 0, 5)
+    uniform token[] xformOpOrder = ["xformOp:translate"]
+}
+def Xform "rig"
+{
+    def Camera "tele"
+    {
+        float focalLength = 100
+        float verticalAperture = 20
+        double3 xformOp:translate = (0, 0, 50)
+        uniform token[] xformOpOrder = ["xformOp:translate"]
+    }
+}
+"#;
+    let tmp = tempfile::tempdir().unwrap();
+    let path = tmp.path().join("cameras.usda");
+    std::fs::write(&path, stage).unwrap();
+    let yfov_of = |camera: Option<&str>| {
+        let out = tmp.path().join(format!("export-{}", camera.unwrap_or("default").replace('/', "_")));
+        let mut args = vec!["export", path.to_str().unwrap(), "--frames", "0", "--out", out.to_str().unwrap()];
+        if let Some(c) = camera {
+            args.extend(["--camera", c]);
+        }
+        let output = mipray(&args);
+        assert!(output.status.success(), "{}", String::from_utf8_lossy(&output.stderr));
+        let json: Value =
+            serde_json::from_str(&std::fs::read_to_string(out.join("camera_0000.json")).unwrap())
+                .unwrap();
+        json["yfov_degrees"].as_f64().unwrap()
+    };
+    let wide = (2.0 * (20.0f64 / 20.0).atan()).to_degrees();
+    let tele = (2.0 * (20.0f64 / 200.0).atan()).to_degrees();
+    assert!((yfov_of(None) - wide).abs() < 1e-3);
+    assert!((yfov_of(Some("tele")) - tele).abs() < 1e-3);
+    assert!((yfov_of(Some("/rig/tele")) - tele).abs() < 1e-3);
+    assert!((yfov_of(Some("wide")) - wide).abs() < 1e-3);
+    let output = mipray(&["render", path.to_str().unwrap(), "--camera", "zoom", "--frames", "0"]);
+    assert_eq!(output.status.code(), Some(1));
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert!(stderr.contains("\"/wide\"") && stderr.contains("\"/rig/tele\""), "{stderr}");
+}
