@@ -369,3 +369,128 @@ def Xform "rig"
     let stderr = String::from_utf8_lossy(&output.stderr);
     assert!(stderr.contains("\"/wide\"") && stderr.contains("\"/rig/tele\""), "{stderr}");
 }
+
+/// UsdLux lights and UsdPreviewSurface materials map as `docs/src/formats-usd.md` says.
+#[test]
+fn lights_and_materials_map_as_documented() {
+    let stage = r#"#usda 1.0
+(
+    metersPerUnit = 0.5
+    upAxis = "Y"
+)
+def Mesh "Glass"
+{
+    uniform token subdivisionScheme = "none"
+    int[] faceVertexCounts = [3]
+    int[] faceVertexIndices = [0, 1, 2]
+    point3f[] points = [(0, 0, 0), (1, 0, 0), (0, 1, 0)]
+    texCoord2f[] primvars:uv1 = [(0, 0), (1, 0), (0, 1)] (interpolation = "vertex")
+    rel material:binding = </M/Glass>
+}
+def Mesh "Textured"
+{
+    uniform token subdivisionScheme = "none"
+    int[] faceVertexCounts = [3]
+    int[] faceVertexIndices = [0, 1, 2]
+    point3f[] points = [(0, 0, 1), (1, 0, 1), (0, 1, 1)]
+    texCoord2f[] primvars:uv1 = [(0, 0), (1, 0), (0, 1)] (interpolation = "vertex")
+    rel material:binding = </M/Tex>
+}
+def Scope "M"
+{
+    def Material "Glass"
+    {
+        token outputs:surface.connect = </M/Glass/S.outputs:surface>
+        def Shader "S"
+        {
+            uniform token info:id = "UsdPreviewSurface"
+            color3f inputs:diffuseColor = (0.2, 0.4, 0.6)
+            float inputs:opacity = 0.25
+            float inputs:ior = 1.33
+            float inputs:metallic = 1.0
+            float inputs:roughness = 0.0
+            token outputs:surface
+        }
+    }
+    def Material "Tex"
+    {
+        token outputs:surface.connect = </M/Tex/S.outputs:surface>
+        def Shader "S"
+        {
+            uniform token info:id = "UsdPreviewSurface"
+            color3f inputs:diffuseColor.connect = </M/Tex/T.outputs:rgb>
+            token outputs:surface
+        }
+        def Shader "R"
+        {
+            uniform token info:id = "UsdPrimvarReader_float2"
+            token inputs:varname = "uv1"
+            float2 outputs:result
+        }
+        def Shader "T"
+        {
+            uniform token info:id = "UsdUVTexture"
+            asset inputs:file = @checker.png@
+            float2 inputs:st.connect = </M/Tex/R.outputs:result>
+            token inputs:wrapS = "mirror"
+            token inputs:wrapT = "black"
+            float4 inputs:scale = (0.5, 0.5, 0.5, 1)
+            float3 outputs:rgb
+        }
+    }
+}
+def SphereLight "Bulb" { float inputs:intensity = 10  float inputs:exposure = 1  float inputs:radius = 2 }
+def RectLight "Panel" { float inputs:intensity = 3  float inputs:width = 2  float inputs:height = 4 }
+def DiskLight "Spot" (prepend apiSchemas = ["ShapingAPI"]) { float inputs:intensity = 1  float inputs:shaping:cone:angle = 30  float inputs:shaping:cone:softness = 0.5 }
+def DistantLight "Sun" { float intensity = 2  color3f color = (1, 0.5, 0.25) }
+"#;
+    use mipray::scene::LightKind;
+    use mipray::texture::WrapMode;
+    let tmp = tempfile::tempdir().unwrap();
+    let path = tmp.path().join("looks.usda");
+    std::fs::write(&path, stage).unwrap();
+    image::RgbImage::from_fn(4, 4, |x, y| image::Rgb(if (x + y) % 2 == 0 { [255; 3] } else { [0; 3] }))
+        .save(tmp.path().join("checker.png"))
+        .unwrap();
+    let scene = mipray::scene::load(&path).unwrap();
+    let material = |mesh: usize| &scene.materials[scene.meshes[mesh].primitives[0].material.unwrap()];
+    let glass = material(0);
+    assert_eq!(glass.transmission, 0.75);
+    assert_eq!(glass.ior, 1.33);
+    assert_eq!(glass.reflectance, 1.0, "a smooth metal is a mirror");
+    assert_eq!(glass.base_color, glam::Vec3::new(0.2, 0.4, 0.6));
+    assert!(glass.base_color_texture.is_none());
+    let textured = material(1);
+    let texture = &scene.textures[textured.base_color_texture.unwrap()];
+    assert_eq!(texture.sampler.wrap_s, WrapMode::MirroredRepeat);
+    assert_eq!(texture.sampler.wrap_t, WrapMode::ClampToEdge);
+    assert_eq!(textured.base_color, glam::Vec3::splat(0.5), "the texture's scale");
+    // The uvs come from primvar uv1, t flipped to v.
+    let uvs = scene.meshes[1].primitives[0].uvs.as_ref().unwrap();
+    assert_eq!(uvs[0], glam::Vec2::new(0.0, 1.0));
+    assert!(scene.notes.iter().any(|n| n.contains("'black' wrap")), "{:?}", scene.notes);
+    // Lights: radii and sizes in metres (metersPerUnit 0.5).
+    let light = |name: &str| {
+        let node = scene.nodes.iter().find(|n| n.name == name).unwrap();
+        scene.lights[node.light.unwrap()]
+    };
+    let pi = std::f32::consts::PI;
+    let bulb = light("/Bulb");
+    assert_eq!(bulb.kind, LightKind::Point);
+    assert!((bulb.intensity - 20.0 * pi * 1.0).abs() < 1e-4, "{bulb:?}");
+    let panel = light("/Panel");
+    assert!(matches!(panel.kind, LightKind::Spot { outer_cone, .. } if (outer_cone - pi / 2.0).abs() < 1e-6));
+    assert!((panel.intensity - 3.0 * 1.0 * 2.0).abs() < 1e-5, "{panel:?}");
+    let spot = light("/Spot");
+    match spot.kind {
+        LightKind::Spot { inner_cone, outer_cone } => {
+            assert!((outer_cone - 30f32.to_radians()).abs() < 1e-6);
+            assert!((inner_cone - 15f32.to_radians()).abs() < 1e-6);
+        }
+        other => panic!("{other:?}"),
+    }
+    let sun = light("/Sun");
+    assert_eq!(sun.kind, LightKind::Directional);
+    assert_eq!(sun.intensity, 2.0);
+    assert_eq!(sun.color, glam::Vec3::new(1.0, 0.5, 0.25));
+}
