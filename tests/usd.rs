@@ -19,7 +19,10 @@ const SAMPLES: [(&str, &str); 7] = [
     ("AnimatedTriangle", "AnimatedTriangle/AnimatedTriangle.gltf"),
     ("BoxAnimated", "BoxAnimated/BoxAnimated.glb"),
     ("CesiumMan", "CesiumMan/CesiumMan.glb"),
-    ("InterpolationTest", "InterpolationTest/InterpolationTest.glb"),
+    (
+        "InterpolationTest",
+        "InterpolationTest/InterpolationTest.glb",
+    ),
     ("RiggedFigure", "RiggedFigure/RiggedFigure.glb"),
     ("RiggedSimple", "RiggedSimple/RiggedSimple.glb"),
 ];
@@ -33,7 +36,12 @@ fn mipray(args: &[&str]) -> Output {
 
 /// Renders `scene` into `out` with `extra` flags; panics with stderr on failure.
 fn render(scene: &Path, out: &Path, extra: &[&str]) {
-    let mut args = vec!["render", scene.to_str().unwrap(), "--out", out.to_str().unwrap()];
+    let mut args = vec![
+        "render",
+        scene.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+    ];
     if !extra.contains(&"--size") {
         args.extend(["--size", "96x54"]);
     }
@@ -81,7 +89,10 @@ fn every_usdz_sample_renders_a_short_sequence_with_finite_samples() {
         for r in &records {
             assert_eq!(counter(r, "nonfinite_samples"), 0, "{name}: {r}");
         }
-        let moved: u64 = records[1..].iter().map(|r| counter(r, "moved_triangles")).sum();
+        let moved: u64 = records[1..]
+            .iter()
+            .map(|r| counter(r, "moved_triangles"))
+            .sum();
         assert!(moved > 0, "{name}: nothing moved in 12 frames");
     }
 }
@@ -94,22 +105,36 @@ fn a_time_sampled_translation_moves_rigidly_and_the_camera_comes_from_its_lens()
     // focalLength 218.12926, verticalAperture 20.955: the vertical field of view.
     assert_eq!(scene.cameras.len(), 1);
     let yfov = 2.0 * (20.955f64 / (2.0 * 218.12926)).atan();
-    assert!((scene.cameras[0].yfov as f64 - yfov).abs() < 1e-6, "{:?}", scene.cameras[0]);
+    assert!(
+        (scene.cameras[0].yfov as f64 - yfov).abs() < 1e-6,
+        "{:?}",
+        scene.cameras[0]
+    );
     assert_eq!(scene.cameras[0].znear, 1.0);
     // The camera node sits at (50, 0, 1129.035) centimetres: metres after metersPerUnit.
     let camera_node = scene.nodes.iter().position(|n| n.camera.is_some()).unwrap();
     let world = mipray::anim::node_world_transforms(&scene, 0.0);
     let eye = world[camera_node].transform_point3(glam::Vec3::ZERO);
-    assert!((eye - glam::Vec3::new(0.5, 0.0, 11.290352)).length() < 1e-4, "{eye}");
+    assert!(
+        (eye - glam::Vec3::new(0.5, 0.0, 11.290352)).length() < 1e-4,
+        "{eye}"
+    );
     // 100 time codes at the default 24 per second: the cube is 1 m along +X at 100/24 s.
     let cube = scene.nodes.iter().position(|n| n.mesh.is_some()).unwrap();
     let at_end = mipray::anim::node_world_transforms(&scene, 100.0 / 24.0)[cube];
     let moved = at_end.transform_point3(glam::Vec3::ZERO);
-    assert!((moved - glam::Vec3::new(1.0, 0.0, 0.0)).length() < 1e-5, "{moved}");
+    assert!(
+        (moved - glam::Vec3::new(1.0, 0.0, 0.0)).length() < 1e-5,
+        "{moved}"
+    );
 
     let tmp = tempfile::tempdir().unwrap();
     let out = tmp.path().join("cube");
-    render(&scene_path, &out, &["--frames", "0..10", "--camera", "camera"]);
+    render(
+        &scene_path,
+        &out,
+        &["--frames", "0..10", "--camera", "camera"],
+    );
     let records = records(&out);
     for r in &records[1..] {
         assert_eq!(counter(r, "moved_triangles"), 12, "{r}");
@@ -185,7 +210,10 @@ fn usdz_conversions_render_like_their_gltf_originals() {
         );
         // Both at 30 fps from t = 0, so frame i shows the same time in both.
         let frames = ["--frames", "0..40", "--fps", "30", "--size", "160x90"];
-        let (ga, ub) = (tmp.path().join(format!("{name}-gltf")), tmp.path().join(format!("{name}-usd")));
+        let (ga, ub) = (
+            tmp.path().join(format!("{name}-gltf")),
+            tmp.path().join(format!("{name}-usd")),
+        );
         render(&gltf_scene, &ga, &frames);
         render(&usd_scene, &ub, &frames);
         let expect = expectation(name);
@@ -193,13 +221,21 @@ fn usdz_conversions_render_like_their_gltf_originals() {
         if !matches!(expect, Expect::RebakedKeys | Expect::Resampled) {
             for (x, y) in ra.iter().zip(&rb) {
                 for c in ["moved_triangles", "deformed_triangles"] {
-                    assert_eq!(counter(x, c), counter(y, c), "{name} frame {}: {c}", x["frame"]);
+                    assert_eq!(
+                        counter(x, c),
+                        counter(y, c),
+                        "{name} frame {}: {c}",
+                        x["frame"]
+                    );
                 }
             }
         }
         let check = |metric: &str, threshold: &str, frames: &str| {
             let report = tmp.path().join(format!("{name}-{metric}"));
-            let (ga, ub) = (subset(&ga, frames, tmp.path()), subset(&ub, frames, tmp.path()));
+            let (ga, ub) = (
+                subset(&ga, frames, tmp.path()),
+                subset(&ub, frames, tmp.path()),
+            );
             let output = mipray(&[
                 "diff",
                 ga.to_str().unwrap(),
@@ -242,7 +278,10 @@ fn subset(dir: &Path, frames: &str, tmp: &Path) -> PathBuf {
     if frames == "all" {
         return dir.to_path_buf();
     }
-    let copy = tmp.join(format!("{}-first", dir.file_name().unwrap().to_str().unwrap()));
+    let copy = tmp.join(format!(
+        "{}-first",
+        dir.file_name().unwrap().to_str().unwrap()
+    ));
     std::fs::create_dir_all(&copy).unwrap();
     std::fs::copy(dir.join("frame_0000.png"), copy.join("frame_0000.png")).unwrap();
     copy
@@ -292,17 +331,27 @@ fn a_point_cache_marks_exactly_the_changed_triangles_deformed() {
     render(&path, &out, &[]);
     let records = records(&out);
     assert_eq!(records.len(), 31);
-    let indices = [0, 1, 4, 0, 4, 3, 1, 2, 5, 1, 5, 4, 3, 4, 7, 3, 7, 6, 4, 5, 8, 4, 8, 7];
+    let indices = [
+        0, 1, 4, 0, 4, 3, 1, 2, 5, 1, 5, 4, 3, 4, 7, 3, 7, 6, 4, 5, 8, 4, 8, 7,
+    ];
     let touching = |v: u32| indices.chunks(3).filter(|t| t.contains(&v)).count() as u64;
     for r in &records[1..] {
         let frame = counter(r, "frame");
         let expected = match frame {
-            1..=10 => touching(4), // the centre: 6 triangles
+            1..=10 => touching(4),  // the centre: 6 triangles
             11..=20 => touching(8), // the corner: 2 triangles
             _ => 0,                 // held after the last sample
         };
-        assert_eq!(counter(r, "deformed_triangles"), expected, "frame {frame}: {r}");
-        assert_eq!(counter(r, "moved_triangles"), expected, "frame {frame}: {r}");
+        assert_eq!(
+            counter(r, "deformed_triangles"),
+            expected,
+            "frame {frame}: {r}"
+        );
+        assert_eq!(
+            counter(r, "moved_triangles"),
+            expected,
+            "frame {frame}: {r}"
+        );
         assert_eq!(counter(r, "nonfinite_samples"), 0);
     }
 }
@@ -346,13 +395,27 @@ def Xform "rig"
     let path = tmp.path().join("cameras.usda");
     std::fs::write(&path, stage).unwrap();
     let yfov_of = |camera: Option<&str>| {
-        let out = tmp.path().join(format!("export-{}", camera.unwrap_or("default").replace('/', "_")));
-        let mut args = vec!["export", path.to_str().unwrap(), "--frames", "0", "--out", out.to_str().unwrap()];
+        let out = tmp.path().join(format!(
+            "export-{}",
+            camera.unwrap_or("default").replace('/', "_")
+        ));
+        let mut args = vec![
+            "export",
+            path.to_str().unwrap(),
+            "--frames",
+            "0",
+            "--out",
+            out.to_str().unwrap(),
+        ];
         if let Some(c) = camera {
             args.extend(["--camera", c]);
         }
         let output = mipray(&args);
-        assert!(output.status.success(), "{}", String::from_utf8_lossy(&output.stderr));
+        assert!(
+            output.status.success(),
+            "{}",
+            String::from_utf8_lossy(&output.stderr)
+        );
         let json: Value =
             serde_json::from_str(&std::fs::read_to_string(out.join("camera_0000.json")).unwrap())
                 .unwrap();
@@ -364,10 +427,20 @@ def Xform "rig"
     assert!((yfov_of(Some("tele")) - tele).abs() < 1e-3);
     assert!((yfov_of(Some("/rig/tele")) - tele).abs() < 1e-3);
     assert!((yfov_of(Some("wide")) - wide).abs() < 1e-3);
-    let output = mipray(&["render", path.to_str().unwrap(), "--camera", "zoom", "--frames", "0"]);
+    let output = mipray(&[
+        "render",
+        path.to_str().unwrap(),
+        "--camera",
+        "zoom",
+        "--frames",
+        "0",
+    ]);
     assert_eq!(output.status.code(), Some(1));
     let stderr = String::from_utf8_lossy(&output.stderr);
-    assert!(stderr.contains("\"/wide\"") && stderr.contains("\"/rig/tele\""), "{stderr}");
+    assert!(
+        stderr.contains("\"/wide\"") && stderr.contains("\"/rig/tele\""),
+        "{stderr}"
+    );
 }
 
 /// UsdLux lights and UsdPreviewSurface materials map as `docs/src/formats-usd.md` says.
@@ -449,11 +522,14 @@ def DistantLight "Sun" { float intensity = 2  color3f color = (1, 0.5, 0.25) }
     let tmp = tempfile::tempdir().unwrap();
     let path = tmp.path().join("looks.usda");
     std::fs::write(&path, stage).unwrap();
-    image::RgbImage::from_fn(4, 4, |x, y| image::Rgb(if (x + y) % 2 == 0 { [255; 3] } else { [0; 3] }))
-        .save(tmp.path().join("checker.png"))
-        .unwrap();
+    image::RgbImage::from_fn(4, 4, |x, y| {
+        image::Rgb(if (x + y) % 2 == 0 { [255; 3] } else { [0; 3] })
+    })
+    .save(tmp.path().join("checker.png"))
+    .unwrap();
     let scene = mipray::scene::load(&path).unwrap();
-    let material = |mesh: usize| &scene.materials[scene.meshes[mesh].primitives[0].material.unwrap()];
+    let material =
+        |mesh: usize| &scene.materials[scene.meshes[mesh].primitives[0].material.unwrap()];
     let glass = material(0);
     assert_eq!(glass.transmission, 0.75);
     assert_eq!(glass.ior, 1.33);
@@ -464,11 +540,19 @@ def DistantLight "Sun" { float intensity = 2  color3f color = (1, 0.5, 0.25) }
     let texture = &scene.textures[textured.base_color_texture.unwrap()];
     assert_eq!(texture.sampler.wrap_s, WrapMode::MirroredRepeat);
     assert_eq!(texture.sampler.wrap_t, WrapMode::ClampToEdge);
-    assert_eq!(textured.base_color, glam::Vec3::splat(0.5), "the texture's scale");
+    assert_eq!(
+        textured.base_color,
+        glam::Vec3::splat(0.5),
+        "the texture's scale"
+    );
     // The uvs come from primvar uv1, t flipped to v.
     let uvs = scene.meshes[1].primitives[0].uvs.as_ref().unwrap();
     assert_eq!(uvs[0], glam::Vec2::new(0.0, 1.0));
-    assert!(scene.notes.iter().any(|n| n.contains("'black' wrap")), "{:?}", scene.notes);
+    assert!(
+        scene.notes.iter().any(|n| n.contains("'black' wrap")),
+        "{:?}",
+        scene.notes
+    );
     // Lights: radii and sizes in metres (metersPerUnit 0.5).
     let light = |name: &str| {
         let node = scene.nodes.iter().find(|n| n.name == name).unwrap();
@@ -479,11 +563,19 @@ def DistantLight "Sun" { float intensity = 2  color3f color = (1, 0.5, 0.25) }
     assert_eq!(bulb.kind, LightKind::Point);
     assert!((bulb.intensity - 20.0 * pi * 1.0).abs() < 1e-4, "{bulb:?}");
     let panel = light("/Panel");
-    assert!(matches!(panel.kind, LightKind::Spot { outer_cone, .. } if (outer_cone - pi / 2.0).abs() < 1e-6));
-    assert!((panel.intensity - 3.0 * 1.0 * 2.0).abs() < 1e-5, "{panel:?}");
+    assert!(
+        matches!(panel.kind, LightKind::Spot { outer_cone, .. } if (outer_cone - pi / 2.0).abs() < 1e-6)
+    );
+    assert!(
+        (panel.intensity - 3.0 * 1.0 * 2.0).abs() < 1e-5,
+        "{panel:?}"
+    );
     let spot = light("/Spot");
     match spot.kind {
-        LightKind::Spot { inner_cone, outer_cone } => {
+        LightKind::Spot {
+            inner_cone,
+            outer_cone,
+        } => {
             assert!((outer_cone - 30f32.to_radians()).abs() < 1e-6);
             assert!((inner_cone - 15f32.to_radians()).abs() < 1e-6);
         }

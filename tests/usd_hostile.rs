@@ -87,7 +87,10 @@ fn damaged() -> Vec<(&'static str, Vec<u8>)> {
     let mut toc = valid.clone();
     put_u64(&mut toc, 16, valid.len() as u64 + 1000);
     out.push(("usd_crate_toc_outside.usdc", toc));
-    out.push(("usd_crate_truncated.usdc", valid[..valid.len() / 2].to_vec()));
+    out.push((
+        "usd_crate_truncated.usdc",
+        valid[..valid.len() / 2].to_vec(),
+    ));
     let mut old = valid.clone();
     old[8..11].copy_from_slice(&[0, 3, 0]);
     out.push(("usd_crate_version_old.usdc", old));
@@ -114,7 +117,10 @@ fn the_committed_crate_fixtures_are_the_damaged_valid_file() {
     assert_eq!(scene.instanced_triangle_count(), 1);
     for (name, bytes) in damaged() {
         let committed = std::fs::read(hostile_dir().join(name)).unwrap_or_default();
-        assert_eq!(committed, bytes, "{name} differs from what write_crate_fixtures writes");
+        assert_eq!(
+            committed, bytes,
+            "{name} differs from what write_crate_fixtures writes"
+        );
         let path = tmp.path().join(name);
         std::fs::write(&path, &bytes).unwrap();
         let error = mipray::scene::load(&path).unwrap_err().to_string();

@@ -106,7 +106,12 @@ fn check(scene_path: &Path, prims: &[&str], times: &[f64]) {
                 .iter()
                 .fold(0.0f64, |m, x| m.max(x.abs()));
             assert!(
-                error < 2e-4 * theirs.to_cols_array().iter().fold(1.0f64, |m, x| m.max(x.abs())),
+                error
+                    < 2e-4
+                        * theirs
+                            .to_cols_array()
+                            .iter()
+                            .fold(1.0f64, |m, x| m.max(x.abs())),
                 "{prim} at time code {time}: ours {ours} vs openusd {theirs} (error {error})"
             );
         }
@@ -132,7 +137,10 @@ fn an_animated_matrix_op_is_exact_at_its_samples() {
     check(&path, &["/A/E"], &[0.0, 6.0, 10.0]);
     let scene = mipray::scene::load(&path).unwrap();
     assert!(
-        scene.notes.iter().any(|n| n.contains("/A/E.xformOp:transform")),
+        scene
+            .notes
+            .iter()
+            .any(|n| n.contains("/A/E.xformOp:transform")),
         "{:?}",
         scene.notes
     );
@@ -160,13 +168,11 @@ def Xform "R"
     std::fs::write(&path, stage).unwrap();
     let scene = mipray::scene::load(&path).unwrap();
     let node = scene.nodes.iter().position(|n| n.name == "/R").unwrap();
-    let shape = |t: f32| {
-        mipray::anim::node_shapes(&scene, mipray::anim::AnimationSelection::All, t)[node]
-    };
+    let shape =
+        |t: f32| mipray::anim::node_shapes(&scene, mipray::anim::AnimationSelection::All, t)[node];
     let first = shape(0.0).expect("a similarity");
     assert_eq!(first.scale, 2.0);
     for k in 1..=24 {
         assert_eq!(shape(k as f32 / 24.0), Some(first), "time code {k}");
     }
 }
-

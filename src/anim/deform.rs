@@ -150,11 +150,18 @@ fn sample_point_cache(
     normals.clear();
     let count = desc.positions.len();
     let last = cache.positions.len().saturating_sub(1);
-    let s = if s.is_nan() { 0.0 } else { s.clamp(0.0, last as f32) };
+    let s = if s.is_nan() {
+        0.0
+    } else {
+        s.clamp(0.0, last as f32)
+    };
     let k = (s.floor() as usize).min(last);
     let u = s - k as f32;
     fn sample(samples: &[Vec<Vec3>], i: usize, count: usize) -> Option<&[Vec3]> {
-        samples.get(i).map(Vec::as_slice).filter(|v| v.len() == count)
+        samples
+            .get(i)
+            .map(Vec::as_slice)
+            .filter(|v| v.len() == count)
     }
     let (Some(a), b) = (
         sample(&cache.positions, k, count),
@@ -548,7 +555,10 @@ mod tests {
         for s in [0.1f32, 0.33, 0.9, 1.0, 1.4] {
             let p = at(s);
             // Vertex 1 never moves: the same bits at every position.
-            assert_eq!(p[1].to_array().map(f32::to_bits), moved.to_array().map(f32::to_bits));
+            assert_eq!(
+                p[1].to_array().map(f32::to_bits),
+                moved.to_array().map(f32::to_bits)
+            );
         }
         // Between samples 1 and 2 vertex 2 does not move, vertex 0 does.
         assert_eq!(at(1.3)[2], at(1.8)[2]);

@@ -26,7 +26,10 @@ pub fn info(args: &InfoArgs) -> Result<()> {
 }
 
 fn is_usd(path: &std::path::Path) -> bool {
-    let ext = path.extension().and_then(|e| e.to_str()).map(str::to_ascii_lowercase);
+    let ext = path
+        .extension()
+        .and_then(|e| e.to_str())
+        .map(str::to_ascii_lowercase);
     matches!(ext.as_deref(), Some("usda" | "usdc" | "usdz" | "usd"))
 }
 
@@ -40,14 +43,22 @@ pub fn describe_stage(m: &crate::scene::usd::StageMetadata) -> String {
         "upAxis: {} ({}){}",
         m.up_axis,
         authored(m.up_axis_authored),
-        if m.up_axis == "Z" { "; turned Y-up for rendering" } else { "" }
+        if m.up_axis == "Z" {
+            "; turned Y-up for rendering"
+        } else {
+            ""
+        }
     );
     let _ = writeln!(
         s,
         "metersPerUnit: {} ({}){}",
         m.meters_per_unit,
         authored(m.meters_per_unit_authored),
-        if m.meters_per_unit != 1.0 { "; scaled to metres for rendering" } else { "" }
+        if m.meters_per_unit != 1.0 {
+            "; scaled to metres for rendering"
+        } else {
+            ""
+        }
     );
     let range = match m.time_code_range {
         Some((start, end)) => format!("startTimeCode {start}, endTimeCode {end}"),

@@ -19,9 +19,14 @@ const NEAR: f32 = 1.0;
 pub(super) fn add(b: &mut Builder, prim: &Prim, node: usize) -> Result<(), String> {
     let path = prim.path().as_str().to_string();
     let reader = &b.reader;
-    let projection = reader.default_value(prim, "projection")?.as_ref().and_then(token);
+    let projection = reader
+        .default_value(prim, "projection")?
+        .as_ref()
+        .and_then(token);
     if projection.as_deref() == Some("orthographic") {
-        b.notes.push(format!("{path}: orthographic cameras are not supported; skipped"));
+        b.notes.push(format!(
+            "{path}: orthographic cameras are not supported; skipped"
+        ));
         return Ok(());
     }
     let mut number = |name: &str, fallback: f64| -> Result<f64, String> {
@@ -47,9 +52,17 @@ pub(super) fn add(b: &mut Builder, prim: &Prim, node: usize) -> Result<(), Strin
             "{path}: focalLength {focal} and verticalAperture {vertical} give no usable field of view"
         ));
     }
-    let znear = match reader.static_value(prim, "clippingRange")?.as_ref().and_then(vec2) {
+    let znear = match reader
+        .static_value(prim, "clippingRange")?
+        .as_ref()
+        .and_then(vec2)
+    {
         Some(range) if range.x.is_finite() && range.x > 0.0 => range.x,
-        Some(_) => return Err(format!("{path}.clippingRange must start at a positive distance")),
+        Some(_) => {
+            return Err(format!(
+                "{path}.clippingRange must start at a positive distance"
+            ));
+        }
         None => NEAR,
     };
     b.cameras.push(CameraDesc { yfov, znear });

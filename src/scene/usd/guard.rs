@@ -98,8 +98,9 @@ impl Resolver for CheckingResolver {
     fn open_asset(&self, resolved_path: &ResolvedPath) -> io::Result<Box<dyn Asset>> {
         let mut asset = self.0.open_asset(resolved_path)?;
         let bytes = asset.read_all()?;
-        check_bytes(&bytes)
-            .map_err(|e| io::Error::new(io::ErrorKind::InvalidData, format!("{resolved_path}: {e}")))?;
+        check_bytes(&bytes).map_err(|e| {
+            io::Error::new(io::ErrorKind::InvalidData, format!("{resolved_path}: {e}"))
+        })?;
         Ok(Box::new(Cursor::new(bytes)))
     }
     fn identity(&self) -> String {
@@ -167,13 +168,20 @@ fn check_package(bytes: &[u8]) -> Result<(), String> {
     const END: [u8; 4] = [0x50, 0x4b, 0x05, 0x06];
     const ENTRY: [u8; 4] = [0x50, 0x4b, 0x01, 0x02];
     const LOCAL: [u8; 4] = [0x50, 0x4b, 0x03, 0x04];
-    let truncated = || "the .usdz package is truncated or not a ZIP archive (no end of central directory)".to_string();
+    let truncated = || {
+        "the .usdz package is truncated or not a ZIP archive (no end of central directory)"
+            .to_string()
+    };
     let search_from = bytes.len().saturating_sub(22 + 65535);
     let end = (search_from..=bytes.len().saturating_sub(22))
         .rev()
         .find(|&i| bytes[i..i + 4] == END)
         .ok_or_else(truncated)?;
-    let u16_at = |i: usize| bytes.get(i..i + 2).map(|b| u16::from_le_bytes([b[0], b[1]]) as u64);
+    let u16_at = |i: usize| {
+        bytes
+            .get(i..i + 2)
+            .map(|b| u16::from_le_bytes([b[0], b[1]]) as u64)
+    };
     let u32_at = |i: usize| {
         bytes
             .get(i..i + 4)
@@ -189,7 +197,8 @@ fn check_package(bytes: &[u8]) -> Result<(), String> {
     }
     let mut at = directory as usize;
     for k in 0..entries {
-        let bad = |what: &str| format!("the .usdz package's entry {k} {what}: the package is corrupt");
+        let bad =
+            |what: &str| format!("the .usdz package's entry {k} {what}: the package is corrupt");
         if bytes.get(at..at + 4) != Some(&ENTRY[..]) {
             return Err(bad("is not where the central directory says"));
         }
@@ -210,7 +219,9 @@ fn check_package(bytes: &[u8]) -> Result<(), String> {
             ));
         }
         if bytes.get(local..local + 4) != Some(&LOCAL[..]) {
-            return Err(format!("the .usdz package's file '{name}' has no local header where the directory says: the package is corrupt"));
+            return Err(format!(
+                "the .usdz package's file '{name}' has no local header where the directory says: the package is corrupt"
+            ));
         }
         let local_name = u16_at(local + 26).unwrap_or(0) as usize;
         let local_extra = u16_at(local + 28).unwrap_or(0) as usize;
@@ -232,20 +243,32 @@ struct Bytes<'a> {
 
 impl Bytes<'_> {
     fn u64_at(&self, at: u64) -> Result<u64, String> {
-        let at = usize::try_from(at).map_err(|_| "an offset past the end of the file".to_string())?;
+        let at =
+            usize::try_from(at).map_err(|_| "an offset past the end of the file".to_string())?;
         self.bytes
             .get(at..at.saturating_add(8))
             .and_then(|b| b.try_into().ok())
             .map(u64::from_le_bytes)
-            .ok_or_else(|| format!("a read at byte {at} runs past the end of the file ({} bytes)", self.bytes.len()))
+            .ok_or_else(|| {
+                format!(
+                    "a read at byte {at} runs past the end of the file ({} bytes)",
+                    self.bytes.len()
+                )
+            })
     }
     fn u32_at(&self, at: u64) -> Result<u64, String> {
-        let at = usize::try_from(at).map_err(|_| "an offset past the end of the file".to_string())?;
+        let at =
+            usize::try_from(at).map_err(|_| "an offset past the end of the file".to_string())?;
         self.bytes
             .get(at..at.saturating_add(4))
             .and_then(|b| b.try_into().ok())
             .map(|b| u32::from_le_bytes(b) as u64)
-            .ok_or_else(|| format!("a read at byte {at} runs past the end of the file ({} bytes)", self.bytes.len()))
+            .ok_or_else(|| {
+                format!(
+                    "a read at byte {at} runs past the end of the file ({} bytes)",
+                    self.bytes.len()
+                )
+            })
     }
     fn len(&self) -> u64 {
         self.bytes.len() as u64
@@ -258,7 +281,8 @@ fn check_crate(bytes: &[u8]) -> Result<(), String> {
     let corrupt = |e: String| format!("corrupt crate (.usdc) file: {e}");
     check_crate_structure(&file).map_err(corrupt)?;
     let crate_file = without_panics(|| {
-        CrateFile::open(Cursor::new(bytes)).map_err(|e| format!("corrupt crate (.usdc) file: {e:#}"))
+        CrateFile::open(Cursor::new(bytes))
+            .map_err(|e| format!("corrupt crate (.usdc) file: {e:#}"))
     })?;
     let v = crate_file.version();
     let values = Values {
@@ -274,7 +298,9 @@ fn check_crate(bytes: &[u8]) -> Result<(), String> {
     }
     for path in &crate_file.paths {
         if path.as_str().matches('/').count() > MAX_DEPTH {
-            return Err(corrupt(format!("a path nests more than {MAX_DEPTH} prims deep")));
+            return Err(corrupt(format!(
+                "a path nests more than {MAX_DEPTH} prims deep"
+            )));
         }
     }
     Ok(())
@@ -284,33 +310,48 @@ fn check_crate(bytes: &[u8]) -> Result<(), String> {
 /// `openusd` allocates when it opens the file).
 fn check_crate_structure(file: &Bytes) -> Result<(), String> {
     if file.len() < 88 {
-        return Err(format!("{} bytes, shorter than the 88-byte header", file.len()));
+        return Err(format!(
+            "{} bytes, shorter than the 88-byte header",
+            file.len()
+        ));
     }
     let b = file.bytes;
     if b[8] == 0 && b[9] < 4 {
-        return Err(format!("version 0.{}.{} is older than this reader supports (0.4.0)", b[9], b[10]));
+        return Err(format!(
+            "version 0.{}.{} is older than this reader supports (0.4.0)",
+            b[9], b[10]
+        ));
     }
     let toc = file.u64_at(16)?;
     let sections = file.u64_at(toc)?;
     if sections == 0 || sections >= 64 || toc + 8 + sections * 32 > file.len() {
-        return Err(format!("the table of contents declares {sections} sections that do not fit the file"));
+        return Err(format!(
+            "the table of contents declares {sections} sections that do not fit the file"
+        ));
     }
     for s in 0..sections {
         let at = toc + 8 + s * 32;
         let name_bytes = &b[at as usize..at as usize + 16];
-        let name = String::from_utf8_lossy(name_bytes.split(|&c| c == 0).next().unwrap_or(&[])).to_string();
+        let name = String::from_utf8_lossy(name_bytes.split(|&c| c == 0).next().unwrap_or(&[]))
+            .to_string();
         let start = file.u64_at(at + 16)?;
         let size = file.u64_at(at + 24)?;
         let end = start.checked_add(size).filter(|&e| e <= file.len()).ok_or_else(|| {
             format!("section {name} ({size} bytes at {start}) runs past the end of the file ({} bytes)", file.len())
         })?;
-        let section = Section { file, name: &name, end };
+        let section = Section {
+            file,
+            name: &name,
+            end,
+        };
         match name.as_str() {
             "TOKENS" => {
                 let count = file.u64_at(start)?;
                 let uncompressed = file.u64_at(start + 8)?;
                 let compressed = section.compressed(start + 16)?;
-                if uncompressed > compressed.saturating_mul(LZ4_RATIO) + 64 || count > uncompressed + 1 {
+                if uncompressed > compressed.saturating_mul(LZ4_RATIO) + 64
+                    || count > uncompressed + 1
+                {
                     return Err(format!(
                         "section TOKENS declares {count} tokens in {uncompressed} bytes, more than its {compressed} compressed bytes hold"
                     ));
@@ -325,7 +366,9 @@ fn check_crate_structure(file: &Bytes) -> Result<(), String> {
                 let next = section.encoded_ints(count, start + 8, "field names")?;
                 let reps = section.compressed(next)?;
                 if count.saturating_mul(8) > reps.saturating_mul(LZ4_RATIO) + 64 {
-                    return Err(format!("section FIELDS declares {count} values, more than {reps} compressed bytes hold"));
+                    return Err(format!(
+                        "section FIELDS declares {count} values, more than {reps} compressed bytes hold"
+                    ));
                 }
             }
             "FIELDSETS" => {
@@ -340,7 +383,9 @@ fn check_crate_structure(file: &Bytes) -> Result<(), String> {
                     at = section.encoded_ints(encoded, at, what)?;
                 }
                 if count > encoded.saturating_mul(2) + 1 {
-                    return Err(format!("section PATHS declares {count} paths but encodes {encoded}"));
+                    return Err(format!(
+                        "section PATHS declares {count} paths but encodes {encoded}"
+                    ));
                 }
             }
             "SPECS" => {
@@ -448,19 +493,28 @@ mod ty {
 /// fixed size: the most permissive bound).
 fn element_size(t: u64) -> u64 {
     match t {
-        1 | 2 => 1,                        // bool, uchar
-        3 | 4 | 8 => 4,                    // int, uint, float
-        5 | 6 | 9 | ty::TIME_CODE => 8,    // int64, uint64, double, time code
-        7 => 2,                            // half
-        13 => 32,                          // matrix2d
-        14 => 72,                          // matrix3d
-        15 => 128,                         // matrix4d
-        16 => 32,                          // quatd
-        17 => 16,                          // quatf
-        18 => 8,                           // quath
-        19 => 16, 20 => 8, 21 => 4, 22 => 8,   // vec2 d f h i
-        23 => 24, 24 => 12, 25 => 6, 26 => 12, // vec3 d f h i
-        27 => 32, 28 => 16, 29 => 8, 30 => 16, // vec4 d f h i
+        1 | 2 => 1,                     // bool, uchar
+        3 | 4 | 8 => 4,                 // int, uint, float
+        5 | 6 | 9 | ty::TIME_CODE => 8, // int64, uint64, double, time code
+        7 => 2,                         // half
+        13 => 32,                       // matrix2d
+        14 => 72,                       // matrix3d
+        15 => 128,                      // matrix4d
+        16 => 32,                       // quatd
+        17 => 16,                       // quatf
+        18 => 8,                        // quath
+        19 => 16,
+        20 => 8,
+        21 => 4,
+        22 => 8, // vec2 d f h i
+        23 => 24,
+        24 => 12,
+        25 => 6,
+        26 => 12, // vec3 d f h i
+        27 => 32,
+        28 => 16,
+        29 => 8,
+        30 => 16, // vec4 d f h i
         _ => 1,
     }
 }
@@ -512,7 +566,11 @@ impl Values<'_> {
                 let limit = if rep & COMPRESSED != 0 {
                     (remaining(at).saturating_mul(LZ4_RATIO) + 64).saturating_mul(INTS_PER_BYTE)
                 } else {
-                    let element = if t == ty::DOUBLE_VECTOR { 8 } else { element_size(t) };
+                    let element = if t == ty::DOUBLE_VECTOR {
+                        8
+                    } else {
+                        element_size(t)
+                    };
                     remaining(at) / element
                 };
                 if count > limit {
@@ -581,7 +639,9 @@ impl Values<'_> {
         let count = self.file.u64_at(at)?;
         let room = self.file.len().saturating_sub(at + 8);
         if count.saturating_mul(size) > room {
-            return Err(format!("a list at byte {at} declares {count} elements, more than the {room} bytes after it hold"));
+            return Err(format!(
+                "a list at byte {at} declares {count} elements, more than the {room} bytes after it hold"
+            ));
         }
         Ok(count)
     }
@@ -601,7 +661,9 @@ impl Values<'_> {
     /// returns where the stream continues.
     fn dictionary(&self, at: u64, depth: usize) -> Result<u64, String> {
         if depth > MAX_DEPTH {
-            return Err(format!("dictionaries nest more than {MAX_DEPTH} levels deep"));
+            return Err(format!(
+                "dictionaries nest more than {MAX_DEPTH} levels deep"
+            ));
         }
         let count = self.indices(at, 12)?;
         let mut at = at + 8;

@@ -78,7 +78,9 @@ pub(super) fn add(b: &mut Builder, prim: &Prim, node: usize) -> Result<(), Strin
         ));
     }
     if animated {
-        b.notes.push(format!("{path}: animated light inputs are not supported; their first values hold"));
+        b.notes.push(format!(
+            "{path}: animated light inputs are not supported; their first values hold"
+        ));
     }
     let area = |a: f32| if normalize { 1.0 } else { a };
     let shaped = (cone < 90.0).then(|| {
@@ -89,13 +91,22 @@ pub(super) fn add(b: &mut Builder, prim: &Prim, node: usize) -> Result<(), Strin
         }
     });
     let (kind, intensity) = match type_name.as_str() {
-        "SphereLight" => (shaped.unwrap_or(LightKind::Point), radiance * area(PI * radius * radius)),
+        "SphereLight" => (
+            shaped.unwrap_or(LightKind::Point),
+            radiance * area(PI * radius * radius),
+        ),
         "DiskLight" => (
-            shaped.unwrap_or(LightKind::Spot { inner_cone: 0.0, outer_cone: FRAC_PI_2 }),
+            shaped.unwrap_or(LightKind::Spot {
+                inner_cone: 0.0,
+                outer_cone: FRAC_PI_2,
+            }),
             radiance * area(PI * radius * radius),
         ),
         "RectLight" => (
-            shaped.unwrap_or(LightKind::Spot { inner_cone: 0.0, outer_cone: FRAC_PI_2 }),
+            shaped.unwrap_or(LightKind::Spot {
+                inner_cone: 0.0,
+                outer_cone: FRAC_PI_2,
+            }),
             radiance * area(width * height),
         ),
         "CylinderLight" => (LightKind::Point, radiance * area(2.0 * radius * length)),
@@ -108,14 +119,19 @@ pub(super) fn add(b: &mut Builder, prim: &Prim, node: usize) -> Result<(), Strin
             return Ok(());
         }
         other => {
-            b.notes.push(format!("{path}: {other} is not supported; ignored"));
+            b.notes
+                .push(format!("{path}: {other} is not supported; ignored"));
             return Ok(());
         }
     };
     if type_name != "DistantLight" {
         b.notes.push(format!(
             "{path}: {type_name} rendered as a {} light at its centre (hard shadows)",
-            if matches!(kind, LightKind::Spot { .. }) { "spot" } else { "point" }
+            if matches!(kind, LightKind::Spot { .. }) {
+                "spot"
+            } else {
+                "point"
+            }
         ));
     }
     if !intensity.is_finite() {

@@ -93,12 +93,27 @@ impl Ignored {
                 notes.push(format!("{n} material(s) {what}"));
             }
         };
-        note(self.maps, "have textures on inputs other than diffuseColor (normal, roughness, metallic, occlusion, ...), which are ignored (values only)");
+        note(
+            self.maps,
+            "have textures on inputs other than diffuseColor (normal, roughness, metallic, occlusion, ...), which are ignored (values only)",
+        );
         note(self.emissive, "have an emissive colour, which is ignored");
-        note(self.cutout, "use opacityThreshold (a cut-out mask), which is ignored (rendered opaque)");
-        note(self.bias, "have a texture bias, which is ignored (the scale is applied)");
-        note(self.black_wrap, "use the 'black' wrap mode, approximated by clamping to the edge");
-        note(self.other_shaders, "use a surface shader other than UsdPreviewSurface; rendered with the default material");
+        note(
+            self.cutout,
+            "use opacityThreshold (a cut-out mask), which is ignored (rendered opaque)",
+        );
+        note(
+            self.bias,
+            "have a texture bias, which is ignored (the scale is applied)",
+        );
+        note(
+            self.black_wrap,
+            "use the 'black' wrap mode, approximated by clamping to the edge",
+        );
+        note(
+            self.other_shaders,
+            "use a surface shader other than UsdPreviewSurface; rendered with the default material",
+        );
     }
 }
 
@@ -177,8 +192,7 @@ impl Materials {
                 desc.base_color = color(&v, &shader, "inputs:diffuseColor")?;
             }
             Input::Connected(source, output) => {
-                let (texture, read, scale) =
-                    self.texture(reader, &source, &output, ignored)?;
+                let (texture, read, scale) = self.texture(reader, &source, &output, ignored)?;
                 desc.base_color_texture = Some(texture);
                 desc.base_color = scale;
                 uv = Some(read);
@@ -189,12 +203,18 @@ impl Materials {
             match input(name)? {
                 Input::Value(v) => {
                     let x = scalar(&v).ok_or_else(|| {
-                        format!("{}: expected a float", attr_path(&shader, &format!("inputs:{name}")))
+                        format!(
+                            "{}: expected a float",
+                            attr_path(&shader, &format!("inputs:{name}"))
+                        )
                     })? as f32;
                     if x.is_finite() {
                         Ok(x)
                     } else {
-                        Err(format!("{}: not finite", attr_path(&shader, &format!("inputs:{name}"))))
+                        Err(format!(
+                            "{}: not finite",
+                            attr_path(&shader, &format!("inputs:{name}"))
+                        ))
                     }
                 }
                 Input::Connected(..) => {
@@ -209,7 +229,13 @@ impl Materials {
         let opacity = float("opacity", 1.0)?.clamp(0.0, 1.0);
         let threshold = float("opacityThreshold", 0.0)?;
         let ior = float("ior", 1.5)?;
-        for map in ["normal", "occlusion", "displacement", "clearcoat", "specularColor"] {
+        for map in [
+            "normal",
+            "occlusion",
+            "displacement",
+            "clearcoat",
+            "specularColor",
+        ] {
             if matches!(input(map)?, Input::Connected(..)) {
                 ignored.maps += 1;
             }
@@ -231,7 +257,11 @@ impl Materials {
                 desc.transmission = 1.0 - opacity;
             }
         }
-        desc.ior = if ior == 0.0 { MAX_IOR } else { ior.clamp(1.0, MAX_IOR) };
+        desc.ior = if ior == 0.0 {
+            MAX_IOR
+        } else {
+            ior.clamp(1.0, MAX_IOR)
+        };
         self.materials.push(desc);
         Ok(Bound {
             index: self.materials.len() - 1,
@@ -263,9 +293,10 @@ impl Materials {
             Input::Value(Value::AssetPath(a)) => a,
             _ => return Err(format!("{path}: inputs:file is not an asset path")),
         };
-        let resolved = file.resolved_path().map(str::to_string).ok_or_else(|| {
-            format!("{path}: texture file '{}' not found", file.asset_path())
-        })?;
+        let resolved = file
+            .resolved_path()
+            .map(str::to_string)
+            .ok_or_else(|| format!("{path}: texture file '{}' not found", file.asset_path()))?;
         let raw = matches!(
             shader_input(reader, shader, "sourceColorSpace")?,
             Input::Value(v) if token(&v).as_deref() == Some("raw")
@@ -281,7 +312,10 @@ impl Materials {
                         WrapMode::ClampToEdge
                     }
                     Some(other) => {
-                        return Err(format!("{}: unknown wrap mode '{other}'", attr_path(shader, &format!("inputs:{name}"))));
+                        return Err(format!(
+                            "{}: unknown wrap mode '{other}'",
+                            attr_path(shader, &format!("inputs:{name}"))
+                        ));
                     }
                 },
                 _ => WrapMode::Repeat,
@@ -293,10 +327,17 @@ impl Materials {
         };
         let scale = match shader_input(reader, shader, "scale")? {
             Input::Value(v) => {
-                let s = vec4(&v).map(|s| Vec3::new(s[0], s[1], s[2])).or_else(|| vec3_or_4(&v));
+                let s = vec4(&v)
+                    .map(|s| Vec3::new(s[0], s[1], s[2]))
+                    .or_else(|| vec3_or_4(&v));
                 match s {
                     Some(s) if s.is_finite() => s.max(Vec3::ZERO),
-                    _ => return Err(format!("{}: expected a finite float4", attr_path(shader, "inputs:scale"))),
+                    _ => {
+                        return Err(format!(
+                            "{}: expected a finite float4",
+                            attr_path(shader, "inputs:scale")
+                        ));
+                    }
                 }
             }
             _ => Vec3::ONE,
@@ -333,7 +374,10 @@ impl Materials {
             return Ok(i);
         }
         let (pyramid, name) = match self.by_image.get(&(resolved.to_string(), raw)) {
-            Some(&i) => (self.textures[i].pyramid.clone(), self.textures[i].name.clone()),
+            Some(&i) => (
+                self.textures[i].pyramid.clone(),
+                self.textures[i].name.clone(),
+            ),
             None => decode(resolved, raw, shader)?,
         };
         self.textures.push(Texture {
@@ -342,7 +386,9 @@ impl Materials {
             sampler,
         });
         let index = self.textures.len() - 1;
-        self.by_image.entry((resolved.to_string(), raw)).or_insert(index);
+        self.by_image
+            .entry((resolved.to_string(), raw))
+            .or_insert(index);
         self.by_texture.insert(key, index);
         Ok(index)
     }
@@ -360,10 +406,15 @@ fn decode(resolved: &str, raw: bool, shader: &str) -> Result<(MipPyramid, String
             Ok(bytes)
         })
         .map_err(|e| format!("{what}: cannot read it: {e}"))?;
-    let encoding = if raw { ColorEncoding::Linear } else { ColorEncoding::Srgb };
+    let encoding = if raw {
+        ColorEncoding::Linear
+    } else {
+        ColorEncoding::Srgb
+    };
     let (width, height, texels) =
         decode_texels(&bytes, encoding).map_err(|e| format!("{what}: {e}"))?;
-    let pyramid = MipPyramid::from_linear_rgba(width, height, texels).map_err(|e| format!("{what}: {e}"))?;
+    let pyramid =
+        MipPyramid::from_linear_rgba(width, height, texels).map_err(|e| format!("{what}: {e}"))?;
     let name = resolved
         .rsplit(['/', '['])
         .next()
@@ -390,7 +441,10 @@ fn preview_defaults() -> MaterialDesc {
 fn color(v: &Value, shader: &Prim, input: &str) -> Result<Vec3, String> {
     match vec3_or_4(v) {
         Some(c) if c.is_finite() => Ok(c.max(Vec3::ZERO)),
-        _ => Err(format!("{}: expected a finite colour", attr_path(shader, input))),
+        _ => Err(format!(
+            "{}: expected a finite colour",
+            attr_path(shader, input)
+        )),
     }
 }
 
@@ -429,7 +483,10 @@ fn prim_exists(stage: &Stage, path: &sdf::Path) -> bool {
 /// `UsdPreviewSurface`.
 fn surface_shader(reader: &Reader, material: &Prim) -> Result<Option<Prim>, String> {
     let stage = reader.stage;
-    let mut attr = material.path().append_property("outputs:surface").map_err(|e| e.to_string())?;
+    let mut attr = material
+        .path()
+        .append_property("outputs:surface")
+        .map_err(|e| e.to_string())?;
     for _ in 0..MAX_CONNECTION_HOPS {
         let connections = stage
             .attribute(attr.clone())
@@ -440,7 +497,11 @@ fn surface_shader(reader: &Reader, material: &Prim) -> Result<Option<Prim>, Stri
         };
         let prim = stage.prim(source.prim_path());
         if !prim.is_valid().unwrap_or(false) {
-            return Err(format!("{}: connected to {}, which does not exist", attr.as_str(), source.as_str()));
+            return Err(format!(
+                "{}: connected to {}, which does not exist",
+                attr.as_str(),
+                source.as_str()
+            ));
         }
         match info_id(reader, &prim)?.as_deref() {
             Some("UsdPreviewSurface") => return Ok(Some(prim)),
@@ -449,11 +510,17 @@ fn surface_shader(reader: &Reader, material: &Prim) -> Result<Option<Prim>, Stri
             None => attr = source,
         }
     }
-    Err(format!("{}: connections loop or nest too deeply", material.path().as_str()))
+    Err(format!(
+        "{}: connections loop or nest too deeply",
+        material.path().as_str()
+    ))
 }
 
 fn info_id(reader: &Reader, shader: &Prim) -> Result<Option<String>, String> {
-    Ok(reader.default_value(shader, "info:id")?.as_ref().and_then(token))
+    Ok(reader
+        .default_value(shader, "info:id")?
+        .as_ref()
+        .and_then(token))
 }
 
 /// A shader input: a value, a connection to another shader's output, or nothing.
@@ -501,7 +568,10 @@ fn shader_input(reader: &Reader, shader: &Prim, name: &str) -> Result<Input, Str
             }
         }
     }
-    Err(format!("{}: connections loop or nest too deeply", attr_path(shader, &format!("inputs:{name}"))))
+    Err(format!(
+        "{}: connections loop or nest too deeply",
+        attr_path(shader, &format!("inputs:{name}"))
+    ))
 }
 
 /// How a `UsdUVTexture` reads its uvs: the primvar reader's `varname` (default `st`), and
@@ -518,7 +588,10 @@ fn uv_read(reader: &Reader, texture: &Prim) -> Result<UvRead, String> {
         let get2 = |name: &str, default: Vec2| -> Result<Vec2, String> {
             Ok(match shader_input(reader, &source, name)? {
                 Input::Value(v) => vec2(&v).filter(|v| v.is_finite()).ok_or_else(|| {
-                    format!("{}: expected a finite float2", attr_path(&source, &format!("inputs:{name}")))
+                    format!(
+                        "{}: expected a finite float2",
+                        attr_path(&source, &format!("inputs:{name}"))
+                    )
                 })?,
                 _ => default,
             })
@@ -526,7 +599,10 @@ fn uv_read(reader: &Reader, texture: &Prim) -> Result<UvRead, String> {
         let scale = get2("scale", Vec2::ONE)?;
         let translation = get2("translation", Vec2::ZERO)?;
         let rotation = match shader_input(reader, &source, "rotation")? {
-            Input::Value(v) => scalar(&v).map(|x| x as f32).filter(|x| x.is_finite()).unwrap_or(0.0),
+            Input::Value(v) => scalar(&v)
+                .map(|x| x as f32)
+                .filter(|x| x.is_finite())
+                .unwrap_or(0.0),
             _ => 0.0,
         };
         read.transform = Some((scale, rotation, translation));
@@ -535,7 +611,10 @@ fn uv_read(reader: &Reader, texture: &Prim) -> Result<UvRead, String> {
             _ => return Ok(read),
         }
     }
-    if info_id(reader, &source)?.as_deref().is_some_and(|id| id.starts_with("UsdPrimvarReader")) {
+    if info_id(reader, &source)?
+        .as_deref()
+        .is_some_and(|id| id.starts_with("UsdPrimvarReader"))
+    {
         if let Input::Value(v) = shader_input(reader, &source, "varname")?
             && let Some(name) = token(&v)
         {

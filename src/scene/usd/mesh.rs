@@ -18,9 +18,7 @@ use glam::{Vec2, Vec3};
 use openusd::sdf::Value;
 use openusd::usd::Prim;
 
-use super::values::{
-    Reader, attr_path, colors, first_nonfinite, ints, token, vec2s, vec3s,
-};
+use super::values::{Reader, attr_path, colors, first_nonfinite, ints, token, vec2s, vec3s};
 use crate::scene::PointCacheDesc;
 
 /// How a primvar's elements map onto the mesh.
@@ -75,9 +73,8 @@ pub(super) fn topology(
 ) -> Result<Topology, String> {
     let path = prim.path().as_str();
     let points = match reader.static_value(prim, "points")? {
-        Some(v) => vec3s(&v).ok_or_else(|| {
-            format!("{}: expected point3f[] values", attr_path(prim, "points"))
-        })?,
+        Some(v) => vec3s(&v)
+            .ok_or_else(|| format!("{}: expected point3f[] values", attr_path(prim, "points")))?,
         None => Vec::new(),
     };
     if let Some(i) = first_nonfinite(&points) {
@@ -92,7 +89,9 @@ pub(super) fn topology(
             ));
         }
         match reader.static_value(prim, name)? {
-            Some(v) => ints(&v).ok_or_else(|| format!("{}: expected int[] values", attr_path(prim, name))),
+            Some(v) => {
+                ints(&v).ok_or_else(|| format!("{}: expected int[] values", attr_path(prim, name)))
+            }
             None => Ok(Vec::new()),
         }
     };
@@ -124,18 +123,33 @@ pub(super) fn topology(
             }
         }
     }
-    let left_handed = match reader.default_value(prim, "orientation")?.as_ref().and_then(token) {
+    let left_handed = match reader
+        .default_value(prim, "orientation")?
+        .as_ref()
+        .and_then(token)
+    {
         Some(t) if t == "leftHanded" => true,
         Some(t) if t == "rightHanded" => false,
-        Some(t) => return Err(format!("{}: unknown orientation '{t}'", attr_path(prim, "orientation"))),
+        Some(t) => {
+            return Err(format!(
+                "{}: unknown orientation '{t}'",
+                attr_path(prim, "orientation")
+            ));
+        }
         None => false,
     };
     let mut skipped: Vec<bool> = counts.iter().map(|&c| c < 3).collect();
     let small = skipped.iter().filter(|&&s| s).count();
     if small > 0 {
-        notes.push(format!("{path}: {small} face(s) with fewer than 3 corners skipped"));
+        notes.push(format!(
+            "{path}: {small} face(s) with fewer than 3 corners skipped"
+        ));
     }
-    if let Some(holes) = reader.static_value(prim, "holeIndices")?.as_ref().and_then(ints) {
+    if let Some(holes) = reader
+        .static_value(prim, "holeIndices")?
+        .as_ref()
+        .and_then(ints)
+    {
         let mut count = 0;
         for h in holes {
             if let Some(s) = usize::try_from(h).ok().and_then(|h| skipped.get_mut(h)) {
@@ -144,10 +158,16 @@ pub(super) fn topology(
             }
         }
         if count > 0 {
-            notes.push(format!("{path}: {count} hole face(s) (holeIndices) left out"));
+            notes.push(format!(
+                "{path}: {count} hole face(s) (holeIndices) left out"
+            ));
         }
     }
-    if let Some(scheme) = reader.default_value(prim, "subdivisionScheme")?.as_ref().and_then(token) {
+    if let Some(scheme) = reader
+        .default_value(prim, "subdivisionScheme")?
+        .as_ref()
+        .and_then(token)
+    {
         if scheme != "none" {
             notes.push(format!(
                 "{path}: subdivisionScheme '{scheme}' is rendered as its control polygons (no subdivision)"
@@ -214,12 +234,18 @@ pub(super) fn triangulate(
     if let Some(n) = &normals
         && let Some(i) = first_nonfinite(&n.values)
     {
-        return Err(format!("{}: normal {i} is not finite", prim.path().as_str()));
+        return Err(format!(
+            "{}: normal {i} is not finite",
+            prim.path().as_str()
+        ));
     }
     if let Some(uv) = &uvs
         && let Some(i) = uv.values.iter().position(|v| !v.is_finite())
     {
-        return Err(format!("{}: texture coordinate {i} is not finite", prim.path().as_str()));
+        return Err(format!(
+            "{}: texture coordinate {i} is not finite",
+            prim.path().as_str()
+        ));
     }
     let mut out = Primitive {
         normals: normals.as_ref().map(|_| Vec::new()),
@@ -241,10 +267,14 @@ pub(super) fn triangulate(
         for c in first..first + count {
             let point = topology.indices[c];
             let normal = normals.as_ref().map(|n| n.at(face, c, point as usize));
-            let uv = uvs.as_ref().map(|u| (wanted.uv_transform)(u.at(face, c, point as usize)));
+            let uv = uvs
+                .as_ref()
+                .map(|u| (wanted.uv_transform)(u.at(face, c, point as usize)));
             let uv = uv.map(|uv| Vec2::new(uv.x, 1.0 - uv.y));
             let unshared = normals_vary
-                && normals.as_ref().is_some_and(|n| n.interpolation != Interpolation::Vertex);
+                && normals
+                    .as_ref()
+                    .is_some_and(|n| n.interpolation != Interpolation::Vertex);
             let key = (
                 point,
                 normal.map_or([0; 3], |n| n.to_array().map(f32::to_bits)),
@@ -284,7 +314,14 @@ fn normals_primvar(
     prim: &Prim,
     topology: &Topology,
 ) -> Result<Option<Primvar<Vec3>>, String> {
-    if let Some(n) = primvar(reader, prim, "primvars:normals", topology, vec3s, "normal3f[]")? {
+    if let Some(n) = primvar(
+        reader,
+        prim,
+        "primvars:normals",
+        topology,
+        vec3s,
+        "normal3f[]",
+    )? {
         return Ok(Some(n));
     }
     primvar(reader, prim, "normals", topology, vec3s, "normal3f[]")
@@ -329,7 +366,11 @@ fn primvar_from<T: Copy>(
     let what = attr_path(prim, name);
     let interpolation = interpolation(reader, prim, name, &what)?;
     let indices_name = format!("{name}:indices");
-    let values = match reader.static_value(prim, &indices_name)?.as_ref().and_then(ints) {
+    let values = match reader
+        .static_value(prim, &indices_name)?
+        .as_ref()
+        .and_then(ints)
+    {
         Some(indices) => indices
             .iter()
             .enumerate()
@@ -338,7 +379,10 @@ fn primvar_from<T: Copy>(
                     .ok()
                     .and_then(|i| values.get(i).copied())
                     .ok_or_else(|| {
-                        format!("{what}: index {k} ({i}) is outside its {} values", values.len())
+                        format!(
+                            "{what}: index {k} ({i}) is outside its {} values",
+                            values.len()
+                        )
                     })
             })
             .collect::<Result<Vec<T>, String>>()?,
@@ -369,13 +413,18 @@ fn interpolation(
     name: &str,
     what: &str,
 ) -> Result<Interpolation, String> {
-    Ok(match reader.attr_token_metadata(prim, name, "interpolation").as_deref() {
-        None | Some("vertex") | Some("varying") => Interpolation::Vertex,
-        Some("faceVarying") => Interpolation::FaceVarying,
-        Some("uniform") => Interpolation::Uniform,
-        Some("constant") => Interpolation::Constant,
-        Some(other) => return Err(format!("{what}: unknown interpolation '{other}'")),
-    })
+    Ok(
+        match reader
+            .attr_token_metadata(prim, name, "interpolation")
+            .as_deref()
+        {
+            None | Some("vertex") | Some("varying") => Interpolation::Vertex,
+            Some("faceVarying") => Interpolation::FaceVarying,
+            Some("uniform") => Interpolation::Uniform,
+            Some("constant") => Interpolation::Constant,
+            Some(other) => return Err(format!("{what}: unknown interpolation '{other}'")),
+        },
+    )
 }
 
 /// The mesh's `displayColor`: its single value, or the average of several (with a note,
@@ -389,10 +438,16 @@ pub(super) fn display_color(
         return Ok(None);
     };
     let colors = colors(&value).ok_or_else(|| {
-        format!("{}: expected color3f[] values", attr_path(prim, "primvars:displayColor"))
+        format!(
+            "{}: expected color3f[] values",
+            attr_path(prim, "primvars:displayColor")
+        )
     })?;
     if colors.iter().any(|c| !c.is_finite()) {
-        return Err(format!("{}: a colour is not finite", attr_path(prim, "primvars:displayColor")));
+        return Err(format!(
+            "{}: a colour is not finite",
+            attr_path(prim, "primvars:displayColor")
+        ));
     }
     match colors.as_slice() {
         [] => Ok(None),
@@ -426,7 +481,8 @@ pub(super) fn point_cache(
     let mut times = Vec::new();
     let mut per_sample: Vec<Vec<Vec3>> = Vec::new();
     for (time, value) in samples.times.iter().zip(&samples.values) {
-        let points = vec3s(value).ok_or_else(|| format!("{}: expected point3f[] values", attr_path(prim, "points")))?;
+        let points = vec3s(value)
+            .ok_or_else(|| format!("{}: expected point3f[] values", attr_path(prim, "points")))?;
         if points.len() != topology.points.len() {
             notes.push(format!(
                 "{path}: points change count at t = {time} s ({} instead of {}): the point cache stops before it",
@@ -436,7 +492,9 @@ pub(super) fn point_cache(
             break;
         }
         if let Some(i) = first_nonfinite(&points) {
-            return Err(format!("{path}: point {i} of the sample at t = {time} s is not finite"));
+            return Err(format!(
+                "{path}: point {i} of the sample at t = {time} s is not finite"
+            ));
         }
         times.push(*time);
         per_sample.push(points);
@@ -450,7 +508,12 @@ pub(super) fn point_cache(
         .map(|p| {
             let positions = per_sample
                 .iter()
-                .map(|points| p.point_of_vertex.iter().map(|&i| points[i as usize]).collect())
+                .map(|points| {
+                    p.point_of_vertex
+                        .iter()
+                        .map(|&i| points[i as usize])
+                        .collect()
+                })
                 .collect();
             let normals = match (&normal_samples, &p.normals) {
                 (Some(samples), Some(_)) => Some(
@@ -510,10 +573,16 @@ fn cached_normals(
         let values = vec3s(value)
             .ok_or_else(|| format!("{}: expected normal3f[] values", attr_path(prim, name)))?;
         if let Some(i) = first_nonfinite(&values) {
-            return Err(format!("{}: normal {i} of a sample is not finite", attr_path(prim, name)));
+            return Err(format!(
+                "{}: normal {i} of a sample is not finite",
+                attr_path(prim, name)
+            ));
         }
         let primvar = primvar_from(reader, prim, name, topology, values)?;
-        if !matches!(primvar.interpolation, Interpolation::Vertex | Interpolation::FaceVarying) {
+        if !matches!(
+            primvar.interpolation,
+            Interpolation::Vertex | Interpolation::FaceVarying
+        ) {
             return Ok(None);
         }
         out.push(primvar);

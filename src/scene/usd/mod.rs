@@ -134,7 +134,9 @@ fn read_metadata(stage: &usd::Stage) -> Result<StageMetadata, String> {
     // USD's fallback unit is the centimetre.
     let meters_per_unit = mpu.unwrap_or(0.01);
     if !(meters_per_unit.is_finite() && meters_per_unit > 0.0) {
-        return Err(format!("metersPerUnit {meters_per_unit} must be a positive number"));
+        return Err(format!(
+            "metersPerUnit {meters_per_unit} must be a positive number"
+        ));
     }
     let time_codes_per_second = stage.time_codes_per_second();
     let frames_per_second = stage.frames_per_second_or(time_codes_per_second);
@@ -277,7 +279,9 @@ fn load_stage(path: &Path) -> Result<SceneDesc, String> {
     }
     let mut paths = Vec::new();
     stage
-        .traverse(usd::PrimPredicate::DEFAULT_PROXIES, |p| paths.push(p.clone()))
+        .traverse(usd::PrimPredicate::DEFAULT_PROXIES, |p| {
+            paths.push(p.clone())
+        })
         .map_err(|e| format!("cannot traverse the stage: {e:#}"))?;
     check_composition(&stage)?;
     let mut skipped: Vec<String> = Vec::new();
@@ -447,7 +451,11 @@ impl Builder<'_> {
         } else {
             xform::chain(&self.reader, prim, &mut self.notes)?
         };
-        let mut parent = if chain.resets { self.stage_root } else { parent_node };
+        let mut parent = if chain.resets {
+            self.stage_root
+        } else {
+            parent_node
+        };
         let count = chain.nodes.len();
         for (k, link) in chain.nodes.into_iter().enumerate() {
             let name = if k + 1 == count {
@@ -538,9 +546,7 @@ impl Builder<'_> {
             }
             // A textured material whose uvs are missing renders untextured.
             let material = match bound {
-                Some((index, Some(_))) if p.uvs.is_none() => {
-                    Some(self.untextured_copy(*index))
-                }
+                Some((index, Some(_))) if p.uvs.is_none() => Some(self.untextured_copy(*index)),
                 Some((index, _)) => Some(*index),
                 None => None,
             };
@@ -627,9 +633,19 @@ impl Builder<'_> {
             if !is_subset {
                 continue;
             }
-            let family = self.reader.default_value(&child, "familyName")?.as_ref().and_then(token);
-            let element = self.reader.default_value(&child, "elementType")?.as_ref().and_then(token);
-            if family.as_deref() != Some("materialBind") || element.as_deref().is_some_and(|e| e != "face") {
+            let family = self
+                .reader
+                .default_value(&child, "familyName")?
+                .as_ref()
+                .and_then(token);
+            let element = self
+                .reader
+                .default_value(&child, "elementType")?
+                .as_ref()
+                .and_then(token);
+            if family.as_deref() != Some("materialBind")
+                || element.as_deref().is_some_and(|e| e != "face")
+            {
                 continue;
             }
             let indices = self
@@ -640,12 +656,15 @@ impl Builder<'_> {
                 .unwrap_or_default();
             let mut mask = vec![false; faces];
             for (k, &f) in indices.iter().enumerate() {
-                let slot = usize::try_from(f).ok().and_then(|f| mask.get_mut(f)).ok_or_else(|| {
-                    format!(
-                        "{}: indices[{k}] = {f} is outside the mesh's {faces} faces",
-                        child.path().as_str()
-                    )
-                })?;
+                let slot = usize::try_from(f)
+                    .ok()
+                    .and_then(|f| mask.get_mut(f))
+                    .ok_or_else(|| {
+                        format!(
+                            "{}: indices[{k}] = {f} is outside the mesh's {faces} faces",
+                            child.path().as_str()
+                        )
+                    })?;
                 *slot = true;
             }
             for (c, &m) in covered.iter_mut().zip(&mask) {
@@ -674,11 +693,17 @@ impl Builder<'_> {
         mesh: &Prim,
         double_sided: bool,
     ) -> Result<Option<(usize, Option<material::UvRead>)>, String> {
-        if let Some(bound) = self.materials.bound(&self.reader, prim, double_sided, &mut self.ignored)? {
+        if let Some(bound) =
+            self.materials
+                .bound(&self.reader, prim, double_sided, &mut self.ignored)?
+        {
             return Ok(Some((bound.index, bound.uv)));
         }
         if let Some(color) = mesh::display_color(&self.reader, mesh, &mut self.notes)? {
-            return Ok(Some((self.materials.display_color(color, double_sided), None)));
+            return Ok(Some((
+                self.materials.display_color(color, double_sided),
+                None,
+            )));
         }
         Ok(double_sided.then(|| (self.materials.plain(true), None)))
     }

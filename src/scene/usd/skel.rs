@@ -26,7 +26,9 @@ use openusd::sdf::Value;
 use openusd::usd::Prim;
 
 use super::Builder;
-use super::values::{attr_path, dmat4, dmat4s, first_nonfinite, floats, ints, quats, tokens, vec3s};
+use super::values::{
+    attr_path, dmat4, dmat4s, first_nonfinite, floats, ints, quats, tokens, vec3s,
+};
 use super::xform::decompose;
 use crate::scene::{ChannelDesc, ChannelTarget, Interpolation, MorphTargetDesc, SkinDesc};
 
@@ -53,7 +55,11 @@ pub(super) struct PendingMesh {
 
 /// The first target of relationship `name` on `prim` or its closest ancestor that has one
 /// (UsdSkel bindings are inherited down namespace).
-fn inherited_target(b: &Builder, prim: &Prim, name: &str) -> Result<Option<openusd::sdf::Path>, String> {
+fn inherited_target(
+    b: &Builder,
+    prim: &Prim,
+    name: &str,
+) -> Result<Option<openusd::sdf::Path>, String> {
     let mut current = Some(prim.path().clone());
     while let Some(path) = current {
         if path == openusd::sdf::Path::abs_root() {
@@ -79,14 +85,17 @@ pub(super) fn add_skeleton(b: &mut Builder, prim: &Prim, node: usize) -> Result<
     let path = prim.path().as_str().to_string();
     let reader = &b.reader;
     let names = match reader.default_value(prim, "joints")? {
-        Some(v) => tokens(&v).ok_or_else(|| format!("{}: expected token[]", attr_path(prim, "joints")))?,
+        Some(v) => {
+            tokens(&v).ok_or_else(|| format!("{}: expected token[]", attr_path(prim, "joints")))?
+        }
         None => Vec::new(),
     };
     let matrices = |name: &str| -> Result<Vec<DMat4>, String> {
         let Some(v) = reader.default_value(prim, name)? else {
             return Ok(vec![DMat4::IDENTITY; names.len()]);
         };
-        let m = dmat4s(&v).ok_or_else(|| format!("{}: expected matrix4d[]", attr_path(prim, name)))?;
+        let m =
+            dmat4s(&v).ok_or_else(|| format!("{}: expected matrix4d[]", attr_path(prim, name)))?;
         if m.len() != names.len() {
             return Err(format!(
                 "{}: {} matrices for {} joints",
@@ -96,7 +105,10 @@ pub(super) fn add_skeleton(b: &mut Builder, prim: &Prim, node: usize) -> Result<
             ));
         }
         if let Some(i) = m.iter().position(|m| !m.is_finite()) {
-            return Err(format!("{}: matrix {i} is not finite", attr_path(prim, name)));
+            return Err(format!(
+                "{}: matrix {i} is not finite",
+                attr_path(prim, name)
+            ));
         }
         Ok(m)
     };
@@ -157,13 +169,24 @@ pub(super) fn add_skeleton(b: &mut Builder, prim: &Prim, node: usize) -> Result<
 }
 
 /// Channels for the joints `anim` drives.
-fn animate_joints(b: &mut Builder, anim: &Prim, names: &[String], joints: &[usize]) -> Result<(), String> {
+fn animate_joints(
+    b: &mut Builder,
+    anim: &Prim,
+    names: &[String],
+    joints: &[usize],
+) -> Result<(), String> {
     let reader = &b.reader;
     let anim_joints = match reader.default_value(anim, "joints")? {
-        Some(v) => tokens(&v).ok_or_else(|| format!("{}: expected token[]", attr_path(anim, "joints")))?,
+        Some(v) => {
+            tokens(&v).ok_or_else(|| format!("{}: expected token[]", attr_path(anim, "joints")))?
+        }
         None => return Ok(()),
     };
-    let index: HashMap<&str, usize> = names.iter().enumerate().map(|(i, n)| (n.as_str(), i)).collect();
+    let index: HashMap<&str, usize> = names
+        .iter()
+        .enumerate()
+        .map(|(i, n)| (n.as_str(), i))
+        .collect();
     let mut target = Vec::with_capacity(anim_joints.len());
     for name in &anim_joints {
         // Joints the skeleton does not have are ignored, as UsdSkel does.
@@ -171,7 +194,9 @@ fn animate_joints(b: &mut Builder, anim: &Prim, names: &[String], joints: &[usiz
     }
     let count = anim_joints.len();
     // Per attribute: times and, per key, one value per animation joint.
-    let read = |name: &str, convert: &dyn Fn(&Value) -> Option<Vec<[f32; 4]>>| -> Result<Option<(Vec<f32>, Vec<Vec<[f32; 4]>>)>, String> {
+    let read = |name: &str,
+                convert: &dyn Fn(&Value) -> Option<Vec<[f32; 4]>>|
+     -> Result<Option<(Vec<f32>, Vec<Vec<[f32; 4]>>)>, String> {
         let samples = reader.samples(anim, name)?;
         let (times, values) = if samples.times.is_empty() {
             match reader.default_value(anim, name)? {
@@ -183,7 +208,8 @@ fn animate_joints(b: &mut Builder, anim: &Prim, names: &[String], joints: &[usiz
         };
         let mut keys = Vec::with_capacity(values.len());
         for v in &values {
-            let k = convert(v).ok_or_else(|| format!("{}: unexpected value type", attr_path(anim, name)))?;
+            let k = convert(v)
+                .ok_or_else(|| format!("{}: unexpected value type", attr_path(anim, name)))?;
             if k.len() != count {
                 return Err(format!(
                     "{}: {} values for the animation's {count} joints",
@@ -199,7 +225,8 @@ fn animate_joints(b: &mut Builder, anim: &Prim, names: &[String], joints: &[usiz
         Ok(Some((times, keys)))
     };
     let as3 = |v: &Value| vec3s(v).map(|a| a.into_iter().map(|p| [p.x, p.y, p.z, 0.0]).collect());
-    let as4 = |v: &Value| quats(v).map(|a| a.into_iter().map(|q| q.normalize().to_array()).collect());
+    let as4 =
+        |v: &Value| quats(v).map(|a| a.into_iter().map(|q| q.normalize().to_array()).collect());
     let translations = read("translations", &as3)?;
     let rotations = read("rotations", &as4)?;
     let scales = read("scales", &as3)?;
@@ -218,7 +245,9 @@ fn animate_joints(b: &mut Builder, anim: &Prim, names: &[String], joints: &[usiz
             animated = true;
             let first = keys[0][a];
             match target {
-                ChannelTarget::Translation => local.translation = Vec3::new(first[0], first[1], first[2]),
+                ChannelTarget::Translation => {
+                    local.translation = Vec3::new(first[0], first[1], first[2])
+                }
                 ChannelTarget::Scale => local.scale = Vec3::new(first[0], first[1], first[2]),
                 _ => local.rotation = Quat::from_array(first),
             }
@@ -228,7 +257,10 @@ fn animate_joints(b: &mut Builder, anim: &Prim, names: &[String], joints: &[usiz
                     target,
                     interpolation: Interpolation::Linear,
                     times: times.clone(),
-                    values: keys.iter().flat_map(|k| k[a][..components].to_vec()).collect(),
+                    values: keys
+                        .iter()
+                        .flat_map(|k| k[a][..components].to_vec())
+                        .collect(),
                     components,
                 });
             }
@@ -269,13 +301,22 @@ fn bind_mesh(b: &mut Builder, pending: &PendingMesh) -> Result<(), String> {
     // The mesh's own joint order, mapped to the skeleton's.
     let remap: Option<Vec<usize>> = match reader.default_value(prim, "skel:joints")? {
         Some(v) => {
-            let own = tokens(&v).ok_or_else(|| format!("{}: expected token[]", attr_path(prim, "skel:joints")))?;
+            let own = tokens(&v)
+                .ok_or_else(|| format!("{}: expected token[]", attr_path(prim, "skel:joints")))?;
             Some(
                 own.iter()
                     .map(|name| {
-                        skeleton.names.iter().position(|n| n == name).ok_or_else(|| {
-                            format!("{}: joint '{name}' is not a joint of {}", attr_path(prim, "skel:joints"), target.as_str())
-                        })
+                        skeleton
+                            .names
+                            .iter()
+                            .position(|n| n == name)
+                            .ok_or_else(|| {
+                                format!(
+                                    "{}: joint '{name}' is not a joint of {}",
+                                    attr_path(prim, "skel:joints"),
+                                    target.as_str()
+                                )
+                            })
                     })
                     .collect::<Result<_, String>>()?,
             )
@@ -285,9 +326,12 @@ fn bind_mesh(b: &mut Builder, pending: &PendingMesh) -> Result<(), String> {
     let local_count = remap.as_ref().map_or(joint_count, Vec::len);
     let points = influences_per_point(b, prim, local_count, &path)?;
     let geom_bind = match reader.static_value(prim, "primvars:skel:geomBindTransform")? {
-        Some(v) => dmat4(&v)
-            .filter(|m| m.is_finite())
-            .ok_or_else(|| format!("{}: expected a finite matrix4d", attr_path(prim, "primvars:skel:geomBindTransform")))?,
+        Some(v) => dmat4(&v).filter(|m| m.is_finite()).ok_or_else(|| {
+            format!(
+                "{}: expected a finite matrix4d",
+                attr_path(prim, "primvars:skel:geomBindTransform")
+            )
+        })?,
         None => DMat4::IDENTITY,
     };
     let mut inverse_bind = Vec::with_capacity(joint_count);
@@ -351,8 +395,12 @@ fn influences_per_point(
         .as_ref()
         .and_then(floats)
         .ok_or_else(|| format!("{}: expected float[]", attr_path(prim, weights_name)))?;
-    let element_size = reader.attr_int_metadata(prim, indices_name, "elementSize").unwrap_or(1);
-    let weight_size = reader.attr_int_metadata(prim, weights_name, "elementSize").unwrap_or(element_size);
+    let element_size = reader
+        .attr_int_metadata(prim, indices_name, "elementSize")
+        .unwrap_or(1);
+    let weight_size = reader
+        .attr_int_metadata(prim, weights_name, "elementSize")
+        .unwrap_or(element_size);
     if element_size < 1 || weight_size != element_size {
         return Err(format!(
             "{path}: jointIndices and jointWeights have elementSize {element_size} and {weight_size}"
@@ -367,7 +415,10 @@ fn influences_per_point(
         ));
     }
     let point_count = mesh_point_count(b, prim)?;
-    let constant = reader.attr_token_metadata(prim, indices_name, "interpolation").as_deref() == Some("constant");
+    let constant = reader
+        .attr_token_metadata(prim, indices_name, "interpolation")
+        .as_deref()
+        == Some("constant");
     let groups = indices.len() / size;
     if (constant && groups != 1) || (!constant && groups != point_count) {
         return Err(format!(
@@ -382,7 +433,9 @@ fn influences_per_point(
         for k in g * size..(g + 1) * size {
             let (j, w) = (indices[k], weights[k]);
             if !(w.is_finite()) || w < 0.0 {
-                return Err(format!("{path}: joint weight {k} ({w}) is not a finite non-negative number"));
+                return Err(format!(
+                    "{path}: joint weight {k} ({w}) is not a finite non-negative number"
+                ));
             }
             if w == 0.0 {
                 continue;
@@ -423,14 +476,19 @@ fn mesh_point_count(b: &Builder, prim: &Prim) -> Result<usize, String> {
 }
 
 /// Morph targets from the mesh's blend shapes, and the weights channel from the animation.
-fn blend_shapes(b: &mut Builder, pending: &PendingMesh, animation: Option<&Prim>) -> Result<(), String> {
+fn blend_shapes(
+    b: &mut Builder,
+    pending: &PendingMesh,
+    animation: Option<&Prim>,
+) -> Result<(), String> {
     let prim = &pending.prim;
     let path = prim.path().as_str().to_string();
     let reader = &b.reader;
     let Some(names) = reader.default_value(prim, "skel:blendShapes")? else {
         return Ok(());
     };
-    let names = tokens(&names).ok_or_else(|| format!("{}: expected token[]", attr_path(prim, "skel:blendShapes")))?;
+    let names = tokens(&names)
+        .ok_or_else(|| format!("{}: expected token[]", attr_path(prim, "skel:blendShapes")))?;
     let targets = reader.targets(prim, "skel:blendShapeTargets")?;
     if targets.len() != names.len() {
         return Err(format!(
@@ -452,17 +510,33 @@ fn blend_shapes(b: &mut Builder, pending: &PendingMesh, animation: Option<&Prim>
             Some(v) => vec3s(&v).ok_or_else(|| format!("{what}.offsets: expected vector3f[]"))?,
             None => Vec::new(),
         };
-        let normal_offsets = b.reader.static_value(&shape, "normalOffsets")?.as_ref().and_then(vec3s);
-        if first_nonfinite(&offsets).is_some() || normal_offsets.as_deref().is_some_and(|n| first_nonfinite(n).is_some()) {
+        let normal_offsets = b
+            .reader
+            .static_value(&shape, "normalOffsets")?
+            .as_ref()
+            .and_then(vec3s);
+        if first_nonfinite(&offsets).is_some()
+            || normal_offsets
+                .as_deref()
+                .is_some_and(|n| first_nonfinite(n).is_some())
+        {
             return Err(format!("{what}: an offset is not finite"));
         }
-        let indices = b.reader.static_value(&shape, "pointIndices")?.as_ref().and_then(ints);
+        let indices = b
+            .reader
+            .static_value(&shape, "pointIndices")?
+            .as_ref()
+            .and_then(ints);
         let scatter = |values: &[Vec3]| -> Result<Vec<Vec3>, String> {
             let mut out = vec![Vec3::ZERO; point_count];
             match &indices {
                 Some(indices) => {
                     if indices.len() != values.len() {
-                        return Err(format!("{what}: {} pointIndices for {} offsets", indices.len(), values.len()));
+                        return Err(format!(
+                            "{what}: {} pointIndices for {} offsets",
+                            indices.len(),
+                            values.len()
+                        ));
                     }
                     for (k, (&i, &v)) in indices.iter().zip(values).enumerate() {
                         let slot = usize::try_from(i).ok().and_then(|i| out.get_mut(i)).ok_or_else(|| {
@@ -473,7 +547,10 @@ fn blend_shapes(b: &mut Builder, pending: &PendingMesh, animation: Option<&Prim>
                 }
                 None => {
                     if values.len() != point_count {
-                        return Err(format!("{what}: {} offsets for {point_count} points", values.len()));
+                        return Err(format!(
+                            "{what}: {} offsets for {point_count} points",
+                            values.len()
+                        ));
                     }
                     out.copy_from_slice(values);
                 }
@@ -492,16 +569,25 @@ fn blend_shapes(b: &mut Builder, pending: &PendingMesh, animation: Option<&Prim>
         per_point.push((positions, normals));
     }
     if inbetweens > 0 {
-        b.notes.push(format!("{path}: {inbetweens} blend shape(s) have in-between shapes, which are ignored"));
+        b.notes.push(format!(
+            "{path}: {inbetweens} blend shape(s) have in-between shapes, which are ignored"
+        ));
     }
     let mesh = &mut b.meshes[pending.mesh];
     for (primitive, vertex_points) in mesh.primitives.iter_mut().zip(&pending.point_of_vertex) {
         primitive.morph_targets = per_point
             .iter()
             .map(|(positions, normals)| MorphTargetDesc {
-                positions: Some(vertex_points.iter().map(|&p| positions[p as usize]).collect()),
+                positions: Some(
+                    vertex_points
+                        .iter()
+                        .map(|&p| positions[p as usize])
+                        .collect(),
+                ),
                 normals: match (normals, &primitive.normals) {
-                    (Some(n), Some(_)) => Some(vertex_points.iter().map(|&p| n[p as usize]).collect()),
+                    (Some(n), Some(_)) => {
+                        Some(vertex_points.iter().map(|&p| n[p as usize]).collect())
+                    }
                     _ => None,
                 },
             })
@@ -512,7 +598,11 @@ fn blend_shapes(b: &mut Builder, pending: &PendingMesh, animation: Option<&Prim>
         return Ok(());
     };
     let reader = &b.reader;
-    let Some(anim_names) = reader.default_value(anim, "blendShapes")?.as_ref().and_then(tokens) else {
+    let Some(anim_names) = reader
+        .default_value(anim, "blendShapes")?
+        .as_ref()
+        .and_then(tokens)
+    else {
         return Ok(());
     };
     let slot: Vec<Option<usize>> = names
@@ -530,7 +620,8 @@ fn blend_shapes(b: &mut Builder, pending: &PendingMesh, animation: Option<&Prim>
     };
     let mut flat = Vec::with_capacity(times.len() * names.len());
     for v in &values {
-        let w = floats(v).ok_or_else(|| format!("{}: expected float[]", attr_path(anim, "blendShapeWeights")))?;
+        let w = floats(v)
+            .ok_or_else(|| format!("{}: expected float[]", attr_path(anim, "blendShapeWeights")))?;
         if w.len() != anim_names.len() || w.iter().any(|x| !x.is_finite()) {
             return Err(format!(
                 "{}: {} finite weights expected, one per blend shape",

@@ -28,7 +28,10 @@ impl Reader<'_> {
         match attr.get::<Value>() {
             Ok(Some(Value::ValueBlock | Value::None)) | Ok(None) => Ok(None),
             Ok(Some(v)) => Ok(Some(v)),
-            Err(e) => Err(format!("{}: cannot read the value: {e:#}", attr_path(prim, name))),
+            Err(e) => Err(format!(
+                "{}: cannot read the value: {e:#}",
+                attr_path(prim, name)
+            )),
         }
     }
 
@@ -54,7 +57,10 @@ impl Reader<'_> {
             let code = if use_retimed { retimed[k] } else { time };
             let seconds = (code / self.time_codes_per_second) as f32;
             if !seconds.is_finite() {
-                return Err(format!("{}: time sample at time code {code} is not finite", what()));
+                return Err(format!(
+                    "{}: time sample at time code {code} is not finite",
+                    what()
+                ));
             }
             if times.last().is_some_and(|&last| seconds <= last) {
                 // Two time codes closer than an f32 second can tell apart: keep the later.
@@ -69,7 +75,10 @@ impl Reader<'_> {
 
     /// Whether the attribute has an opinion (a default or time samples).
     pub fn has_value(&self, prim: &Prim, name: &str) -> Result<bool, String> {
-        Ok(self.default_value(prim, name)?.is_some() || !self.samples(prim, name)?.times.is_empty())
+        Ok(
+            self.default_value(prim, name)?.is_some()
+                || !self.samples(prim, name)?.times.is_empty(),
+        )
     }
 
     /// The value used for a static read of a possibly animated attribute: the first time
@@ -143,7 +152,11 @@ pub(super) fn dvec3(v: &Value) -> Option<DVec3> {
     Some(match v {
         Value::Vec3f(a) => DVec3::new(a.x as f64, a.y as f64, a.z as f64),
         Value::Vec3d(a) => DVec3::new(a.x, a.y, a.z),
-        Value::Vec3h(a) => DVec3::new(a.x.to_f32() as f64, a.y.to_f32() as f64, a.z.to_f32() as f64),
+        Value::Vec3h(a) => DVec3::new(
+            a.x.to_f32() as f64,
+            a.y.to_f32() as f64,
+            a.z.to_f32() as f64,
+        ),
         _ => return None,
     })
 }
@@ -229,8 +242,14 @@ pub(super) fn ints(v: &Value) -> Option<Vec<i64>> {
 pub(super) fn vec2s(v: &Value) -> Option<Vec<Vec2>> {
     Some(match v {
         Value::Vec2fVec(a) => a.iter().map(|p| Vec2::new(p.x, p.y)).collect(),
-        Value::Vec2dVec(a) => a.iter().map(|p| Vec2::new(p.x as f32, p.y as f32)).collect(),
-        Value::Vec2hVec(a) => a.iter().map(|p| Vec2::new(p.x.to_f32(), p.y.to_f32())).collect(),
+        Value::Vec2dVec(a) => a
+            .iter()
+            .map(|p| Vec2::new(p.x as f32, p.y as f32))
+            .collect(),
+        Value::Vec2hVec(a) => a
+            .iter()
+            .map(|p| Vec2::new(p.x.to_f32(), p.y.to_f32()))
+            .collect(),
         _ => return None,
     })
 }
@@ -260,7 +279,10 @@ pub(super) fn colors(v: &Value) -> Option<Vec<Vec3>> {
 
 pub(super) fn quats(v: &Value) -> Option<Vec<Quat>> {
     Some(match v {
-        Value::QuatfVec(a) => a.iter().map(|q| Quat::from_xyzw(q.x, q.y, q.z, q.w)).collect(),
+        Value::QuatfVec(a) => a
+            .iter()
+            .map(|q| Quat::from_xyzw(q.x, q.y, q.z, q.w))
+            .collect(),
         Value::QuatdVec(a) => a
             .iter()
             .map(|q| {
@@ -288,7 +310,12 @@ pub(super) fn tokens(v: &Value) -> Option<Vec<String>> {
     match v {
         Value::TokenVec(t) => Some(t.iter().map(|t| t.as_str().to_string()).collect()),
         Value::StringVec(s) => Some(s.clone()),
-        Value::TokenListOp(op) => Some(op.flatten().into_iter().map(|t| t.as_str().to_string()).collect()),
+        Value::TokenListOp(op) => Some(
+            op.flatten()
+                .into_iter()
+                .map(|t| t.as_str().to_string())
+                .collect(),
+        ),
         _ => None,
     }
 }

@@ -95,12 +95,20 @@ enum Piece {
 /// # Errors
 /// An op with a value of the wrong type or a non-finite value, a singular op under
 /// `!invert!`, `!resetXformStack!` anywhere but first; each names the attribute.
-pub(super) fn chain(reader: &Reader, prim: &Prim, notes: &mut Vec<String>) -> Result<Chain, String> {
+pub(super) fn chain(
+    reader: &Reader,
+    prim: &Prim,
+    notes: &mut Vec<String>,
+) -> Result<Chain, String> {
     let Some(order) = reader.default_value(prim, "xformOpOrder")? else {
         return Ok(Chain::default());
     };
-    let order = tokens(&order)
-        .ok_or_else(|| format!("{}: expected a token array", attr_path(prim, "xformOpOrder")))?;
+    let order = tokens(&order).ok_or_else(|| {
+        format!(
+            "{}: expected a token array",
+            attr_path(prim, "xformOpOrder")
+        )
+    })?;
     let mut chain = Chain::default();
     let mut pieces = Vec::new();
     for (i, op) in order.iter().enumerate() {
@@ -132,16 +140,22 @@ fn op_pieces(
         None => (false, op),
     };
     let what = attr_path(prim, name);
-    let Some(kind) = name.strip_prefix("xformOp:").map(|k| k.split(':').next().unwrap_or(k))
+    let Some(kind) = name
+        .strip_prefix("xformOp:")
+        .map(|k| k.split(':').next().unwrap_or(k))
     else {
-        return Err(format!("{what}: not an xformOp (xformOpOrder entries start with xformOp:)"));
+        return Err(format!(
+            "{what}: not an xformOp (xformOpOrder entries start with xformOp:)"
+        ));
     };
     let samples = reader.samples(prim, name)?;
     let values: Vec<openusd::sdf::Value> = if samples.times.is_empty() {
         match reader.default_value(prim, name)? {
             Some(v) => vec![v],
             None => {
-                notes.push(format!("{what} is listed in xformOpOrder but has no value; ignored"));
+                notes.push(format!(
+                    "{what} is listed in xformOpOrder but has no value; ignored"
+                ));
                 return Ok(Vec::new());
             }
         }
@@ -157,20 +171,34 @@ fn op_pieces(
         }
     }
     let bad = |v: &openusd::sdf::Value| {
-        format!("{what}: unexpected {} value for a {kind} op", super::values::kind(v))
+        format!(
+            "{what}: unexpected {} value for a {kind} op",
+            super::values::kind(v)
+        )
     };
     let finite3 = |v: DVec3| {
-        if v.is_finite() { Ok(v) } else { Err(format!("{what}: non-finite value {v}")) }
+        if v.is_finite() {
+            Ok(v)
+        } else {
+            Err(format!("{what}: non-finite value {v}"))
+        }
     };
     let vec3s = || -> Result<Vec<DVec3>, String> {
-        values.iter().map(|v| dvec3(v).ok_or_else(|| bad(v)).and_then(finite3)).collect()
+        values
+            .iter()
+            .map(|v| dvec3(v).ok_or_else(|| bad(v)).and_then(finite3))
+            .collect()
     };
     let scalars = || -> Result<Vec<f64>, String> {
         values
             .iter()
             .map(|v| {
                 let x = scalar(v).ok_or_else(|| bad(v))?;
-                if x.is_finite() { Ok(x) } else { Err(format!("{what}: non-finite value {x}")) }
+                if x.is_finite() {
+                    Ok(x)
+                } else {
+                    Err(format!("{what}: non-finite value {x}"))
+                }
             })
             .collect()
     };
@@ -189,11 +217,23 @@ fn op_pieces(
         "scale" => vec![Piece::Scale(keyed(&times, vec3s()?))],
         "translateX" | "translateY" | "translateZ" => {
             let c = kind.as_bytes()[9];
-            vec![Piece::Translate(keyed(&times, scalars()?.into_iter().map(|x| component(c, x, 0.0)).collect()))]
+            vec![Piece::Translate(keyed(
+                &times,
+                scalars()?
+                    .into_iter()
+                    .map(|x| component(c, x, 0.0))
+                    .collect(),
+            ))]
         }
         "scaleX" | "scaleY" | "scaleZ" => {
             let c = kind.as_bytes()[5];
-            vec![Piece::Scale(keyed(&times, scalars()?.into_iter().map(|x| component(c, x, 1.0)).collect()))]
+            vec![Piece::Scale(keyed(
+                &times,
+                scalars()?
+                    .into_iter()
+                    .map(|x| component(c, x, 1.0))
+                    .collect(),
+            ))]
         }
         "rotateX" | "rotateY" | "rotateZ" => {
             let axis = axis_of(kind.as_bytes()[6]);
@@ -231,7 +271,11 @@ fn op_pieces(
                 .iter()
                 .map(|v| {
                     let m = dmat4(v).ok_or_else(|| bad(v))?;
-                    if m.is_finite() { Ok(m) } else { Err(format!("{what}: non-finite matrix")) }
+                    if m.is_finite() {
+                        Ok(m)
+                    } else {
+                        Err(format!("{what}: non-finite matrix"))
+                    }
                 })
                 .collect::<Result<Vec<_>, String>>()?;
             if times.is_empty() {
@@ -300,8 +344,16 @@ fn decomposed_keys(times: &[f32], matrices: &[DMat4]) -> Vec<Piece> {
         let (scale, rotation, translation) = m.to_scale_rotation_translation();
         let ok = scale.is_finite() && rotation.is_finite() && rotation.length() > 0.5;
         t.push(translation);
-        r.push(if ok { rotation.normalize() } else { DQuat::IDENTITY });
-        s.push(if scale.is_finite() { scale } else { DVec3::ZERO });
+        r.push(if ok {
+            rotation.normalize()
+        } else {
+            DQuat::IDENTITY
+        });
+        s.push(if scale.is_finite() {
+            scale
+        } else {
+            DVec3::ZERO
+        });
     }
     vec![
         Piece::Translate(Keyed::Keys(times.to_vec(), t)),
@@ -358,15 +410,21 @@ fn pack(pieces: &[Piece]) -> Vec<ChainNode> {
         match piece {
             Piece::Translate(k) => {
                 node.local.translation = k.first().as_vec3();
-                push_track(node, ChannelTarget::Translation, k, |v| v.as_vec3().to_array().to_vec());
+                push_track(node, ChannelTarget::Translation, k, |v| {
+                    v.as_vec3().to_array().to_vec()
+                });
             }
             Piece::Scale(k) => {
                 node.local.scale = k.first().as_vec3();
-                push_track(node, ChannelTarget::Scale, k, |v| v.as_vec3().to_array().to_vec());
+                push_track(node, ChannelTarget::Scale, k, |v| {
+                    v.as_vec3().to_array().to_vec()
+                });
             }
             Piece::Rotate(k) => {
                 node.local.rotation = to_quat(k.first());
-                push_track(node, ChannelTarget::Rotation, k, |q| to_quat(q).to_array().to_vec());
+                push_track(node, ChannelTarget::Rotation, k, |q| {
+                    to_quat(q).to_array().to_vec()
+                });
             }
             Piece::Matrix(m) => {
                 let matrix = m.as_mat4();
@@ -461,7 +519,11 @@ mod tests {
             Piece::Rotate(Keyed::Fixed(DQuat::from_rotation_x(0.3))),
             Piece::Scale(Keyed::Fixed(DVec3::new(2.0, 4.0, 0.5))),
         ];
-        let inverse: Vec<Piece> = pieces.iter().rev().map(|p| invert(p, "x").unwrap()).collect();
+        let inverse: Vec<Piece> = pieces
+            .iter()
+            .rev()
+            .map(|p| invert(p, "x").unwrap())
+            .collect();
         let mut all = pieces.clone();
         all.extend(inverse);
         assert!(product(&pack(&all)).abs_diff_eq(Mat4::IDENTITY, 1e-5));
