@@ -30,7 +30,7 @@ pub(super) fn add(b: &mut Builder, prim: &Prim, node: usize) -> Result<(), Strin
         return Ok(());
     }
     let mut number = |name: &str, fallback: f64| -> Result<f64, String> {
-        if reader.samples(prim, name)?.values.len() > 1 {
+        if reader.sample_count(prim, name)? > 1 {
             b.notes.push(format!(
                 "{path}.{name} is animated, which cameras do not support here: its first sample holds"
             ));

@@ -38,7 +38,7 @@ pub(super) fn add(b: &mut Builder, prim: &Prim, node: usize) -> Result<(), Strin
     let mut animated = false;
     let mut input = |name: &str| -> Result<Option<openusd::sdf::Value>, String> {
         for attr in [format!("inputs:{name}"), name.to_string()] {
-            if reader.samples(prim, &attr)?.values.len() > 1 {
+            if reader.sample_count(prim, &attr)? > 1 {
                 animated = true;
             }
             if let Some(v) = reader.static_value(prim, &attr)? {

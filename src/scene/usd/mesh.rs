@@ -81,8 +81,7 @@ pub(super) fn topology(
         return Err(format!("{path}: point {i} is not finite ({})", points[i]));
     }
     let mut int_array = |name: &str| -> Result<Vec<i64>, String> {
-        let samples = reader.samples(prim, name)?;
-        if samples.values.len() > 1 {
+        if reader.sample_count(prim, name)? > 1 {
             notes.push(format!(
                 "{}: topology changes over time, which is not supported: the first sample is used",
                 attr_path(prim, name)
@@ -334,7 +333,7 @@ pub(super) fn normals_vary(reader: &Reader, prim: &Prim) -> Result<bool, String>
     } else {
         "normals"
     };
-    Ok(reader.samples(prim, name)?.values.len() > 1)
+    Ok(reader.sample_count(prim, name)? > 1)
 }
 
 /// A primvar's values with indices applied, checked against the topology; `None` when the

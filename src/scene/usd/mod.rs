@@ -284,15 +284,18 @@ fn load_stage(path: &Path) -> Result<SceneDesc, String> {
         })
         .map_err(|e| format!("cannot traverse the stage: {e:#}"))?;
     check_composition(&stage)?;
-    let mut skipped: Vec<String> = Vec::new();
+    // The traversal is depth first, parents before children, so a skipped prim's subtree
+    // is the run of paths right after it: one prefix at a time is enough.
+    let mut skipped: Option<String> = None;
     for path in &paths {
         let name = path.as_str();
-        if skipped.iter().any(|s| is_under(name, s)) {
+        if skipped.as_deref().is_some_and(|s| is_under(name, s)) {
             continue;
         }
+        skipped = None;
         let prim = stage.prim(path.clone());
         if !b.visit(&prim)? {
-            skipped.push(name.to_string());
+            skipped = Some(name.to_string());
         }
     }
     check_composition(&stage)?;
@@ -497,7 +500,7 @@ impl Builder<'_> {
     fn rendered(&mut self, prim: &Prim) -> Result<bool, String> {
         let path = prim.path().as_str();
         let visibility = self.reader.static_value(prim, "visibility")?;
-        if self.reader.samples(prim, "visibility")?.values.len() > 1 {
+        if self.reader.sample_count(prim, "visibility")? > 1 {
             self.notes.push(format!(
                 "{path}: animated visibility is not supported; its first value holds"
             ));

@@ -73,22 +73,42 @@ impl Reader<'_> {
         Ok(Samples { times, values })
     }
 
+    /// How many time samples the attribute has (their values are not read).
+    pub fn sample_count(&self, prim: &Prim, name: &str) -> Result<usize, String> {
+        prim.attribute(name).num_time_samples().map_err(|e| {
+            format!(
+                "{}: cannot read its time samples: {e:#}",
+                attr_path(prim, name)
+            )
+        })
+    }
+
     /// Whether the attribute has an opinion (a default or time samples).
     pub fn has_value(&self, prim: &Prim, name: &str) -> Result<bool, String> {
-        Ok(
-            self.default_value(prim, name)?.is_some()
-                || !self.samples(prim, name)?.times.is_empty(),
-        )
+        Ok(self.sample_count(prim, name)? > 0 || self.default_value(prim, name)?.is_some())
     }
 
     /// The value used for a static read of a possibly animated attribute: the first time
     /// sample when there are samples (USD: samples win over the default at every time), else
-    /// the default.
+    /// the default. Only that one value is read.
     pub fn static_value(&self, prim: &Prim, name: &str) -> Result<Option<Value>, String> {
-        let samples = self.samples(prim, name)?;
-        match samples.values.into_iter().next() {
-            Some(v) => Ok(Some(v)),
-            None => self.default_value(prim, name),
+        let attr = prim.attribute(name);
+        let times = attr.time_sample_times().map_err(|e| {
+            format!(
+                "{}: cannot read its time samples: {e:#}",
+                attr_path(prim, name)
+            )
+        })?;
+        let Some(&first) = times.first() else {
+            return self.default_value(prim, name);
+        };
+        match attr.get_at::<Value>(openusd::usd::TimeCode::new(first)) {
+            Ok(Some(Value::ValueBlock | Value::None)) | Ok(None) => Ok(None),
+            Ok(Some(v)) => Ok(Some(v)),
+            Err(e) => Err(format!(
+                "{}: cannot read the value: {e:#}",
+                attr_path(prim, name)
+            )),
         }
     }
 
