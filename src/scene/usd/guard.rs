@@ -12,7 +12,9 @@
 //!   that follow it (compressed data may grow at most 255 times, LZ4's limit; 2-bit integer
 //!   codes four times more), nested dictionaries and time samples at most [`MAX_DEPTH`]
 //!   deep;
-//! - a text (`.usda`) layer must be UTF-8 and nest brackets at most [`MAX_DEPTH`] deep.
+//! - a text (`.usda`) layer must be UTF-8, nest brackets at most [`MAX_DEPTH`] deep, and
+//!   close each path literal `<...>` on its line without whitespace (openusd recursed
+//!   without end on one that did not: a stack overflow the fuzz target found).
 //!
 //! What passes these checks can still make `openusd` panic (an index past a table, a
 //! feature it leaves `todo!()`): [`without_panics`] turns that into an error, the last
@@ -144,6 +146,25 @@ fn check_text(bytes: &[u8]) -> Result<(), String> {
                     } else if d == c {
                         break;
                     }
+                }
+            }
+            '<' => {
+                // A path literal: openusd 0.6 recursed without end on one that ran over
+                // lines (found by the fuzz target); real paths hold no whitespace.
+                let mut closed = false;
+                for (_, d) in chars.by_ref() {
+                    if d == '>' {
+                        closed = true;
+                        break;
+                    }
+                    if d.is_whitespace() {
+                        break;
+                    }
+                }
+                if !closed {
+                    return Err(format!(
+                        "line {line}: a path '<...>' is not closed on its line or holds whitespace"
+                    ));
                 }
             }
             '{' | '[' | '(' => {
@@ -681,4 +702,20 @@ impl Values<'_> {
 /// How many item lists a list op's header byte announces (bit 0 only marks it explicit).
 fn list_count(header: Option<u8>) -> u32 {
     header.map_or(0, |h| (h & !1).count_ones())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn text_checks_accept_real_layers_and_refuse_runaway_paths_and_nesting() {
+        let good = "#usda 1.0\n(\n  doc = \"a <b> (\"\n)\n# a comment with <\ndef \"A\" {\n  rel r = </A/B.c:d>\n  rel s = <../B{v=x}C.rel[/D].e>\n}\n";
+        assert_eq!(check_text(good.as_bytes()), Ok(()));
+        let runaway = "#usda 1.0\ndef \"A\" {\n  rel r = </ME\n}\n";
+        assert!(check_text(runaway.as_bytes()).unwrap_err().contains("line 3"));
+        let deep = format!("#usda 1.0\n{}{}", "[".repeat(MAX_DEPTH + 1), "]".repeat(MAX_DEPTH + 1));
+        assert!(check_text(deep.as_bytes()).unwrap_err().contains("nest"));
+        assert!(check_text(b"not usd").is_err());
+    }
 }
