@@ -45,7 +45,9 @@ fn cases(scratch: &Path) -> Vec<Case> {
         let name = path.file_name().unwrap().to_str().unwrap().to_string();
         let ext = path.extension().and_then(|e| e.to_str()).unwrap_or("");
         let (scene, names) = match ext {
-            "gltf" | "glb" | "aff" | "obj" => (path.clone(), name.clone()),
+            "gltf" | "glb" | "aff" | "obj" | "usda" | "usdc" | "usdz" => {
+                (path.clone(), name.clone())
+            }
             "ppm" => (ppm_scene(&path, scratch), name.clone()),
             _ if path.is_dir() => (path.join("frame_0000.obj"), "camera_0000.json".into()),
             _ => continue, // make.py
