@@ -272,7 +272,10 @@ pub fn run_ray_file_bench(
                 (FileKernel::OcclusionPackets, "packets"),
                 (FileKernel::Occlusion, "single"),
             ],
-            RayClass::Reflection | RayClass::Refraction => &[(FileKernel::ClosestSingle, "single")],
+            RayClass::Reflection | RayClass::Refraction => &[
+                (FileKernel::ClosestScattered, "packets"),
+                (FileKernel::ClosestSingle, "single"),
+            ],
         };
         for &(kernel, api) in kernels {
             let mut seconds = vec![vec![0.0f64; repeats]; threads.len()];

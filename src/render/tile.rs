@@ -5,8 +5,8 @@
 //! A tile holds its rays as path vertices: a sample's primary ray is vertex `k` for the
 //! `k`-th sample (in pixel order, each pixel's samples in order), and the rays a hit spawns
 //! get the next free numbers, so a vertex's children always come after it. Each bounce:
-//! 1. the pending rays are traced (the primary rays as packets of up to [`PACKET`] from the
-//!    camera, later bounces one by one);
+//! 1. the pending rays are traced as packets of up to [`PACKET`] (the primary rays from the
+//!    camera with interval bounds, later bounces from their hits by the masked walk);
 //! 2. each hit's surface is made and its texture looked up (`FrameScene::arrive`), which
 //!    lists the shadow rays its direct light needs;
 //! 3. the shadow rays are traced, grouped by light, as packets of up to [`PACKET`]
@@ -205,20 +205,28 @@ fn primary_bounce<L: RayLod>(
     bounce
 }
 
-/// A bounce's reflected and refracted rays traced one by one, each with its hit.
+/// A bounce's reflected and refracted rays, each with its hit: traced as packets of up to
+/// [`PACKET`] in the order they were spawned (`SceneBvh::closest_hits_scattered`: each ray
+/// finds exactly what it finds alone).
 fn trace_bounce<L: RayLod>(
     scene: &FrameScene,
     pending: &[Pending<L>],
     counters: &mut TraceCounters,
 ) -> Vec<(Pending<L>, Option<Hit>)> {
-    pending
-        .iter()
-        .map(|p| {
+    let mut bounce = Vec::with_capacity(pending.len());
+    let mut rays = [(Vec3A::ZERO, Vec3A::ZERO); PACKET];
+    let mut hits = [None; PACKET];
+    for packet in pending.chunks(PACKET) {
+        for (ray, p) in rays.iter_mut().zip(packet) {
+            *ray = (p.ray.origin, p.ray.direction);
+        }
+        let n = packet.len();
+        scene
+            .bvh
+            .closest_hits_scattered(&rays[..n], f32::INFINITY, &mut hits[..n]);
+        for (p, &hit) in packet.iter().zip(&hits[..n]) {
             let ray = &p.ray;
             counters.rays += 1;
-            let hit = scene
-                .bvh
-                .closest_hit(ray.origin, ray.direction, f32::INFINITY);
             if let Some(log) = &mut counters.log {
                 log.closest(
                     p.pixel,
@@ -229,9 +237,10 @@ fn trace_bounce<L: RayLod>(
                     hit,
                 );
             }
-            (*p, hit)
-        })
-        .collect()
+            bounce.push((*p, hit));
+        }
+    }
+    bounce
 }
 
 /// Traces every request's shadow ray and fills in its transmittance: per light, the

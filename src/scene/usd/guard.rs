@@ -713,8 +713,16 @@ mod tests {
         let good = "#usda 1.0\n(\n  doc = \"a <b> (\"\n)\n# a comment with <\ndef \"A\" {\n  rel r = </A/B.c:d>\n  rel s = <../B{v=x}C.rel[/D].e>\n}\n";
         assert_eq!(check_text(good.as_bytes()), Ok(()));
         let runaway = "#usda 1.0\ndef \"A\" {\n  rel r = </ME\n}\n";
-        assert!(check_text(runaway.as_bytes()).unwrap_err().contains("line 3"));
-        let deep = format!("#usda 1.0\n{}{}", "[".repeat(MAX_DEPTH + 1), "]".repeat(MAX_DEPTH + 1));
+        assert!(
+            check_text(runaway.as_bytes())
+                .unwrap_err()
+                .contains("line 3")
+        );
+        let deep = format!(
+            "#usda 1.0\n{}{}",
+            "[".repeat(MAX_DEPTH + 1),
+            "]".repeat(MAX_DEPTH + 1)
+        );
         assert!(check_text(deep.as_bytes()).unwrap_err().contains("nest"));
         assert!(check_text(b"not usd").is_err());
     }
