@@ -4,7 +4,6 @@
 pub mod accel;
 pub mod anim;
 pub mod atomic_file;
-pub mod authoring;
 pub mod bench;
 pub mod cli;
 pub mod compare;
