@@ -31,7 +31,8 @@ mod generated;
 use std::time::Instant;
 
 use glam::Vec3;
-use mipray::frame::{BvhLayout, BvhPolicy, FrameRecord, RenderSettings, Renderer, UpdateStats};
+use mipray::frame::{BvhLayout, BvhPolicy, RenderSettings, Renderer};
+use mipray::record::{FrameRecord, UpdateStats};
 use mipray::report::Percentiles;
 use mipray::scene::*;
 

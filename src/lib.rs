@@ -17,6 +17,7 @@ pub mod markup;
 pub mod metrics;
 pub mod output;
 pub mod pages;
+pub mod record;
 pub mod render;
 pub mod report;
 pub mod scene;

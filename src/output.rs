@@ -13,7 +13,7 @@ use std::path::{Path, PathBuf};
 use image::{ImageBuffer, ImageFormat, Rgb};
 
 use crate::atomic_file::{AtomicWriteError, write_atomically, write_bytes_atomically};
-use crate::frame::FrameRecord;
+use crate::record::{FrameRecord, Record};
 use crate::render::LinearImage;
 /// `summary.json`'s type lives with the statistics it shares with `mipray report`.
 pub use crate::report::Summary;
@@ -217,8 +217,9 @@ fn remove_stale_temporaries(dir: &Path) {
     }
 }
 
-/// The records of a stats file up to its first unreadable line (an interrupted write leaves
-/// at most a torn last line). A missing file has no records.
+/// The records of a stats file up to its first line that is not a complete record (an
+/// interrupted write leaves at most a torn last line; a resumed render writes its records
+/// back, so it keeps only those it can write back unchanged). A missing file has no records.
 fn read_complete_records(path: &Path) -> Result<Vec<FrameRecord>, OutputError> {
     let text = match fs::read_to_string(path) {
         Ok(t) => t,
@@ -232,7 +233,8 @@ fn read_complete_records(path: &Path) -> Result<Vec<FrameRecord>, OutputError> {
     };
     Ok(text
         .lines()
-        .map_while(|line| serde_json::from_str::<FrameRecord>(line).ok())
+        .map_while(|line| Record::parse(line).ok().filter(|r| r.missing().is_empty()))
+        .map(|r| r.values)
         .collect())
 }
 

@@ -532,7 +532,7 @@ fn museum_detail_knob_scales_the_sculpture_by_four_per_level() {
 }
 
 /// Renders frames 0, 1, 2 (at 30 fps) of a committed scene at 64 x 36 and checks each.
-fn render_three_frames(name: &str) -> Vec<mipray::frame::FrameRecord> {
+fn render_three_frames(name: &str) -> Vec<mipray::record::FrameRecord> {
     use mipray::frame::{RenderSettings, Renderer};
     let scene = mipray::scene::gltf::load(&committed_dir().join(format!("{name}.gltf"))).unwrap();
     let mut renderer = Renderer::new(

@@ -15,7 +15,7 @@ use rayon::prelude::*;
 
 use super::posed::VertexSource;
 use super::prefetch::prefetch;
-use super::{InstanceState, Motion, Renderer, UpdateStats};
+use super::{InstanceState, Motion, Renderer};
 use crate::anim::NodeShape;
 use crate::geometry::{Placement, SceneGeometry};
 use crate::lod::log2::log2_in_place;
@@ -23,6 +23,7 @@ use crate::lod::{
     PixelFootprint, cross_squared, log2_pb, log2_pb_from_parts, log2_pb_with_texel_term,
     shift_log2_pb, texel_area, texel_term, uv_area,
 };
+use crate::record::UpdateStats;
 use crate::scene::SceneDesc;
 
 /// How many entries ahead the `log2 P_b` pass prefetches its slots.

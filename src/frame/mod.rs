@@ -15,7 +15,6 @@ mod dirty;
 mod log2_pb;
 mod posed;
 mod prefetch;
-mod record;
 mod scatter;
 pub mod sequence;
 mod settings;
@@ -25,7 +24,6 @@ mod update;
 pub use crate::accel::{BvhLayout, BvhPolicy};
 pub use clock::FrameClock;
 pub use dirty::{DirtySet, Motion};
-pub use record::{FrameRecord, Phase, UpdateStats};
 pub use sequence::{Check, Resume, SequenceOutcome, SequenceOutput, render_sequence};
 pub use settings::RenderSettings;
 pub use update::UpdateParallelism;
@@ -38,6 +36,7 @@ use crate::accel::{Accel, AccelError};
 use crate::anim::{NodeShape, Pose, node_shapes, primitive_deforms};
 use crate::geometry::{FrameTriangles, SceneGeometry};
 use crate::lod::{LodCamera, PixelFootprint};
+use crate::record::{FrameRecord, UpdateStats};
 use crate::render::light::ring_lights;
 use crate::render::{
     Camera, FrameScene, Instanced, Light, LinearImage, SceneBvh, TraceCounters, render_image,

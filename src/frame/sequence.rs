@@ -16,9 +16,10 @@ use std::time::Instant;
 use anyhow::{Context, Result};
 use indicatif::{ProgressBar, ProgressStyle};
 
-use super::{FrameClock, FrameRecord, LevelImage, Renderer};
+use super::{FrameClock, LevelImage, Renderer};
 use crate::diff::{DiffOptions, DiffReport, FrameDiff, Verdict, compare_stats, diff_frame};
 use crate::output::{FrameFormat, OutputDir, Shard};
+use crate::record::FrameRecord;
 
 /// Where and how a sequence is written.
 #[derive(Debug, Clone)]

@@ -21,10 +21,11 @@ use std::collections::HashMap;
 use glam::{Mat4, Vec3, Vec3A};
 
 use super::posed::VertexSource;
-use super::{InstanceState, Motion, Renderer, UpdateStats};
+use super::{InstanceState, Motion, Renderer};
 use crate::accel::{AccelError, TlasInstance, TwoLevelAccel};
 use crate::anim::{NodeShape, moving_nodes};
 use crate::geometry::{FrameTriangles, Placement};
+use crate::record::UpdateStats;
 use crate::render::{InstanceShading, PbRule};
 
 /// Most extra world-space triangles the static copies of one mesh may add (beyond its first

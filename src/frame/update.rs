@@ -26,9 +26,10 @@ use super::posed::{
 };
 use super::scatter::SlotScatter;
 use super::two_level::Which;
-use super::{InstanceState, Motion, Renderer, UpdateStats, ms_since};
+use super::{InstanceState, Motion, Renderer, ms_since};
 use crate::accel::{Accel, AccelError, BvhLayout, TreeStep};
 use crate::anim::NodeShape;
+use crate::record::UpdateStats;
 
 /// Below this much work (triangles or vertices) an update step stays on the calling thread:
 /// rayon's split and join cost more than the work (tens of ns per item).

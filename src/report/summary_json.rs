@@ -14,7 +14,7 @@ use super::metrics::{
 };
 use super::percentiles::Percentiles;
 use super::stats::{PreprocessingShare, rebuild_count};
-use crate::frame::{FrameRecord, Phase};
+use crate::record::{FrameRecord, Phase};
 
 /// `summary.json` (see the module comment).
 #[derive(Debug, Clone, serde::Serialize)]
