@@ -32,8 +32,8 @@ use std::time::Instant;
 
 use glam::Vec3;
 use mipray::frame::{BvhLayout, BvhPolicy, RenderSettings, Renderer};
+use mipray::percentiles::Percentiles;
 use mipray::record::{FrameRecord, UpdateStats};
-use mipray::report::Percentiles;
 use mipray::scene::*;
 
 const PATCH_SIDE: u32 = 22; // 22 x 22 quads: 968 triangles per patch

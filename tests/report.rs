@@ -6,10 +6,10 @@
 use std::fs;
 use std::path::{Path, PathBuf};
 
+use mipray::percentiles::Percentiles;
 use mipray::record::{Phase, StatsFileError, load_records, load_sequence};
 use mipray::report::{
-    LOD_RECOMPUTED, MOVED_TRIANGLES, Metric, Percentiles, Quantities, RENDER_MS, TIMING_PHASES,
-    report,
+    LOD_RECOMPUTED, MOVED_TRIANGLES, Metric, Quantities, RENDER_MS, TIMING_PHASES, report,
 };
 use serde_json::json;
 

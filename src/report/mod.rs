@@ -4,15 +4,13 @@
 //! read back, with the fields it had). [`report`] loads the records of one or more output
 //! folders ([`crate::record::load_sequence`]: shards merged, sorted by frame, duplicates
 //! dropped), summarises every timing phase and count
-//! with [`Percentiles`] (min / median / nearest-rank p95 / max), computes the preprocessing
+//! with [`crate::percentiles::Percentiles`] (min / median / nearest-rank p95 / max), computes the preprocessing
 //! share of frame time and the rebuild count, and writes an SVG plot ([`write_svg`]).
 //! Fields missing from older records are absent, never 0: a quantity no record has is left
 //! out of the table and the plot.
 
-pub(crate) mod chart;
 mod error;
 mod metrics;
-mod percentiles;
 pub(crate) mod plot;
 mod stats;
 mod summary;
@@ -25,7 +23,6 @@ pub use metrics::{
     COUNTS, DEFORMED_TRIANGLES, LOD_RECOMPUTED, MOVED_TRIANGLES, Metric, PLOTTED_COUNTS,
     PREPROCESSING_PHASES, Quantities, RAYS, RENDER_MS, TIMING_PHASES, TOTAL_MS, TRIANGLES,
 };
-pub use percentiles::{Percentiles, median, nearest_rank};
 pub use plot::{SVG_SIZE, render_svg, write_svg};
 pub use stats::{PhaseRow, PreprocessingShare, rebuild_count};
 pub use summary::ReportSummary;

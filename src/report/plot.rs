@@ -19,10 +19,10 @@ use plotters::coord::Shift;
 use plotters::coord::types::RangedCoordi64;
 use plotters::prelude::*;
 
-use super::chart::{Run, chart_on, draw_legend, draw_runs, series_color, text};
 use super::error::ReportError;
 use super::metrics::{Metric, PLOTTED_COUNTS, Quantities, TIMING_PHASES};
 use crate::atomic_file::write_bytes_atomically;
+use crate::chart::{Run, chart_on, draw_legend, draw_runs, series_color, text};
 use crate::record::Record;
 
 /// Size of the whole plot in pixels.

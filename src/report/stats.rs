@@ -7,7 +7,7 @@
 //! loop just made (`summary.json`), which have every quantity.
 
 use super::metrics::{Metric, PREPROCESSING_PHASES, Quantities, TOTAL_MS};
-use super::percentiles::Percentiles;
+use crate::percentiles::Percentiles;
 
 /// The spread of one quantity over the frames that have it.
 #[derive(Debug, Clone, Copy, PartialEq)]
