@@ -27,10 +27,10 @@ use super::{
     CompareReport, FrameErrors, LevelError, LightsRow, MethodSpec, MethodSummary,
     SubpixelFrameErrors, SubpixelSummary,
 };
+use crate::atomic_file::write_rgb8_atomically;
 use crate::frame::{FrameClock, PreparedFrame, RenderSettings, Renderer};
 use crate::lod::LodMethod;
 use crate::metrics;
-use crate::output::write_rgb8_atomically;
 use crate::percentiles::median;
 use crate::record::Phase;
 use crate::render::integrator::{FrameScene, MIP_LEVELS};

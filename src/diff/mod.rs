@@ -212,7 +212,7 @@ fn write_failure_images(
     let mut diff_path = PathBuf::new();
     for (suffix, image) in [("ref", a), ("test", b), ("diff", heat)] {
         let path = out.join(format!("frame_{frame:04}_{suffix}.png"));
-        crate::output::write_rgb8_atomically(&path, image)
+        crate::atomic_file::write_rgb8_atomically(&path, image)
             .map_err(|e| folder_error(e.to_string()))?;
         diff_path = path;
     }
@@ -411,8 +411,8 @@ impl DiffReport {
     /// Writes `diff.md` and `diff.csv` into `out`.
     pub fn write(&self, out: &Path) -> std::io::Result<()> {
         std::fs::create_dir_all(out)?;
-        crate::output::write_text_atomically(&out.join("diff.md"), &self.markdown())?;
-        crate::output::write_text_atomically(&out.join("diff.csv"), &self.csv())
+        crate::atomic_file::write_text_atomically(&out.join("diff.md"), &self.markdown())?;
+        crate::atomic_file::write_text_atomically(&out.join("diff.csv"), &self.csv())
     }
 }
 

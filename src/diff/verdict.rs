@@ -24,7 +24,7 @@ pub fn finish_report(report: &DiffReport, out: &Path, junit: Option<&Path>) -> R
         .write(out)
         .with_context(|| format!("{}: cannot write the diff report", out.display()))?;
     if let Some(path) = junit {
-        crate::output::write_text_atomically(path, &junit_xml(report))
+        crate::atomic_file::write_text_atomically(path, &junit_xml(report))
             .with_context(|| format!("{}: cannot write JUnit XML", path.display()))?;
     }
     println!("{}", report.verdict());

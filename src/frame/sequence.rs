@@ -102,7 +102,7 @@ pub fn render_sequence(
         let path = output.write_frame(frame, &image)?;
         if let Some(view) = view {
             let view_path = output.path().join(format!("lod_{frame:04}.png"));
-            crate::output::write_rgb8_atomically(&view_path, &view)
+            crate::atomic_file::write_rgb8_atomically(&view_path, &view)
                 .with_context(|| format!("cannot write {}", view_path.display()))?;
         }
         output.append_record(&record)?;

@@ -42,7 +42,7 @@ mod table;
 use std::path::{Path, PathBuf};
 
 use super::CompareReport;
-use crate::output::write_text_atomically;
+use crate::atomic_file::write_text_atomically;
 
 pub use markdown::{markdown, markdown_with};
 pub use plots::write_plots;
