@@ -10,11 +10,9 @@
 
 mod junit;
 mod stats;
-mod verdict;
 
 pub use junit::junit_xml;
 pub use stats::{StatsDelta, compare_stats};
-pub use verdict::{Verdict, finish_report};
 
 use std::collections::BTreeMap;
 use std::fmt::Write as _;
@@ -22,6 +20,13 @@ use std::path::{Path, PathBuf};
 
 use crate::csv::csv_field;
 use crate::metrics::{FrameMetrics, MetricsError, compare, format_psnr, heat_map, read_srgb8};
+
+/// Whether a checked sequence stayed within its threshold.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Verdict {
+    Passed,
+    Failed,
+}
 
 /// The metric that decides pass or fail.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, clap::ValueEnum)]

@@ -16,7 +16,6 @@ mod log2_pb;
 mod posed;
 mod prefetch;
 mod scatter;
-pub mod sequence;
 mod settings;
 mod two_level;
 mod update;
@@ -24,7 +23,6 @@ mod update;
 pub use crate::accel::{BvhLayout, BvhPolicy};
 pub use clock::FrameClock;
 pub use dirty::{DirtySet, Motion};
-pub use sequence::{Check, Resume, SequenceOutcome, SequenceOutput, render_sequence};
 pub use settings::RenderSettings;
 pub use update::UpdateParallelism;
 

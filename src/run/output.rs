@@ -15,8 +15,7 @@ use image::{ImageBuffer, ImageFormat, Rgb};
 use crate::atomic_file::{FileWriteError, write_bytes_atomically, write_image_atomically};
 use crate::record::{FrameRecord, Record};
 use crate::render::LinearImage;
-/// `summary.json`'s type lives with the statistics it shares with `mipray report`.
-pub use crate::report::Summary;
+use crate::report::Summary;
 
 /// Output image format of frames.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, clap::ValueEnum)]
