@@ -23,4 +23,5 @@ pub mod render;
 pub mod report;
 pub mod run;
 pub mod scene;
+pub mod simd;
 pub mod texture;
