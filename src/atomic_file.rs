@@ -6,7 +6,8 @@
 //! untouched. This is the one implementation: frames, stats summaries, plots, reports and
 //! exported meshes all go through [`write_atomically`], text through
 //! [`write_text_atomically`] and images through [`write_image_atomically`]. A resumed
-//! render removes stale `.*.tmp` files an interrupted run left behind (`run::output`).
+//! render removes the stale `.*.tmp` files of its own outputs an interrupted run left
+//! behind (`run::output`, which finds what a temporary was for with [`temporary_target`]).
 
 use std::fs::{self, File};
 use std::io::{self, BufWriter, Write};
@@ -130,6 +131,18 @@ pub fn write_rgb8_atomically(path: &Path, image: &image::RgbImage) -> Result<(),
     write_image_atomically(path, image, ImageFormat::Png)
 }
 
+/// The file name a temporary sibling was written for: `frame_0003.png` for
+/// `.frame_0003.png.PID.tmp` (or the older `.frame_0003.png.tmp`); `None` for a name that
+/// is not a temporary of this module.
+pub fn temporary_target(file_name: &str) -> Option<&str> {
+    let inner = file_name.strip_prefix('.')?.strip_suffix(".tmp")?;
+    let target = match inner.rsplit_once('.') {
+        Some((name, pid)) if !pid.is_empty() && pid.bytes().all(|b| b.is_ascii_digit()) => name,
+        _ => inner,
+    };
+    (!target.is_empty()).then_some(target)
+}
+
 /// `dir/.name.PID.tmp`: hidden, same folder, distinct per process.
 fn temporary_sibling(path: &Path) -> PathBuf {
     let name = path
@@ -172,6 +185,17 @@ mod tests {
         assert!(matches!(result, Err(AtomicWriteError::Write(_))));
         assert_eq!(fs::read(&path).unwrap(), b"complete");
         assert_eq!(names(dir.path()), ["mesh.obj"]);
+    }
+
+    #[test]
+    fn temporaries_name_their_target() {
+        let tmp = temporary_sibling(Path::new("/out/frame_0003.png"));
+        let name = tmp.file_name().unwrap().to_str().unwrap();
+        assert_eq!(temporary_target(name), Some("frame_0003.png"));
+        assert_eq!(temporary_target(".stats.jsonl.tmp"), Some("stats.jsonl"));
+        assert_eq!(temporary_target("frame_0003.png"), None);
+        assert_eq!(temporary_target(".tmp"), None);
+        assert_eq!(temporary_target("..tmp"), None);
     }
 
     #[test]

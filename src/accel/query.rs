@@ -138,22 +138,42 @@ impl PacketQuery {
         self.limits.fill(t_max);
     }
 
-    /// Runs `query` on this thread's query filled for `rays` (a fresh one if the thread's
-    /// is in use, which no caller does today: queries do not nest).
+    /// Fills the query for the occlusion rays `rays` (at most [`PACKET`]), ray `r` searched
+    /// up to `t_max[r]`; rays from several origins get interval bounds too.
+    pub(super) fn fill_occlusion(&mut self, rays: &[(Vec3A, Vec3A)], t_max: &[f32]) {
+        let n = rays.len().min(PACKET).min(t_max.len());
+        self.packet.set_from_several_origins(&rays[..n]);
+        for (sheared, &(origin, direction)) in self.sheared.iter_mut().zip(&rays[..n]) {
+            *sheared = ShearedRay::new(origin, direction);
+        }
+        self.limits[..n].copy_from_slice(&t_max[..n]);
+    }
+
+    /// Runs `query` on this thread's query filled for `rays` with limit `t_max` (a fresh
+    /// one if the thread's is in use, which no caller does today: queries do not nest).
     pub(super) fn with<R>(
         rays: &[(Vec3A, Vec3A)],
         t_max: f32,
         query: impl FnOnce(&mut PacketQuery) -> R,
     ) -> R {
+        Self::with_filled(|q| q.fill(rays, t_max), query)
+    }
+
+    /// Runs `query` on this thread's query after `fill` (a fresh one if the thread's is in
+    /// use).
+    pub(super) fn with_filled<R>(
+        fill: impl FnOnce(&mut PacketQuery),
+        query: impl FnOnce(&mut PacketQuery) -> R,
+    ) -> R {
         PACKET_QUERY.with(|cell| match cell.try_borrow_mut() {
             Ok(mut slot) => {
                 let q = slot.get_or_insert_with(PacketQuery::boxed);
-                q.fill(rays, t_max);
+                fill(q);
                 query(q)
             }
             Err(_) => {
                 let mut q = PacketQuery::boxed();
-                q.fill(rays, t_max);
+                fill(&mut q);
                 query(&mut q)
             }
         })

@@ -16,6 +16,17 @@ pub enum ReportError {
         path: PathBuf,
         source: std::io::Error,
     },
+    /// Frames of the expected range have no record or no frame file (a shard failed, was
+    /// cancelled or never ran).
+    #[error(
+        "{sources}: {count} frame(s) of {expected} have no record or no frame file: {frames} (render them again with --resume)"
+    )]
+    Incomplete {
+        sources: String,
+        count: usize,
+        frames: String,
+        expected: String,
+    },
     /// The plot could not be drawn.
     #[error("{path}: cannot draw the plot: {message}")]
     Plot { path: PathBuf, message: String },

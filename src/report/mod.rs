@@ -7,8 +7,10 @@
 //! with [`crate::percentiles::Percentiles`] (min / median / nearest-rank p95 / max), computes the preprocessing
 //! share of frame time and the rebuild count, and writes an SVG plot ([`write_svg`]).
 //! Fields missing from older records are absent, never 0: a quantity no record has is left
-//! out of the table and the plot.
+//! out of the table and the plot. [`require_frames`] checks that an expected range is all
+//! there (`report --expect-frames`, a farm's merge step).
 
+mod complete;
 mod error;
 mod metrics;
 pub(crate) mod plot;
@@ -18,6 +20,7 @@ mod summary_json;
 
 use std::path::{Path, PathBuf};
 
+pub use complete::{frame_folders, missing_frames, require_frames};
 pub use error::ReportError;
 pub use metrics::{
     COUNTS, DEFORMED_TRIANGLES, LOD_RECOMPUTED, MOVED_TRIANGLES, Metric, PLOTTED_COUNTS,

@@ -12,7 +12,9 @@ use std::path::{Path, PathBuf};
 
 use image::{ImageBuffer, ImageFormat, Rgb};
 
-use crate::atomic_file::{FileWriteError, write_bytes_atomically, write_image_atomically};
+use crate::atomic_file::{
+    FileWriteError, temporary_target, write_bytes_atomically, write_image_atomically,
+};
 use crate::record::{FrameRecord, Record};
 use crate::render::LinearImage;
 use crate::report::Summary;
@@ -83,11 +85,15 @@ impl Shard {
 impl OutputDir {
     /// Creates the folder (and parents) and starts its stats file. A fresh render truncates
     /// it; with `resume` the complete records already there are kept (a torn last line from
-    /// an interrupted run is dropped) and returned, and new records are appended.
+    /// an interrupted run is dropped) and returned, and new records are appended, and the
+    /// temporary files an interrupted run of this shard left are removed: those of its
+    /// `frames` and its own stats and summary files; never another shard's, which may be
+    /// running beside it in the same folder (without a shard, every temporary).
     pub fn open(
         dir: &Path,
         format: FrameFormat,
         shard: Option<Shard>,
+        frames: std::ops::Range<u32>,
         resume: bool,
     ) -> Result<(OutputDir, Vec<FrameRecord>), FileWriteError> {
         fs::create_dir_all(dir).map_err(io_error(dir))?;
@@ -98,9 +104,16 @@ impl OutputDir {
             ),
             None => ("stats.jsonl".to_string(), "summary.json".to_string()),
         };
-        let stats_path = dir.join(stats_name);
+        let stats_path = dir.join(&stats_name);
         if resume {
-            remove_stale_temporaries(dir);
+            remove_stale_temporaries(dir, |target| match shard {
+                None => true,
+                Some(_) => {
+                    target == stats_name
+                        || target == summary_name
+                        || frame_of_file(target).is_some_and(|f| frames.contains(&f))
+                }
+            });
         }
         let previous = if resume {
             read_complete_records(&stats_path)?
@@ -189,18 +202,31 @@ impl OutputDir {
     }
 }
 
-/// Removes `.NAME.PID.tmp` (and older `.NAME.tmp`) files an interrupted run left behind
-/// (never complete outputs).
-fn remove_stale_temporaries(dir: &Path) {
+/// Removes the `.NAME.PID.tmp` (and older `.NAME.tmp`) files an interrupted run left behind
+/// whose `NAME` is `owned` (never complete outputs).
+fn remove_stale_temporaries(dir: &Path, owned: impl Fn(&str) -> bool) {
     let Ok(entries) = fs::read_dir(dir) else {
         return;
     };
     for entry in entries.flatten() {
         let name = entry.file_name().to_string_lossy().into_owned();
-        if name.starts_with('.') && name.ends_with(".tmp") {
+        if temporary_target(&name).is_some_and(&owned) {
             let _ = fs::remove_file(entry.path());
         }
     }
+}
+
+/// The frame number of a file a frame writes (`frame_0003.png`, `preview_0003.png`,
+/// `lod_0003.png`), `None` for other files.
+fn frame_of_file(name: &str) -> Option<u32> {
+    let (stem, _extension) = name.rsplit_once('.')?;
+    let digits = ["frame_", "preview_", "lod_"]
+        .iter()
+        .find_map(|prefix| stem.strip_prefix(prefix))?;
+    if digits.is_empty() || !digits.bytes().all(|b| b.is_ascii_digit()) {
+        return None;
+    }
+    digits.parse().ok()
 }
 
 /// The records of a stats file up to its first line that is not a complete record (an
@@ -254,6 +280,54 @@ pub fn write_frame_atomically(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A shard resumed beside other shards in one folder removes only its own temporaries:
+    /// the others may be writing theirs at that moment.
+    #[test]
+    fn resumed_shard_removes_only_its_own_temporaries() {
+        let dir = tempfile::tempdir().unwrap();
+        let names = [
+            ".frame_0001.png.11.tmp",            // shard 0's frame
+            ".lod_0004.png.11.tmp",              // shard 0's level image
+            ".stats.shard-0-of-2.jsonl.11.tmp",  // shard 0's stats
+            ".frame_0005.png.22.tmp",            // shard 1's frame
+            ".stats.shard-1-of-2.jsonl.22.tmp",  // shard 1's stats
+            ".summary.shard-1-of-2.json.22.tmp", // shard 1's summary
+            ".index.html.22.tmp",                // the page every shard writes
+        ];
+        for name in names {
+            fs::write(dir.path().join(name), b"half").unwrap();
+        }
+        let shard = Some(Shard { index: 0, count: 2 });
+        OutputDir::open(dir.path(), FrameFormat::Png, shard, 0..5, true).unwrap();
+        let mut left: Vec<String> = fs::read_dir(dir.path())
+            .unwrap()
+            .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+            .filter(|n| n.ends_with(".tmp"))
+            .collect();
+        left.sort();
+        assert_eq!(left, [names[3], names[6], names[4], names[5]]);
+        // Alone in its folder (no shard), a resumed render removes every temporary.
+        OutputDir::open(dir.path(), FrameFormat::Png, None, 0..10, true).unwrap();
+        assert!(
+            fs::read_dir(dir.path()).unwrap().all(|e| !e
+                .unwrap()
+                .file_name()
+                .to_string_lossy()
+                .ends_with(".tmp"))
+        );
+    }
+
+    #[test]
+    fn frame_files_name_their_frame() {
+        assert_eq!(frame_of_file("frame_0003.png"), Some(3));
+        assert_eq!(frame_of_file("preview_12345.png"), Some(12345));
+        assert_eq!(frame_of_file("lod_0000.png"), Some(0));
+        assert_eq!(frame_of_file("frame_.png"), None);
+        assert_eq!(frame_of_file("frame_+1.png"), None);
+        assert_eq!(frame_of_file("stats.jsonl"), None);
+        assert_eq!(frame_of_file("index.html"), None);
+    }
 
     #[test]
     fn frame_names_are_zero_padded() {

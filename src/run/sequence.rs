@@ -134,7 +134,8 @@ pub fn render_sequence(
         None => frames,
     };
     let resume = out.resume == Resume::SkipComplete;
-    let (mut output, previous) = OutputDir::open(&out.dir, out.format, out.shard, resume)?;
+    let (mut output, previous) =
+        OutputDir::open(&out.dir, out.format, out.shard, frames.clone(), resume)?;
     // A frame is complete when its file exists and its record was written after it.
     let mut records: Vec<FrameRecord> = previous
         .into_iter()
