@@ -31,7 +31,7 @@
 //! Every file is written to a temporary sibling and renamed into place.
 //!
 //! Files: `table.rs` (the two CSV files), `markdown.rs` (`compare.md`), `plots.rs` (the
-//! three SVGs, with the chart setup shared with `mipray report` in `report::chart`).
+//! three SVGs, with the chart setup shared with `mipray report` in `crate::chart`).
 
 #[cfg(test)]
 mod fixtures;
