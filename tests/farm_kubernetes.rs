@@ -246,8 +246,9 @@ fn records_of(stats: &Path) -> BTreeSet<u32> {
     std::fs::read_to_string(stats)
         .unwrap_or_default()
         .lines()
-        .filter_map(|l| serde_json::from_str::<mipray::frame::FrameRecord>(l).ok())
-        .map(|r| r.frame)
+        .filter_map(|l| mipray::record::Record::parse(l).ok())
+        .filter(|r| r.missing().is_empty())
+        .map(|r| r.frame())
         .collect()
 }
 

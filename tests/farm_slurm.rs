@@ -427,8 +427,9 @@ fn recorded(dir: &Path, shard: u32, shards: u32) -> BTreeSet<u32> {
     std::fs::read_to_string(path)
         .unwrap_or_default()
         .lines()
-        .filter_map(|l| serde_json::from_str::<mipray::frame::FrameRecord>(l).ok())
-        .map(|r| r.frame)
+        .filter_map(|l| mipray::record::Record::parse(l).ok())
+        .filter(|r| r.missing().is_empty())
+        .map(|r| r.frame())
         .collect()
 }
 

@@ -185,7 +185,7 @@ fn the_last_shard_of_a_huge_frame_range_renders_its_frames() {
 
 /// Without shards, a 4e9-frame range must start rendering at once, not build a list of
 /// 4e9 frames first (16 GB: an abort under the limit). The sequence loop iterates the
-/// range (`frame::sequence`).
+/// range (`run::sequence`).
 #[test]
 fn a_huge_frame_range_starts_rendering_without_a_frame_list() {
     let out = tempfile::tempdir().unwrap();

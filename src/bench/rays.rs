@@ -18,9 +18,9 @@ use rayon::prelude::*;
 use crate::accel::PACKET;
 use crate::export::rays::{MISS, RayRecord, read_ray_file};
 use crate::frame::Renderer;
+use crate::percentiles::Percentiles;
 use crate::render::film::TILE;
 use crate::render::{RayClass, SceneBvh, shadow_ray_toward};
-use crate::report::Percentiles;
 
 /// Which rays `--rays` times.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]

@@ -10,9 +10,9 @@ use super::args::{
     LightsSpec, MAX_SPP, SequenceArgs, TraceArgs, View, parse_lights, render_settings,
 };
 use super::bench::MAX_REPEATS;
+use super::progress::progress_bar;
 use super::scene::{load_scene, open_scene};
 use crate::compare::{CompareOptions, MethodSpec, report, run_compare, subpixel_table};
-use crate::frame::sequence::progress_bar;
 
 #[derive(Args, Debug, Clone)]
 pub struct CompareArgs {

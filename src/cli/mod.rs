@@ -1,7 +1,8 @@
 //! The command line: argument structs (shared flag groups in `args`, flattened once where
 //! used), one file per command, and the dispatch. No arguments = render the default
-//! animation. The frame loop itself is in `crate::frame` (`frame::sequence` for a whole
-//! sequence); this module only turns arguments into settings and calls it.
+//! animation. The frame loop itself is in `crate::frame`, a whole sequence in `crate::run`;
+//! this module turns arguments into settings, calls them, and prints what they report (the
+//! only module that prints, with `main.rs`).
 
 mod args;
 mod bench;
@@ -9,6 +10,7 @@ mod compare;
 mod diff;
 mod export;
 mod info;
+mod progress;
 mod render;
 mod scene;
 
@@ -113,7 +115,7 @@ fn report(args: &ReportArgs) -> Result<()> {
     let page = crate::pages::write_render_page(&args.dirs, page_dir, Some(&svg))?;
     println!("page: {}", page.display());
     if let Some(expected) = expected {
-        let sequence = crate::report::load_sequence(&args.dirs)?;
+        let sequence = crate::record::load_sequence(&args.dirs)?;
         let folders = crate::report::frame_folders(&args.dirs);
         crate::report::require_frames(&sequence, &folders, expected.clone())?;
         println!(

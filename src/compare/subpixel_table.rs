@@ -11,7 +11,7 @@ use std::path::{Path, PathBuf};
 use anyhow::{Context, Result};
 
 use super::{LevelError, SubpixelSummary};
-use crate::output::write_text_atomically;
+use crate::atomic_file::write_text_atomically;
 
 /// CSV header: the method, then bias / rms / under for each convention, then the share.
 pub const CSV_HEADER: &str = "method,subpixel_longest_bias,subpixel_longest_rms,\

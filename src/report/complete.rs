@@ -7,7 +7,7 @@ use std::ops::Range;
 use std::path::{Path, PathBuf};
 
 use super::error::ReportError;
-use super::load::Sequence;
+use crate::record::Sequence;
 
 /// The frames of `expected` that `sequence` lacks: no record, or no frame file
 /// (`frame_NNNN.png` or `.exr`) in any of `folders`.
@@ -90,8 +90,8 @@ fn runs(frames: &[u32]) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::frame::FrameRecord;
-    use crate::report::Record;
+    use crate::record::FrameRecord;
+    use crate::record::Record;
 
     fn sequence(frames: &[u32]) -> Sequence {
         Sequence {

@@ -16,7 +16,7 @@ use std::ops::Range;
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
-use mipray::frame::FrameRecord;
+use mipray::record::{FrameRecord, Record};
 
 /// The scene every farm test renders: the project's default animation, by path so that a
 /// job started in any folder finds it.
@@ -125,13 +125,13 @@ pub fn record_lines_per_frame(dir: &Path) -> BTreeMap<u32, usize> {
     for entry in std::fs::read_dir(dir).unwrap() {
         let path = entry.unwrap().path();
         let name = path.file_name().unwrap().to_string_lossy().into_owned();
-        if !mipray::report::is_stats_file_name(&name) {
+        if !mipray::record::is_stats_file_name(&name) {
             continue;
         }
         for line in std::fs::read_to_string(&path).unwrap().lines() {
-            let record: FrameRecord = serde_json::from_str(line)
-                .unwrap_or_else(|e| panic!("{}: bad line {line:?}: {e}", path.display()));
-            *lines.entry(record.frame).or_insert(0) += 1;
+            let record = Record::parse(line)
+                .unwrap_or_else(|e| panic!("{}: bad line {line:?}: {e:?}", path.display()));
+            *lines.entry(record.frame()).or_insert(0) += 1;
         }
     }
     lines
@@ -172,9 +172,9 @@ pub fn assert_records_match_reference(
     let expected: BTreeMap<u32, usize> = frames.clone().map(|f| (f, 1)).collect();
     assert_eq!(lines, expected, "{}: stats lines per frame", farm.display());
     let ours =
-        mipray::report::load_sequence(&[farm.to_path_buf()]).expect("merge the farm's records");
+        mipray::record::load_sequence(&[farm.to_path_buf()]).expect("merge the farm's records");
     let theirs =
-        mipray::report::load_sequence(&[reference.to_path_buf()]).expect("reference records");
+        mipray::record::load_sequence(&[reference.to_path_buf()]).expect("reference records");
     assert_eq!(ours.duplicates_dropped, 0);
     assert_eq!(ours.records.len(), frames.len());
     assert_eq!(theirs.records.len(), frames.len());
@@ -213,7 +213,7 @@ pub fn shard_starts(dir: &Path) -> BTreeSet<u32> {
         let first = std::fs::read_to_string(&path)
             .unwrap()
             .lines()
-            .map(|line| serde_json::from_str::<FrameRecord>(line).unwrap().frame)
+            .map(|line| Record::parse(line).unwrap().frame())
             .min();
         starts.extend(first);
     }
