@@ -27,8 +27,8 @@ const ALL_METHODS: [&str; 6] = [
 const BYTES_PER_RAY: [(&str, u32); 6] = [
     ("none", 0),
     ("paper", 4),
-    ("paper-cos", 4),
-    ("cones", 8),
+    ("paper-cos", 12),
+    ("cones", 12),
     ("diffs", 48),
     ("diffs-aniso", 48),
 ];

@@ -1,8 +1,9 @@
 //! Texture level-of-detail selection: one file per method, all behind [`RayLod`].
 //!
 //! Every ray carries the state its method needs (its "LOD payload"): nothing for `none`, the
-//! path length for `paper` and `paper-cos`, a cone (width, spread angle) for `cones`, four
-//! differential vectors for `diffs` and `diffs-aniso`. The integrator is generic over the
+//! path length for `paper` (and its pixel's two widths for `paper-cos`), a cone (width,
+//! spread angle, radial ratio) for `cones`, four differential vectors for `diffs` and
+//! `diffs-aniso`. The integrator is generic over the
 //! state, so each method pays only for its own payload and arithmetic (the dispatch on
 //! [`LodMethod`] happens once per primary ray).
 //!
@@ -22,6 +23,7 @@ mod none;
 mod paper;
 mod paper_cos;
 mod pb;
+mod pixel;
 #[cfg(test)]
 mod test_support;
 
@@ -35,6 +37,7 @@ pub use pb::{
     LOG2_PB_LIMIT, PixelFootprint, cross_squared, log2_pb, log2_pb_from_parts,
     log2_pb_with_texel_term, shift_log2_pb, texel_area, texel_term, uv_area,
 };
+pub use pixel::{PixelWidths, footprint_longest_axis};
 
 use std::fmt;
 use std::str::FromStr;
@@ -51,10 +54,11 @@ pub enum LodMethod {
     None,
     /// Park & Kim: `log2(path length) - log2 P_b`.
     Paper,
-    /// Park & Kim plus the incidence term of ray cones: `- log2 max(|n.d|, 1/16)`.
+    /// Park & Kim plus the incidence term of ray cones (`- log2 max(|n.d|, 1/16)` on the
+    /// axis), with each primary ray's own pixel: exact on a facing plane at any field of view.
     PaperCos,
-    /// Ray cones (Akenine-Moller et al. 2019/2021): width and spread angle, curvature
-    /// spread at mirrors, refraction of the spread.
+    /// Ray cones (Akenine-Moller et al. 2019/2021): width and spread angle of each primary
+    /// ray's own pixel, curvature spread at mirrors, refraction of the spread.
     Cones,
     /// Igehy's ray differentials; isotropic level, OpenGL convention.
     Diffs,
@@ -442,7 +446,8 @@ mod tests {
     fn payload_sizes_are_as_documented() {
         assert_eq!(LodMethod::None.bytes_per_ray(), 0);
         assert_eq!(LodMethod::Paper.bytes_per_ray(), 4);
-        assert_eq!(LodMethod::Cones.bytes_per_ray(), 8);
+        assert_eq!(LodMethod::PaperCos.bytes_per_ray(), 12);
+        assert_eq!(LodMethod::Cones.bytes_per_ray(), 12);
         assert_eq!(LodMethod::Diffs.bytes_per_ray(), 48);
     }
 
