@@ -21,4 +21,5 @@ pub mod pages;
 pub mod render;
 pub mod report;
 pub mod scene;
+pub mod simd;
 pub mod texture;

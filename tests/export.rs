@@ -48,6 +48,7 @@ fn export(
         dir: dir.to_path_buf(),
         frames,
         clock: mipray::frame::FrameClock::Fps(30.0),
+        rays: false,
     };
     export_frames(renderer, &options, |_| {}).expect("export")
 }
@@ -744,6 +745,7 @@ fn bad_input_gives_errors_not_panics() {
         dir: unwritable.clone(),
         frames: 0..1,
         clock: mipray::frame::FrameClock::Fps(30.0),
+        rays: false,
     };
     assert!(export_frames(&mut renderer, &options, |_| {}).is_err());
 
@@ -770,4 +772,139 @@ fn bad_input_gives_errors_not_panics() {
     let run = mipray(&["info", bad.to_str().unwrap()]);
     assert!(!run.status.success());
     assert!(String::from_utf8_lossy(&run.stderr).contains("missing.png"));
+}
+
+// ---------------------------------------------------------------- the ray file
+
+/// The per-corner triangles of an exported OBJ, in face order.
+fn obj_faces(path: &Path) -> Vec<[glam::Vec3A; 3]> {
+    let text = std::fs::read_to_string(path).unwrap();
+    let mut v = Vec::new();
+    let mut faces = Vec::new();
+    for line in text.lines() {
+        let mut w = line.split_whitespace();
+        match w.next() {
+            Some("v") => {
+                let c: Vec<f32> = w.map(|x| x.parse().unwrap()).collect();
+                v.push(glam::Vec3A::new(c[0], c[1], c[2]));
+            }
+            Some("f") => {
+                let i: Vec<usize> = w
+                    .map(|c| c.split('/').next().unwrap().parse::<usize>().unwrap() - 1)
+                    .collect();
+                assert_eq!(i.len(), 3, "{line}");
+                faces.push([v[i[0]], v[i[1]], v[i[2]]]);
+            }
+            _ => {}
+        }
+    }
+    faces
+}
+
+/// `export --rays` records every class of ray the default animation traces (it has mirrors,
+/// glass and two lights), each answer checked by brute force against the exported mesh's
+/// faces (the face recorded is one at the nearest distance, bit for bit; a miss crosses no
+/// face; a shadow ray is blocked exactly when some face lies within its interval), and
+/// `bench --rays FILE` traces the file on mipray's kernels with no answer differing.
+#[test]
+fn the_ray_file_records_every_ray_with_answers_brute_force_confirms() {
+    use mipray::accel::intersect;
+    use mipray::export::rays::{MISS, read_ray_file};
+    use mipray::render::RayClass;
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().to_str().unwrap();
+    let (w, h) = (48u32, 27u32);
+    let size = format!("{w}x{h}");
+    let run = mipray(&[
+        "export", "default", "--frames", "5", "--size", &size, "--rays", "--out", out,
+    ]);
+    assert!(
+        run.status.success(),
+        "{}",
+        String::from_utf8_lossy(&run.stderr)
+    );
+    let records = read_ray_file(&dir.path().join("rays_0005.bin")).unwrap();
+    let faces = obj_faces(&dir.path().join("frame_0005.obj"));
+    let count = |c: RayClass| records.iter().filter(|r| r.class == c).count();
+    assert_eq!(
+        count(RayClass::Primary),
+        (w * h) as usize,
+        "one primary ray per pixel"
+    );
+    for class in [RayClass::Shadow, RayClass::Reflection, RayClass::Refraction] {
+        assert!(count(class) > 20, "{class:?}: {}", count(class));
+    }
+    // Film order: tile by tile, so the primary rays' pixels come in the tiles' order.
+    let first_row: Vec<u32> = records
+        .iter()
+        .filter(|r| r.class == RayClass::Primary)
+        .take(16)
+        .map(|r| r.pixel)
+        .collect();
+    assert_eq!(first_row, (0..16).collect::<Vec<_>>());
+    let mut checked = [0usize; 4];
+    for r in &records {
+        assert!(r.pixel < w * h);
+        let hit_t = |tri: &[glam::Vec3A; 3]| intersect(tri, r.origin, r.direction).map(|(t, _)| t);
+        let nearest = faces
+            .iter()
+            .filter_map(hit_t)
+            .filter(|&t| t >= r.t_min && t < r.t_max)
+            .fold(None, |m: Option<f32>, t| Some(m.map_or(t, |m| m.min(t))));
+        match r.class {
+            RayClass::Shadow => {
+                assert_eq!(r.result == 1, nearest.is_some(), "shadow ray {r:?}");
+                assert!(r.t.is_nan());
+            }
+            _ if r.result == MISS => {
+                assert_eq!(nearest, None, "a recorded miss crosses a face: {r:?}");
+                assert!(r.t.is_nan());
+            }
+            _ => {
+                let face = &faces[r.result as usize];
+                assert_eq!(hit_t(face).map(f32::to_bits), Some(r.t.to_bits()), "{r:?}");
+                assert_eq!(
+                    nearest.map(f32::to_bits),
+                    Some(r.t.to_bits()),
+                    "not the nearest: {r:?}"
+                );
+            }
+        }
+        checked[r.class as usize] += 1;
+    }
+    assert_eq!(checked.iter().sum::<usize>(), records.len());
+
+    let file = dir.path().join("rays_0005.bin");
+    let bench = mipray(&[
+        "bench",
+        "default",
+        "--frames",
+        "5",
+        "--size",
+        &size,
+        "--rays",
+        file.to_str().unwrap(),
+        "--threads",
+        "1",
+        "--repeats",
+        "1",
+    ]);
+    assert!(
+        bench.status.success(),
+        "{}",
+        String::from_utf8_lossy(&bench.stderr)
+    );
+    let table = String::from_utf8_lossy(&bench.stdout);
+    let rows: Vec<&str> = table
+        .lines()
+        .filter(|l| l.starts_with("| ") && !l.starts_with("| class"))
+        .collect();
+    assert_eq!(
+        rows.len(),
+        5,
+        "primary packets and single, shadow, reflection, refraction:\n{table}"
+    );
+    for row in rows {
+        assert!(row.trim_end().ends_with("| 0 |"), "answers differ: {row}");
+    }
 }

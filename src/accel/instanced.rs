@@ -18,9 +18,10 @@ use std::time::Duration;
 use glam::{Affine3A, Mat4, Vec2, Vec3, Vec3A};
 use obvhs::{BvhBuildParams, aabb::Aabb, bvh2::builder::build_bvh2};
 
+use super::query::{Closest, Hit, ObjectPacket, PacketQuery, Within};
 use super::triangles::ShearedRay;
 use super::wide::{PACKET, RayBoxes, WideBvh};
-use super::{Accel, AccelError, Closest, Hit, ObjectPacket, PacketQuery, Within};
+use super::{Accel, AccelError};
 use crate::geometry::{FrameTriangles, Placement};
 
 /// One instance of a shared mesh, as the frame loop describes it.

@@ -9,7 +9,10 @@ use std::fmt::Write;
 
 mod rays;
 
-pub use rays::{RayKind, RayKinds, RayRate, ray_table, run_ray_bench};
+pub use rays::{
+    RayFileRate, RayKind, RayKinds, RayRate, ray_file_table, ray_table, run_ray_bench,
+    run_ray_file_bench,
+};
 
 use anyhow::Result;
 

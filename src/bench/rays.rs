@@ -16,9 +16,10 @@ use glam::Vec3A;
 use rayon::prelude::*;
 
 use crate::accel::PACKET;
+use crate::export::rays::{MISS, RayRecord, read_ray_file};
 use crate::frame::Renderer;
 use crate::render::film::TILE;
-use crate::render::{SceneBvh, shadow_ray_toward};
+use crate::render::{RayClass, SceneBvh, shadow_ray_toward};
 use crate::report::Percentiles;
 
 /// Which rays `--rays` times.
@@ -199,6 +200,183 @@ fn trace_all(kind: RayKind, bvh: &SceneBvh, rays: &[TimedRay]) -> usize {
                 .count(),
         })
         .sum()
+}
+
+/// Rate of one class of a ray file's rays at one thread count, and how many answers
+/// differed from the recorded ones.
+#[derive(Debug, Clone)]
+pub struct RayFileRate {
+    pub class: RayClass,
+    /// How the class was traced: "packets" or "single".
+    pub api: &'static str,
+    pub threads: usize,
+    pub rays: usize,
+    /// Share that hit (closest hit) or were blocked (shadow).
+    pub hit_share: f64,
+    /// Answers that differ from the file's (triangle and distance bits, or blocked).
+    pub mismatches: usize,
+    pub rays_per_second: Percentiles,
+}
+
+/// How one class of a ray file's rays is traced.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum FileKernel {
+    /// Closest hits in packets of up to [`PACKET`] consecutive rays (primary rays, as the
+    /// film traces them).
+    ClosestPackets,
+    ClosestSingle,
+    /// Any hit in `[t min, t max)`.
+    Occlusion,
+}
+
+/// Traces the rays of a ray file (`mipray export --rays`) on frame `frame` of the
+/// renderer's scene, class by class, for each thread count, `repeats` times; checks every
+/// answer against the recorded one.
+///
+/// # Errors
+/// The file cannot be read, or the frame cannot be prepared.
+pub fn run_ray_file_bench(
+    renderer: &mut Renderer,
+    frame: u32,
+    clock: crate::frame::FrameClock,
+    path: &std::path::Path,
+    threads: &[usize],
+    repeats: usize,
+) -> Result<Vec<RayFileRate>> {
+    let records = read_ray_file(path)?;
+    let pools = threads
+        .iter()
+        .map(|&t| rayon::ThreadPoolBuilder::new().num_threads(t).build())
+        .collect::<Result<Vec<_>, _>>()?;
+    let prepared = renderer.prepare(frame, clock.time(frame))?;
+    let face_of_slot = crate::export::face_of_slot(renderer);
+    let bvh = renderer.frame_scene(&prepared).bvh;
+    let mut rates = Vec::new();
+    for class in RayClass::ALL {
+        let rays: Vec<&RayRecord> = records.iter().filter(|r| r.class == class).collect();
+        if rays.is_empty() {
+            continue;
+        }
+        let kernels: &[(FileKernel, &str)] = match class {
+            RayClass::Primary => &[
+                (FileKernel::ClosestPackets, "packets"),
+                (FileKernel::ClosestSingle, "single"),
+            ],
+            RayClass::Shadow => &[(FileKernel::Occlusion, "single")],
+            RayClass::Reflection | RayClass::Refraction => &[(FileKernel::ClosestSingle, "single")],
+        };
+        for &(kernel, api) in kernels {
+            let mut seconds = vec![vec![0.0f64; repeats]; threads.len()];
+            let mut answers = Vec::new();
+            for repeat in 0..repeats {
+                for k in 0..threads.len() {
+                    let c = (k + repeat) % threads.len();
+                    let start = Instant::now();
+                    let got = pools[c].install(|| trace_records(kernel, &bvh, &rays));
+                    seconds[c][repeat] += start.elapsed().as_secs_f64();
+                    if repeat == 0 && k == 0 {
+                        answers = got;
+                    }
+                }
+            }
+            let mismatches = rays
+                .iter()
+                .zip(&answers)
+                .filter(|(r, a)| !answer_matches(r, **a, &face_of_slot))
+                .count();
+            let hits = answers.iter().filter(|a| a.is_some()).count();
+            for (c, &t) in threads.iter().enumerate() {
+                rates.push(RayFileRate {
+                    class,
+                    api,
+                    threads: t,
+                    rays: rays.len(),
+                    hit_share: hits as f64 / rays.len() as f64,
+                    mismatches,
+                    rays_per_second: Percentiles::of(
+                        seconds[c].iter().map(|s| rays.len() as f64 / s.max(1e-9)),
+                    ),
+                });
+            }
+        }
+    }
+    Ok(rates)
+}
+
+/// What a kernel answered for one ray: the hit slot and distance (closest hit), or
+/// `Some((0, NaN))` for blocked (occlusion); `None` for a miss or a clear shadow ray.
+type Answer = Option<(u32, f32)>;
+
+fn trace_records(kernel: FileKernel, bvh: &SceneBvh, rays: &[&RayRecord]) -> Vec<Answer> {
+    let closest = |h: Option<crate::accel::Hit>| h.map(|h| (h.triangle, h.t));
+    rays.par_chunks(1024)
+        .flat_map_iter(|chunk| -> Vec<Answer> {
+            match kernel {
+                FileKernel::ClosestPackets => chunk
+                    .chunks(PACKET)
+                    .flat_map(|packet| {
+                        let mut pairs = [(Vec3A::ZERO, Vec3A::ZERO); PACKET];
+                        for (pair, r) in pairs.iter_mut().zip(packet) {
+                            *pair = (r.origin, r.direction);
+                        }
+                        let mut hits = [None; PACKET];
+                        let n = packet.len();
+                        bvh.closest_hits(&pairs[..n], f32::INFINITY, &mut hits[..n]);
+                        hits[..n].iter().map(|&h| closest(h)).collect::<Vec<_>>()
+                    })
+                    .collect(),
+                FileKernel::ClosestSingle => chunk
+                    .iter()
+                    .map(|r| closest(bvh.closest_hit(r.origin, r.direction, r.t_max)))
+                    .collect(),
+                FileKernel::Occlusion => chunk
+                    .iter()
+                    .map(|r| {
+                        let clear = bvh.visit_hits(r.origin, r.direction, r.t_max, |_, _, _| false);
+                        (!clear).then_some((0, f32::NAN))
+                    })
+                    .collect(),
+            }
+        })
+        .collect()
+}
+
+/// Whether `answer` is what record `r` holds (the same face and distance bits, or the same
+/// blocked flag).
+fn answer_matches(r: &RayRecord, answer: Answer, face_of_slot: &[u32]) -> bool {
+    match (r.class, answer) {
+        (RayClass::Shadow, a) => (r.result == 1) == a.is_some(),
+        (_, None) => r.result == MISS,
+        (_, Some((slot, t))) => {
+            face_of_slot.get(slot as usize) == Some(&r.result) && t.to_bits() == r.t.to_bits()
+        }
+    }
+}
+
+/// A Markdown table of a ray file's rates per class.
+pub fn ray_file_table(rates: &[RayFileRate]) -> String {
+    let mut s = String::new();
+    let _ = writeln!(
+        s,
+        "| class | traced as | threads | count | hit or blocked | Mrays/s (median) | min..max | answers differing |"
+    );
+    let _ = writeln!(s, "|---|---|---:|---:|---:|---:|---:|---:|");
+    for r in rates {
+        let _ = writeln!(
+            s,
+            "| {} | {} | {} | {} | {:.1}% | {:.3} | {:.3}..{:.3} | {} |",
+            r.class.name(),
+            r.api,
+            r.threads,
+            r.rays,
+            100.0 * r.hit_share,
+            r.rays_per_second.median / 1e6,
+            r.rays_per_second.min / 1e6,
+            r.rays_per_second.max / 1e6,
+            r.mismatches
+        );
+    }
+    s
 }
 
 /// A Markdown table of ray rates.

@@ -7,7 +7,10 @@ use super::args::{LightArgs, SequenceArgs, TraceArgs, render_settings};
 use super::render::{BvhMode, apply_bvh};
 use super::scene::{load_scene, open_scene};
 use crate::accel::BvhPolicy;
-use crate::bench::{BenchConfig, RayKinds, bench_table, ray_table, run_bench, run_ray_bench};
+use crate::bench::{
+    BenchConfig, RayKinds, bench_table, ray_file_table, ray_table, run_bench, run_ray_bench,
+    run_ray_file_bench,
+};
 use crate::frame::Renderer;
 use crate::lod::LodMethod;
 
@@ -34,14 +37,33 @@ pub struct BenchArgs {
     /// How many times every configuration renders the frames.
     #[arg(long, default_value_t = 5)]
     pub repeats: usize,
-    /// Time tracing alone instead of whole frames: closest-hit primary rays through pixel
-    /// centres, occlusion rays from their hits to every light, or both (no shading).
-    #[arg(long, value_enum)]
-    pub rays: Option<RayKinds>,
+    /// Time tracing alone instead of whole frames: `primary` (closest-hit rays through pixel
+    /// centres), `shadow` (occlusion rays from their hits to every light) or `all` (both),
+    /// no shading; or a ray file written by `export --rays` (path), whose rays are traced
+    /// class by class on the first frame of `--frames` and checked against the file's
+    /// answers.
+    #[arg(long, value_parser = parse_rays_arg)]
+    pub rays: Option<RaysArg>,
     /// BVH layouts and policies, comma separated, as `render --bvh` (whole frames: each is a
     /// configuration; `--rays`: the first).
     #[arg(long, value_enum, value_delimiter = ',', default_value = "flat")]
     pub bvh: Vec<BvhMode>,
+}
+
+/// What `--rays` times: generated rays of some kinds, or the rays of a file.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum RaysArg {
+    Kinds(RayKinds),
+    File(std::path::PathBuf),
+}
+
+fn parse_rays_arg(s: &str) -> Result<RaysArg, String> {
+    use clap::ValueEnum;
+    match RayKinds::from_str(s, false) {
+        Ok(kinds) => Ok(RaysArg::Kinds(kinds)),
+        Err(_) if s.is_empty() => Err("expected primary, shadow, all or a ray file".into()),
+        Err(_) => Ok(RaysArg::File(s.into())),
+    }
 }
 
 /// `mipray bench`.
@@ -72,7 +94,32 @@ pub fn bench(args: &BenchArgs) -> Result<()> {
     if threads.contains(&0) {
         bail!("--threads: counts must be at least 1");
     }
-    if let Some(kinds) = args.rays {
+    if let Some(RaysArg::File(file)) = &args.rays {
+        eprintln!(
+            "bench --rays {}: {} frame {} at {}x{} (flat tree), threads {:?} x {} repeats",
+            file.display(),
+            path.display(),
+            frames.start,
+            settings.width,
+            settings.height,
+            threads,
+            args.repeats
+        );
+        settings.lod = args.methods[0];
+        settings.layout = crate::accel::BvhLayout::Flat;
+        let mut renderer = Renderer::new(load_scene(&path)?, settings);
+        let rates = run_ray_file_bench(
+            &mut renderer,
+            frames.start,
+            clock,
+            file,
+            &threads,
+            args.repeats,
+        )?;
+        print!("{}", ray_file_table(&rates));
+        return Ok(());
+    }
+    if let Some(RaysArg::Kinds(kinds)) = args.rays {
         eprintln!(
             "bench --rays: {} frames {}..{} at {}x{}, lights {:?}, threads {:?} x {} repeats",
             path.display(),

@@ -23,6 +23,16 @@ pub struct ExportArgs {
     /// Output folder [default: out/<scene>/export/].
     #[arg(long)]
     pub out: Option<PathBuf>,
+    /// Also render each frame and write every ray it traces to `rays_NNNN.bin` (primary,
+    /// shadow, reflection and refraction rays with their answers; format in the guide).
+    #[arg(long)]
+    pub rays: bool,
+    /// Maximum reflection/refraction depth of the rendered frames (with `--rays`).
+    #[arg(long, default_value_t = 5)]
+    pub max_depth: u32,
+    /// Samples per pixel of the rendered frames (with `--rays`).
+    #[arg(long, default_value_t = 1)]
+    pub spp: u32,
 }
 
 /// `mipray export`: prepares each frame with render's settings and writes its triangles,
@@ -30,9 +40,9 @@ pub struct ExportArgs {
 pub fn export(args: &ExportArgs) -> Result<()> {
     let trace = TraceArgs {
         lod_bias: 0.0,
-        max_depth: crate::frame::RenderSettings::default().max_depth,
+        max_depth: args.max_depth,
     };
-    let mut settings = render_settings(&args.sequence, &trace, args.lights.lights, 1)?;
+    let mut settings = render_settings(&args.sequence, &trace, args.lights.lights, args.spp)?;
     let scene = open_scene(&args.sequence)?;
     settings.animation = scene.animation;
     let options = ExportOptions {
@@ -43,6 +53,7 @@ pub fn export(args: &ExportArgs) -> Result<()> {
             .unwrap_or_else(|| PathBuf::from("out").join(&scene.name).join("export")),
         frames: scene.frames.clone(),
         clock: scene.clock,
+        rays: args.rays,
     };
     let mut renderer = Renderer::new(scene.desc, settings);
     let done = export_frames(&mut renderer, &options, |f| {
@@ -54,6 +65,9 @@ pub fn export(args: &ExportArgs) -> Result<()> {
             f.deformed,
             f.mesh.display()
         );
+        if let Some((path, count)) = &f.rays {
+            println!("            {count} rays -> {}", path.display());
+        }
     })?;
     println!(
         "exported {} frame(s) into {}",

@@ -6,7 +6,8 @@
 //! Files per frame `N` in the output folder (see `docs/export.md` for the formats):
 //! - `frame_NNNN.obj` (+ one shared `materials.mtl` and `textures/*.png`), or
 //!   `frame_NNNN.ply` (binary little-endian, with per-face material, `log2_pb`, `deformed`);
-//! - `camera_NNNN.json`: camera, primary-ray convention, lights, background.
+//! - `camera_NNNN.json`: camera, primary-ray convention, lights, background;
+//! - with `--rays`, `rays_NNNN.bin`: every ray the frame traces when rendered ([`rays`]).
 //!
 //! Invariants: meshes stream from `Renderer::triangles()` through a `BufWriter` (no second
 //! in-memory copy of the mesh); every file is written to a hidden temporary file in the same
@@ -15,6 +16,7 @@
 pub mod camera;
 mod obj;
 mod ply;
+pub mod rays;
 
 use std::fs::{self, File};
 use std::io::{self, BufWriter, Write};
@@ -54,6 +56,8 @@ pub struct ExportOptions {
     /// Half-open frame range; frame `i` is at `clock.time(i)` (as `render` does).
     pub frames: Range<u32>,
     pub clock: crate::frame::FrameClock,
+    /// Also render each frame (with the renderer's settings) and write the rays it traced.
+    pub rays: bool,
 }
 
 /// One exported frame.
@@ -66,6 +70,8 @@ pub struct ExportedFrame {
     pub triangles: usize,
     /// Triangles flagged `deformed` (shape changed since the previous frame).
     pub deformed: usize,
+    /// The ray file and its record count, with `ExportOptions::rays`.
+    pub rays: Option<(PathBuf, usize)>,
 }
 
 #[derive(Debug, thiserror::Error)]
@@ -127,6 +133,43 @@ pub(crate) fn bit(bits: &[u64], slot: usize) -> bool {
         .is_some_and(|w| w & (1 << (slot % 64)) != 0)
 }
 
+/// Per slot of the renderer's triangles, its face index in the OBJ export of the frame (the
+/// `result` of a hit in the ray file, whatever the mesh format exported beside it).
+pub fn face_of_slot(renderer: &Renderer) -> Vec<u32> {
+    let triangles = renderer.triangles();
+    let order = obj::slots_in_face_order(
+        &triangles.material,
+        &triangles.source,
+        renderer.materials().len(),
+    );
+    let mut face = vec![rays::MISS; triangles.len()];
+    for (index, &slot) in order.iter().enumerate() {
+        face[slot as usize] = index as u32;
+    }
+    face
+}
+
+/// Renders the prepared frame recording its rays and writes them to `path` (the result of
+/// a hit as the face index in the frame's OBJ export); returns the number of rays.
+fn write_frame_rays(
+    renderer: &Renderer,
+    prepared: &crate::frame::PreparedFrame,
+    path: &Path,
+) -> Result<usize, ExportError> {
+    let scene = renderer.frame_scene(prepared);
+    let spp = renderer.settings().spp.max(1);
+    let (_, counters) = crate::render::render_image_recording(&scene, &prepared.camera, spp);
+    let log = counters.log.unwrap_or_default();
+    let face_of_slot = face_of_slot(renderer);
+    let records: Vec<rays::RayRecord> = log
+        .rays
+        .iter()
+        .map(|ray| rays::RayRecord::of(ray, &face_of_slot))
+        .collect();
+    write_atomically(path, |w| rays::write_records(w, &records))?;
+    Ok(records.len())
+}
+
 /// Exports `options.frames` of the renderer's scene into `options.dir` (created if
 /// needed), calling `on_frame` after each frame's files are in place.
 ///
@@ -175,6 +218,13 @@ pub fn export_frames(
             w.write_all(json.as_bytes())?;
             w.write_all(b"\n")
         })?;
+        let rays = if options.rays {
+            let path = options.dir.join(rays::ray_file_name(frame));
+            let count = write_frame_rays(renderer, &prepared, &path)?;
+            Some((path, count))
+        } else {
+            None
+        };
         let exported = ExportedFrame {
             frame,
             time_s,
@@ -182,6 +232,7 @@ pub fn export_frames(
             camera,
             triangles: renderer.triangles().len(),
             deformed: deformed.iter().map(|w| w.count_ones() as usize).sum(),
+            rays,
         };
         on_frame(&exported);
         done.push(exported);

@@ -225,6 +225,23 @@ fn write_transmission(w: &mut impl Write, m: &MaterialDesc) -> std::io::Result<(
     Ok(())
 }
 
+/// The slots of a frame's triangles in the order the OBJ writes them: grouped by material
+/// (in material order), then by source triangle. Source order, not slot order, so the file
+/// does not depend on how the tree was built (a frame exported after others, or alone,
+/// writes the same file). Triangles whose material index is not below `material_count` are
+/// not written (none are: every slot names one of the scene's materials or the default one).
+pub(crate) fn slots_in_face_order(
+    material_of_slot: &[u32],
+    source_of_slot: &[u32],
+    material_count: usize,
+) -> Vec<u32> {
+    let mut slots: Vec<u32> = (0..material_of_slot.len() as u32)
+        .filter(|&s| (material_of_slot[s as usize] as usize) < material_count)
+        .collect();
+    slots.sort_unstable_by_key(|&s| (material_of_slot[s as usize], source_of_slot[s as usize]));
+    slots
+}
+
 /// Streams the frame's triangles into `path`, grouped by material.
 pub(crate) fn write_obj(
     renderer: &Renderer,
@@ -248,29 +265,26 @@ pub(crate) fn write_obj(
         writeln!(w, "mtllib {MTL_FILE}")?;
         writeln!(w, "o frame_{frame:04}")?;
         let mut next = 1usize;
-        for (m, material) in materials.iter().enumerate() {
-            let mut started = false;
-            for slot in 0..t.len() {
-                if t.material[slot] as usize != m {
-                    continue;
-                }
-                if !started {
-                    writeln!(w, "usemtl {}", material_name(m, material))?;
-                    started = true;
-                }
-                for p in &t.positions[slot] {
-                    writeln!(w, "v {} {} {}", p.x, p.y, p.z)?;
-                }
-                for uv in &t.uvs[slot] {
-                    writeln!(w, "vt {} {}", uv.x, 1.0 - uv.y as f64)?;
-                }
-                for n in &t.normals[slot] {
-                    writeln!(w, "vn {} {} {}", n.x, n.y, n.z)?;
-                }
-                let (a, b, c) = (next, next + 1, next + 2);
-                writeln!(w, "f {a}/{a}/{a} {b}/{b}/{b} {c}/{c}/{c}")?;
-                next += 3;
+        let mut current = None;
+        for slot in slots_in_face_order(&t.material, &t.source, materials.len()) {
+            let m = t.material[slot as usize] as usize;
+            if current != Some(m) {
+                writeln!(w, "usemtl {}", material_name(m, &materials[m]))?;
+                current = Some(m);
             }
+            let slot = slot as usize;
+            for p in &t.positions[slot] {
+                writeln!(w, "v {} {} {}", p.x, p.y, p.z)?;
+            }
+            for uv in &t.uvs[slot] {
+                writeln!(w, "vt {} {}", uv.x, 1.0 - uv.y as f64)?;
+            }
+            for n in &t.normals[slot] {
+                writeln!(w, "vn {} {} {}", n.x, n.y, n.z)?;
+            }
+            let (a, b, c) = (next, next + 1, next + 2);
+            writeln!(w, "f {a}/{a}/{a} {b}/{b}/{b} {c}/{c}/{c}")?;
+            next += 3;
         }
         Ok(())
     })

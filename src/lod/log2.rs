@@ -1,6 +1,6 @@
 //! `log2` of positive normal `f64` values, one at a time or in batches that the compiler
 //! vectorises (two lanes on the x86-64 baseline, four in the AVX2 copy, chosen at run time by
-//! `accel::avx2_walks` as the walks are).
+//! `simd::dispatch`).
 //!
 //! The deforming meshes' `log2 P_b` pass takes one `log2` per triangle and frame, and libm's
 //! is a call the loop cannot vectorise: about 3 of a million triangles' ~4.4 ms
@@ -14,6 +14,8 @@
 //! Method: `x = 2^e m` with `m` in `[sqrt(1/2), sqrt(2))`; `ln m = 2 atanh(s)` with
 //! `s = (m - 1) / (m + 1)`, `|s| <= 0.1716`, summed as `2 s (1 + s^2/3 + ... + s^18/19)`
 //! (the next term is below `2.5e-17` of the sum).
+
+use crate::simd;
 
 /// `log2 x` for a positive normal `x` (module docs).
 #[inline(always)]
@@ -51,29 +53,25 @@ pub fn log2(x: f64) -> f64 {
     e + (2.0 * s * series) * std::f64::consts::LOG2_E
 }
 
-/// Replaces every value of `values` with its [`log2`], the same bits as one at a time.
+/// Replaces every value of `values` with its [`log2`], the same bits as one at a time, in
+/// the copy [`simd::dispatch`] chooses (four lanes per instruction in the AVX2 copy).
 pub fn log2_in_place(values: &mut [f64]) {
-    #[cfg(target_arch = "x86_64")]
-    if crate::accel::avx2_walks() {
-        // SAFETY: the CPU has AVX2 (detected).
-        unsafe { log2_in_place_avx2(values) };
-        return;
-    }
-    log2_each(values);
+    simd::dispatch(Log2InPlace(values))
 }
 
-#[inline(always)]
-fn log2_each(values: &mut [f64]) {
-    for v in values {
-        *v = log2(*v);
-    }
-}
+/// [`log2_in_place`] as a [`simd::Kernel`]: the loop compiles to vector code in each copy,
+/// with the same operations.
+struct Log2InPlace<'a>(&'a mut [f64]);
 
-/// [`log2_each`] compiled for AVX2 (four lanes per instruction; the same operations).
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2")]
-fn log2_in_place_avx2(values: &mut [f64]) {
-    log2_each(values);
+impl simd::Kernel for Log2InPlace<'_> {
+    type Output = ();
+
+    #[inline(always)]
+    fn run<const AVX2: bool>(self) {
+        for v in self.0 {
+            *v = log2(*v);
+        }
+    }
 }
 
 #[cfg(test)]
@@ -135,23 +133,29 @@ mod tests {
         eprintln!("worst: {worst} ulps");
     }
 
-    /// A batch (vectorised, AVX2 where the CPU has it) gives the same bits as one value at
-    /// a time, whatever the batch length and alignment.
+    /// A batch gives the same bits as one value at a time, whatever the batch length and
+    /// alignment, in the copy the process runs, in the baseline copy, and in the AVX2 copy
+    /// where the CPU has AVX2.
     #[test]
     fn batches_equal_one_at_a_time() {
         let mut state = 0x1234_5678_9abc_def1u64;
         let values: Vec<f64> = (0..10_007).map(|_| random_positive(&mut state)).collect();
+        let check = |batch: &[f64], start: usize, copy: &str| {
+            for (x, got) in values[start..].iter().zip(batch) {
+                assert_eq!(got.to_bits(), log2(*x).to_bits(), "{x} ({copy})");
+            }
+        };
         for start in 0..3 {
             let mut batch = values[start..].to_vec();
             log2_in_place(&mut batch);
-            for (x, got) in values[start..].iter().zip(&batch) {
-                assert_eq!(got.to_bits(), log2(*x).to_bits(), "{x}");
+            check(&batch, start, "dispatched");
+            let mut batch = values[start..].to_vec();
+            simd::run_baseline(Log2InPlace(&mut batch));
+            check(&batch, start, "baseline");
+            let mut batch = values[start..].to_vec();
+            if simd::run_avx2_if_available(Log2InPlace(&mut batch)).is_some() {
+                check(&batch, start, "avx2");
             }
-        }
-        let mut baseline = values.clone();
-        log2_each(&mut baseline);
-        for (x, got) in values.iter().zip(&baseline) {
-            assert_eq!(got.to_bits(), log2(*x).to_bits(), "{x}");
         }
     }
 }

@@ -35,6 +35,25 @@ impl LinearImage {
 
 /// Renders all pixels of `camera` with `spp` samples each.
 pub fn render_image(scene: &FrameScene, camera: &Camera, spp: u32) -> (LinearImage, TraceCounters) {
+    render_image_with(scene, camera, spp, false)
+}
+
+/// [`render_image`], also recording every ray traced (`TraceCounters::log`, in film order:
+/// tile by tile, each tile's rays in the order it traced them). The image is the same.
+pub fn render_image_recording(
+    scene: &FrameScene,
+    camera: &Camera,
+    spp: u32,
+) -> (LinearImage, TraceCounters) {
+    render_image_with(scene, camera, spp, true)
+}
+
+fn render_image_with(
+    scene: &FrameScene,
+    camera: &Camera,
+    spp: u32,
+    record: bool,
+) -> (LinearImage, TraceCounters) {
     let (width, height) = (camera.width, camera.height);
     let tiles_x = width.div_ceil(TILE);
     let tiles_y = height.div_ceil(TILE);
@@ -47,6 +66,7 @@ pub fn render_image(scene: &FrameScene, camera: &Camera, spp: u32) -> (LinearIma
                 spp,
                 (tile % tiles_x) * TILE,
                 (tile / tiles_x) * TILE,
+                record,
             )
         })
         .collect();
@@ -55,7 +75,11 @@ pub fn render_image(scene: &FrameScene, camera: &Camera, spp: u32) -> (LinearIma
         height,
         pixels: vec![Vec3::ZERO; (width * height) as usize],
     };
-    let mut counters = TraceCounters::default();
+    let mut counters = if record {
+        TraceCounters::recording()
+    } else {
+        TraceCounters::default()
+    };
     for (tile, (pixels, tile_counters)) in tiles.iter().enumerate() {
         let (x0, y0) = (
             (tile as u32 % tiles_x) * TILE,
@@ -79,8 +103,9 @@ fn render_tile(
     spp: u32,
     x0: u32,
     y0: u32,
+    record: bool,
 ) -> (Vec<Vec3>, TraceCounters) {
-    with_lod_state!(scene.lod, L => render_tile_with::<L>(scene, camera, spp, x0, y0))
+    with_lod_state!(scene.lod, L => render_tile_with::<L>(scene, camera, spp, x0, y0, record))
 }
 
 /// One tile's pixels, row by row. Primary rays are traced as packets of up to
@@ -93,15 +118,21 @@ fn render_tile_with<L: RayLod>(
     spp: u32,
     x0: u32,
     y0: u32,
+    record: bool,
 ) -> (Vec<Vec3>, TraceCounters) {
     let x1 = (x0 + TILE).min(camera.width);
     let y1 = (y0 + TILE).min(camera.height);
-    let mut counters = TraceCounters::default();
+    let mut counters = if record {
+        TraceCounters::recording()
+    } else {
+        TraceCounters::default()
+    };
     let mut pixels = Vec::with_capacity(((x1 - x0) * (y1 - y0)) as usize);
     let mut samples = (y0..y1)
         .flat_map(|y| (x0..x1).map(move |x| (x, y)))
         .flat_map(|(x, y)| (0..spp).map(move |i| (x, y, i)));
     let mut film_points = [(0.0f32, 0.0f32); PACKET];
+    let mut pixel_of = [0u32; PACKET];
     let mut rays = [(Vec3A::ZERO, Vec3A::ZERO); PACKET];
     let mut hits = [None; PACKET];
     let mut sum = Vec3A::ZERO;
@@ -112,6 +143,7 @@ fn render_tile_with<L: RayLod>(
             let (sx, sy) = sample_offset(x, y, i, spp);
             let point = (x as f32 + sx, y as f32 + sy);
             film_points[n] = point;
+            pixel_of[n] = y * camera.width + x;
             rays[n] = (camera.eye, camera.primary_direction(point.0, point.1));
             n += 1;
         }
@@ -122,6 +154,7 @@ fn render_tile_with<L: RayLod>(
             .bvh
             .closest_hits(&rays[..n], f32::INFINITY, &mut hits[..n]);
         for k in 0..n {
+            counters.set_pixel(pixel_of[k]);
             let radiance = scene.primary_radiance_at::<L>(
                 camera,
                 film_points[k],

@@ -16,6 +16,7 @@ use crate::lod::{Footprint, LodCamera, LodMethod, RayLod, SurfaceHit, finite_lev
 use crate::render::camera::Camera;
 use crate::render::light::Light;
 use crate::render::material::{Material, ShadingModel};
+use crate::render::ray_log::{RayClass, RayLog};
 use crate::render::scene_bvh::SceneBvh;
 use crate::render::surface::{SurfacePoint, dielectric_fresnel, interpolate_uv, reflect};
 use crate::texture::{MipPyramid, Texture};
@@ -34,7 +35,7 @@ const MAX_SHADOW_GLASS: usize = 16;
 const AMBIENT: Vec3A = Vec3A::splat(0.03);
 
 /// Counters gathered while tracing; summed per tile, then per frame.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[derive(Debug, Clone, PartialEq)]
 pub struct TraceCounters {
     /// Every ray traced: primary, shadow, reflection, refraction.
     pub rays: u64,
@@ -42,6 +43,8 @@ pub struct TraceCounters {
     pub mip_histogram: [u64; MIP_LEVELS],
     /// Samples whose radiance came out non-finite and were replaced by black.
     pub nonfinite_samples: u64,
+    /// Every ray traced, when the render records them (`film::render_image_recording`).
+    pub log: Option<RayLog>,
 }
 
 impl Default for TraceCounters {
@@ -50,16 +53,37 @@ impl Default for TraceCounters {
             rays: 0,
             mip_histogram: [0; MIP_LEVELS],
             nonfinite_samples: 0,
+            log: None,
         }
     }
 }
 
 impl TraceCounters {
+    /// Counters that also record every ray.
+    pub fn recording() -> TraceCounters {
+        TraceCounters {
+            log: Some(RayLog::default()),
+            ..TraceCounters::default()
+        }
+    }
+
+    /// Adds `other`'s counts (and appends its recorded rays after these).
     pub fn add(&mut self, other: &TraceCounters) {
         self.rays += other.rays;
         self.nonfinite_samples += other.nonfinite_samples;
         for (a, b) in self.mip_histogram.iter_mut().zip(other.mip_histogram) {
             *a += b;
+        }
+        if let (Some(log), Some(more)) = (&mut self.log, &other.log) {
+            log.rays.extend_from_slice(&more.rays);
+        }
+    }
+
+    /// Sets the pixel the next recorded rays belong to.
+    #[inline]
+    pub(super) fn set_pixel(&mut self, pixel: u32) {
+        if let Some(log) = &mut self.log {
+            log.pixel = pixel;
         }
     }
 }
@@ -95,7 +119,7 @@ impl FrameScene<'_> {
     ) -> Vec3A {
         let direction = camera.primary_direction(px, py);
         let lod = L::primary(&self.lod_camera, px, py);
-        self.radiance(camera.eye, direction, lod, 0, counters)
+        self.radiance(RayClass::Primary, camera.eye, direction, lod, 0, counters)
     }
 
     /// [`FrameScene::primary_radiance`] for a primary ray already traced: `direction` is
@@ -112,13 +136,17 @@ impl FrameScene<'_> {
     ) -> Vec3A {
         let lod = L::primary(&self.lod_camera, px, py);
         counters.rays += 1;
+        if let Some(log) = &mut counters.log {
+            log.closest(RayClass::Primary, camera.eye, direction, f32::INFINITY, hit);
+        }
         self.shade(hit, camera.eye, direction, lod, 0, counters)
     }
 
-    /// Radiance arriving at `origin` from `direction`; `lod` is the ray's LOD state,
-    /// `depth` the number of bounces so far.
+    /// Radiance arriving at `origin` from `direction` along a ray of class `class`; `lod`
+    /// is the ray's LOD state, `depth` the number of bounces so far.
     pub fn radiance<L: RayLod>(
         &self,
+        class: RayClass,
         origin: Vec3A,
         direction: Vec3A,
         lod: L,
@@ -127,6 +155,9 @@ impl FrameScene<'_> {
     ) -> Vec3A {
         counters.rays += 1;
         let hit = self.bvh.closest_hit(origin, direction, f32::INFINITY);
+        if let Some(log) = &mut counters.log {
+            log.closest(class, origin, direction, f32::INFINITY, hit);
+        }
         self.shade(hit, origin, direction, lod, depth, counters)
     }
 
@@ -177,7 +208,16 @@ impl FrameScene<'_> {
         if mirror > MIN_WEIGHT {
             let reflected = reflect(direction, surface.shading_normal, surface.face_normal);
             let lod = lod.reflect(&lod_hit, reflected);
-            color += albedo * mirror * self.spawn(&surface, reflected, lod, depth, counters);
+            color += albedo
+                * mirror
+                * self.spawn(
+                    RayClass::Reflection,
+                    &surface,
+                    reflected,
+                    lod,
+                    depth,
+                    counters,
+                );
         }
         if material.transmission > MIN_WEIGHT {
             color += self.transmit(&lod_hit, &surface, albedo, material, lod, depth, counters);
@@ -222,19 +262,41 @@ impl FrameScene<'_> {
         if material.reflectance > MIN_WEIGHT {
             let reflected = reflect(direction, surface.shading_normal, surface.face_normal);
             let lod = lod.reflect(lod_hit, reflected);
-            color += material.reflectance * self.spawn(surface, reflected, lod, depth, counters);
+            color += material.reflectance
+                * self.spawn(
+                    RayClass::Reflection,
+                    surface,
+                    reflected,
+                    lod,
+                    depth,
+                    counters,
+                );
         }
         if material.transmission > MIN_WEIGHT {
             let r = surface.refraction(direction, material.ior);
             let traced = match r.transmitted {
                 Some((refracted, _)) => {
                     let lod = lod.refract(lod_hit, r.eta, refracted);
-                    self.spawn(&surface.far_side(), refracted, lod, depth, counters)
+                    self.spawn(
+                        RayClass::Refraction,
+                        &surface.far_side(),
+                        refracted,
+                        lod,
+                        depth,
+                        counters,
+                    )
                 }
                 None => {
                     let reflected = reflect(direction, surface.shading_normal, surface.face_normal);
                     let lod = lod.reflect(lod_hit, reflected);
-                    self.spawn(surface, reflected, lod, depth, counters)
+                    self.spawn(
+                        RayClass::Reflection,
+                        surface,
+                        reflected,
+                        lod,
+                        depth,
+                        counters,
+                    )
                 }
             };
             color += material.transmission * traced;
@@ -340,6 +402,9 @@ impl FrameScene<'_> {
                 count += 1;
                 true
             });
+        if let Some(log) = &mut counters.log {
+            log.shadow(origin, to_light, t_max, !unblocked || count > 0);
+        }
         if !unblocked {
             return Vec3A::ZERO;
         }
@@ -383,26 +448,52 @@ impl FrameScene<'_> {
         let r = surface.refraction(direction, material.ior);
         let Some((refracted, cos_t)) = r.transmitted else {
             let lod = lod.reflect(lod_hit, reflected);
-            return weight * self.spawn(surface, reflected, lod, depth, counters);
+            return weight
+                * self.spawn(
+                    RayClass::Reflection,
+                    surface,
+                    reflected,
+                    lod,
+                    depth,
+                    counters,
+                );
         };
         let fresnel = dielectric_fresnel(r.cos_i, cos_t, r.eta);
         let mut color = Vec3A::ZERO;
         if weight * fresnel > MIN_WEIGHT {
             let lod = lod.reflect(lod_hit, reflected);
-            color += weight * fresnel * self.spawn(surface, reflected, lod, depth, counters);
+            color += weight
+                * fresnel
+                * self.spawn(
+                    RayClass::Reflection,
+                    surface,
+                    reflected,
+                    lod,
+                    depth,
+                    counters,
+                );
         }
         if weight * (1.0 - fresnel) > MIN_WEIGHT {
             let lod = lod.refract(lod_hit, r.eta, refracted);
-            let through = self.spawn(&surface.far_side(), refracted, lod, depth, counters);
+            let through = self.spawn(
+                RayClass::Refraction,
+                &surface.far_side(),
+                refracted,
+                lod,
+                depth,
+                counters,
+            );
             color += albedo * (weight * (1.0 - fresnel)) * through;
         }
         color
     }
 
-    /// Traces a secondary ray leaving the surface on the side `face_normal` points to.
+    /// Traces a secondary ray of class `class` leaving the surface on the side
+    /// `face_normal` points to.
     #[inline]
     fn spawn<L: RayLod>(
         &self,
+        class: RayClass,
         surface: &SurfacePoint,
         direction: Vec3A,
         lod: L,
@@ -410,6 +501,6 @@ impl FrameScene<'_> {
         counters: &mut TraceCounters,
     ) -> Vec3A {
         let origin = surface.position + surface.face_normal * surface.epsilon;
-        self.radiance(origin, direction, lod, depth + 1, counters)
+        self.radiance(class, origin, direction, lod, depth + 1, counters)
     }
 }

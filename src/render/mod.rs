@@ -12,14 +12,16 @@ pub mod light;
 pub mod lod_view;
 pub mod material;
 pub mod probe;
+pub mod ray_log;
 pub mod scene_bvh;
 mod surface;
 
 pub use camera::Camera;
-pub use film::{LinearImage, render_image};
+pub use film::{LinearImage, render_image, render_image_recording};
 pub use integrator::{FrameScene, MIP_LEVELS, TraceCounters};
 pub use light::{Light, LightKind, LightSource};
 pub use material::{Material, ShadingModel};
 pub use probe::{Bend, Chain, LodProbe};
+pub use ray_log::{RayAnswer, RayClass, RayLog, TracedRay};
 pub use scene_bvh::{InstanceShading, Instanced, PbRule, SceneBvh};
 pub use surface::shadow_ray_toward;

@@ -2,10 +2,10 @@
 //! two 4-wide SSE instructions per operation (the x86-64 baseline every build can run) or
 //! one 8-wide AVX instruction where the CPU has AVX2.
 //!
-//! Which one runs is chosen once per process ([`avx2_walks`]): the walks are compiled twice,
-//! and the AVX2 copy is entered through a `#[target_feature(enable = "avx2")]` function
-//! (`WideBvh::walk_avx2`), into which everything below is inlined. The baseline build of
-//! the crate stays runnable on any x86-64 CPU; no `-C target-cpu` is needed.
+//! Which one runs is chosen once per process by [`crate::simd`]: the walks are compiled
+//! twice (as `simd::Kernel`s), and everything below is inlined into the copy compiled with
+//! AVX2, where `AVX` is true. The baseline build of the crate stays runnable on any x86-64
+//! CPU; no `-C target-cpu` is needed.
 //!
 //! Both ways take the same decisions bit for bit: `min` and `max` are written as the SSE and
 //! AVX instructions compute them (`a < b ? a : b`, the second operand when either is NaN),
@@ -38,7 +38,8 @@ impl Lanes {
     pub fn sub<const AVX: bool>(self, other: Lanes) -> Lanes {
         #[cfg(target_arch = "x86_64")]
         if AVX {
-            // SAFETY: `AVX` code runs only behind `avx2_walks()`.
+            // SAFETY: `AVX` is true only in a kernel copy `simd::dispatch` runs where the CPU
+            // has AVX2.
             return unsafe { avx::sub(self, other) };
         }
         self.zip(other, |a, b| a - b)
@@ -90,23 +91,6 @@ impl Lanes {
         }
         mask
     }
-}
-
-/// Whether the walks run their AVX2 copy (and `lod::log2` its batches'): the CPU has AVX2
-/// and `MIPRAY_SIMD` is not `baseline` (which forces the x86-64 baseline copy, for
-/// comparisons). Decided once.
-#[inline]
-pub fn avx2_walks() -> bool {
-    use std::sync::OnceLock;
-    static CHOICE: OnceLock<bool> = OnceLock::new();
-    *CHOICE.get_or_init(|| {
-        let forced_baseline = std::env::var("MIPRAY_SIMD").is_ok_and(|v| v == "baseline");
-        #[cfg(target_arch = "x86_64")]
-        let detected = std::arch::is_x86_feature_detected!("avx2");
-        #[cfg(not(target_arch = "x86_64"))]
-        let detected = false;
-        detected && !forced_baseline
-    })
 }
 
 /// The AVX versions of the operations, inlined only into functions compiled for AVX2.
@@ -188,26 +172,59 @@ mod tests {
         }))
     }
 
+    /// Every copy checked on every CPU: the baseline operations against scalar IEEE
+    /// arithmetic with the SSE/AVX rules written out (`min`/`max` return the second operand
+    /// when either is NaN, `le` is false for NaN), and the AVX operations, where the CPU has
+    /// AVX2, against the baseline, bit for bit.
     #[test]
-    fn avx_operations_equal_the_baseline_bit_for_bit() {
-        if !std::arch::is_x86_feature_detected!("avx2") {
-            println!("skipped: this CPU has no AVX2, only the baseline runs here");
-            return;
-        }
+    fn every_copy_of_the_operations_equals_the_scalar_rules() {
         let bits = |l: Lanes| l.0.map(f32::to_bits);
+        let scalar = |a: Lanes, b: Lanes, f: fn(f32, f32) -> f32| {
+            bits(Lanes(std::array::from_fn(|i| f(a.0[i], b.0[i]))))
+        };
+        let second_if_nan = |a: f32, b: f32, pick_a: bool| {
+            if a.is_nan() || b.is_nan() || !pick_a {
+                b
+            } else {
+                a
+            }
+        };
+        let avx2 = crate::simd::Isa::cpu_has_avx2();
         let mut compared = 0;
         for i in 0..SPECIAL.len() {
             for j in 0..SPECIAL.len() {
                 let (a, b) = (lanes(i), lanes(j));
-                assert_eq!(bits(a.sub::<true>(b)), bits(a.sub::<false>(b)));
-                assert_eq!(bits(a.mul::<true>(b)), bits(a.mul::<false>(b)));
-                assert_eq!(bits(a.min::<true>(b)), bits(a.min::<false>(b)));
-                assert_eq!(bits(a.max::<true>(b)), bits(a.max::<false>(b)));
-                assert_eq!(a.le_mask::<true>(b), a.le_mask::<false>(b));
+                assert_eq!(bits(a.sub::<false>(b)), scalar(a, b, |x, y| x - y));
+                assert_eq!(bits(a.mul::<false>(b)), scalar(a, b, |x, y| x * y));
+                let min: Vec<u32> = (0..WIDTH)
+                    .map(|l| second_if_nan(a.0[l], b.0[l], a.0[l] < b.0[l]).to_bits())
+                    .collect();
+                let max: Vec<u32> = (0..WIDTH)
+                    .map(|l| second_if_nan(a.0[l], b.0[l], a.0[l] > b.0[l]).to_bits())
+                    .collect();
+                assert_eq!(bits(a.min::<false>(b)).to_vec(), min);
+                assert_eq!(bits(a.max::<false>(b)).to_vec(), max);
+                let le = (0..WIDTH).fold(0, |m, l| {
+                    let ordered = !a.0[l].is_nan() && !b.0[l].is_nan();
+                    m | (((ordered && a.0[l] <= b.0[l]) as u32) << l)
+                });
+                assert_eq!(a.le_mask::<false>(b), le);
+                if avx2 {
+                    assert_eq!(bits(a.sub::<true>(b)), bits(a.sub::<false>(b)));
+                    assert_eq!(bits(a.mul::<true>(b)), bits(a.mul::<false>(b)));
+                    assert_eq!(bits(a.min::<true>(b)), bits(a.min::<false>(b)));
+                    assert_eq!(bits(a.max::<true>(b)), bits(a.max::<false>(b)));
+                    assert_eq!(a.le_mask::<true>(b), a.le_mask::<false>(b));
+                }
                 compared += 1;
             }
         }
         assert_eq!(compared, SPECIAL.len() * SPECIAL.len());
+        if !avx2 {
+            println!(
+                "this CPU has no AVX2: the baseline operations were checked against the scalar rules only"
+            );
+        }
     }
 
     #[test]

@@ -24,10 +24,9 @@ use std::mem::MaybeUninit;
 
 use glam::{BVec4A, Vec3A, Vec4};
 
-use super::{
-    EMPTY, INLINE_STACK, LEAF, Lanes, PACKET, ROBUST_FAR, RayBoxes, WIDTH, WideBvh, WideNode,
-    safe_inverse4,
-};
+use super::walk::{INLINE_STACK, safe_inverse4};
+use super::{EMPTY, LEAF, Lanes, PACKET, ROBUST_FAR, RayBoxes, WIDTH, WideBvh, WideNode};
+use crate::simd;
 
 /// The rays of a packet for the walk, as structure of arrays (four rays per SIMD test at a
 /// leaf; one ray's splatted slab constants are made when a walk needs them), and the
@@ -289,7 +288,7 @@ impl WideBvh {
         }
     }
 
-    /// [`WideBvh::walk_packet`] in its AVX2 copy where the CPU has AVX2 (as `walk_on`).
+    /// [`WideBvh::walk_packet`] in the copy [`simd::dispatch`] chooses.
     #[inline(always)]
     fn walk_packet_on(
         &self,
@@ -298,25 +297,13 @@ impl WideBvh {
         limits: &mut [f32; PACKET],
         leaf: &mut impl PacketLeaf,
     ) {
-        #[cfg(target_arch = "x86_64")]
-        if super::avx2_walks() {
-            // SAFETY: the CPU has AVX2 (detected).
-            return unsafe { self.walk_packet_avx2(stack, packet, limits, leaf) };
-        }
-        self.walk_packet::<false>(stack, packet, limits, leaf)
-    }
-
-    /// The AVX2 copy of [`WideBvh::walk_packet`] (see `WideBvh::walk_avx2`).
-    #[cfg(target_arch = "x86_64")]
-    #[target_feature(enable = "avx2")]
-    fn walk_packet_avx2(
-        &self,
-        stack: &mut [MaybeUninit<PacketEntry>],
-        packet: &RayPacket,
-        limits: &mut [f32; PACKET],
-        leaf: &mut impl PacketLeaf,
-    ) {
-        self.walk_packet::<true>(stack, packet, limits, leaf)
+        simd::dispatch(PacketWalk {
+            bvh: self,
+            stack,
+            packet,
+            limits,
+            leaf,
+        })
     }
 
     #[inline(always)]
@@ -385,7 +372,7 @@ impl WideBvh {
                 // the leaf tests it spared (8% of a primary-ray frame).
                 let (near, may) = frustum.may_enter::<AVX>(node, packet_limit);
                 let (lanes, count) =
-                    super::lanes_near_to_far::<false>(near, used_lanes(node) & may);
+                    super::walk::lanes_near_to_far::<false>(near, used_lanes(node) & may);
                 for &lane in lanes[..count].iter().rev() {
                     push(lane, first as u32, &mut top);
                 }
@@ -417,11 +404,30 @@ impl WideBvh {
                 bits &= bits - 1;
                 push(lane, first_of[lane], &mut top);
             }
-            let (lanes, count) = super::lanes_near_to_far::<false>(near, entered);
+            let (lanes, count) = super::walk::lanes_near_to_far::<false>(near, entered);
             for &lane in lanes[..count].iter().rev() {
                 push(lane, first_of[lane], &mut top);
             }
         }
+    }
+}
+
+/// One packet walk as a [`simd::Kernel`] (see `walk::Walk`).
+struct PacketWalk<'a, P> {
+    bvh: &'a WideBvh,
+    stack: &'a mut [MaybeUninit<PacketEntry>],
+    packet: &'a RayPacket,
+    limits: &'a mut [f32; PACKET],
+    leaf: &'a mut P,
+}
+
+impl<P: PacketLeaf> simd::Kernel for PacketWalk<'_, P> {
+    type Output = ();
+
+    #[inline(always)]
+    fn run<const AVX2: bool>(self) {
+        self.bvh
+            .walk_packet::<AVX2>(self.stack, self.packet, self.limits, self.leaf)
     }
 }
 
@@ -631,18 +637,16 @@ mod tests {
         );
     }
 
-    /// The node tests of the AVX2 copy (a ray's slab test, a packet's interval test) give
-    /// bit for bit the baseline's distances and masks.
-    #[cfg(target_arch = "x86_64")]
+    /// The node tests are checked on every CPU: the baseline copy's slab test against the
+    /// scalar test of each lane's box alone (`RayBoxes::enters_box`), and where the CPU has
+    /// AVX2, the AVX2 copy's node tests (a ray's slab test, a packet's interval test) against
+    /// the baseline's, bit for bit.
     #[test]
-    fn avx2_node_tests_equal_the_baseline_ones() {
-        if !std::arch::is_x86_feature_detected!("avx2") {
-            println!("skipped: this CPU has no AVX2, only the baseline runs here");
-            return;
-        }
+    fn node_tests_of_every_copy_agree_with_the_scalar_reference() {
         let bits = |(near, mask): (Lanes, u32)| (near.0.map(f32::to_bits), mask);
+        let avx2 = crate::simd::Isa::cpu_has_avx2();
         let mut next = stream(0x853c49e6748fea9b);
-        let (mut rays, mut bounded) = (0, 0);
+        let (mut rays, mut bounded, mut entered) = (0, 0, 0);
         for _ in 0..200 {
             let node = random_node(&mut next);
             for set in packets(&mut next) {
@@ -650,13 +654,23 @@ mod tests {
                 let limit = next().abs() * 12.0;
                 for r in 0..set.len() {
                     let ray = packet.ray(r);
-                    assert_eq!(
-                        bits(ray.enter::<true>(&node, limit)),
-                        bits(ray.enter::<false>(&node, limit))
-                    );
+                    let (_, mask) = ray.enter::<false>(&node, limit);
+                    let scalar = (0..WIDTH).fold(0, |m, lane| {
+                        m | ((ray.enters_box(&node.lane_box(lane), limit) as u32) << lane)
+                    });
+                    assert_eq!(mask, scalar, "baseline slab test against the scalar one");
+                    entered += mask.count_ones();
+                    if avx2 {
+                        assert_eq!(
+                            bits(ray.enter::<true>(&node, limit)),
+                            bits(ray.enter::<false>(&node, limit))
+                        );
+                    }
                     rays += 1;
                 }
-                if let Some(frustum) = &packet.frustum {
+                if let Some(frustum) = &packet.frustum
+                    && avx2
+                {
                     assert_eq!(
                         bits(frustum.may_enter::<true>(&node, limit)),
                         bits(frustum.may_enter::<false>(&node, limit))
@@ -666,9 +680,16 @@ mod tests {
             }
         }
         assert!(
-            rays > 10000 && bounded > 300,
-            "{rays} rays, {bounded} packets"
+            rays > 10000 && entered > 1000,
+            "{rays} rays, {entered} lanes entered"
         );
+        if avx2 {
+            assert!(bounded > 300, "{bounded} packets");
+        } else {
+            println!(
+                "this CPU has no AVX2: the baseline node tests were checked against the scalar reference only"
+            );
+        }
     }
 
     #[test]

@@ -1,0 +1,192 @@
+//! The flat tree: one 8-wide tree over the frame's world-space triangles ([`Accel`]).
+//!
+//! Built without spatial splits so it can be refitted later. After a build the triangle
+//! arrays are permuted into BVH order (`FrameTriangles::permute`), so a leaf's primitive
+//! range indexes the triangle arrays directly: no indirection on the hot path. The hit test
+//! reads the triangles from their own copy laid out four to a pack in slot order
+//! (`accel::triangles`, watertight), refreshed with the boxes ([`refit`]).
+//! Leaf boxes are padded (see [`padded_box`]) because a flat triangle's box has zero
+//! thickness and an axis-aligned ray can slip through it by rounding.
+
+use std::time::Duration;
+
+use glam::Vec3A;
+use obvhs::{BvhBuildParams, aabb::Aabb, bvh2::builder::build_bvh2};
+
+use super::triangles::PackedTriangles;
+use super::wide::WideBvh;
+use crate::geometry::FrameTriangles;
+
+/// Past this many triangles the edge and leaf-box refresh of a full refit runs on rayon's
+/// threads (below it the fork costs more than the work).
+pub(in crate::accel) const PARALLEL_REFIT_MIN: usize = 16_384;
+
+/// A BVH over one frame's triangles.
+#[derive(Default)]
+pub struct Accel {
+    /// The tree rays walk and refits update.
+    pub(in crate::accel) wide: WideBvh,
+    /// The triangles as the hit test reads them.
+    pub(in crate::accel) triangles: PackedTriangles,
+    /// Per leaf, in slot order: its first slot, triangle count and lane in the wide tree.
+    /// Refits walk leaves (and packs) in this order, so they stream through the triangles.
+    pub(in crate::accel) leaves: Vec<Leaf>,
+    /// Per slot, its leaf's index in `leaves`.
+    pub(in crate::accel) leaf_of_slot: Vec<u32>,
+    /// SAH cost right after the last build (see [`Accel::sah_cost`]).
+    pub(in crate::accel) build_cost: f32,
+    /// `sah_cost()` of the tree as it is, kept from the last build or refit: the cost is a
+    /// walk over every node, which a frame that moved nothing (a static scene) must not pay,
+    /// and which the refit's time should include.
+    pub(in crate::accel) cost: f32,
+}
+
+/// A leaf of the tree: its triangle slots and where the wide tree keeps its box.
+#[derive(Clone, Copy)]
+pub(in crate::accel) struct Leaf {
+    pub(in crate::accel) first: u32,
+    pub(in crate::accel) count: u32,
+    pub(in crate::accel) lane: u32,
+}
+
+/// Relative costs of the surface-area heuristic: one node visit vs one triangle test.
+pub(in crate::accel) const SAH_TRAVERSAL_COST: f32 = 1.0;
+
+pub(in crate::accel) const SAH_INTERSECTION_COST: f32 = 1.0;
+
+/// Errors that stop a BVH build.
+#[derive(Debug, thiserror::Error)]
+pub enum AccelError {
+    #[error("triangle {triangle} has a non-finite vertex ({vertex:?})")]
+    NonFiniteVertex { triangle: usize, vertex: [f32; 3] },
+}
+
+impl Accel {
+    /// Builds a BVH over `triangles` (in any order) and permutes them into BVH order.
+    ///
+    /// # Errors
+    /// A non-finite vertex (obvhs would panic on it).
+    pub fn build(triangles: &mut FrameTriangles) -> Result<Accel, AccelError> {
+        check_finite(triangles)?;
+        if triangles.is_empty() {
+            return Ok(Accel::default());
+        }
+        let boxes: Vec<Aabb> = triangles.positions.iter().map(padded_box).collect();
+        let bvh = build_bvh2(
+            &boxes,
+            BvhBuildParams::medium_build(),
+            &mut Duration::default(),
+        );
+        triangles.permute(&bvh.primitive_indices);
+        let mut leaves = Vec::new();
+        let mut wide = WideBvh::collapse(&bvh, |first, count| {
+            leaves.push(Leaf {
+                first,
+                count,
+                lane: 0,
+            });
+            first
+        });
+        for (leaf, &lane) in leaves.iter_mut().zip(wide.leaf_lanes()) {
+            leaf.lane = lane;
+        }
+        // Packs and leaves in slot order; each leaf then refers to its first pack.
+        leaves.sort_unstable_by_key(|l| l.first);
+        let mut packed = PackedTriangles::default();
+        let mut leaf_of_slot = vec![0; triangles.len()];
+        for (i, leaf) in leaves.iter().enumerate() {
+            let (first, count) = (leaf.first as usize, leaf.count as usize);
+            leaf_of_slot[first..first + count].fill(i as u32);
+            let first_pack = packed.push_leaf(
+                &triangles.positions,
+                &triangles.source,
+                leaf.first,
+                leaf.count,
+            );
+            wide.set_leaf_ref(leaf.lane, first_pack);
+        }
+        let mut accel = Accel {
+            wide,
+            triangles: packed,
+            leaves,
+            leaf_of_slot,
+            build_cost: 0.0,
+            cost: 0.0,
+        };
+        accel.build_cost = accel.sah_cost();
+        accel.cost = accel.build_cost;
+        Ok(accel)
+    }
+
+    /// Surface-area-heuristic cost of the tree, relative to its root box: the expected cost
+    /// of a ray through the root. Compared with its value right after the build to decide
+    /// when refitting has degraded the tree enough to rebuild it.
+    pub fn sah_cost(&self) -> f32 {
+        self.wide
+            .sah_cost(SAH_TRAVERSAL_COST, SAH_INTERSECTION_COST)
+            .unwrap_or_else(|| {
+                // One leaf (or nothing): every ray tests every triangle.
+                self.leaves
+                    .first()
+                    .map_or(0.0, |l| l.count as f32 * SAH_INTERSECTION_COST)
+            })
+    }
+
+    /// The box of every triangle in the tree (`None` when empty).
+    pub fn bounds(&self, triangles: &FrameTriangles) -> Option<Aabb> {
+        if self.leaves.is_empty() {
+            return None;
+        }
+        Some(self.wide.root_box().unwrap_or_else(|| {
+            self.leaves.iter().fold(Aabb::empty(), |a, l| {
+                a.union(&leaf_box(&triangles.positions, l.first, l.count))
+            })
+        }))
+    }
+
+    /// `sah_cost() / cost right after the last build` (1 for an empty tree), as of the last
+    /// build or refit.
+    pub fn sah_ratio(&self) -> f32 {
+        if self.build_cost > 0.0 {
+            self.cost / self.build_cost
+        } else {
+            1.0
+        }
+    }
+}
+
+pub(in crate::accel) fn check_finite(triangles: &FrameTriangles) -> Result<(), AccelError> {
+    for (i, tri) in triangles.positions.iter().enumerate() {
+        if let Some(v) = tri.iter().find(|v| !v.is_finite()) {
+            return Err(AccelError::NonFiniteVertex {
+                triangle: triangles.source[i] as usize,
+                vertex: v.to_array(),
+            });
+        }
+    }
+    Ok(())
+}
+
+/// A triangle's box grown by a few ulps of its own magnitude on every axis, so that a flat
+/// box still has volume and slab tests cannot miss it by rounding.
+pub fn padded_box(tri: &[Vec3A; 3]) -> Aabb {
+    let min = tri[0].min(tri[1]).min(tri[2]);
+    let max = tri[0].max(tri[1]).max(tri[2]);
+    let magnitude = min.abs().max(max.abs()).max_element();
+    let pad = Vec3A::splat(magnitude * 2f32.powi(-20) + f32::MIN_POSITIVE * 8.0);
+    Aabb::new(min - pad, max + pad)
+}
+
+/// The union of the padded boxes of the `count` triangles from slot `first` (a leaf).
+pub(in crate::accel) fn leaf_box(positions: &[[Vec3A; 3]], first: u32, count: u32) -> Aabb {
+    positions[first as usize..(first + count) as usize]
+        .iter()
+        .fold(Aabb::empty(), |a, tri| a.union(&padded_box(tri)))
+}
+
+mod hits;
+mod refit;
+#[cfg(test)]
+pub(crate) mod tests;
+
+pub use refit::RefitKind;

@@ -1,0 +1,436 @@
+//! The flat tree against brute force: closest hits, packets, refits, ties.
+
+use glam::{Vec2, Vec3, Vec3A};
+
+use super::*;
+use crate::accel::triangles::intersect;
+use crate::accel::wide::PACKET;
+use crate::geometry::FrameTriangles;
+
+/// Triangles with placeholder shading data, source ids in order.
+pub(in crate::accel) fn soup(tris: &[[Vec3A; 3]]) -> FrameTriangles {
+    FrameTriangles {
+        positions: tris.to_vec(),
+        normals: vec![[Vec3::Z; 3]; tris.len()],
+        uvs: vec![[Vec2::ZERO; 3]; tris.len()],
+        material: vec![0; tris.len()],
+        log2_pb: vec![0.0; tris.len()],
+        source: (0..tris.len() as u32).collect(),
+    }
+}
+
+#[test]
+fn finds_closest_of_stacked_triangles() {
+    let tri = |z: f32| {
+        [
+            Vec3A::new(-1.0, -1.0, z),
+            Vec3A::new(1.0, -1.0, z),
+            Vec3A::new(0.0, 1.0, z),
+        ]
+    };
+    let mut tris = soup(&[tri(-5.0), tri(-2.0), tri(-9.0)]);
+    let accel = Accel::build(&mut tris).unwrap();
+    let hit = accel
+        .closest_hit(Vec3A::ZERO, Vec3A::NEG_Z, f32::INFINITY)
+        .unwrap();
+    assert!((hit.t - 2.0).abs() < 1e-6);
+    assert_eq!(tris.source[hit.triangle as usize], 1);
+    let mut count = 0;
+    accel.visit_hits(Vec3A::ZERO, Vec3A::NEG_Z, f32::INFINITY, |_, _| {
+        count += 1;
+        true
+    });
+    assert_eq!(count, 3);
+    assert!(
+        accel
+            .closest_hit(Vec3A::new(5.0, 0.0, 0.0), Vec3A::NEG_Z, f32::INFINITY)
+            .is_none()
+    );
+}
+
+#[test]
+fn axis_aligned_ray_hits_axis_aligned_flat_triangle() {
+    // Floor at y = 0 seen straight down, and a wall at x = 3 hit along +x.
+    let floor = [
+        Vec3A::new(-1.0, 0.0, -1.0),
+        Vec3A::new(1.0, 0.0, -1.0),
+        Vec3A::new(0.0, 0.0, 1.0),
+    ];
+    let wall = [
+        Vec3A::new(3.0, -1.0, -1.0),
+        Vec3A::new(3.0, 1.0, -1.0),
+        Vec3A::new(3.0, 0.0, 1.0),
+    ];
+    let mut tris = soup(&[floor, wall]);
+    let accel = Accel::build(&mut tris).unwrap();
+    let down = accel.closest_hit(Vec3A::new(0.0, 5.0, 0.0), Vec3A::NEG_Y, f32::INFINITY);
+    assert!((down.unwrap().t - 5.0).abs() < 1e-6);
+    let side = accel.closest_hit(Vec3A::new(-2.0, 0.0, 0.0), Vec3A::X, f32::INFINITY);
+    assert!((side.unwrap().t - 5.0).abs() < 1e-6);
+}
+
+#[test]
+fn rejects_non_finite_vertices() {
+    let mut tris = soup(&[[Vec3A::ZERO, Vec3A::X, Vec3A::new(f32::NAN, 0.0, 0.0)]]);
+    assert!(matches!(
+        Accel::build(&mut tris),
+        Err(AccelError::NonFiniteVertex { triangle: 0, .. })
+    ));
+}
+
+#[test]
+fn empty_scene_misses() {
+    let mut tris = soup(&[]);
+    let accel = Accel::build(&mut tris).unwrap();
+    assert!(
+        accel
+            .closest_hit(Vec3A::ZERO, Vec3A::X, f32::INFINITY)
+            .is_none()
+    );
+}
+
+/// A small deterministic generator (xorshift) for the random soups below.
+/// Xorshift: reproducible pseudo-random points (seed non-zero).
+pub(in crate::accel) struct Rng(pub u64);
+impl Rng {
+    pub(in crate::accel) fn next(&mut self) -> f32 {
+        self.0 ^= self.0 << 13;
+        self.0 ^= self.0 >> 7;
+        self.0 ^= self.0 << 17;
+        (self.0 >> 40) as f32 / (1u64 << 24) as f32
+    }
+    /// A point in the cube of side `scale` centred on the origin.
+    pub(in crate::accel) fn point(&mut self, scale: f32) -> Vec3A {
+        Vec3A::new(self.next(), self.next(), self.next()) * scale - Vec3A::splat(scale / 2.0)
+    }
+}
+
+/// Closest hit by testing every triangle (same test, same tie rule).
+fn brute_force(tris: &FrameTriangles, origin: Vec3A, direction: Vec3A) -> Option<(u32, f32)> {
+    let mut best: Option<(u32, f32)> = None;
+    for (slot, p) in tris.positions.iter().enumerate() {
+        let Some((t, _)) = intersect(p, origin, direction) else {
+            continue;
+        };
+        let source = tris.source[slot];
+        if t >= 0.0 && best.is_none_or(|(s, b)| t < b || (t == b && source < s)) {
+            best = Some((source, t));
+        }
+    }
+    best
+}
+
+/// Exact ties far from the ray origin: an 8 x 8 grid of unit quads at z = 0, each
+/// triangle three times (the copies tie exactly), seen from cameras up to 1e6 away. The
+/// lowest source must win whatever order the tree visits the copies in, for single rays
+/// and packets alike.
+#[test]
+fn exact_ties_far_from_the_origin_go_to_the_lowest_source() {
+    let mut tris = Vec::new();
+    for j in 0..8 {
+        for i in 0..8 {
+            let (x, y) = (i as f32, j as f32);
+            let a = [
+                Vec3A::new(x, y, 0.0),
+                Vec3A::new(x + 1.0, y, 0.0),
+                Vec3A::new(x + 1.0, y + 1.0, 0.0),
+            ];
+            let b = [a[0], a[2], Vec3A::new(x, y + 1.0, 0.0)];
+            tris.extend([a, b, a, b, a, b]);
+        }
+    }
+    // Shuffled, so copies land in different leaves with unrelated source ids.
+    let mut rng = Rng(0x5851f42d4c957f2d);
+    for i in (1..tris.len()).rev() {
+        let j = (rng.next() * (i + 1) as f32) as usize % (i + 1);
+        tris.swap(i, j);
+    }
+    let mut tris = soup(&tris);
+    let accel = Accel::build(&mut tris).unwrap();
+    let mut checked = 0;
+    for distance in [30.0f32, 1e3, 1e4, 1e5, 3e5, 1e6, 1e6, 1e6] {
+        for _ in 0..100 {
+            let eye = Vec3A::new(rng.next() * 2.0 - 1.0, rng.next() * 2.0 - 1.0, 1.0) * distance;
+            let rays: Vec<(Vec3A, Vec3A)> = (0..64)
+                .map(|_| {
+                    let aim = Vec3A::new(rng.next() * 8.0, rng.next() * 8.0, 0.0);
+                    (eye, (aim - eye).normalize())
+                })
+                .collect();
+            let mut hits = vec![None; rays.len()];
+            accel.closest_hits(&rays, f32::INFINITY, &mut hits);
+            for (&(o, d), hit) in rays.iter().zip(&hits) {
+                let single = accel.closest_hit(o, d, f32::INFINITY);
+                let found = single.map(|h| (tris.source[h.triangle as usize], h.t));
+                assert_eq!(found, brute_force(&tris, o, d), "eye {o} direction {d}");
+                assert_eq!(*hit, single, "packet and single ray, eye {o}");
+                checked += found.is_some() as usize;
+            }
+        }
+    }
+    assert!(checked > 8000, "only {checked} rays hit the grid");
+}
+
+fn random_soup(rng: &mut Rng, n: usize) -> FrameTriangles {
+    let tris: Vec<[Vec3A; 3]> = (0..n)
+        .map(|_| {
+            let c = rng.point(20.0);
+            [c + rng.point(2.0), c + rng.point(2.0), c + rng.point(2.0)]
+        })
+        .collect();
+    soup(&tris)
+}
+
+fn assert_matches_brute_force(accel: &Accel, tris: &FrameTriangles, rng: &mut Rng) {
+    let mut hits = 0;
+    for _ in 0..2000 {
+        let origin = rng.point(30.0);
+        let direction = (rng.point(2.0) - origin * 0.05).normalize();
+        let wide = accel
+            .closest_hit(origin, direction, f32::INFINITY)
+            .map(|h| (tris.source[h.triangle as usize], h.t));
+        assert_eq!(wide, brute_force(tris, origin, direction));
+        hits += wide.is_some() as usize;
+        // The shadow walk sees a hit exactly when the closest-hit walk does.
+        let blocked = !accel.visit_hits(origin, direction, f32::INFINITY, |_, _| false);
+        assert_eq!(blocked, wide.is_some());
+    }
+    assert!(
+        hits > 200,
+        "too few rays hit ({hits}): the test would prove little"
+    );
+}
+
+#[test]
+fn wide_walk_finds_what_testing_every_triangle_finds_before_and_after_refits() {
+    let mut rng = Rng(0x9e3779b97f4a7c15);
+    let mut tris = random_soup(&mut rng, 3000);
+    let mut accel = Accel::build(&mut tris).unwrap();
+    assert_matches_brute_force(&accel, &tris, &mut rng);
+    // A few triangles jump (partial refit), then all of them move (full refit).
+    let moved: Vec<u32> = (0..3000).step_by(97).collect();
+    for &slot in &moved {
+        let shift = rng.point(10.0);
+        tris.positions[slot as usize] = tris.positions[slot as usize].map(|v| v + shift);
+    }
+    assert_eq!(accel.sah_ratio(), 1.0);
+    assert_eq!(accel.refit(&tris, &moved), RefitKind::Partial);
+    assert_matches_brute_force(&accel, &tris, &mut rng);
+    // The kept SAH ratio is the refitted tree's (the jumps changed its boxes).
+    assert!(accel.sah_ratio() != 1.0, "{}", accel.sah_ratio());
+    assert_eq!(accel.sah_ratio(), accel.sah_cost() / accel.build_cost);
+    let all: Vec<u32> = (0..3000).collect();
+    for p in &mut tris.positions {
+        *p = p.map(|v| v * 1.5 + Vec3A::new(1.0, 0.0, 0.0));
+    }
+    assert_eq!(accel.refit(&tris, &all), RefitKind::Full);
+    assert_matches_brute_force(&accel, &tris, &mut rng);
+}
+#[test]
+fn a_packet_finds_what_each_of_its_rays_finds_alone() {
+    let mut rng = Rng(0x2545f4914f6cdd1d);
+    let mut tris = random_soup(&mut rng, 4000);
+    // A coherent packet (a camera's 8 x 8 block), an incoherent one, and a short one.
+    let accel = Accel::build(&mut tris).unwrap();
+    let eye = Vec3A::new(0.0, 0.0, 40.0);
+    let coherent: Vec<(Vec3A, Vec3A)> = (0..64)
+        .map(|i| {
+            let (x, y) = ((i % 8) as f32, (i / 8) as f32);
+            (
+                eye,
+                Vec3A::new(x * 0.01 - 0.04, y * 0.01 - 0.04, -1.0).normalize(),
+            )
+        })
+        .collect();
+    let scattered: Vec<(Vec3A, Vec3A)> = (0..64)
+        .map(|_| {
+            let origin = rng.point(30.0);
+            (origin, (rng.point(2.0) - origin * 0.05).normalize())
+        })
+        .collect();
+    let mut found = 0;
+    for (rays, t_max) in [
+        (&coherent[..], f32::INFINITY),
+        (&scattered[..], f32::INFINITY),
+        (&scattered[..13], 25.0),
+    ] {
+        let mut hits = vec![None; rays.len()];
+        accel.closest_hits(rays, t_max, &mut hits);
+        for (&(o, d), hit) in rays.iter().zip(&hits) {
+            assert_eq!(*hit, accel.closest_hit(o, d, t_max));
+            found += hit.is_some() as usize;
+        }
+    }
+    assert!(
+        found > 40,
+        "too few hits ({found}) for the test to mean much"
+    );
+}
+
+/// The parallel full refit (leaf boxes written into their lanes from several tasks)
+/// leaves the tree bit for bit as the sequential one does.
+#[test]
+fn parallel_full_refit_equals_sequential() {
+    let mut rng = Rng(0x51f15eed);
+    let mut tris = random_soup(&mut rng, 5000);
+    let mut accel = Accel::build(&mut tris).unwrap();
+    let original = tris.clone();
+    for tri in &mut tris.positions {
+        let shift = rng.point(3.0);
+        for v in tri.iter_mut() {
+            *v = *v * 1.5 + shift;
+        }
+    }
+    accel.refit_full(&tris, false);
+    let sequential = accel.wide.bounds_bits();
+    // Back to the original boxes, sequentially (so a lane the parallel refit skipped
+    // would keep one and show), then the moved triangles again, in parallel.
+    accel.refit_full(&original, false);
+    assert_ne!(accel.wide.bounds_bits(), sequential);
+    accel.refit_full(&tris, true);
+    assert_eq!(accel.wide.bounds_bits(), sequential);
+    // Every pack lane holds its slot's moved triangle.
+    for (slot, tri) in tris.positions.iter().enumerate() {
+        assert_eq!(accel.triangles.triangle(slot as u32), *tri, "slot {slot}");
+    }
+    // And the refitted tree finds what a fresh build over the moved triangles finds.
+    let fresh = Accel::build(&mut tris.clone()).unwrap();
+    for _ in 0..300 {
+        let (o, d) = (rng.point(40.0), rng.point(2.0).normalize_or_zero());
+        let hit = |a: &Accel| a.closest_hit(o, d, f32::INFINITY).map(|h| h.t.to_bits());
+        assert_eq!(hit(&accel), hit(&fresh));
+    }
+}
+
+#[test]
+fn tiny_and_empty_trees_answer_packets_and_refits() {
+    // Two triangles: the whole tree is one leaf (no wide node), then nothing at all.
+    let tri = |z: f32| {
+        [
+            Vec3A::new(-1.0, -1.0, z),
+            Vec3A::new(1.0, -1.0, z),
+            Vec3A::new(0.0, 1.0, z),
+        ]
+    };
+    let mut tris = soup(&[tri(-5.0), tri(-2.0)]);
+    let mut accel = Accel::build(&mut tris).unwrap();
+    let rays = [
+        (Vec3A::ZERO, Vec3A::NEG_Z),
+        (Vec3A::new(9.0, 0.0, 0.0), Vec3A::NEG_Z),
+    ];
+    let mut hits = [None; 2];
+    accel.closest_hits(&rays, f32::INFINITY, &mut hits);
+    assert_eq!(hits[0].map(|h| h.t), Some(2.0));
+    assert!(hits[1].is_none());
+    // Move the near one behind the far one: the refit must move the packed copy too.
+    tris.positions[tris.source.iter().position(|&s| s == 1).unwrap()] = tri(-7.0);
+    let moved: Vec<u32> = (0..2).collect();
+    accel.refit(&tris, &moved);
+    assert_eq!(
+        accel
+            .closest_hit(Vec3A::ZERO, Vec3A::NEG_Z, f32::INFINITY)
+            .map(|h| h.t),
+        Some(5.0)
+    );
+    assert!(accel.sah_cost() > 0.0);
+    // One triangle: certainly a tree of one leaf; a full refit moves it.
+    let mut one = soup(&[tri(-3.0)]);
+    let mut accel = Accel::build(&mut one).unwrap();
+    one.positions[0] = tri(-4.0);
+    assert_eq!(accel.refit(&one, &[0]), RefitKind::Full);
+    assert_eq!(
+        accel
+            .closest_hit(Vec3A::ZERO, Vec3A::NEG_Z, f32::INFINITY)
+            .map(|h| h.t),
+        Some(4.0)
+    );
+    let mut empty = soup(&[]);
+    let accel = Accel::build(&mut empty).unwrap();
+    accel.closest_hits(&rays, f32::INFINITY, &mut hits);
+    assert_eq!(hits, [None, None]);
+    assert!(accel.visit_hits(Vec3A::ZERO, Vec3A::X, f32::INFINITY, |_, _| false));
+}
+
+#[test]
+fn packets_of_axis_parallel_and_repeated_rays_match_single_rays() {
+    let mut rng = Rng(99);
+    let mut tris = random_soup(&mut rng, 2000);
+    let accel = Accel::build(&mut tris).unwrap();
+    // Directions with zero components, both signs of zero, and the same ray many times.
+    let mut rays = Vec::new();
+    for d in [
+        Vec3A::X,
+        Vec3A::NEG_X,
+        Vec3A::Y,
+        Vec3A::NEG_Z,
+        Vec3A::new(-0.0, 0.0, 1.0),
+    ] {
+        for i in 0..6 {
+            rays.push((Vec3A::new(i as f32 - 3.0, 1.5, -0.5) - d * 30.0, d));
+        }
+    }
+    rays.extend(std::iter::repeat_n(
+        (Vec3A::new(0.0, 0.0, 30.0), Vec3A::NEG_Z),
+        10,
+    ));
+    assert!(rays.len() <= PACKET);
+    let mut hits = vec![None; rays.len()];
+    accel.closest_hits(&rays, f32::INFINITY, &mut hits);
+    for (&(o, d), hit) in rays.iter().zip(&hits) {
+        assert_eq!(*hit, accel.closest_hit(o, d, f32::INFINITY));
+    }
+    assert!(hits.iter().filter(|h| h.is_some()).count() > 5);
+}
+
+#[test]
+fn rays_through_shared_edges_and_vertices_of_a_mesh_never_slip_through() {
+    // A jittered 40 x 40 grid of quads (two triangles each) in a tilted plane; rays aimed
+    // exactly at its vertices and at points on its shared edges must all hit it.
+    let n = 40;
+    let mut rng = Rng(12345);
+    let mut grid = vec![Vec3A::ZERO; (n + 1) * (n + 1)];
+    for y in 0..=n {
+        for x in 0..=n {
+            let jitter = if x == 0 || y == 0 || x == n || y == n {
+                Vec3A::ZERO
+            } else {
+                Vec3A::new(rng.next() - 0.5, rng.next() - 0.5, 0.0) * 0.6
+            };
+            let p = Vec3A::new(x as f32, y as f32, 0.0) + jitter;
+            grid[y * (n + 1) + x] = Vec3A::new(p.x, p.y, 0.37 * p.x - 0.21 * p.y);
+        }
+    }
+    let at = |x: usize, y: usize| grid[y * (n + 1) + x];
+    let mut quads = Vec::new();
+    for y in 0..n {
+        for x in 0..n {
+            quads.push([at(x, y), at(x + 1, y), at(x + 1, y + 1)]);
+            quads.push([at(x, y), at(x + 1, y + 1), at(x, y + 1)]);
+        }
+    }
+    let mut tris = soup(&quads);
+    let accel = Accel::build(&mut tris).unwrap();
+    let eye = Vec3A::new(17.3, 21.1, 60.0);
+    let mut misses = 0;
+    let mut rays = 0;
+    for y in 1..n {
+        for x in 1..n {
+            // The vertex, the midpoints of its right and upper edges and of the diagonal.
+            let targets = [
+                at(x, y),
+                (at(x, y) + at(x + 1, y)) * 0.5,
+                (at(x, y) + at(x, y + 1)) * 0.5,
+                (at(x, y) + at(x + 1, y + 1)) * 0.5,
+            ];
+            for target in targets {
+                rays += 1;
+                let direction = (target - eye).normalize();
+                misses += accel.closest_hit(eye, direction, f32::INFINITY).is_none() as usize;
+            }
+        }
+    }
+    assert_eq!(
+        misses, 0,
+        "{misses} of {rays} rays slipped through the mesh"
+    );
+}

@@ -1,0 +1,201 @@
+//! Refitting the wide tree in place, and its SAH cost.
+//!
+//! A full refit sets every leaf's lane (from concurrent tasks through [`LeafLanes`]: leaves
+//! never share a lane), then every inner lane as the union of its child's lanes, children
+//! first; a partial refit walks up from one leaf and stops at the first ancestor whose box
+//! comes out unchanged. A tree of one leaf keeps no box.
+
+use obvhs::aabb::Aabb;
+
+use super::node::WideNode;
+use super::{EMPTY, LEAF, WIDTH, WideBvh};
+
+/// Concurrent writes of leaf boxes into distinct lanes ([`WideBvh::leaf_lanes_writer`]).
+/// Two leaves may share a node but never a lane, and a lane's six bounds are its own `f32`s,
+/// so tasks writing distinct lanes touch distinct memory; no reference to a whole node is
+/// ever formed while they run.
+pub struct LeafLanes<'a> {
+    nodes: *mut WideNode,
+    len: usize,
+    one_leaf: bool,
+    _nodes: std::marker::PhantomData<&'a mut [WideNode]>,
+}
+
+// SAFETY: the pointer comes from an exclusive borrow held for 'a; `set_leaf_box`'s contract
+// keeps every lane to one task at a time.
+unsafe impl Sync for LeafLanes<'_> {}
+
+impl LeafLanes<'_> {
+    /// [`WideBvh::set_leaf_box`] for lane `at` (`node * WIDTH + lane`).
+    ///
+    /// # Safety
+    /// No other call for the same `at` may run at the same time.
+    ///
+    /// # Panics
+    /// If `at` names no node.
+    #[inline]
+    pub unsafe fn set_leaf_box(&self, at: u32, aabb: &Aabb) {
+        if self.one_leaf {
+            return; // as `WideBvh::set_leaf_box`: a one-leaf tree keeps no box
+        }
+        let (node, lane) = (at as usize / WIDTH, at as usize % WIDTH);
+        assert!(node < self.len, "node {node} of {}", self.len);
+        // SAFETY: in bounds (checked); each write goes to one `f32` of this lane, which no
+        // other task writes (the caller's contract), through a raw place (no `&mut` node).
+        unsafe {
+            let bounds = std::ptr::addr_of_mut!((*self.nodes.add(node)).bounds);
+            for axis in 0..3 {
+                (*bounds)[axis][lane] = aabb.min[axis];
+                (*bounds)[axis + 3][lane] = aabb.max[axis];
+            }
+        }
+    }
+}
+
+impl WideBvh {
+    /// Sets the box of the leaf in lane `at` (`node * WIDTH + lane`); a full refit sets
+    /// every leaf's, then calls [`WideBvh::refit_inner`]. A tree of one leaf keeps no box
+    /// (rays test that leaf whatever), so there it does nothing.
+    pub fn set_leaf_box(&mut self, at: u32, aabb: &Aabb) {
+        if self.root_leaf.is_none() {
+            self.set_lane(at, aabb);
+        }
+    }
+
+    /// Every node's bounds as bits (tests compare trees bit for bit).
+    #[cfg(test)]
+    pub fn bounds_bits(&self) -> Vec<u32> {
+        self.nodes
+            .iter()
+            .flat_map(|n| n.bounds.iter().flatten().map(|v| v.to_bits()))
+            .collect()
+    }
+
+    /// Writes leaf boxes into their lanes from concurrent tasks (a full refit's leaves,
+    /// one task per leaf).
+    pub fn leaf_lanes_writer(&mut self) -> LeafLanes<'_> {
+        LeafLanes {
+            nodes: self.nodes.as_mut_ptr(),
+            len: self.nodes.len(),
+            one_leaf: self.root_leaf.is_some(),
+            _nodes: std::marker::PhantomData,
+        }
+    }
+
+    /// Refits every inner lane as the union of its child's lanes, children first.
+    pub fn refit_inner(&mut self) {
+        for index in (1..self.nodes.len()).rev() {
+            let aabb = self.nodes[index].bounds_union();
+            self.set_lane(self.parent[index], &aabb);
+        }
+    }
+
+    /// Refits the leaf in lane `at` (`node * WIDTH + lane`) to `aabb`, then its ancestors
+    /// up to the first whose box comes out unchanged (its own ancestors cannot change).
+    pub fn refit_leaf(&mut self, at: u32, aabb: &Aabb) {
+        if self.root_leaf.is_some() {
+            return; // one leaf, no box (see `set_leaf_box`)
+        }
+        self.set_lane(at, aabb);
+        let mut node = at as usize / WIDTH;
+        while node != 0 {
+            let aabb = self.nodes[node].bounds_union();
+            let up = self.parent[node];
+            if self.lane_box(up) == aabb {
+                break;
+            }
+            self.set_lane(up, &aabb);
+            node = up as usize / WIDTH;
+        }
+    }
+
+    fn set_lane(&mut self, at: u32, aabb: &Aabb) {
+        self.nodes[at as usize / WIDTH].set_box(at as usize % WIDTH, aabb);
+    }
+
+    fn lane_box(&self, at: u32) -> Aabb {
+        self.nodes[at as usize / WIDTH].lane_box(at as usize % WIDTH)
+    }
+
+    /// Surface-area-heuristic cost relative to the root box: the expected cost of a ray
+    /// through the root (one traversal step per node entered, one intersection per
+    /// triangle of a leaf entered), the sum over lanes of its share of the root's area
+    /// times its cost. `None` when the tree is one leaf or empty.
+    pub fn sah_cost(&self, traversal: f32, intersection: f32) -> Option<f32> {
+        let root = self.nodes.first()?.bounds_union();
+        let root_area = f64::from(root.half_area().max(f32::MIN_POSITIVE));
+        let mut cost = f64::from(traversal);
+        for node in &self.nodes {
+            for lane in 0..WIDTH {
+                if node.child[lane] == EMPTY {
+                    continue;
+                }
+                let share = f64::from(node.lane_box(lane).half_area()) / root_area;
+                let step = if node.child[lane] & LEAF != 0 {
+                    node.count[lane] as f32 * intersection
+                } else {
+                    traversal
+                };
+                cost += share * f64::from(step);
+            }
+        }
+        Some(cost as f32)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::accel::wide::test_support::*;
+    #[allow(unused_imports)]
+    use crate::accel::wide::{LeafVisit, node::ChildRef, walk::RayBoxes};
+    #[allow(unused_imports)]
+    use glam::Vec3A;
+    #[allow(unused_imports)]
+    use obvhs::{BvhBuildParams, aabb::Aabb, bvh2::builder::build_bvh2};
+    #[allow(unused_imports)]
+    use std::time::Duration;
+
+    #[test]
+    fn refits_move_a_leaf_and_its_ancestors() {
+        let binary = build(16);
+        // Leaves in the order collapse meets them, by first slot, with their boxes.
+        let mut order = Vec::new();
+        let mut wide = WideBvh::collapse(&binary, |first, _| {
+            order.push(first);
+            first
+        });
+        let box_of_slot = |slot: u32| {
+            *binary
+                .nodes
+                .iter()
+                .find(|n| n.is_leaf() && n.first_index == slot)
+                .unwrap()
+                .aabb()
+        };
+        let mut leaf_boxes: Vec<Aabb> = order.iter().map(|&f| box_of_slot(f)).collect();
+        let original_cost = wide.sah_cost(1.0, 1.0).unwrap();
+        // Box 3 jumps far up: by a partial refit of its leaf lane, then by a full refit.
+        let moved = order
+            .iter()
+            .position(|&f| binary.primitive_indices[f as usize] == 3)
+            .unwrap();
+        leaf_boxes[moved] = Aabb::new(Vec3A::new(6.0, 100.0, 0.0), Vec3A::new(7.0, 101.0, 1.0));
+        wide.refit_leaf(wide.leaf_lanes[moved], &leaf_boxes[moved]);
+        assert!(reached(&wide, Vec3A::new(6.5, 5.0, 0.5), Vec3A::NEG_Y).is_empty());
+        assert_eq!(
+            reached(&wide, Vec3A::new(6.5, 200.0, 0.5), Vec3A::NEG_Y).len(),
+            1
+        );
+        // The cost is read from the refitted boxes (relative to the grown root box).
+        assert_ne!(wide.sah_cost(1.0, 1.0).unwrap(), original_cost);
+        let mut full = WideBvh::collapse(&binary, |first, _| first);
+        for (leaf, aabb) in leaf_boxes.iter().enumerate() {
+            full.set_leaf_box(full.leaf_lanes[leaf], aabb);
+        }
+        full.refit_inner();
+        for (a, b) in full.nodes.iter().zip(&wide.nodes) {
+            assert_eq!(a.bounds, b.bounds);
+        }
+    }
+}

@@ -1,0 +1,140 @@
+//! Which SIMD copy of a hot loop runs: the one place that decides.
+//!
+//! The release binary is built for the x86-64 baseline (SSE2), so it runs on any x86-64
+//! CPU; the hot loops (BVH walks, packets, the batched `log2`, texture filtering) are
+//! compiled a second time with AVX2 enabled and the copy is chosen at run time, once per
+//! process ([`Isa::current`]). A loop takes part by implementing [`Kernel`]: its `run` is
+//! generic over `AVX2` and `#[inline(always)]`, so [`dispatch`] inlines it whole into a
+//! function compiled with AVX2 (where `AVX2` is true) or into the baseline caller. Code
+//! inside may branch on `AVX2` to use AVX intrinsics (see `accel::wide::Lanes`); it must
+//! compute the same bits either way (no fused multiply-add is formed in either copy), which
+//! the tests of every such kernel check against the baseline copy or a scalar reference.
+//!
+//! `MIPRAY_SIMD=baseline` forces the baseline copy on any CPU, for comparisons and for
+//! testing the baseline path on a machine that has AVX2.
+
+use std::sync::OnceLock;
+
+/// The instruction sets a kernel is compiled for.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Isa {
+    /// x86-64 baseline (SSE2): runs everywhere; on other architectures, portable code.
+    Baseline,
+    /// AVX2 (Intel Haswell, 2013, and AMD Excavator, 2015, onward).
+    Avx2,
+}
+
+impl Isa {
+    /// The copy this process runs: AVX2 where the CPU has it, unless `MIPRAY_SIMD=baseline`.
+    /// Decided once.
+    #[inline]
+    pub fn current() -> Isa {
+        static CHOICE: OnceLock<Isa> = OnceLock::new();
+        *CHOICE.get_or_init(|| {
+            let forced_baseline = std::env::var("MIPRAY_SIMD").is_ok_and(|v| v == "baseline");
+            if Isa::cpu_has_avx2() && !forced_baseline {
+                Isa::Avx2
+            } else {
+                Isa::Baseline
+            }
+        })
+    }
+
+    /// Whether the CPU can run the AVX2 copy (whatever `MIPRAY_SIMD` says).
+    pub fn cpu_has_avx2() -> bool {
+        #[cfg(target_arch = "x86_64")]
+        return std::arch::is_x86_feature_detected!("avx2");
+        #[cfg(not(target_arch = "x86_64"))]
+        return false;
+    }
+}
+
+/// Whether [`dispatch`] runs AVX2 copies in this process.
+#[inline]
+pub fn avx2() -> bool {
+    Isa::current() == Isa::Avx2
+}
+
+/// A computation compiled twice, once per [`Isa`].
+pub trait Kernel {
+    type Output;
+
+    /// Runs the computation. `AVX2` is true only in the copy compiled for AVX2; implement it
+    /// `#[inline(always)]` so that the whole computation is compiled into that copy.
+    fn run<const AVX2: bool>(self) -> Self::Output;
+}
+
+/// Runs `kernel`'s copy for [`Isa::current`].
+#[inline(always)]
+pub fn dispatch<K: Kernel>(kernel: K) -> K::Output {
+    #[cfg(target_arch = "x86_64")]
+    if avx2() {
+        // SAFETY: `avx2()` is true only where the CPU has AVX2 (`Isa::current`).
+        return unsafe { run_avx2(kernel) };
+    }
+    kernel.run::<false>()
+}
+
+/// Runs `kernel`'s baseline copy whatever the CPU (tests compare the copies with it).
+#[inline(always)]
+pub fn run_baseline<K: Kernel>(kernel: K) -> K::Output {
+    kernel.run::<false>()
+}
+
+/// Runs `kernel`'s AVX2 copy, or `None` where the CPU has no AVX2 (tests).
+#[inline(always)]
+pub fn run_avx2_if_available<K: Kernel>(kernel: K) -> Option<K::Output> {
+    #[cfg(target_arch = "x86_64")]
+    if Isa::cpu_has_avx2() {
+        // SAFETY: the CPU has AVX2 (detected just above).
+        return Some(unsafe { run_avx2(kernel) });
+    }
+    let _ = kernel;
+    None
+}
+
+/// `kernel`'s AVX2 copy: `run::<true>` and everything it inlines compiled with AVX2.
+///
+/// # Safety
+/// The CPU must have AVX2.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+unsafe fn run_avx2<K: Kernel>(kernel: K) -> K::Output {
+    kernel.run::<true>()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Reports which copy ran.
+    struct WhichCopy;
+
+    impl Kernel for WhichCopy {
+        type Output = bool;
+        #[inline(always)]
+        fn run<const AVX2: bool>(self) -> bool {
+            AVX2
+        }
+    }
+
+    #[test]
+    fn dispatch_runs_the_copy_the_process_chose() {
+        assert_eq!(dispatch(WhichCopy), Isa::current() == Isa::Avx2);
+        assert!(!run_baseline(WhichCopy));
+        assert_eq!(
+            run_avx2_if_available(WhichCopy),
+            Isa::cpu_has_avx2().then_some(true)
+        );
+    }
+
+    #[test]
+    fn the_avx2_copy_is_chosen_only_where_the_cpu_has_it() {
+        if Isa::current() == Isa::Avx2 {
+            assert!(Isa::cpu_has_avx2());
+        }
+        if std::env::var("MIPRAY_SIMD").is_ok_and(|v| v == "baseline") {
+            assert_eq!(Isa::current(), Isa::Baseline);
+        }
+    }
+}

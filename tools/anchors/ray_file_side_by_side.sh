@@ -1,0 +1,76 @@
+#!/usr/bin/env bash
+# Every class of ray a real frame traces, mipray against Embree 3 on the same rays, ONE thread.
+#
+# usage (from the project root, after `cargo build --release`):
+#   tools/anchors/ray_file_side_by_side.sh SCENE FRAME WxH [LIGHTS] [ROUNDS]
+#   e.g. tools/anchors/ray_file_side_by_side.sh ../shared/bart/kitchen/aff/kitchen.aff 400 800x600 1
+# needs: apt-get install -y libembree-dev   (Debian's Embree 3.13); MIPRAY=path overrides the binary.
+#
+# `mipray export --rays` records the frame's rays (primary, shadow, reflection, refraction:
+# every ray of a render at depth 5 with LIGHTS lights, default 1). Each round then runs
+# `mipray bench --rays FILE --threads 1 --repeats 3` and `embree_ray_file` (this folder; 3
+# repetitions of every build and API) on that file, alternately. Per class: mipray's fastest
+# way (packets or single), Embree's single-ray API (rtcIntersect1/rtcOccluded1) and its best
+# API (single, or 4/8/16-wide packets of the class's rays grouped by pixel block and bounce),
+# each the best of its two builds (refittable, static high quality); figures are the median
+# of a run's repetitions, then the median over rounds; the ratio is mipray / Embree best.
+set -euo pipefail
+[ $# -ge 3 ] || { sed -n '4,6p' "$0" >&2; exit 2; }
+scene=$1; frame=$2; size=$3; lights=${4:-1}; rounds=${5:-3}
+here=$(cd "$(dirname "$0")" && pwd)
+bin=${MIPRAY:-target/release/mipray}
+[ -x "$bin" ] || { echo "no $bin: run cargo build --release first (or set MIPRAY)" >&2; exit 2; }
+work=${TMPDIR:-/tmp}/mipray-ray-file; mkdir -p "$work"
+if [ ! -x "$work/embree_ray_file" ] || [ "$here/embree_ray_file.c" -nt "$work/embree_ray_file" ]; then
+  cc -O3 -march=native -o "$work/embree_ray_file" "$here/embree_ray_file.c" -lembree3 -lm \
+    || { echo "cannot build the Embree anchor: apt-get install -y libembree-dev" >&2; exit 2; }
+fi
+ex="$work/rays-$$"; rm -rf "$ex"; trap 'rm -rf "$ex"' EXIT
+"$bin" export "$scene" --frames "$frame" --size "$size" --lights "$lights" --rays --out "$ex" >/dev/null 2>&1
+obj=$(ls "$ex"/frame_*.obj | head -1); rays=$(ls "$ex"/rays_*.bin | head -1)
+width=${size%x*}
+for round in $(seq "$rounds"); do
+  "$bin" bench "$scene" --frames "$frame" --size "$size" --lights "$lights" --rays "$rays" \
+    --threads 1 --repeats 3 2>/dev/null > "$ex/mipray_$round.txt"
+  "$work/embree_ray_file" "$obj" "$rays" "$width" 3 > "$ex/embree_$round.txt"
+done
+python3 - "$ex" "$scene" "$frame" "$size" "$lights" "$rounds" <<'PY'
+import statistics as st, sys
+ex, scene, frame, size, lights, rounds = sys.argv[1:7]
+rounds = int(rounds)
+m = {}  # (class, api) -> medians over rounds, count, differing
+e = {}  # (build, class, api) -> medians over rounds, count, hits, agree
+for r in range(1, rounds + 1):
+    for line in open(f"{ex}/mipray_{r}.txt"):
+        f = [x.strip() for x in line.split("|")[1:-1]]
+        if len(f) == 8 and f[0] in ("primary", "shadow", "reflection", "refraction"):
+            d = m.setdefault((f[0], f[1]), {"med": [], "count": int(f[3]), "share": f[4], "differ": f[7]})
+            d["med"].append(float(f[5]))
+    for line in open(f"{ex}/embree_{r}.txt"):
+        w = line.split()
+        if w and w[0] == "ray":
+            d = e.setdefault((w[1], w[2], w[3]), {"med": [], "rays": int(w[4]), "hits": int(w[5]), "agree": int(w[8])})
+            d["med"].append(float(w[7]))
+med = st.median
+print(f"{scene} frame {frame} {size}, {lights} light(s), 1 thread, {rounds} rounds")
+print("| class | rays | mipray (way) | Embree single (build) | Embree best (API/build) | mipray / E-single | mipray / E-best | answers equal to the file's (Embree) |")
+print("|---|---:|---:|---:|---:|---:|---:|---:|")
+for cls in ("primary", "shadow", "reflection", "refraction"):
+    mine = [(med(d["med"]), api, d) for (c, api), d in m.items() if c == cls]
+    if not mine:
+        continue
+    mm, mapi, md = max(mine)
+    single = max((med(e[(b, cls, "1")]["med"]), b) for b in ("refit", "high"))
+    best = max((med(e[(b, cls, a)]["med"]), f"{a}/{b}") for b in ("refit", "high") for a in ("1", "4", "8", "16"))
+    agree = e[("refit", cls, "1")]
+    print(f"| {cls} | {md['count']} | {mm:.3f} ({mapi}) | {single[0]:.3f} ({single[1]}) | {best[0]:.3f} ({best[1]}) "
+          f"| {mm / single[0]:.3f} | {mm / best[0]:.3f} | {100 * agree['agree'] / max(agree['rays'], 1):.3f}% |")
+print("\nmipray answers differing from the file (must be 0):",
+      {f"{c} {a}": d["differ"] for (c, a), d in m.items()})
+print("\nEmbree, every API (median over rounds, Mrays/s):")
+for cls in ("primary", "shadow", "reflection", "refraction"):
+    for b in ("refit", "high"):
+        if (b, cls, "1") in e:
+            print(f"  {cls:10s} {b:5s} " + "  ".join(f"{a:>2s} {med(e[(b, cls, a)]['med']):7.3f}" for a in ("1", "4", "8", "16")))
+print("\nmipray per round:", {f"{c} {a}": d["med"] for (c, a), d in m.items()})
+PY
