@@ -331,6 +331,13 @@ pub enum Footprint {
     /// `taps` trilinear lookups at `level`, spread evenly over `axis` (a texture-coordinate
     /// offset spanning the footprint's major axis, centred on the hit), averaged.
     Anisotropic { level: f32, axis: Vec2, taps: u32 },
+    /// EWA over the ellipse with conjugate semi-axes `major` and `minor` (texture-coordinate
+    /// offsets per pixel), in the levels around `level`, the minor axis's level.
+    Elliptical {
+        level: f32,
+        major: Vec2,
+        minor: Vec2,
+    },
 }
 
 impl Footprint {
@@ -338,7 +345,9 @@ impl Footprint {
     pub fn level(&self) -> f32 {
         match *self {
             Footprint::Base => 0.0,
-            Footprint::Level(level) | Footprint::Anisotropic { level, .. } => level,
+            Footprint::Level(level)
+            | Footprint::Anisotropic { level, .. }
+            | Footprint::Elliptical { level, .. } => level,
         }
     }
 }
