@@ -27,12 +27,13 @@ fn facing_closed_form(distance: f64, size: f64, texture: u32, yfov: f32, height:
     distance.log2() - ((size / texture as f64) / k).log2()
 }
 
-const MIPMAPPED: [LodMethod; 5] = [
+const MIPMAPPED: [LodMethod; 6] = [
     LodMethod::Paper,
     LodMethod::PaperCos,
     LodMethod::Cones,
     LodMethod::Diffs,
     LodMethod::DiffsAniso,
+    LodMethod::DiffsEwa,
 ];
 
 #[test]
@@ -104,11 +105,11 @@ fn plane_tilted_60_degrees_adds_one_level_to_cos_aware_methods() {
     }
     // Anisotropic filtering spends the elongation (1 / cos 60 = 2) on two taps instead: its
     // level stays at the footprint's short axis, which the tilt leaves unchanged.
-    let aniso = level(LodMethod::DiffsAniso).level;
-    assert!(
-        (aniso - paper).abs() < 0.02,
-        "diffs-aniso {aniso}, paper {paper}"
-    );
+    // EWA likewise filters at the minor axis's level and spreads along the major one.
+    for lod in [LodMethod::DiffsAniso, LodMethod::DiffsEwa] {
+        let got = level(lod).level;
+        assert!((got - paper).abs() < 0.02, "{lod} {got}, paper {paper}");
+    }
 }
 
 /// Camera at the origin looking down -Z at a mirror 3 m away; the textured quad hangs 2 m

@@ -2,8 +2,8 @@
 //!
 //! Every ray carries the state its method needs (its "LOD payload"): nothing for `none`, the
 //! path length for `paper` (and its pixel's two widths for `paper-cos`), a cone (width,
-//! spread angle, radial ratio) for `cones`, four differential vectors for `diffs` and
-//! `diffs-aniso`. The integrator is generic over the
+//! spread angle, radial ratio) for `cones`, four differential vectors for `diffs`,
+//! `diffs-aniso` and `diffs-ewa`. The integrator is generic over the
 //! state, so each method pays only for its own payload and arithmetic (the dispatch on
 //! [`LodMethod`] happens once per primary ray).
 //!
@@ -18,6 +18,7 @@
 mod cones;
 mod diffs;
 mod diffs_aniso;
+mod diffs_ewa;
 pub mod log2;
 mod none;
 mod paper;
@@ -30,6 +31,7 @@ mod test_support;
 pub use cones::RayCone;
 pub use diffs::{RayDiffs, TexelGradients};
 pub use diffs_aniso::RayDiffsAniso;
+pub use diffs_ewa::{EllipticalFootprint, RayDiffsEwa};
 pub use none::NoLod;
 pub use paper::PathLength;
 pub use paper_cos::PathLengthCos;
@@ -65,6 +67,9 @@ pub enum LodMethod {
     /// Ray differentials with anisotropic filtering: up to 16 trilinear taps along the
     /// footprint's major axis.
     DiffsAniso,
+    /// Ray differentials with EWA filtering (pbrt-v4's): a Gaussian over the footprint's
+    /// ellipse in the level of its minor axis, anisotropy up to 16.
+    DiffsEwa,
 }
 
 /// Smallest `|n.d|` the incidence term uses (anisotropy 16, as the OptiX toolkit clamps),
@@ -79,13 +84,14 @@ pub const MAX_ANISOTROPY: u32 = 16;
 pub const COARSEST_LEVEL: f32 = 1024.0;
 
 impl LodMethod {
-    pub const ALL: [LodMethod; 6] = [
+    pub const ALL: [LodMethod; 7] = [
         LodMethod::None,
         LodMethod::Paper,
         LodMethod::PaperCos,
         LodMethod::Cones,
         LodMethod::Diffs,
         LodMethod::DiffsAniso,
+        LodMethod::DiffsEwa,
     ];
 
     pub fn as_str(self) -> &'static str {
@@ -96,6 +102,7 @@ impl LodMethod {
             LodMethod::Cones => "cones",
             LodMethod::Diffs => "diffs",
             LodMethod::DiffsAniso => "diffs-aniso",
+            LodMethod::DiffsEwa => "diffs-ewa",
         }
     }
 
@@ -165,6 +172,10 @@ macro_rules! with_lod_state {
             }
             $crate::lod::LodMethod::DiffsAniso => {
                 type $L = $crate::lod::RayDiffsAniso;
+                $body
+            }
+            $crate::lod::LodMethod::DiffsEwa => {
+                type $L = $crate::lod::RayDiffsEwa;
                 $body
             }
         }
@@ -458,6 +469,7 @@ mod tests {
         assert_eq!(LodMethod::PaperCos.bytes_per_ray(), 12);
         assert_eq!(LodMethod::Cones.bytes_per_ray(), 12);
         assert_eq!(LodMethod::Diffs.bytes_per_ray(), 48);
+        assert_eq!(LodMethod::DiffsEwa.bytes_per_ray(), 48);
     }
 
     #[test]
