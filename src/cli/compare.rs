@@ -27,7 +27,7 @@ pub struct CompareArgs {
     #[arg(
         long,
         value_delimiter = ',',
-        default_value = "none,paper,paper-cos,cones,diffs,diffs-aniso"
+        default_value = "none,paper,paper-cos,cones,diffs,diffs-aniso,diffs-ewa"
     )]
     pub methods: Vec<MethodSpec>,
     /// `N` lights for every render, or a range `A..B` (inclusive: `1..6` is 1 to 6 lights)

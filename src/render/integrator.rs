@@ -517,6 +517,11 @@ impl FrameScene<'_> {
             Footprint::Anisotropic { axis, taps, .. } => {
                 pyramid.sample_anisotropic(uv, level, axis, taps, texture.sampler)
             }
+            // The bias scales the ellipse, so its minor axis fits the biased level.
+            Footprint::Elliptical { major, minor, .. } => {
+                let scale = self.lod_bias.exp2();
+                pyramid.sample_ewa(uv, level, (major, minor), scale, texture.sampler)
+            }
         };
         Vec3A::new(texel.x, texel.y, texel.z)
     }

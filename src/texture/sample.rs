@@ -80,7 +80,7 @@ fn floor(x: f64) -> f64 {
 
 /// Maps an integer texel index to `0..n` (glTF / OpenGL wrap semantics).
 #[inline]
-fn wrap(i: i64, n: i64, mode: WrapMode) -> usize {
+pub(super) fn wrap(i: i64, n: i64, mode: WrapMode) -> usize {
     (match mode {
         WrapMode::Repeat => i.rem_euclid(n),
         WrapMode::ClampToEdge => i.clamp(0, n - 1),
