@@ -79,30 +79,44 @@ impl CodeIndex {
 static SRGB8_INDEX: LazyLock<CodeIndex> = LazyLock::new(|| CodeIndex::new(&SRGB8_LUT));
 static ALPHA8_INDEX: LazyLock<CodeIndex> = LazyLock::new(|| CodeIndex::new(&ALPHA8_LUT));
 
+/// [`SRGB8_LUT`] then [`ALPHA8_LUT`] in one array, so that a texel's four channels are read
+/// from one table (`code` for red, green and blue, `ALPHA_OFFSET + code` for alpha): one
+/// AVX2 gather decodes two texels.
+static DECODE8: LazyLock<[f32; 2 * 256]> =
+    LazyLock::new(|| std::array::from_fn(|i| [&*SRGB8_LUT, &*ALPHA8_LUT][i / 256][i % 256]));
+
+/// Where the alpha table starts in [`Srgb8Tables::decode_table`].
+pub(super) const ALPHA_OFFSET: usize = 256;
+
 /// The two tables that decode an 8-bit sRGB image's pixels, as `expand_u8` decodes them.
 #[derive(Debug, Clone, Copy)]
 pub(super) struct Srgb8Tables {
-    colour: &'static [f32; 256],
-    alpha: &'static [f32; 256],
+    /// Colour codes at `0..256`, alpha codes at `ALPHA_OFFSET..ALPHA_OFFSET + 256`.
+    decode: &'static [f32; 2 * 256],
 }
 
 impl Srgb8Tables {
     pub(super) fn get() -> Srgb8Tables {
-        Srgb8Tables {
-            colour: &SRGB8_LUT,
-            alpha: &ALPHA8_LUT,
-        }
+        Srgb8Tables { decode: &DECODE8 }
     }
 
     /// The texel of pixel `codes` (red, green, blue, alpha).
     #[inline(always)]
     pub(super) fn texel(&self, codes: [u8; 4]) -> Vec4 {
+        let t = self.decode;
         Vec4::new(
-            self.colour[codes[0] as usize],
-            self.colour[codes[1] as usize],
-            self.colour[codes[2] as usize],
-            self.alpha[codes[3] as usize],
+            t[codes[0] as usize],
+            t[codes[1] as usize],
+            t[codes[2] as usize],
+            t[ALPHA_OFFSET + codes[3] as usize],
         )
+    }
+
+    /// Both tables in one array: colour code `c` decodes to entry `c`, alpha code `a` to
+    /// entry `ALPHA_OFFSET + a`.
+    #[inline(always)]
+    pub(super) fn decode_table(&self) -> &'static [f32; 2 * 256] {
+        self.decode
     }
 
     /// The codes [`Srgb8Tables::texel`] turns into exactly `texel`, if there are any.
@@ -114,6 +128,40 @@ impl Srgb8Tables {
             colour.code(texel.z)?,
             alpha.code(texel.w)?,
         ])
+    }
+
+    /// The codes whose decoded values are nearest `texel`'s channels (see [`nearest_code`]):
+    /// what a reduced MIP level of an 8-bit image keeps.
+    pub(super) fn nearest_codes(&self, texel: Vec4) -> [u8; 4] {
+        [
+            nearest_code(&SRGB8_LUT, texel.x),
+            nearest_code(&SRGB8_LUT, texel.y),
+            nearest_code(&SRGB8_LUT, texel.z),
+            nearest_code(&ALPHA8_LUT, texel.w),
+        ]
+    }
+}
+
+/// The code of a strictly increasing `table` whose value is nearest `value` (ties to the
+/// lower code); values below the first entry or above the last take the end codes, and NaN
+/// takes code 0. The two distances are compared in f64, where the difference of two `f32`
+/// values loses nothing unless their exponents are 29 or more apart (a value that close to
+/// zero is nearer code 0 by far).
+fn nearest_code(table: &[f32; 256], value: f32) -> u8 {
+    // The first code whose value is not below `value` (256 when every value is below it).
+    let above = table.partition_point(|&t| t < value);
+    if above == 0 {
+        return 0;
+    }
+    if above == table.len() {
+        return 255;
+    }
+    let (below, above_value) = (f64::from(table[above - 1]), f64::from(table[above]));
+    let value = f64::from(value);
+    if above_value - value < value - below {
+        above as u8
+    } else {
+        (above - 1) as u8
     }
 }
 

@@ -55,12 +55,14 @@ pub struct MipLevel {
     texels: Texels,
 }
 
-/// How a level keeps its texels. Level 0 of an 8-bit image keeps the 8-bit codes (4 bytes
-/// per texel instead of 16) and decodes them through the tables its loader used, so every
-/// lookup returns the same `Vec4` bit for bit; texture lookups of whole frames wait on
-/// texel loads (the hottest instructions of `sample_trilinear`), and a quarter of the bytes
-/// keeps more of a texture in cache. Everything else (reduced levels, 16-bit and float
-/// images) stays linear `f32`.
+/// How a level keeps its texels. Every level of an 8-bit image keeps 8-bit codes (4 bytes
+/// per texel instead of 16) and decodes them through the tables its loader used: texture
+/// lookups of whole frames wait on texel loads, and a quarter of the bytes keeps more of a
+/// texture in cache. Level 0 holds the image's own codes, so every lookup there returns the
+/// same `Vec4` bit for bit as the decoded image; a reduced level holds, per channel, the
+/// code whose value is nearest the box-filtered value (computed from the unrounded levels
+/// above it), as a GPU's sRGB MIP chain stores it. 16-bit and float images keep linear
+/// `f32` at every level.
 #[derive(Debug, Clone)]
 enum Texels {
     Linear(Vec<Vec4>),
@@ -82,7 +84,8 @@ impl MipLevel {
         }
     }
 
-    /// Texel `i` (`y * width + x`).
+    /// Texel `i` (`y * width + x`) as linear RGBA, whatever the storage: the one accessor
+    /// for filters that read texels one by one.
     #[inline(always)]
     pub fn texel(&self, i: usize) -> Vec4 {
         match &self.texels {
@@ -102,16 +105,30 @@ impl MipLevel {
     }
 
     /// Keeps the texels as 8-bit codes when every one of them is exactly what the 8-bit
-    /// sRGB decoding produces for some code; otherwise leaves the level as it is.
-    fn store_8bit_if_exact(&mut self) {
+    /// sRGB decoding produces for some code; otherwise leaves the level as it is. Returns
+    /// whether the level keeps codes.
+    fn store_8bit_if_exact(&mut self) -> bool {
+        let Texels::Linear(texels) = &self.texels else {
+            return true;
+        };
+        let tables = decode::Srgb8Tables::get();
+        let codes: Option<Vec<[u8; 4]>> = texels.iter().map(|&t| tables.codes(t)).collect();
+        let Some(codes) = codes else {
+            return false;
+        };
+        self.texels = Texels::Srgb8 { codes, tables };
+        true
+    }
+
+    /// Keeps, per channel, the 8-bit code whose decoded value is nearest the texel's (for
+    /// the reduced levels of an 8-bit image).
+    fn store_nearest_8bit(&mut self) {
         let Texels::Linear(texels) = &self.texels else {
             return;
         };
         let tables = decode::Srgb8Tables::get();
-        let codes: Option<Vec<[u8; 4]>> = texels.iter().map(|&t| tables.codes(t)).collect();
-        if let Some(codes) = codes {
-            self.texels = Texels::Srgb8 { codes, tables };
-        }
+        let codes = texels.iter().map(|&t| tables.nearest_codes(t)).collect();
+        self.texels = Texels::Srgb8 { codes, tables };
     }
 }
 

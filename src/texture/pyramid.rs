@@ -14,6 +14,12 @@
 //! Invariant: every source texel's weights over all destination texels sum to `dw / sw`,
 //! so each level's mean equals the previous level's mean (and hence level 0's), up to the
 //! f32 rounding of the stored texels.
+//!
+//! Storage: every level is first computed in f32 from the unrounded level above it. When
+//! level 0 is an 8-bit image (every texel exactly an 8-bit sRGB decoding), every level then
+//! keeps 8-bit codes: level 0 its own, each reduced level per channel the code nearest its
+//! computed value, so it decodes to that value within half a step between adjacent codes
+//! (and its mean to within that of level 0's).
 
 use glam::{DVec4, Vec4};
 
@@ -109,18 +115,29 @@ impl MipPyramid {
                 expected,
             });
         }
-        let count = 1 + width.max(height).ilog2() as usize;
-        let mut levels = Vec::with_capacity(count);
-        levels.push(MipLevel::linear(width, height, texels));
-        while let Some(last) = levels.last().filter(|l| l.width > 1 || l.height > 1) {
-            let next = reduce(last);
-            levels.push(next);
+        let mut levels = unrounded_levels(MipLevel::linear(width, height, texels));
+        // After the reduction, which reads every level unrounded: an 8-bit image keeps
+        // its own codes at level 0 and the nearest codes at the reduced levels.
+        if levels[0].store_8bit_if_exact() {
+            for level in &mut levels[1..] {
+                level.store_nearest_8bit();
+            }
         }
-        // After the reduction, which reads level 0 in f32 either way.
-        levels[0].store_8bit_if_exact();
-        debug_assert_eq!(levels.len(), count);
         Ok(Self { levels })
     }
+}
+
+/// `level0` and its reductions down to 1x1, every level in f32.
+fn unrounded_levels(level0: MipLevel) -> Vec<MipLevel> {
+    let count = 1 + level0.width.max(level0.height).ilog2() as usize;
+    let mut levels = Vec::with_capacity(count);
+    levels.push(level0);
+    while let Some(last) = levels.last().filter(|l| l.width > 1 || l.height > 1) {
+        let next = reduce(last);
+        levels.push(next);
+    }
+    debug_assert_eq!(levels.len(), count);
+    levels
 }
 
 #[cfg(test)]
@@ -156,6 +173,10 @@ mod tests {
             assert_eq!(l.texels().len(), (l.width * l.height) as usize);
         }
         p.levels.iter().map(|l| (l.width, l.height)).collect()
+    }
+
+    fn same(a: Vec4, b: Vec4) -> bool {
+        a.to_array().map(f32::to_bits) == b.to_array().map(f32::to_bits)
     }
 
     fn mean(level: &MipLevel) -> [f64; 4] {
@@ -265,22 +286,19 @@ mod tests {
             .unwrap();
         let (w, h, texels) = decode_texels(&png, ColorEncoding::Srgb).unwrap();
         let compact = MipPyramid::from_linear_rgba(w, h, texels.clone()).unwrap();
-        assert!(compact.levels[0].is_8bit());
-        assert!(compact.levels[1..].iter().all(|l| !l.is_8bit()));
+        assert!(compact.levels.iter().all(MipLevel::is_8bit));
         // Every texel reads back as decoded.
-        let same =
-            |a: Vec4, b: Vec4| a.to_array().map(f32::to_bits) == b.to_array().map(f32::to_bits);
         assert!(
             compact.levels[0]
                 .texels()
                 .zip(&texels)
                 .all(|(a, b)| same(a, *b))
         );
-        // One texel nudged by an ulp is no code's value: that level stays f32.
+        // One texel nudged by an ulp is no code's value: every level stays f32.
         let mut nudged = texels.clone();
         nudged[5].x = f32::from_bits(nudged[5].x.to_bits() + 1);
         let linear = MipPyramid::from_linear_rgba(w, h, nudged).unwrap();
-        assert!(!linear.levels[0].is_8bit());
+        assert!(linear.levels.iter().all(|l| !l.is_8bit()));
         // Lookups equal those of the same pyramid with level 0 kept in f32.
         let mut reference = compact.clone();
         reference.levels[0] = MipLevel::linear(w, h, texels.clone());
@@ -304,8 +322,79 @@ mod tests {
                 reference.sample_bilinear(0, uv, sampler)
             ));
         }
-        // The reduced levels were computed from the same values.
-        for (a, b) in compact.levels[1..].iter().zip(&reference.levels[1..]) {
+    }
+
+    /// The decoded values of the codes just below and above `code` (itself at the ends).
+    fn neighbours(table: impl Fn(u8) -> f32, code: u8) -> (f32, f32) {
+        (table(code.saturating_sub(1)), table(code.saturating_add(1)))
+    }
+
+    #[test]
+    fn reduced_levels_of_an_8bit_image_keep_the_nearest_codes() {
+        use crate::texture::Texels;
+        use crate::texture::decode::Srgb8Tables;
+        let tables = Srgb8Tables::get();
+        let colour = |c: u8| tables.texel([c, 0, 0, 0]).x;
+        let alpha = |c: u8| tables.texel([0, 0, 0, c]).w;
+        for (w, h, seed) in [(64, 48, 1u64), (37, 100, 2), (211, 5, 3), (1, 9, 4)] {
+            // Codes in runs, so that reduced levels hold every kind of mix.
+            let texels: Vec<Vec4> = (0..u64::from(w * h))
+                .map(|i| {
+                    let z = (i / 3 + seed).wrapping_mul(0x9E37_79B9_7F4A_7C15) >> 32;
+                    tables.texel((z as u32).to_le_bytes())
+                })
+                .collect();
+            let pyramid = MipPyramid::from_linear_rgba(w, h, texels.clone()).unwrap();
+            let unrounded = unrounded_levels(MipLevel::linear(w, h, texels));
+            assert_eq!(pyramid.level_count(), unrounded.len());
+            for (k, (stored, exact)) in pyramid.levels.iter().zip(&unrounded).enumerate() {
+                assert!(stored.is_8bit(), "{w}x{h} level {k}");
+                let Texels::Srgb8 { codes, .. } = &stored.texels else {
+                    unreachable!()
+                };
+                for (i, (codes, value)) in codes.iter().zip(exact.texels()).enumerate() {
+                    let decoded = stored.texel(i);
+                    if k == 0 {
+                        assert!(same(decoded, value), "level 0 texel {i}");
+                    }
+                    for c in 0..4 {
+                        let table = |code| if c < 3 { colour(code) } else { alpha(code) };
+                        let (below, above) = neighbours(table, codes[c]);
+                        let (got, want) = (decoded[c], value[c]);
+                        // Within one code of the unrounded value...
+                        assert!(
+                            below <= want && want <= above,
+                            "{w}x{h} level {k} texel {i} channel {c}: {got} for {want}"
+                        );
+                        // ...and no other code is nearer.
+                        let error = (got - want).abs();
+                        assert!(
+                            error <= (below - want).abs() && error <= (above - want).abs(),
+                            "{w}x{h} level {k} texel {i} channel {c}: {got} for {want}"
+                        );
+                    }
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn images_that_are_not_8bit_keep_f32_levels() {
+        use crate::texture::{ColorEncoding, decode_texels};
+        // A 16-bit PNG: its decoded values are no 8-bit code's.
+        let image = image::ImageBuffer::from_fn(16, 8, |x, y| {
+            image::Rgba([x as u16 * 4000 + 1, y as u16 * 7000 + 3, 12345, 65535])
+        });
+        let mut png = Vec::new();
+        image
+            .write_to(&mut std::io::Cursor::new(&mut png), image::ImageFormat::Png)
+            .unwrap();
+        let (w, h, texels) = decode_texels(&png, ColorEncoding::Srgb).unwrap();
+        let p = MipPyramid::from_linear_rgba(w, h, texels.clone()).unwrap();
+        assert!(p.levels.iter().all(|l| !l.is_8bit()));
+        // Its levels are the unrounded reductions.
+        let unrounded = unrounded_levels(MipLevel::linear(w, h, texels));
+        for (a, b) in p.levels.iter().zip(&unrounded) {
             assert!(a.texels().zip(b.texels()).all(|(x, y)| same(x, y)));
         }
     }
