@@ -17,6 +17,9 @@ mod decode;
 mod pyramid;
 mod sample;
 
+mod fetch;
+mod taps;
+
 pub use decode::{ColorEncoding, decode_texels, srgb_to_linear};
 
 use glam::Vec4;
