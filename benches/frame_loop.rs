@@ -31,8 +31,9 @@ mod generated;
 use std::time::Instant;
 
 use glam::Vec3;
-use mipray::frame::{BvhLayout, BvhPolicy, FrameRecord, RenderSettings, Renderer, UpdateStats};
-use mipray::report::Percentiles;
+use mipray::frame::{BvhLayout, BvhPolicy, RenderSettings, Renderer};
+use mipray::percentiles::Percentiles;
+use mipray::record::{FrameRecord, UpdateStats};
 use mipray::scene::*;
 
 const PATCH_SIDE: u32 = 22; // 22 x 22 quads: 968 triangles per patch

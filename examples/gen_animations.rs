@@ -1,5 +1,5 @@
 //! Regenerates the project's authored animations (`default`, `kitchen`, `robots` and
-//! `museum`, each a `.gltf` with its `.bin` and PNGs) from `mipray::authoring`.
+//! `museum`, each a `.gltf` with its `.bin` and PNGs) from `mipray_authoring`.
 //!
 //! Usage:
 //! - `cargo run --release --example gen_animations [-- OUT_DIR]` (default `animations/`)
@@ -14,7 +14,7 @@
 use std::path::PathBuf;
 
 use anyhow::Context;
-use mipray::authoring::{MUSEUM_MAX_DETAIL, museum_sculpture_triangles, write_all, write_museum};
+use mipray_authoring::{MUSEUM_MAX_DETAIL, museum_sculpture_triangles, write_all, write_museum};
 
 const USAGE: &str = "usage: gen_animations [--museum-detail N] [OUT_DIR]";
 

@@ -3,7 +3,7 @@
 
 Run from the crate root: python3 fuzz/seed.py. GLB seeds pack each animation's .gltf,
 .bin and small textures into one file (the gltf target reads no files beside its input);
-the AFF seed joins the fixture scene, its include and its texture in the NUL-separated
+the USD seeds prefix each file with its kind byte (fuzz_targets/usd.rs); the AFF seed joins the fixture scene, its include and its texture in the NUL-separated
 layout of fuzz_targets/aff.rs; the OBJ seed is `mipray export` of the default animation.
 """
 import json, os, pathlib, struct, subprocess, sys, tempfile
@@ -63,6 +63,35 @@ with tempfile.TemporaryDirectory() as tmp:
                    cwd=root, check=True, stdout=subprocess.DEVNULL)
     for f in sorted(pathlib.Path(tmp).glob("*.obj")):
         put("obj", f.name, f.read_bytes())
+
+# USD: the first byte picks the kind (0 text, 1 crate, 2 package), as fuzz_targets/usd.rs
+# reads it; the hostile corpus and a valid crate file written by openusd's writer (the
+# ignored test in tests/usd_hostile.rs writes the damaged ones from the same file).
+usd_kind = {".usda": b"\0", ".usdc": b"\1", ".usdz": b"\2"}
+put("usd", "triangle.usda", b"\0" + b"""#usda 1.0
+(
+    metersPerUnit = 1
+    upAxis = "Y"
+    startTimeCode = 0
+    endTimeCode = 2
+)
+def Xform "A"
+{
+    double3 xformOp:translate.timeSamples = { 0: (0, 0, 0), 2: (1, 0, 0) }
+    uniform token[] xformOpOrder = ["xformOp:translate"]
+    def Mesh "Tri"
+    {
+        uniform token subdivisionScheme = "none"
+        int[] faceVertexCounts = [3]
+        int[] faceVertexIndices = [0, 1, 2]
+        point3f[] points.timeSamples = { 0: [(0, 0, 0), (1, 0, 0), (0, 1, 0)], 2: [(0, 0, 0), (1, 0, 1), (0, 1, 0)] }
+        texCoord2f[] primvars:st = [(0, 0), (1, 0), (0, 1)] (interpolation = "faceVarying")
+    }
+}
+""")
+for f in sorted(hostile.glob("usd_*")) if hostile.is_dir() else []:
+    if f.suffix in usd_kind:
+        put("usd", "hostile_" + f.name, usd_kind[f.suffix] + f.read_bytes())
 
 # The hostile corpus seeds each target with its own kind of file.
 kinds = {".aff": "aff", ".ppm": "ppm", ".gltf": "gltf", ".glb": "gltf", ".obj": "obj"}

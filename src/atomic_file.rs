@@ -4,12 +4,16 @@
 //! rename stays on one file system, and distinct per process), which is renamed into place
 //! once fully written and flushed; on any error the temporary file is removed and `path` is
 //! untouched. This is the one implementation: frames, stats summaries, plots, reports and
-//! exported meshes all go through [`write_atomically`]. A resumed render removes stale
-//! `.*.tmp` files an interrupted run left behind (`output`).
+//! exported meshes all go through [`write_atomically`], text through
+//! [`write_text_atomically`] and images through [`write_image_atomically`]. A resumed
+//! render removes the stale `.*.tmp` files of its own outputs an interrupted run left
+//! behind (`run::output`, which finds what a temporary was for with [`temporary_target`]).
 
 use std::fs::{self, File};
 use std::io::{self, BufWriter, Write};
 use std::path::{Path, PathBuf};
+
+use image::{ImageBuffer, ImageFormat};
 
 /// Why an atomic write failed: the temporary file could not be created, written or renamed
 /// (`Io`, naming the path), or the caller's writer failed (`Write`).
@@ -75,6 +79,70 @@ pub fn write_bytes_atomically(path: &Path, bytes: &[u8]) -> Result<(), (PathBuf,
     })
 }
 
+/// Writes a text file atomically.
+///
+/// # Errors
+/// As [`write_atomically`].
+pub fn write_text_atomically(path: &Path, text: &str) -> io::Result<()> {
+    write_bytes_atomically(path, text.as_bytes()).map_err(|(_, source)| source)
+}
+
+/// Why writing a file failed; both variants name it.
+#[derive(Debug, thiserror::Error)]
+pub enum FileWriteError {
+    #[error("{path}: {source}")]
+    Io { path: PathBuf, source: io::Error },
+    #[error("{path}: cannot encode image: {source}")]
+    Encode {
+        path: PathBuf,
+        source: image::ImageError,
+    },
+}
+
+/// Encodes `image` as `format` into `path` atomically.
+///
+/// # Errors
+/// The file cannot be written ([`FileWriteError::Io`]) or the encoder fails
+/// ([`FileWriteError::Encode`]); `path` is then untouched.
+pub fn write_image_atomically<P, C>(
+    path: &Path,
+    image: &ImageBuffer<P, C>,
+    format: ImageFormat,
+) -> Result<(), FileWriteError>
+where
+    P: image::PixelWithColorType,
+    [P::Subpixel]: image::EncodableLayout,
+    C: std::ops::Deref<Target = [P::Subpixel]>,
+{
+    write_atomically(path, |w| image.write_to(w, format)).map_err(|e| match e {
+        AtomicWriteError::Io { path, source } => FileWriteError::Io { path, source },
+        AtomicWriteError::Write(source) => FileWriteError::Encode {
+            path: path.to_path_buf(),
+            source,
+        },
+    })
+}
+
+/// Writes an 8-bit RGB PNG atomically.
+///
+/// # Errors
+/// As [`write_image_atomically`].
+pub fn write_rgb8_atomically(path: &Path, image: &image::RgbImage) -> Result<(), FileWriteError> {
+    write_image_atomically(path, image, ImageFormat::Png)
+}
+
+/// The file name a temporary sibling was written for: `frame_0003.png` for
+/// `.frame_0003.png.PID.tmp` (or the older `.frame_0003.png.tmp`); `None` for a name that
+/// is not a temporary of this module.
+pub fn temporary_target(file_name: &str) -> Option<&str> {
+    let inner = file_name.strip_prefix('.')?.strip_suffix(".tmp")?;
+    let target = match inner.rsplit_once('.') {
+        Some((name, pid)) if !pid.is_empty() && pid.bytes().all(|b| b.is_ascii_digit()) => name,
+        _ => inner,
+    };
+    (!target.is_empty()).then_some(target)
+}
+
 /// `dir/.name.PID.tmp`: hidden, same folder, distinct per process.
 fn temporary_sibling(path: &Path) -> PathBuf {
     let name = path
@@ -117,6 +185,17 @@ mod tests {
         assert!(matches!(result, Err(AtomicWriteError::Write(_))));
         assert_eq!(fs::read(&path).unwrap(), b"complete");
         assert_eq!(names(dir.path()), ["mesh.obj"]);
+    }
+
+    #[test]
+    fn temporaries_name_their_target() {
+        let tmp = temporary_sibling(Path::new("/out/frame_0003.png"));
+        let name = tmp.file_name().unwrap().to_str().unwrap();
+        assert_eq!(temporary_target(name), Some("frame_0003.png"));
+        assert_eq!(temporary_target(".stats.jsonl.tmp"), Some("stats.jsonl"));
+        assert_eq!(temporary_target("frame_0003.png"), None);
+        assert_eq!(temporary_target(".tmp"), None);
+        assert_eq!(temporary_target("..tmp"), None);
     }
 
     #[test]

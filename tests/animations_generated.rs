@@ -1,4 +1,4 @@
-//! The committed `animations/` files are exactly what `mipray::authoring` generates, and
+//! The committed `animations/` files are exactly what `mipray_authoring` generates, and
 //! the default animation has the structure the renderer's experiments rely on: one 16:9
 //! camera, two `KHR_lights_punctual` point lights, a repeating checker floor, a mirror,
 //! a glass object, and a 1.6 s animation of the textured box. The BART-style animations
@@ -78,7 +78,7 @@ fn approx(value: &Value, expected: f64) -> bool {
 #[test]
 fn committed_animations_are_byte_identical_to_a_fresh_generation() {
     let fresh = tempfile::tempdir().unwrap();
-    let written = mipray::authoring::write_all(fresh.path()).unwrap();
+    let written = mipray_authoring::write_all(fresh.path()).unwrap();
     let mut generated_names = BTreeSet::new();
     for path in &written {
         let name = path.file_name().unwrap().to_str().unwrap().to_owned();
@@ -518,7 +518,7 @@ fn museum_detail_knob_scales_the_sculpture_by_four_per_level() {
     let dir = tempfile::tempdir().unwrap();
     let count = |detail: u32| {
         let name = format!("m{detail}");
-        mipray::authoring::write_museum(dir.path(), &name, detail).unwrap();
+        mipray_authoring::write_museum(dir.path(), &name, detail).unwrap();
         let json = std::fs::read(dir.path().join(format!("{name}.gltf"))).unwrap();
         let doc: Value = serde_json::from_slice(&json).unwrap();
         let (_, sculpture) = node_named(&doc, "Sculpture");
@@ -527,12 +527,12 @@ fn museum_detail_knob_scales_the_sculpture_by_four_per_level() {
         doc["accessors"][indices]["count"].as_u64().unwrap() as usize / 3
     };
     let (low, high) = (count(0), count(2));
-    assert_eq!(low, mipray::authoring::museum_sculpture_triangles(0));
+    assert_eq!(low, mipray_authoring::museum_sculpture_triangles(0));
     assert_eq!(high, 16 * low);
 }
 
 /// Renders frames 0, 1, 2 (at 30 fps) of a committed scene at 64 x 36 and checks each.
-fn render_three_frames(name: &str) -> Vec<mipray::frame::FrameRecord> {
+fn render_three_frames(name: &str) -> Vec<mipray::record::FrameRecord> {
     use mipray::frame::{RenderSettings, Renderer};
     let scene = mipray::scene::gltf::load(&committed_dir().join(format!("{name}.gltf"))).unwrap();
     let mut renderer = Renderer::new(

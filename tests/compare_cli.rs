@@ -14,23 +14,25 @@ mod common;
 use common::mipray;
 
 /// Every LOD method, in the order `compare` reports them by default.
-const ALL_METHODS: [&str; 6] = [
+const ALL_METHODS: [&str; 7] = [
     "none",
     "paper",
     "paper-cos",
     "cones",
     "diffs",
     "diffs-aniso",
+    "diffs-ewa",
 ];
 
 /// Bytes of LOD state per ray, by method, as the paper's memory column reads.
-const BYTES_PER_RAY: [(&str, u32); 6] = [
+const BYTES_PER_RAY: [(&str, u32); 7] = [
     ("none", 0),
     ("paper", 4),
-    ("paper-cos", 4),
-    ("cones", 8),
+    ("paper-cos", 12),
+    ("cones", 12),
     ("diffs", 48),
     ("diffs-aniso", 48),
+    ("diffs-ewa", 48),
 ];
 
 /// The columns `compare.csv` promises, in order.

@@ -901,8 +901,8 @@ fn the_ray_file_records_every_ray_with_answers_brute_force_confirms() {
         .collect();
     assert_eq!(
         rows.len(),
-        5,
-        "primary packets and single, shadow, reflection, refraction:\n{table}"
+        8,
+        "packets and single for primary, shadow, reflection and refraction:\n{table}"
     );
     for row in rows {
         assert!(row.trim_end().ends_with("| 0 |"), "answers differ: {row}");

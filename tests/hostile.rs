@@ -45,7 +45,9 @@ fn cases(scratch: &Path) -> Vec<Case> {
         let name = path.file_name().unwrap().to_str().unwrap().to_string();
         let ext = path.extension().and_then(|e| e.to_str()).unwrap_or("");
         let (scene, names) = match ext {
-            "gltf" | "glb" | "aff" | "obj" => (path.clone(), name.clone()),
+            "gltf" | "glb" | "aff" | "obj" | "usda" | "usdc" | "usdz" => {
+                (path.clone(), name.clone())
+            }
             "ppm" => (ppm_scene(&path, scratch), name.clone()),
             _ if path.is_dir() => (path.join("frame_0000.obj"), "camera_0000.json".into()),
             _ => continue, // make.py
@@ -183,7 +185,7 @@ fn the_last_shard_of_a_huge_frame_range_renders_its_frames() {
 
 /// Without shards, a 4e9-frame range must start rendering at once, not build a list of
 /// 4e9 frames first (16 GB: an abort under the limit). The sequence loop iterates the
-/// range (`frame::sequence`).
+/// range (`run::sequence`).
 #[test]
 fn a_huge_frame_range_starts_rendering_without_a_frame_list() {
     let out = tempfile::tempdir().unwrap();

@@ -27,12 +27,13 @@ fn facing_closed_form(distance: f64, size: f64, texture: u32, yfov: f32, height:
     distance.log2() - ((size / texture as f64) / k).log2()
 }
 
-const MIPMAPPED: [LodMethod; 5] = [
+const MIPMAPPED: [LodMethod; 6] = [
     LodMethod::Paper,
     LodMethod::PaperCos,
     LodMethod::Cones,
     LodMethod::Diffs,
     LodMethod::DiffsAniso,
+    LodMethod::DiffsEwa,
 ];
 
 #[test]
@@ -104,11 +105,11 @@ fn plane_tilted_60_degrees_adds_one_level_to_cos_aware_methods() {
     }
     // Anisotropic filtering spends the elongation (1 / cos 60 = 2) on two taps instead: its
     // level stays at the footprint's short axis, which the tilt leaves unchanged.
-    let aniso = level(LodMethod::DiffsAniso).level;
-    assert!(
-        (aniso - paper).abs() < 0.02,
-        "diffs-aniso {aniso}, paper {paper}"
-    );
+    // EWA likewise filters at the minor axis's level and spreads along the major one.
+    for lod in [LodMethod::DiffsAniso, LodMethod::DiffsEwa] {
+        let got = level(lod).level;
+        assert!((got - paper).abs() < 0.02, "{lod} {got}, paper {paper}");
+    }
 }
 
 /// Camera at the origin looking down -Z at a mirror 3 m away; the textured quad hangs 2 m
@@ -562,9 +563,10 @@ fn assert_level(what: &str, got: f32, expected: f64) {
 fn corner_pixel_of_a_wide_image_matches_each_methods_closed_form() {
     // 128 x 64 at 90 degrees: the corner pixel's ray is 65.7 degrees off the optical axis.
     // The film projects onto a parallel plane by a uniform scale, so the exact footprint is
-    // the on-axis one, `k d`; `diffs` finds it; `cones` keeps the tangential width but
-    // divides by the incidence cosine, `paper` uses the path `d / cos`, and `paper-cos`
-    // adds the incidence term on top.
+    // the on-axis one, `k d`; `diffs` finds it, and so do `cones` and `paper-cos`, whose
+    // pixel is `k cos` wide across the ray and `k cos^2` along the radius, which the
+    // incidence stretches back to `k cos`; `paper` uses the path `d / cos` (the paper's
+    // formula knows only the centre pixel).
     let (yfov, (w, h), d, size, texture) = (90f32.to_radians(), (128, 64), 2.0f32, 10.0, 1024);
     let exact = facing_closed_form(d as f64, size, texture, yfov, h);
     let (px, py) = (0.5f32, 0.5f32);
@@ -575,9 +577,9 @@ fn corner_pixel_of_a_wide_image_matches_each_methods_closed_form() {
     assert!(off_axis > 1.2, "corner only {off_axis} levels off axis");
     for (lod, expected) in [
         (LodMethod::Diffs, exact),
-        (LodMethod::Cones, exact + off_axis),
+        (LodMethod::Cones, exact),
         (LodMethod::Paper, exact + off_axis),
-        (LodMethod::PaperCos, exact + 2.0 * off_axis),
+        (LodMethod::PaperCos, exact),
     ] {
         let scene = facing_quad_scene(d, size as f32, texture, yfov);
         let p = probe(scene, (w, h), lod, px, py);
@@ -765,9 +767,9 @@ fn subpixel_error(
 #[test]
 fn subpixel_reference_agrees_with_the_closed_forms_under_both_conventions() {
     let yfov = 60f32.to_radians();
-    // Facing: both conventions give the same level. `diffs` matches it everywhere; the
-    // others pay the off-axis term `-log2 cos theta` (up to 0.085 levels at the quad's
-    // corners), `paper-cos` twice over.
+    // Facing: both conventions give the same level. `diffs`, `cones` and `paper-cos` (each
+    // ray with its own pixel) match it everywhere; `paper` pays the off-axis term
+    // `-log2 cos theta` (up to 0.085 levels at the quad's corners).
     let facing = |lod| subpixel_error(facing_quad_scene(4.0, 2.0, 256, yfov), lod);
     let mut bias = std::collections::HashMap::new();
     for lod in MIPMAPPED {
@@ -779,19 +781,10 @@ fn subpixel_reference_agrees_with_the_closed_forms_under_both_conventions() {
         );
         bias.insert(lod, longest.bias);
     }
-    assert!(
-        bias[&LodMethod::Diffs].abs() < 0.02,
-        "diffs facing {bias:?}"
-    );
+    for lod in [LodMethod::Diffs, LodMethod::Cones, LodMethod::PaperCos] {
+        assert!(bias[&lod].abs() < 0.02, "{lod} facing {bias:?}");
+    }
     assert!((0.01..0.085).contains(&bias[&LodMethod::Paper]), "{bias:?}");
-    assert!(
-        (bias[&LodMethod::Cones] - bias[&LodMethod::Paper]).abs() < 0.01,
-        "{bias:?}"
-    );
-    assert!(
-        (bias[&LodMethod::PaperCos] - 2.0 * bias[&LodMethod::Paper]).abs() < 0.01,
-        "{bias:?}"
-    );
     // Tilted 60 degrees: the footprint is 1 x 2 on the axis; longest axis charges paper a
     // full level, area half of one (and charges the cos-aware methods the other half).
     // Means over the whole quad, where perspective varies the tilt: within 0.15.

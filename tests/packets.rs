@@ -1,7 +1,7 @@
-//! Primary rays traced as packets give exactly the image of tracing each ray alone: the film
-//! traces a tile's primary rays in packets (`Accel::closest_hits`) and the integrator's own
-//! single-ray path (`FrameScene::primary_radiance`) must agree with it bit for bit, at
-//! sample counts whose packets split pixels and tiles unevenly.
+//! The film's tiles, traced breadth first with packets (primary rays from the camera, shadow
+//! rays toward each light), give exactly the image of tracing each sample depth first one
+//! ray at a time (`FrameScene::primary_radiance`), at sample counts whose packets split
+//! pixels and tiles unevenly, and trace the same number of rays.
 
 mod common;
 

@@ -1,14 +1,15 @@
-//! `mipray::report` end to end: stats files written to a temporary folder as a render (or
+//! `mipray::report` (and the stats-file reader it uses, `mipray::record`) end to end: stats
+//! files written to a temporary folder as a render (or
 //! several shards of one, or an older version) would leave them, then loaded, summarised
 //! and plotted.
 
 use std::fs;
 use std::path::{Path, PathBuf};
 
-use mipray::frame::Phase;
+use mipray::percentiles::Percentiles;
+use mipray::record::{Phase, StatsFileError, load_records, load_sequence};
 use mipray::report::{
-    LOD_RECOMPUTED, MOVED_TRIANGLES, Metric, Percentiles, Quantities, RENDER_MS, ReportError,
-    TIMING_PHASES, load_records, load_sequence, report,
+    LOD_RECOMPUTED, MOVED_TRIANGLES, Metric, Quantities, RENDER_MS, TIMING_PHASES, report,
 };
 use serde_json::json;
 
@@ -384,7 +385,10 @@ fn malformed_line_error_names_file_and_line() {
     lines.extend(records([3]));
     write_lines(&path, &lines);
     let err = load_records(std::slice::from_ref(&dir)).unwrap_err();
-    assert!(matches!(&err, ReportError::Json { line: 3, .. }), "{err:?}");
+    assert!(
+        matches!(&err, StatsFileError::Json { line: 3, .. }),
+        "{err:?}"
+    );
     let message = err.to_string();
     assert!(
         message.starts_with(&format!("{}:3: invalid JSON", path.display())),
@@ -449,7 +453,10 @@ fn no_records_is_an_error() {
         message.starts_with(&missing.display().to_string()),
         "{message}"
     );
-    assert!(matches!(load_records(&[]), Err(ReportError::Empty { .. })));
+    assert!(matches!(
+        load_records(&[]),
+        Err(StatsFileError::Empty { .. })
+    ));
 }
 
 #[test]

@@ -9,8 +9,9 @@ mod generated;
 
 use common::scenes::*;
 use glam::{Quat, Vec3};
-use mipray::frame::{BvhLayout, BvhPolicy, RenderSettings, Renderer, UpdateStats};
+use mipray::frame::{BvhLayout, BvhPolicy, RenderSettings, Renderer};
 use mipray::lod::LodMethod;
+use mipray::record::UpdateStats;
 use mipray::render::LinearImage;
 use mipray::scene::{AnimationDesc, ChannelTarget, SceneDesc, Trs};
 

@@ -396,10 +396,13 @@ impl TwoLevelAccel {
                 best,
                 limits,
                 object,
+                ..
             } = q;
             for top in &self.levels {
-                top.tlas
-                    .traverse_packet_gathered(packet, limits, |entering, first, _, limits| {
+                top.tlas.traverse_packet_gathered(
+                    packet,
+                    limits,
+                    |entering: &[u8], first: u32, _: u32, limits: &mut [f32; PACKET]| {
                         let mut inside = [0u8; PACKET];
                         let mut k = 0;
                         for &r in entering {
@@ -431,7 +434,8 @@ impl TwoLevelAccel {
                                 &mut best[r],
                             );
                         }
-                    });
+                    },
+                );
             }
             for c in self.levels.iter().flat_map(|l| &l.collapsed) {
                 for r in 0..n {

@@ -10,7 +10,7 @@ use std::cell::RefCell;
 use glam::{Vec2, Vec3A};
 
 use super::triangles::ShearedRay;
-use super::wide::{PACKET, RayPacket};
+use super::wide::{PACKET, RayBoxes, RayPacket};
 
 /// The closest intersection along a ray.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -93,6 +93,8 @@ pub(super) struct PacketQuery {
     pub(super) sheared: [ShearedRay; PACKET],
     pub(super) best: [Closest; PACKET],
     pub(super) limits: [f32; PACKET],
+    /// Each ray's own slab constants (masked walks).
+    pub(super) boxes: [RayBoxes; PACKET],
     /// Where the two-level structure takes the rays that enter an instance together.
     pub(super) object: ObjectPacket,
 }
@@ -118,6 +120,7 @@ impl PacketQuery {
             sheared: [ShearedRay::default(); PACKET],
             best: [Closest::default(); PACKET],
             limits: [0.0; PACKET],
+            boxes: [RayBoxes::default(); PACKET],
             object: ObjectPacket {
                 packet: RayPacket::new(&[]),
                 sheared: [ShearedRay::default(); PACKET],
@@ -138,22 +141,54 @@ impl PacketQuery {
         self.limits.fill(t_max);
     }
 
-    /// Runs `query` on this thread's query filled for `rays` (a fresh one if the thread's
-    /// is in use, which no caller does today: queries do not nest).
+    /// Fills the query for the occlusion rays `rays` (at most [`PACKET`]), ray `r` searched
+    /// up to `t_max[r]`; rays from several origins get interval bounds too.
+    pub(super) fn fill_occlusion(&mut self, rays: &[(Vec3A, Vec3A)], t_max: &[f32]) {
+        let n = rays.len().min(PACKET).min(t_max.len());
+        for (k, &(origin, direction)) in rays[..n].iter().enumerate() {
+            self.sheared[k] = ShearedRay::new(origin, direction);
+            self.boxes[k] = RayBoxes::new(origin, direction);
+        }
+        self.limits[..n].copy_from_slice(&t_max[..n]);
+    }
+
+    /// Fills the query for closest hits of `rays` (at most [`PACKET`]) from any origins,
+    /// walked by the masked traversal (each ray's slab constants), with limit `t_max`.
+    pub(super) fn fill_masked(&mut self, rays: &[(Vec3A, Vec3A)], t_max: f32) {
+        let n = rays.len().min(PACKET);
+        for (k, &(origin, direction)) in rays[..n].iter().enumerate() {
+            self.sheared[k] = ShearedRay::new(origin, direction);
+            self.boxes[k] = RayBoxes::new(origin, direction);
+        }
+        self.best[..n].fill(Closest::default());
+        self.limits.fill(t_max);
+    }
+
+    /// Runs `query` on this thread's query filled for `rays` with limit `t_max` (a fresh
+    /// one if the thread's is in use, which no caller does today: queries do not nest).
     pub(super) fn with<R>(
         rays: &[(Vec3A, Vec3A)],
         t_max: f32,
         query: impl FnOnce(&mut PacketQuery) -> R,
     ) -> R {
+        Self::with_filled(|q| q.fill(rays, t_max), query)
+    }
+
+    /// Runs `query` on this thread's query after `fill` (a fresh one if the thread's is in
+    /// use).
+    pub(super) fn with_filled<R>(
+        fill: impl FnOnce(&mut PacketQuery),
+        query: impl FnOnce(&mut PacketQuery) -> R,
+    ) -> R {
         PACKET_QUERY.with(|cell| match cell.try_borrow_mut() {
             Ok(mut slot) => {
                 let q = slot.get_or_insert_with(PacketQuery::boxed);
-                q.fill(rays, t_max);
+                fill(q);
                 query(q)
             }
             Err(_) => {
                 let mut q = PacketQuery::boxed();
-                q.fill(rays, t_max);
+                fill(&mut q);
                 query(&mut q)
             }
         })

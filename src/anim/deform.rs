@@ -12,6 +12,10 @@
 //!   scale once multiplied by `sign(det)`, so it is right for any invertible blend (shears and
 //!   non-uniform scales included), costs three cross products, and needs no division.
 //!
+//! A point-cache primitive (`PrimitiveDesc::point_cache`) instead takes its vertices from
+//! the two cache samples around the cache position its node's one morph weight holds, a
+//! vertex equal in both samples copied unchanged (`sample_point_cache`); nothing else applies.
+//!
 //! Weights are used as given (glTF requires them to sum to 1; they are not renormalised).
 //! Fallbacks that keep every output finite, given the loader's finite inputs:
 //! - skin weights summing to 0: the vertex stays rigidly attached to its node,
@@ -53,7 +57,9 @@ pub enum VertexSpace {
 /// If `node`, `mesh` or `primitive` is out of range.
 pub fn primitive_deforms(scene: &SceneDesc, node: usize, mesh: usize, primitive: usize) -> bool {
     let desc = &scene.meshes[mesh].primitives[primitive];
-    !desc.morph_targets.is_empty() || skin_of(scene, node, desc).is_some()
+    !desc.morph_targets.is_empty()
+        || desc.point_cache.is_some()
+        || skin_of(scene, node, desc).is_some()
 }
 
 /// Writes the primitive's vertices for `pose` into `positions` and `normals` (cleared first;
@@ -91,6 +97,11 @@ pub fn deform_primitive(
         };
         (skinning, influences)
     });
+    if let Some(cache) = &desc.point_cache {
+        let position = morph_weights.first().copied().unwrap_or(0.0);
+        sample_point_cache(desc, cache, position, positions, normals);
+        return VertexSpace::Object;
+    }
     if let (Some((skinning, influences)), false) = (&skinned, morphs) {
         // Skinned straight from the rest vertices: no copy of them first, and no morph pass
         // that would change nothing (two passes over every vertex, a third of the time).
@@ -118,6 +129,70 @@ pub fn deform_primitive(
             VertexSpace::World
         }
         None => VertexSpace::Object,
+    }
+}
+
+/// The point cache's vertices at cache position `s` (module docs of
+/// [`PointCacheDesc`](crate::scene::PointCacheDesc)): sample `k = floor(s)` blended towards
+/// sample `k + 1` by `u = s - k`, a vertex equal in both samples copied from sample `k`
+/// unchanged (so its bits do not depend on `u`). `s` is clamped to the samples (NaN: 0). A
+/// blend that overflows keeps sample `k`'s vertex; a normal that degenerates, sample `k`'s.
+/// A cache whose samples do not match the primitive (not from a loader) gives the base
+/// vertices.
+fn sample_point_cache(
+    desc: &PrimitiveDesc,
+    cache: &crate::scene::PointCacheDesc,
+    s: f32,
+    positions: &mut Vec<Vec3>,
+    normals: &mut Vec<Vec3>,
+) {
+    positions.clear();
+    normals.clear();
+    let count = desc.positions.len();
+    let last = cache.positions.len().saturating_sub(1);
+    let s = if s.is_nan() {
+        0.0
+    } else {
+        s.clamp(0.0, last as f32)
+    };
+    let k = (s.floor() as usize).min(last);
+    let u = s - k as f32;
+    fn sample(samples: &[Vec<Vec3>], i: usize, count: usize) -> Option<&[Vec3]> {
+        samples
+            .get(i)
+            .map(Vec::as_slice)
+            .filter(|v| v.len() == count)
+    }
+    let (Some(a), b) = (
+        sample(&cache.positions, k, count),
+        sample(&cache.positions, k + 1, count).filter(|_| u > 0.0),
+    ) else {
+        positions.extend_from_slice(&desc.positions);
+        normals.extend_from_slice(desc.normals.as_deref().unwrap_or_default());
+        return;
+    };
+    match b {
+        None => positions.extend_from_slice(a),
+        Some(b) => positions.extend(a.iter().zip(b).map(|(&a, &b)| {
+            let p = a + (b - a) * u;
+            if a == b || !p.is_finite() { a } else { p }
+        })),
+    }
+    let Some(base) = &desc.normals else { return };
+    let cached = cache.normals.as_deref().and_then(|n| {
+        let a = sample(n, k, count)?;
+        Some((a, sample(n, k + 1, count).filter(|_| u > 0.0)))
+    });
+    match cached {
+        None => normals.extend_from_slice(base),
+        Some((a, None)) => normals.extend_from_slice(a),
+        Some((a, Some(b))) => normals.extend(a.iter().zip(b).map(|(&a, &b)| {
+            if a == b {
+                a
+            } else {
+                (a + (b - a) * u).try_normalize().unwrap_or(a)
+            }
+        })),
     }
 }
 
@@ -427,5 +502,66 @@ mod tests {
         let flat = Mat3A::from_diagonal(Vec3::new(1.0, 1.0, 0.0));
         let out = transform_normal(&cofactor(flat), flat, Vec3::new(1.0, 0.0, 1.0).normalize());
         assert!((out.length() - 1.0).abs() < 1e-6 && out.is_finite());
+    }
+
+    /// A point cache blends the two samples around the cache position; a vertex equal in
+    /// both keeps its bits whatever the blend, so only moving vertices change.
+    #[test]
+    fn point_cache_blends_samples_and_keeps_unmoved_vertices_bit_identical() {
+        use crate::scene::{MeshDesc, NodeDesc, PointCacheDesc};
+        let moved = Vec3::new(0.1, 0.7, -0.3);
+        let samples = vec![
+            vec![Vec3::new(1.0, 2.0, 3.0), moved, Vec3::ZERO],
+            vec![Vec3::new(1.0, 2.0, 3.0), moved, Vec3::new(1.0, 0.0, 0.0)],
+            vec![Vec3::new(2.0, 2.0, 3.0), moved, Vec3::new(1.0, 0.0, 0.0)],
+        ];
+        let scene = SceneDesc {
+            meshes: vec![MeshDesc {
+                primitives: vec![PrimitiveDesc {
+                    positions: samples[0].clone(),
+                    indices: vec![0, 1, 2],
+                    point_cache: Some(PointCacheDesc {
+                        positions: samples.clone(),
+                        normals: None,
+                    }),
+                    ..Default::default()
+                }],
+                weights: vec![0.0],
+                ..Default::default()
+            }],
+            nodes: vec![NodeDesc {
+                mesh: Some(0),
+                ..Default::default()
+            }],
+            roots: vec![0],
+            ..Default::default()
+        };
+        assert!(primitive_deforms(&scene, 0, 0, 0));
+        let at = |s: f32| {
+            let mut pose = Pose::default();
+            pose.evaluate(&scene, crate::anim::AnimationSelection::All, 0.0);
+            pose.morph_weights[0] = vec![s];
+            let (mut p, mut n) = (Vec::new(), Vec::new());
+            let space = deform_primitive(&scene, &pose, 0, 0, 0, &mut p, &mut n);
+            assert_eq!(space, VertexSpace::Object);
+            p
+        };
+        assert_eq!(at(0.0), samples[0]);
+        assert_eq!(at(2.0), samples[2]);
+        assert_eq!(at(7.0), samples[2], "clamped past the last sample");
+        assert_eq!(at(f32::NAN), samples[0]);
+        let quarter = at(0.25);
+        assert_eq!(quarter[2], Vec3::new(0.25, 0.0, 0.0));
+        for s in [0.1f32, 0.33, 0.9, 1.0, 1.4] {
+            let p = at(s);
+            // Vertex 1 never moves: the same bits at every position.
+            assert_eq!(
+                p[1].to_array().map(f32::to_bits),
+                moved.to_array().map(f32::to_bits)
+            );
+        }
+        // Between samples 1 and 2 vertex 2 does not move, vertex 0 does.
+        assert_eq!(at(1.3)[2], at(1.8)[2]);
+        assert_ne!(at(1.3)[0], at(1.8)[0]);
     }
 }

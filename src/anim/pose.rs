@@ -25,8 +25,9 @@ pub struct Pose {
     /// Per skin (indexed like `SceneDesc::skins`), per joint: world from the mesh's bind
     /// space, `world_from_node[joint] * inverse_bind_matrix`.
     pub joint_matrices: Vec<Vec<Mat4>>,
-    /// Scratch: each node's local TRS with the channels applied.
-    local: Vec<Trs>,
+    /// Each node's local TRS with the channels applied (also what its shape is read from,
+    /// `Pose::node_shapes`, so each channel is sampled once per frame).
+    pub(super) local: Vec<Trs>,
     /// Scratch: whether a channel drove the node's TRS (a matrix node keeps its exact
     /// matrix otherwise).
     animated: Vec<bool>,

@@ -10,8 +10,8 @@
 
 use glam::{Mat3, Quat, Vec3};
 
-use super::{AnimationSelection, sample_rotation, sample_vec3};
-use crate::scene::{ChannelTarget, SceneDesc};
+use super::{AnimationSelection, Pose};
+use crate::scene::SceneDesc;
 
 /// World linear part `scale * R * diag(stretch)` (a similarity when `stretch` is `None`).
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -48,28 +48,51 @@ struct LocalShape {
 
 /// Per node: its world shape, or `None` when the chain shears or stretches under a rotation
 /// (then only the world vertices tell the shape). Nodes not reachable from the roots get
-/// `None`.
+/// `None`. Allocates a [`Pose`]; a frame loop asks its pose ([`Pose::node_shapes`]).
 pub fn node_shapes(
     scene: &SceneDesc,
     selection: AnimationSelection,
     time_s: f32,
 ) -> Vec<Option<NodeShape>> {
-    let local = local_shapes(scene, selection, time_s);
-    let mut world = vec![None; scene.nodes.len()];
-    let root = Some(NodeShape {
-        scale: 1.0,
-        stretch: None,
-    });
-    let mut stack: Vec<(usize, Option<NodeShape>)> =
-        scene.roots.iter().map(|&r| (r, root)).collect();
-    while let Some((node, parent)) = stack.pop() {
-        let shape = parent.and_then(|p| compose(p, local[node]));
-        world[node] = shape;
-        for &child in &scene.nodes[node].children {
-            stack.push((child, shape));
+    let mut pose = Pose::default();
+    pose.evaluate(scene, selection, time_s);
+    let mut shapes = Vec::new();
+    pose.node_shapes(scene, &mut shapes);
+    shapes
+}
+
+impl Pose {
+    /// Writes each node's world shape into `out` (see [`node_shapes`]), from the local
+    /// rotations and scales this pose sampled: the channels are not sampled again.
+    pub fn node_shapes(&self, scene: &SceneDesc, out: &mut Vec<Option<NodeShape>>) {
+        out.clear();
+        out.resize(scene.nodes.len(), None);
+        let root = Some(NodeShape {
+            scale: 1.0,
+            stretch: None,
+        });
+        let mut stack: Vec<(usize, Option<NodeShape>)> =
+            scene.roots.iter().map(|&r| (r, root)).collect();
+        while let Some((node, parent)) = stack.pop() {
+            let shape = parent.and_then(|p| compose(p, self.local_shape(scene, node)));
+            out[node] = shape;
+            for &child in &scene.nodes[node].children {
+                stack.push((child, shape));
+            }
         }
     }
-    world
+
+    /// Node `node`'s own rotation-and-scale in this pose: a matrix node's (static) matrix,
+    /// else its TRS with the selected channels applied.
+    fn local_shape(&self, scene: &SceneDesc, node: usize) -> LocalShape {
+        match scene.nodes[node].matrix {
+            Some(m) => matrix_shape(Mat3::from_mat4(m)),
+            None => {
+                let local = &self.local[node];
+                trs_shape(local.scale, local.rotation)
+            }
+        }
+    }
 }
 
 /// `parent * local` when the result keeps the `s R diag(d)` form.
@@ -97,36 +120,6 @@ fn compose(parent: NodeShape, local: LocalShape) -> Option<NodeShape> {
             stretch: Some([0, 1, 2].map(|i| d[i] * local.axes[i])),
         }),
     }
-}
-
-/// Each node's own rotation-and-scale at `time_s` (selected clips applied).
-fn local_shapes(scene: &SceneDesc, selection: AnimationSelection, time_s: f32) -> Vec<LocalShape> {
-    let mut scales: Vec<Vec3> = scene.nodes.iter().map(|n| n.local.scale).collect();
-    let mut rotations: Vec<Quat> = scene.nodes.iter().map(|n| n.local.rotation).collect();
-    for channel in selection.clips(scene).iter().flat_map(|a| &a.channels) {
-        match channel.target {
-            ChannelTarget::Scale => {
-                if let Some(s) = scales.get_mut(channel.node) {
-                    *s = sample_vec3(channel, time_s);
-                }
-            }
-            ChannelTarget::Rotation => {
-                if let Some(r) = rotations.get_mut(channel.node) {
-                    *r = sample_rotation(channel, time_s);
-                }
-            }
-            _ => {}
-        }
-    }
-    scene
-        .nodes
-        .iter()
-        .zip(scales.into_iter().zip(rotations))
-        .map(|(node, (scale, rotation))| match node.matrix {
-            Some(m) => matrix_shape(Mat3::from_mat4(m)),
-            None => trs_shape(scale, rotation),
-        })
-        .collect()
 }
 
 fn trs_shape(scale: Vec3, rotation: Quat) -> LocalShape {

@@ -19,7 +19,7 @@ use anyhow::Result;
 use crate::accel::{BvhLayout, BvhPolicy};
 use crate::frame::{RenderSettings, Renderer};
 use crate::lod::LodMethod;
-use crate::report::Percentiles;
+use crate::percentiles::Percentiles;
 use crate::scene::SceneDesc;
 
 /// One timed configuration.

@@ -18,9 +18,9 @@ use rayon::prelude::*;
 use crate::accel::PACKET;
 use crate::export::rays::{MISS, RayRecord, read_ray_file};
 use crate::frame::Renderer;
+use crate::percentiles::Percentiles;
 use crate::render::film::TILE;
 use crate::render::{RayClass, SceneBvh, shadow_ray_toward};
-use crate::report::Percentiles;
 
 /// Which rays `--rays` times.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
@@ -225,8 +225,14 @@ enum FileKernel {
     /// film traces them).
     ClosestPackets,
     ClosestSingle,
+    /// Closest hits in packets of up to [`PACKET`] consecutive rays from any origins (a
+    /// bounce's reflected and refracted rays, as a tile traces them).
+    ClosestScattered,
     /// Any hit in `[t min, t max)`.
     Occlusion,
+    /// Any hit, in packets of up to [`PACKET`] consecutive rays (shadow rays, as a tile
+    /// traces them: grouped by light, in the order its hits asked for them).
+    OcclusionPackets,
 }
 
 /// Traces the rays of a ray file (`mipray export --rays`) on frame `frame` of the
@@ -262,8 +268,14 @@ pub fn run_ray_file_bench(
                 (FileKernel::ClosestPackets, "packets"),
                 (FileKernel::ClosestSingle, "single"),
             ],
-            RayClass::Shadow => &[(FileKernel::Occlusion, "single")],
-            RayClass::Reflection | RayClass::Refraction => &[(FileKernel::ClosestSingle, "single")],
+            RayClass::Shadow => &[
+                (FileKernel::OcclusionPackets, "packets"),
+                (FileKernel::Occlusion, "single"),
+            ],
+            RayClass::Reflection | RayClass::Refraction => &[
+                (FileKernel::ClosestScattered, "packets"),
+                (FileKernel::ClosestSingle, "single"),
+            ],
         };
         for &(kernel, api) in kernels {
             let mut seconds = vec![vec![0.0f64; repeats]; threads.len()];
@@ -325,9 +337,39 @@ fn trace_records(kernel: FileKernel, bvh: &SceneBvh, rays: &[&RayRecord]) -> Vec
                         hits[..n].iter().map(|&h| closest(h)).collect::<Vec<_>>()
                     })
                     .collect(),
+                FileKernel::ClosestScattered => chunk
+                    .chunks(PACKET)
+                    .flat_map(|packet| {
+                        let mut pairs = [(Vec3A::ZERO, Vec3A::ZERO); PACKET];
+                        for (pair, r) in pairs.iter_mut().zip(packet) {
+                            *pair = (r.origin, r.direction);
+                        }
+                        let mut hits = [None; PACKET];
+                        let n = packet.len();
+                        bvh.closest_hits_scattered(&pairs[..n], f32::INFINITY, &mut hits[..n]);
+                        hits[..n].iter().map(|&h| closest(h)).collect::<Vec<_>>()
+                    })
+                    .collect(),
                 FileKernel::ClosestSingle => chunk
                     .iter()
                     .map(|r| closest(bvh.closest_hit(r.origin, r.direction, r.t_max)))
+                    .collect(),
+                FileKernel::OcclusionPackets => chunk
+                    .chunks(PACKET)
+                    .flat_map(|packet| {
+                        let mut pairs = [(Vec3A::ZERO, Vec3A::ZERO); PACKET];
+                        let mut limits = [0.0f32; PACKET];
+                        for (k, r) in packet.iter().enumerate() {
+                            pairs[k] = (r.origin, r.direction);
+                            limits[k] = r.t_max;
+                        }
+                        let n = packet.len();
+                        let stopped =
+                            bvh.visit_hits_packet(&pairs[..n], &limits[..n], |_, _, _, _| false);
+                        (0..n)
+                            .map(|k| (stopped & (1 << k) != 0).then_some((0, f32::NAN)))
+                            .collect::<Vec<_>>()
+                    })
                     .collect(),
                 FileKernel::Occlusion => chunk
                     .iter()

@@ -24,7 +24,8 @@ pub const MAX_LOD_BIAS: f32 = 16.0;
 /// or exports frames.
 #[derive(Args, Debug, Clone)]
 pub struct SequenceArgs {
-    /// A .gltf/.glb, .aff or .obj path, or the name of a scene in animations/ (e.g. `default`).
+    /// A .gltf/.glb, .aff, .obj or .usda/.usdc/.usdz path, or the name of a scene in
+    /// animations/ (e.g. `default`).
     #[arg(default_value = "default")]
     pub scene: String,
     /// Half-open frame range `A..B` (or a single frame `A`) [default: the animation's length].
@@ -40,6 +41,10 @@ pub struct SequenceArgs {
     /// Play one animation clip (its name or index) instead of all clips together.
     #[arg(long)]
     pub animation: Option<String>,
+    /// Look through the camera of this node (glTF node name; USD prim name or path)
+    /// instead of the first camera.
+    #[arg(long)]
+    pub camera: Option<String>,
 }
 
 /// How rays are traced: render, bench and compare.

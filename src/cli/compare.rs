@@ -10,9 +10,9 @@ use super::args::{
     LightsSpec, MAX_SPP, SequenceArgs, TraceArgs, View, parse_lights, render_settings,
 };
 use super::bench::MAX_REPEATS;
+use super::progress::progress_bar;
 use super::scene::{load_scene, open_scene};
 use crate::compare::{CompareOptions, MethodSpec, report, run_compare, subpixel_table};
-use crate::frame::sequence::progress_bar;
 
 #[derive(Args, Debug, Clone)]
 pub struct CompareArgs {
@@ -27,7 +27,7 @@ pub struct CompareArgs {
     #[arg(
         long,
         value_delimiter = ',',
-        default_value = "none,paper,paper-cos,cones,diffs,diffs-aniso"
+        default_value = "none,paper,paper-cos,cones,diffs,diffs-aniso,diffs-ewa"
     )]
     pub methods: Vec<MethodSpec>,
     /// `N` lights for every render, or a range `A..B` (inclusive: `1..6` is 1 to 6 lights)

@@ -6,7 +6,9 @@ use std::process::ExitCode;
 use anyhow::Result;
 use clap::Args;
 
-use crate::diff::{DiffMetric, DiffOptions, Verdict, diff_dirs, finish_report};
+use super::progress::print_check_end;
+use crate::diff::{DiffMetric, DiffOptions, Verdict, diff_dirs};
+use crate::run::finish_check;
 
 /// How frames are judged against a reference (shared by `diff` and `render --check`).
 #[derive(Args, Debug, Clone)]
@@ -54,10 +56,10 @@ pub fn diff(args: &DiffArgs) -> Result<ExitCode> {
     if let Some(note) = &report.stats_note {
         println!("stats not compared: {note}");
     }
-    Ok(
-        match finish_report(&report, &options.out, args.check.junit.as_deref())? {
-            Verdict::Passed => ExitCode::SUCCESS,
-            Verdict::Failed => ExitCode::FAILURE,
-        },
-    )
+    let finished = finish_check(&report, &options.out, args.check.junit.as_deref())?;
+    print_check_end(&finished);
+    Ok(match finished.verdict {
+        Verdict::Passed => ExitCode::SUCCESS,
+        Verdict::Failed => ExitCode::FAILURE,
+    })
 }

@@ -9,7 +9,8 @@ use crate::scene::SceneDesc;
 
 #[derive(Args, Debug, Clone)]
 pub struct InfoArgs {
-    /// A .gltf/.glb, .aff or .obj path, or the name of a scene in animations/ (e.g. `default`).
+    /// A .gltf/.glb, .aff, .obj or .usda/.usdc/.usdz path, or the name of a scene in
+    /// animations/ (e.g. `default`).
     pub scene: String,
 }
 
@@ -18,7 +19,57 @@ pub fn info(args: &InfoArgs) -> Result<()> {
     let path = resolve_scene(&args.scene)?;
     let desc = load_scene(&path)?;
     print!("{}", describe(&desc));
+    if is_usd(&path) {
+        print!("{}", describe_stage(&crate::scene::usd::metadata(&path)?));
+    }
     Ok(())
+}
+
+fn is_usd(path: &std::path::Path) -> bool {
+    let ext = path
+        .extension()
+        .and_then(|e| e.to_str())
+        .map(str::to_ascii_lowercase);
+    matches!(ext.as_deref(), Some("usda" | "usdc" | "usdz" | "usd"))
+}
+
+/// The USD stage metadata `mipray info` prints, and how the loader applied it.
+pub fn describe_stage(m: &crate::scene::usd::StageMetadata) -> String {
+    use std::fmt::Write;
+    let authored = |a: bool| if a { "authored" } else { "USD's fallback" };
+    let mut s = String::new();
+    let _ = writeln!(
+        s,
+        "upAxis: {} ({}){}",
+        m.up_axis,
+        authored(m.up_axis_authored),
+        if m.up_axis == "Z" {
+            "; turned Y-up for rendering"
+        } else {
+            ""
+        }
+    );
+    let _ = writeln!(
+        s,
+        "metersPerUnit: {} ({}){}",
+        m.meters_per_unit,
+        authored(m.meters_per_unit_authored),
+        if m.meters_per_unit != 1.0 {
+            "; scaled to metres for rendering"
+        } else {
+            ""
+        }
+    );
+    let range = match m.time_code_range {
+        Some((start, end)) => format!("startTimeCode {start}, endTimeCode {end}"),
+        None => "no time code range authored".to_string(),
+    };
+    let _ = writeln!(
+        s,
+        "time codes: {} per second, {} frames per second, {range}",
+        m.time_codes_per_second, m.frames_per_second
+    );
+    s
 }
 
 /// Drawn triangles by how they move (all clips playing).

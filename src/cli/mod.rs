@@ -1,7 +1,8 @@
 //! The command line: argument structs (shared flag groups in `args`, flattened once where
 //! used), one file per command, and the dispatch. No arguments = render the default
-//! animation. The frame loop itself is in `crate::frame` (`frame::sequence` for a whole
-//! sequence); this module only turns arguments into settings and calls it.
+//! animation. The frame loop itself is in `crate::frame`, a whole sequence in `crate::run`;
+//! this module turns arguments into settings, calls them, and prints what they report (the
+//! only module that prints, with `main.rs`).
 
 mod args;
 mod bench;
@@ -9,13 +10,14 @@ mod compare;
 mod diff;
 mod export;
 mod info;
+mod progress;
 mod render;
 mod scene;
 
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
-use anyhow::Result;
+use anyhow::{Context, Result};
 use clap::{Parser, Subcommand};
 
 pub use args::{
@@ -67,6 +69,10 @@ pub struct ReportArgs {
     /// Where to write the plot [default: report.svg in the first folder].
     #[arg(long)]
     pub svg: Option<PathBuf>,
+    /// The frames the sequence must have (`A..B`, as `render --frames`): after the report,
+    /// fail, naming them, when one has no record or no frame file (a farm's merge step).
+    #[arg(long, value_name = "A..B")]
+    pub expect_frames: Option<String>,
 }
 
 /// Runs the parsed command line. `Ok(FAILURE)` means a regression check found frames outside
@@ -85,8 +91,15 @@ pub fn run(cli: Cli) -> Result<ExitCode> {
     }
 }
 
-/// `mipray report`: merges the records of the folders, prints the table, writes the plot.
+/// `mipray report`: merges the records of the folders, prints the table, writes the plot;
+/// then, with `--expect-frames`, fails when a frame of that range is missing.
 fn report(args: &ReportArgs) -> Result<()> {
+    let expected = args
+        .expect_frames
+        .as_deref()
+        .map(parse_frames)
+        .transpose()
+        .context("--expect-frames")?;
     let svg = args.svg.clone().unwrap_or_else(|| {
         let first = &args.dirs[0];
         let folder = if first.is_dir() {
@@ -101,5 +114,14 @@ fn report(args: &ReportArgs) -> Result<()> {
     let page_dir = svg.parent().unwrap_or(Path::new("."));
     let page = crate::pages::write_render_page(&args.dirs, page_dir, Some(&svg))?;
     println!("page: {}", page.display());
+    if let Some(expected) = expected {
+        let sequence = crate::record::load_sequence(&args.dirs)?;
+        let folders = crate::report::frame_folders(&args.dirs);
+        crate::report::require_frames(&sequence, &folders, expected.clone())?;
+        println!(
+            "complete: every frame of {}..{} has its record and frame file",
+            expected.start, expected.end
+        );
+    }
     Ok(())
 }

@@ -8,14 +8,13 @@ use clap::Args;
 
 use super::args::{LightArgs, SequenceArgs, TraceArgs, View, render_settings};
 use super::diff::CheckArgs;
+use super::progress::{SequenceLines, print_sequence_end};
 use super::scene::open_scene;
 use crate::accel::{BvhLayout, BvhPolicy};
 use crate::diff::{DiffOptions, Verdict};
-use crate::frame::{
-    Check, LevelImage, Renderer, Resume, SequenceOutcome, SequenceOutput, render_sequence,
-};
+use crate::frame::{LevelImage, Renderer};
 use crate::lod::LodMethod;
-use crate::output::{FrameFormat, Shard};
+use crate::run::{Check, FrameFormat, Resume, SequenceOutput, Shard, render_sequence};
 
 #[derive(Args, Debug, Clone)]
 pub struct RenderArgs {
@@ -132,10 +131,20 @@ pub fn render(args: &RenderArgs) -> Result<ExitCode> {
     });
     let (frames, clock) = (scene.frames.clone(), scene.clock);
     let mut renderer = Renderer::new(scene.desc, settings);
-    let outcome =
-        pool.install(|| render_sequence(&mut renderer, frames, clock, &output, check.as_ref()))?;
-    Ok(match outcome {
-        SequenceOutcome::Checked(Verdict::Failed) => ExitCode::FAILURE,
+    let mut lines = SequenceLines::default();
+    let report = pool.install(|| {
+        render_sequence(
+            &mut renderer,
+            frames,
+            clock,
+            &output,
+            check.as_ref(),
+            &mut lines,
+        )
+    })?;
+    print_sequence_end(&report);
+    Ok(match report.check.map(|c| c.verdict) {
+        Some(Verdict::Failed) => ExitCode::FAILURE,
         _ => ExitCode::SUCCESS,
     })
 }

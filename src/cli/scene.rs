@@ -31,7 +31,11 @@ pub fn open_scene(args: &SequenceArgs) -> Result<OpenedScene> {
     // Cheap argument errors first, before a possibly long load.
     let asked_frames = args.frames.as_deref().map(parse_frames).transpose()?;
     let path = resolve_scene(&args.scene)?;
-    let desc = load_scene(&path)?;
+    let mut desc = load_scene(&path)?;
+    if let Some(name) = &args.camera {
+        select_camera(&mut desc, name)
+            .map_err(|e| anyhow::anyhow!("{}: --camera {name}: {e}", path.display()))?;
+    }
     for note in &desc.notes {
         eprintln!("note: {}: {note}", path.display());
     }
@@ -79,6 +83,53 @@ pub fn resolve_scene(scene: &str) -> Result<PathBuf> {
             .collect::<Vec<_>>()
             .join(", ")
     )
+}
+
+/// Makes the camera of the node named `name` the scene's camera: the frame loop looks
+/// through the first camera in traversal order, so every other node's camera is dropped.
+/// A node matches by its whole name or, for USD prim paths, by its last component.
+///
+/// # Errors
+/// No camera node, or several, match; the message lists the camera nodes.
+pub fn select_camera(desc: &mut SceneDesc, name: &str) -> Result<(), String> {
+    let cameras: Vec<usize> = desc
+        .traversal_order()
+        .into_iter()
+        .filter(|&i| desc.nodes[i].camera.is_some())
+        .collect();
+    let matches = |node: &str| node == name || node.rsplit('/').next() == Some(name);
+    let chosen: Vec<usize> = cameras
+        .iter()
+        .copied()
+        .filter(|&i| matches(&desc.nodes[i].name))
+        .collect();
+    let listed = || {
+        let names: Vec<String> = cameras
+            .iter()
+            .map(|&i| format!("{:?}", desc.nodes[i].name))
+            .collect();
+        if names.is_empty() {
+            "the scene has no cameras".to_string()
+        } else {
+            format!("cameras: {}", names.join(", "))
+        }
+    };
+    match chosen.as_slice() {
+        [one] => {
+            for &other in &cameras {
+                if other != *one {
+                    desc.nodes[other].camera = None;
+                }
+            }
+            Ok(())
+        }
+        [] => Err(format!("no camera node is named {name:?} ({})", listed())),
+        _ => Err(format!(
+            "{} camera nodes match {name:?}; give the whole name ({})",
+            chosen.len(),
+            listed()
+        )),
+    }
 }
 
 fn scene_name(path: &Path) -> String {

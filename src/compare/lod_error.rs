@@ -7,7 +7,8 @@
 //! coordinates give the texel Jacobian by central differences,
 //! `J_x = (uv(x + 1/2) - uv(x - 1/2)) * (W, H)` and likewise `J_y`, and from it the
 //! reference level in the OpenGL convention the methods use, `log2 max(|J_x|, |J_y|)`
-//! (anisotropic methods are compared with the anisotropic level of the same Jacobian).
+//! (`diffs-aniso` is compared with the anisotropic level of the same Jacobian, `diffs-ewa`
+//! with the level of its clamped minor axis: each with the level its filter is built on).
 //! Both levels are clamped to the texture's pyramid, so only differences a lookup can see
 //! count. A pixel whose neighbouring rays miss a plane of the chain is left out.
 
@@ -23,7 +24,21 @@ use crate::render::probe::LodProbe;
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct ReferenceLevel {
     pub isotropic: f32,
+    /// `diffs-aniso`'s level of the same Jacobian (`TexelGradients::anisotropic`).
     pub anisotropic: f32,
+    /// `diffs-ewa`'s level of the same Jacobian (`TexelGradients::elliptical`).
+    pub elliptical: f32,
+}
+
+impl ReferenceLevel {
+    /// The reference level `method` is measured against.
+    pub fn for_method(&self, method: LodMethod) -> f32 {
+        match method {
+            LodMethod::DiffsAniso => self.anisotropic,
+            LodMethod::DiffsEwa => self.elliptical,
+            _ => self.isotropic,
+        }
+    }
 }
 
 /// A frame's reference levels, row-major, `None` where no textured surface was measured.
@@ -74,6 +89,7 @@ fn reference_at(scene: &FrameScene, camera: &Camera, px: f32, py: f32) -> Option
     Some(ReferenceLevel {
         isotropic: clamp(gradients.isotropic_level()),
         anisotropic: clamp(gradients.anisotropic().0),
+        elliptical: clamp(gradients.elliptical().level),
     })
 }
 
@@ -90,7 +106,6 @@ pub fn method_error(
     camera: &Camera,
     reference: &LodReference,
 ) -> LodErrorStats {
-    let anisotropic = scene.lod == LodMethod::DiffsAniso;
     let w = reference.width;
     let (sum, sum2, under, pixels) = reference
         .levels
@@ -100,12 +115,7 @@ pub fn method_error(
             let r = (*r)?;
             let (x, y) = (i as u32 % w, i as u32 / w);
             let probe = scene.probe_method(camera, x as f32 + 0.5, y as f32 + 0.5)?;
-            let target = if anisotropic {
-                r.anisotropic
-            } else {
-                r.isotropic
-            };
-            let d = (probe.clamped_level - target) as f64;
+            let d = (probe.clamped_level - r.for_method(scene.lod)) as f64;
             Some((d, d * d, (d < -0.5) as u64, 1u64))
         })
         .reduce(

@@ -27,14 +27,15 @@ use super::{
     CompareReport, FrameErrors, LevelError, LightsRow, MethodSpec, MethodSummary,
     SubpixelFrameErrors, SubpixelSummary,
 };
-use crate::frame::{FrameClock, Phase, PreparedFrame, RenderSettings, Renderer};
+use crate::atomic_file::write_rgb8_atomically;
+use crate::frame::{FrameClock, PreparedFrame, RenderSettings, Renderer};
 use crate::lod::LodMethod;
 use crate::metrics;
-use crate::output::write_rgb8_atomically;
+use crate::percentiles::median;
+use crate::record::Phase;
 use crate::render::integrator::{FrameScene, MIP_LEVELS};
 use crate::render::lod_view::lod_image;
 use crate::render::{Camera, LinearImage, render_image};
-use crate::report::median;
 use crate::scene::SceneDesc;
 
 /// What to compare.

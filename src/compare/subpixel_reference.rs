@@ -42,7 +42,8 @@ const MAX_RESIDUAL_SHARE: f64 = 0.1;
 
 /// The sub-pixel reference levels of one frame under both conventions.
 pub struct SubpixelReference {
-    /// Longest-axis levels (and the anisotropic level of the same fit for `diffs-aniso`).
+    /// Longest-axis levels (and the levels of the same fit `diffs-aniso` and `diffs-ewa`
+    /// are measured against).
     pub longest_axis: LodReference,
     /// Area-preserving levels (anisotropic as above).
     pub area: LodReference,
@@ -127,14 +128,17 @@ fn fit_pixel(scene: &FrameScene, camera: &Camera, px: f32, py: f32) -> PixelFit 
     };
     let clamp = |level: f32| clamp_to_pyramid(level, &centre);
     let anisotropic = clamp(gradients.anisotropic().0);
+    let elliptical = clamp(gradients.elliptical().level);
     PixelFit::Levels {
         longest_axis: ReferenceLevel {
             isotropic: clamp(gradients.isotropic_level()),
             anisotropic,
+            elliptical,
         },
         area: ReferenceLevel {
             isotropic: clamp(area_level(&gradients)),
             anisotropic,
+            elliptical,
         },
     }
 }

@@ -11,7 +11,7 @@ use std::path::{Path, PathBuf};
 use anyhow::{Context, Result};
 
 use super::{LevelError, SubpixelSummary};
-use crate::output::write_text_atomically;
+use crate::atomic_file::write_text_atomically;
 
 /// CSV header: the method, then bias / rms / under for each convention, then the share.
 pub const CSV_HEADER: &str = "method,subpixel_longest_bias,subpixel_longest_rms,\
@@ -89,8 +89,8 @@ pub fn markdown(rows: &[SubpixelSummary]) -> String {
              `longest` is the OpenGL convention the methods aim at; `area` the square of the \
              same area (it does not charge the incidence elongation in full). Bias: mean \
              level minus reference (positive: blurrier); under: share more than half a level \
-             too sharp. `diffs-aniso` is compared with the anisotropic level of the same \
-             fit under both. The `lod` columns of the table above use the probe's \
+             too sharp. `diffs-aniso` and `diffs-ewa` are compared with the level of the same \
+             fit their filters are built on (taps, minor axis) under both. The `lod` columns of the table above use the probe's \
              finite-difference reference instead.",
             n = super::subpixel_reference::GRID
         ),

@@ -10,11 +10,9 @@
 
 mod junit;
 mod stats;
-mod verdict;
 
 pub use junit::junit_xml;
 pub use stats::{StatsDelta, compare_stats};
-pub use verdict::{Verdict, finish_report};
 
 use std::collections::BTreeMap;
 use std::fmt::Write as _;
@@ -22,6 +20,13 @@ use std::path::{Path, PathBuf};
 
 use crate::csv::csv_field;
 use crate::metrics::{FrameMetrics, MetricsError, compare, format_psnr, heat_map, read_srgb8};
+
+/// Whether a checked sequence stayed within its threshold.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Verdict {
+    Passed,
+    Failed,
+}
 
 /// The metric that decides pass or fail.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, clap::ValueEnum)]
@@ -212,7 +217,7 @@ fn write_failure_images(
     let mut diff_path = PathBuf::new();
     for (suffix, image) in [("ref", a), ("test", b), ("diff", heat)] {
         let path = out.join(format!("frame_{frame:04}_{suffix}.png"));
-        crate::output::write_rgb8_atomically(&path, image)
+        crate::atomic_file::write_rgb8_atomically(&path, image)
             .map_err(|e| folder_error(e.to_string()))?;
         diff_path = path;
     }
@@ -411,8 +416,8 @@ impl DiffReport {
     /// Writes `diff.md` and `diff.csv` into `out`.
     pub fn write(&self, out: &Path) -> std::io::Result<()> {
         std::fs::create_dir_all(out)?;
-        crate::output::write_text_atomically(&out.join("diff.md"), &self.markdown())?;
-        crate::output::write_text_atomically(&out.join("diff.csv"), &self.csv())
+        crate::atomic_file::write_text_atomically(&out.join("diff.md"), &self.markdown())?;
+        crate::atomic_file::write_text_atomically(&out.join("diff.csv"), &self.csv())
     }
 }
 

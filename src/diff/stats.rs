@@ -3,7 +3,7 @@
 use std::path::Path;
 
 use super::FrameDiff;
-use crate::report::{Quantities, Record, TOTAL_MS, load_records};
+use crate::record::{Record, load_records};
 
 /// How a frame's render record changed from reference to test.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -38,7 +38,8 @@ pub fn compare_stats(
 }
 
 fn delta(a: &Record, b: &Record) -> StatsDelta {
-    let ratio = match (a.value(&TOTAL_MS), b.value(&TOTAL_MS)) {
+    let total_ms = |r: &Record| r.if_present("total_ms", r.values.total_ms);
+    let ratio = match (total_ms(a), total_ms(b)) {
         (Some(x), Some(y)) if x > 0.0 => y / x,
         _ => f64::NAN,
     };

@@ -13,6 +13,8 @@ use std::ops::Range;
 
 use rayon::prelude::*;
 
+use super::two_level::PlacedChanges;
+
 /// Source triangles per parallel listing task.
 const LIST_CHUNK: usize = 16384;
 
@@ -22,6 +24,24 @@ pub enum Motion {
     Rigid,
     Scaled,
     Deformed,
+}
+
+/// What moved this frame: the output of the dirty step, read by the tree step (what to
+/// refit, and the marks a rebuild carries into the new slot order) and by the `log2 P_b`
+/// step (which constants to recompute or shift).
+#[derive(Debug, Default)]
+pub(super) struct FrameChanges {
+    pub dirty: DirtySet,
+    /// The runs of the dirty list (entry indices, increasing) whose slots belong to deforming
+    /// instances: the `log2 P_b` step walks those slots in slot order instead.
+    pub deformed_entries: Vec<Range<usize>>,
+    /// The runs of placed instances that scaled or changed shape: the entries the `log2
+    /// P_b` step visits one by one (rigid runs keep their constants and are skipped whole).
+    pub reshaped_entries: Vec<Range<usize>>,
+    /// Whether this frame's write gave a moved triangle a non-finite vertex.
+    pub moved_nonfinite: bool,
+    /// What this frame's placed instances changed (two-level only; counted into the record).
+    pub placed: PlacedChanges,
 }
 
 /// The moved triangles of one frame: a bitset for membership and a compact list in the

@@ -13,11 +13,14 @@
 use glam::{Mat4, Vec3};
 use rayon::prelude::*;
 
+use super::Motion;
+use super::animation::InstanceState;
+use super::dirty::FrameChanges;
 use super::posed::VertexSource;
 use super::prefetch::prefetch;
-use super::{InstanceState, Motion, Renderer, UpdateStats};
+use super::setup::FrameSetup;
 use crate::anim::NodeShape;
-use crate::geometry::{Placement, SceneGeometry};
+use crate::geometry::{FrameTriangles, Placement, SceneGeometry};
 use crate::lod::log2::log2_in_place;
 use crate::lod::{
     PixelFootprint, cross_squared, log2_pb, log2_pb_from_parts, log2_pb_with_texel_term,
@@ -28,60 +31,137 @@ use crate::scene::SceneDesc;
 /// How many entries ahead the `log2 P_b` pass prefetches its slots.
 const PREFETCH_AHEAD: usize = 16;
 
-impl Renderer {
-    /// `log2 P_b` for the dirty triangles: recomputed where deformed, shifted where scaled,
-    /// kept where rigid. The slots of deforming instances are walked in slot order from the
-    /// dirty bits ([`Self::update_deforming_log2_pb`]); the entries of placed instances that
-    /// scaled or changed shape one by one; rigid runs are not visited.
-    pub(super) fn update_dirty_log2_pb(&mut self, stats: &mut UpdateStats) {
+/// What the `log2 P_b` rules keep between frames: the object-space constants they start
+/// from, the texel terms of the deforming slots, and the pass's reused buffers.
+#[derive(Default)]
+pub(super) struct Log2PbState {
+    /// Per source triangle: `log2 P_b` of the rest vertices in object space (NaN where the
+    /// material is untextured).
+    pub object: Vec<f32>,
+    /// Per slot: the texel terms of the deforming instances' triangles (`lod::texel_term`).
+    texel_terms: DeformingTexelTerms,
+    /// Scratch: one value per updated slot, reused every frame.
+    values: Vec<Option<f32>>,
+    /// Scratch: the dirty entries the update visits one by one.
+    entries: Vec<u32>,
+}
+
+/// How many textured triangles the `log2 P_b` step gave a new constant.
+#[derive(Debug, Clone, Copy, Default)]
+pub(super) struct Log2PbCounts {
+    /// Computed from vertices (deformed, stretched or sheared).
+    pub recomputed: usize,
+    /// Shifted by a new uniform scale.
+    pub shifted: usize,
+}
+
+impl Log2PbState {
+    /// The object-space constants of `setup`'s scene (no slots yet).
+    pub fn new(setup: &FrameSetup) -> Log2PbState {
+        Log2PbState {
+            object: object_space_log2_pb(&setup.scene, &setup.geometry, setup.footprint),
+            ..Log2PbState::default()
+        }
+    }
+
+    /// Makes [`DeformingTexelTerms`] for the slots as they are now (after every build of
+    /// the tree, which orders the slots); nothing when no instance deforms or the LOD
+    /// method has no `log2 P_b`.
+    pub fn index_slots(&mut self, setup: &FrameSetup, triangles: &FrameTriangles) {
+        let needed = setup.needs_log2_pb() && setup.deforms.contains(&VertexSource::Deformed);
+        self.texel_terms = if needed {
+            DeformingTexelTerms::new(setup, triangles, &self.object)
+        } else {
+            DeformingTexelTerms::default()
+        };
+    }
+
+    /// `log2 P_b` of every triangle (the first frame); returns how many are textured.
+    pub fn recompute_all(
+        &mut self,
+        setup: &FrameSetup,
+        states: &[InstanceState],
+        triangles: &mut FrameTriangles,
+    ) -> usize {
+        let pass = Pass {
+            setup,
+            triangles,
+            object: &self.object,
+            texel_terms: &self.texel_terms,
+            states,
+            reads_vertices: states.iter().any(|state| state.shape.is_none()),
+            stretches: stretches(setup, states),
+        };
+        pass.values_into(triangles.len(), |k| Some(k as u32), &mut self.values);
+        let mut textured = 0;
+        for (slot, &value) in self.values.iter().enumerate() {
+            if let Some(value) = value {
+                triangles.log2_pb[slot] = value;
+                textured += 1;
+            }
+        }
+        textured
+    }
+
+    /// The `log2 P_b` step: the dirty triangles' constants, recomputed where deformed,
+    /// shifted where scaled, kept where rigid. The slots of deforming instances are walked
+    /// in slot order from the dirty bits ([`Self::update_deforming`]); the entries of placed
+    /// instances that scaled or changed shape one by one; rigid runs are not visited.
+    pub fn update(
+        &mut self,
+        setup: &FrameSetup,
+        states: &[InstanceState],
+        changes: &FrameChanges,
+        triangles: &mut FrameTriangles,
+    ) -> Log2PbCounts {
+        let mut counts = Log2PbCounts::default();
         let walked = !self.texel_terms.is_empty();
         if walked {
-            stats.lod_recomputed += self.update_deforming_log2_pb();
+            counts.recomputed += self.update_deforming(setup, changes, triangles);
         }
         // The entries visited one by one, gathered from their runs so the pass is set up
         // once and splits across threads by their total (a scene that interleaves reshaped
         // and rigid instances has a run per instance).
         // (The table is empty only when nothing deforms: then there are no deformed runs.)
-        debug_assert!(walked || self.update.deformed_entries.is_empty());
-        let mut entries = std::mem::take(&mut self.log2_pb_entries);
+        debug_assert!(walked || changes.deformed_entries.is_empty());
+        let entries = &mut self.entries;
         entries.clear();
-        for run in &self.update.reshaped_entries {
+        for run in &changes.reshaped_entries {
             entries.extend(run.clone().map(|k| k as u32));
         }
-        let states = self.instances.take().unwrap_or_default();
         // Only placed instances without a shape key (sheared) read their slots' vertices
         // here: the others' vertices would be prefetched for nothing.
         let reads_vertices = states
             .iter()
-            .zip(&self.deforms)
+            .zip(&setup.deforms)
             .any(|(state, &d)| state.shape.is_none() && d != VertexSource::Deformed);
-        let pass = PassSetup {
+        let pass = Pass {
+            setup,
+            triangles,
+            object: &self.object,
+            texel_terms: &self.texel_terms,
+            states,
             reads_vertices,
-            stretches: self.stretches(&states),
+            stretches: stretches(setup, states),
         };
-        let mut values = std::mem::take(&mut self.log2_pb_values);
-        let (slots, motions) = (&self.dirty.slots, &self.dirty.motions);
-        self.log2_pb_values_into(
+        let (slots, motions) = (&changes.dirty.slots, &changes.dirty.motions);
+        pass.values_into(
             entries.len(),
             |j| {
                 let k = entries[j] as usize;
                 (motions[k] != Motion::Rigid).then_some(slots[k])
             },
-            &states,
-            &pass,
-            &mut values,
+            &mut self.values,
         );
-        for (&k, value) in entries.iter().zip(&values) {
+        for (&k, value) in entries.iter().zip(&self.values) {
             let Some(value) = *value else { continue };
-            self.triangles.log2_pb[self.dirty.slots[k as usize] as usize] = value;
-            match self.dirty.motions[k as usize] {
-                Motion::Deformed => stats.lod_recomputed += 1,
-                _ => stats.lod_shifted += 1,
+            triangles.log2_pb[slots[k as usize] as usize] = value;
+            match motions[k as usize] {
+                Motion::Deformed => counts.recomputed += 1,
+                _ => counts.shifted += 1,
             }
         }
-        self.log2_pb_values = values;
-        self.log2_pb_entries = entries;
-        self.instances = Some(states);
+        counts
     }
 
     /// `log2 P_b` of every dirty slot of a deforming instance, from its world vertices and
@@ -90,9 +170,14 @@ impl Renderer {
     /// constants stream through memory instead of being fetched slot by scattered slot
     /// (the pass was ~15 ms of a million skinned triangles' update, most of it waiting on
     /// those loads), and each task writes its own range of slots.
-    fn update_deforming_log2_pb(&mut self) -> usize {
-        let (table, footprint) = (&self.texel_terms, self.footprint);
-        let positions = &self.triangles.positions;
+    fn update_deforming(
+        &self,
+        setup: &FrameSetup,
+        changes: &FrameChanges,
+        triangles: &mut FrameTriangles,
+    ) -> usize {
+        let (table, footprint) = (&self.texel_terms, setup.footprint);
+        let positions = &triangles.positions;
         // Per bitset word: the squared cross products of its slots, then their logarithms in
         // one batch (vectorised: `lod::log2`), then the constants; the same bits as
         // `log2_pb_with_texel_term` one slot at a time.
@@ -124,10 +209,10 @@ impl Renderer {
             }
             written
         };
-        let words = self.dirty.words();
-        let log2_pb = &mut self.triangles.log2_pb;
-        let deformed: usize = self.update.deformed_entries.iter().map(|r| r.len()).sum();
-        if self.parallelism.splits(deformed) {
+        let words = changes.dirty.words();
+        let log2_pb = &mut triangles.log2_pb;
+        let deformed: usize = changes.deformed_entries.iter().map(|r| r.len()).sum();
+        if setup.parallelism.splits(deformed) {
             log2_pb
                 .par_chunks_mut(WALK_WORDS * 64)
                 .zip(words.par_chunks(WALK_WORDS))
@@ -138,55 +223,35 @@ impl Renderer {
             walk(0, words, log2_pb)
         }
     }
+}
 
-    /// `log2 P_b` of every triangle (the first frame); returns how many are textured.
-    pub(super) fn recompute_all_log2_pb(&mut self, states: &[InstanceState]) -> usize {
-        let mut values = std::mem::take(&mut self.log2_pb_values);
-        let pass = PassSetup {
-            reads_vertices: states.iter().any(|state| state.shape.is_none()),
-            stretches: self.stretches(states),
-        };
-        self.log2_pb_values_into(
-            self.triangles.len(),
-            |k| Some(k as u32),
-            states,
-            &pass,
-            &mut values,
-        );
-        let mut textured = 0;
-        for (slot, value) in values.iter().enumerate() {
-            if let Some(value) = *value {
-                self.triangles.log2_pb[slot] = value;
-                textured += 1;
-            }
-        }
-        self.log2_pb_values = values;
-        textured
-    }
+/// What computing one triangle's constant reads, made once per pass and shared by its
+/// threads.
+struct Pass<'a> {
+    setup: &'a FrameSetup,
+    triangles: &'a FrameTriangles,
+    /// Per source triangle: the object-space constant.
+    object: &'a [f32],
+    texel_terms: &'a DeformingTexelTerms,
+    /// Per instance: this frame's placement and shape key.
+    states: &'a [InstanceState],
+    /// Whether some triangle of the pass reads its slot's vertices (a placed instance
+    /// without a shape key): only then are they prefetched (a stretched 1M crowd's pass
+    /// was 1.17x slower fetching them for nothing).
+    reads_vertices: bool,
+    /// Per instance, see [`stretches`].
+    stretches: Vec<Option<Stretch>>,
+}
 
-    /// Makes [`DeformingTexelTerms`] for the slots as they are now (after every build of
-    /// the tree, which orders the slots); nothing when no instance deforms or the LOD
-    /// method has no `log2 P_b`.
-    pub(super) fn index_texel_terms(&mut self) {
-        let needed =
-            self.settings.lod.needs_log2_pb() && self.deforms.contains(&VertexSource::Deformed);
-        self.texel_terms = if needed {
-            DeformingTexelTerms::new(self)
-        } else {
-            DeformingTexelTerms::default()
-        };
-    }
-
+impl Pass<'_> {
     /// Fills `values[k]` with the new `log2 P_b` of slot `slot_at(k)` for `k` in
     /// `0..count` (`None` where `slot_at` skips it or the triangle is untextured). Each
     /// value is a pure function of its own triangle, so the work splits across rayon's
     /// threads when there is enough of it, with results bit-identical to one thread's.
-    fn log2_pb_values_into(
+    fn values_into(
         &self,
         count: usize,
         slot_at: impl Fn(usize) -> Option<u32> + Sync,
-        states: &[InstanceState],
-        pass: &PassSetup,
         values: &mut Vec<Option<f32>>,
     ) {
         let value = |k: usize| {
@@ -197,13 +262,13 @@ impl Renderer {
                 .then(|| slot_at(k + PREFETCH_AHEAD))
                 .flatten()
             {
-                self.prefetch_slot(ahead as usize, pass.reads_vertices);
+                self.prefetch_slot(ahead as usize);
             }
-            slot_at(k).and_then(|slot| self.log2_pb_of(slot, states, &pass.stretches))
+            slot_at(k).and_then(|slot| self.log2_pb_of(slot))
         };
         // Below 8,192 triangles (`UpdateParallelism::Auto`) rayon's split and join cost more
         // than the work (a triangle's constant takes tens of ns).
-        if self.parallelism.splits(count) {
+        if self.setup.parallelism.splits(count) {
             (0..count)
                 .into_par_iter()
                 .map(value)
@@ -215,112 +280,97 @@ impl Renderer {
     }
 
     /// Hints the cache to load what [`Self::log2_pb_of`] reads of slot `s` (its vertices
-    /// too when `vertices`).
+    /// too when the pass reads vertices).
     #[inline]
-    fn prefetch_slot(&self, s: usize, vertices: bool) {
-        let t = &self.triangles;
+    fn prefetch_slot(&self, s: usize) {
+        let t = self.triangles;
         prefetch(&t.source, s);
-        if vertices {
+        if self.reads_vertices {
             prefetch(&t.positions, s);
         }
-    }
-
-    /// Per instance: the stretch of its shape key as the placement
-    /// [`Self::stretched_log2_pb`] applies (`None` unless the key has a stretch), made once
-    /// per frame instead of once per triangle (a 1M stretched crowd's pass spent most of its
-    /// time inverting the same matrix).
-    fn stretches(&self, states: &[InstanceState]) -> Vec<Option<Stretch>> {
-        states
-            .iter()
-            .enumerate()
-            .map(|(instance, state)| {
-                let shape = state.shape.filter(|s| s.stretch.is_some())?;
-                let [x, y, z] = shape.diagonal();
-                let stretch = Mat4::from_scale(Vec3::new(x as f32, y as f32, z as f32));
-                Some(Stretch {
-                    placement: Placement::new(stretch),
-                    texture_size: self.instance_texture_size(instance).unwrap_or((1, 1)),
-                })
-            })
-            .collect()
     }
 
     /// One triangle's `log2 P_b` by the rule for its instance's shape; `None` when
     /// untextured. The value depends only on the shape key and the vertices, never on the
     /// frames before: this is what keeps a sequential run equal to a fresh frame.
-    fn log2_pb_of(
-        &self,
-        slot: u32,
-        states: &[InstanceState],
-        stretches: &[Option<Stretch>],
-    ) -> Option<f32> {
+    fn log2_pb_of(&self, slot: u32) -> Option<f32> {
+        let (geometry, triangles) = (&self.setup.geometry, self.triangles);
         let s = slot as usize;
-        let source = self.triangles.source[s] as usize;
-        let object = self.object_log2_pb[source];
+        let source = triangles.source[s] as usize;
+        let object = self.object[source];
         if object.is_nan() {
             return None;
         }
-        let instance = self.geometry.triangle_instance[source] as usize;
-        Some(match (states[instance].shape, &stretches[instance]) {
-            // Stretch: the object-space triangle under the exact diagonal (a canonical value,
-            // whatever rotation the frame adds).
-            (_, Some(stretch)) => self.stretched_log2_pb(source, stretch),
-            // Similarity: the object-space constant plus log2 s.
-            (Some(NodeShape { scale, .. }), None) => shift_log2_pb(object, scale.log2()),
-            // Deforming (or sheared): from its world vertices. A deforming triangle's texel
-            // term is read from the table (the source's uvs, perhaps in the other winding:
-            // the same area); a sheared one takes the plain form from its slot's uvs. Each
-            // triangle always gets the same form.
-            (None, None) => match self.texel_terms.of(s) {
-                Some(term) => {
-                    log2_pb_with_texel_term(self.triangles.positions[s], term, self.footprint)
-                }
-                None => {
-                    let size = self.texture_size(source).unwrap_or((1, 1));
-                    log2_pb(
-                        self.triangles.positions[s],
-                        self.triangles.uvs[s],
-                        size,
-                        self.footprint,
-                    )
-                }
+        let instance = geometry.triangle_instance[source] as usize;
+        Some(
+            match (self.states[instance].shape, &self.stretches[instance]) {
+                // Stretch: the object-space triangle under the exact diagonal (a canonical value,
+                // whatever rotation the frame adds).
+                (_, Some(stretch)) => self.stretched_log2_pb(source, stretch),
+                // Similarity: the object-space constant plus log2 s.
+                (Some(NodeShape { scale, .. }), None) => shift_log2_pb(object, scale.log2()),
+                // Deforming (or sheared): from its world vertices. A deforming triangle's texel
+                // term is read from the table (the source's uvs, perhaps in the other winding:
+                // the same area); a sheared one takes the plain form from its slot's uvs. Each
+                // triangle always gets the same form.
+                (None, None) => match self.texel_terms.of(s) {
+                    Some(term) => {
+                        log2_pb_with_texel_term(triangles.positions[s], term, self.setup.footprint)
+                    }
+                    None => {
+                        let size = self.setup.texture_size(source).unwrap_or((1, 1));
+                        log2_pb(
+                            triangles.positions[s],
+                            triangles.uvs[s],
+                            size,
+                            self.setup.footprint,
+                        )
+                    }
+                },
             },
-        })
+        )
     }
 
     /// `log2 P_b` of a source triangle's rest vertices under its instance's stretch.
     fn stretched_log2_pb(&self, source: usize, stretch: &Stretch) -> f32 {
-        let instance = self.geometry.triangle_instance[source] as usize;
-        let primitive = self.geometry.primitive(&self.scene, instance);
+        let setup = self.setup;
+        let instance = setup.geometry.triangle_instance[source] as usize;
+        let primitive = setup.geometry.primitive(&setup.scene, instance);
         let placement = &stretch.placement;
-        let p = self
+        let p = setup
             .geometry
             .world_positions(source as u32, placement, &primitive.positions);
         log2_pb(
             p,
-            self.geometry.oriented_uvs(source as u32, placement),
+            setup.geometry.oriented_uvs(source as u32, placement),
             stretch.texture_size,
-            self.footprint,
+            setup.footprint,
         )
     }
+}
 
-    /// Level-0 size of the base-colour texture of source triangle `source`'s material.
-    pub(super) fn texture_size(&self, source: usize) -> Option<(u32, u32)> {
-        self.instance_texture_size(self.geometry.triangle_instance[source] as usize)
-    }
-
-    /// Level-0 size of the base-colour texture of instance `instance`'s material.
-    pub(super) fn instance_texture_size(&self, instance: usize) -> Option<(u32, u32)> {
-        let instance = self.geometry.instances[instance];
-        let material = &self.geometry.materials[instance.material as usize];
-        let texture = self.scene.textures.get(material.base_color_texture?)?;
-        Some(texture.pyramid.base_size())
-    }
+/// Per instance: the stretch of its shape key as the placement [`Pass::stretched_log2_pb`]
+/// applies (`None` unless the key has a stretch), made once per frame instead of once per
+/// triangle (a 1M stretched crowd's pass spent most of its time inverting the same matrix).
+fn stretches(setup: &FrameSetup, states: &[InstanceState]) -> Vec<Option<Stretch>> {
+    states
+        .iter()
+        .enumerate()
+        .map(|(instance, state)| {
+            let shape = state.shape.filter(|s| s.stretch.is_some())?;
+            let [x, y, z] = shape.diagonal();
+            let stretch = Mat4::from_scale(Vec3::new(x as f32, y as f32, z as f32));
+            Some(Stretch {
+                placement: Placement::new(stretch),
+                texture_size: setup.instance_texture_size(instance).unwrap_or((1, 1)),
+            })
+        })
+        .collect()
 }
 
 /// `log2 P_b` of every source triangle from its rest vertices in object space; NaN where the
 /// material is untextured.
-pub(super) fn object_space_log2_pb(
+fn object_space_log2_pb(
     scene: &SceneDesc,
     geometry: &SceneGeometry,
     footprint: PixelFootprint,
@@ -349,17 +399,7 @@ pub(super) fn object_space_log2_pb(
     out
 }
 
-/// What a pass of [`Renderer::log2_pb_values_into`] needs, made once per frame.
-struct PassSetup {
-    /// Whether some triangle of the pass reads its slot's vertices (a placed instance
-    /// without a shape key): only then are they prefetched (a stretched 1M crowd's pass
-    /// was 1.17x slower fetching them for nothing).
-    reads_vertices: bool,
-    /// Per instance, see [`Renderer::stretches`].
-    stretches: Vec<Option<Stretch>>,
-}
-
-/// An instance's stretch for [`Renderer::stretched_log2_pb`]: `diag(shape.diagonal())` as a
+/// An instance's stretch for [`Pass::stretched_log2_pb`]: `diag(shape.diagonal())` as a
 /// placement, and the instance's texture size.
 struct Stretch {
     placement: Placement,
@@ -380,28 +420,22 @@ pub(super) struct DeformingTexelTerms {
 }
 
 impl DeformingTexelTerms {
-    fn new(renderer: &Renderer) -> Self {
-        let Renderer {
-            geometry,
-            triangles,
-            deforms,
-            object_log2_pb,
-            ..
-        } = renderer;
+    fn new(setup: &FrameSetup, triangles: &FrameTriangles, object_log2_pb: &[f32]) -> Self {
+        let (geometry, deforms) = (&setup.geometry, &setup.deforms);
         let term = |&source: &u32| {
             let instance = geometry.triangle_instance[source as usize] as usize;
             let textured = !object_log2_pb[source as usize].is_nan();
             if deforms[instance] != VertexSource::Deformed || !textured {
                 return f64::NAN;
             }
-            let size = renderer.texture_size(source as usize).unwrap_or((1, 1));
+            let size = setup.texture_size(source as usize).unwrap_or((1, 1));
             // The source's uvs: a slot may hold them in the other winding, the same area.
             texel_term(texel_area(
                 uv_area(geometry.triangle_uvs[source as usize]),
                 size,
             ))
         };
-        let per_slot = if renderer.parallelism.splits(triangles.len()) {
+        let per_slot = if setup.parallelism.splits(triangles.len()) {
             triangles.source.par_iter().map(term).collect()
         } else {
             triangles.source.iter().map(term).collect()

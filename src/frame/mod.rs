@@ -10,42 +10,41 @@
 //! `log2 s` (so a rigid motion needs no work), and closest-hit ties are broken by triangle
 //! id rather than by tree order (see `accel`).
 
+mod animation;
 mod clock;
 mod dirty;
 mod log2_pb;
 mod posed;
 mod prefetch;
-mod record;
 mod scatter;
-pub mod sequence;
 mod settings;
+mod setup;
 mod two_level;
 mod update;
 
 pub use crate::accel::{BvhLayout, BvhPolicy};
 pub use clock::FrameClock;
 pub use dirty::{DirtySet, Motion};
-pub use record::{FrameRecord, Phase, UpdateStats};
-pub use sequence::{Check, Resume, SequenceOutcome, SequenceOutput, render_sequence};
 pub use settings::RenderSettings;
 pub use update::UpdateParallelism;
 
 use std::time::Instant;
 
-use glam::{Mat4, Vec3, Vec3A};
+use glam::{Vec3, Vec3A};
 
 use crate::accel::{Accel, AccelError};
-use crate::anim::{NodeShape, Pose, node_shapes, primitive_deforms};
 use crate::geometry::{FrameTriangles, SceneGeometry};
-use crate::lod::{LodCamera, PixelFootprint};
-use crate::render::light::ring_lights;
+use crate::lod::LodCamera;
+use crate::record::{FrameRecord, UpdateStats};
 use crate::render::{
     Camera, FrameScene, Instanced, Light, LinearImage, SceneBvh, TraceCounters, render_image,
 };
 use crate::scene::SceneDesc;
-use log2_pb::{DeformingTexelTerms, object_space_log2_pb};
-use posed::{VertexSource, posed_bounds};
-use update::UpdateScratch;
+use animation::AnimationState;
+use dirty::FrameChanges;
+use log2_pb::Log2PbState;
+use setup::FrameSetup;
+use update::TreeState;
 
 /// Errors that stop a frame.
 #[derive(Debug, thiserror::Error)]
@@ -72,132 +71,58 @@ pub enum LevelImage {
     Make,
 }
 
-/// Per-instance state carried from one frame to the next.
-#[derive(Debug, Clone, Copy)]
-struct InstanceState {
-    world_from_object: Mat4,
-    /// The placement's shape (uniform scale and axis stretch), exact through the hierarchy
-    /// (see `anim::node_shapes`); `None` for a shear, a stretch under a rotation, or a
-    /// skinned/morphed primitive (then only its world vertices tell its shape).
-    shape: Option<NodeShape>,
-}
-
-/// Renders frames of one scene; owns the frame-to-frame state and scratch buffers.
+/// Renders frames of one scene. Its state is split by the step of the frame loop that
+/// owns it: each step is one method that borrows the fixed setup and the parts it reads,
+/// and writes only its own part.
+///
+/// | step | method | reads | writes |
+/// |---|---|---|---|
+/// | animate | `AnimationState::advance` | setup, time | animation |
+/// | dirty set | `TreeState::mark_moved` | setup, animation | tree (triangles), changes |
+/// | refit or rebuild | `TreeState::refit_or_rebuild` | setup, animation | tree, changes (slot order) |
+/// | `log2 P_b` | `Log2PbState::update` | setup, animation, changes | `log2 P_b` state, tree's constants |
+/// | render | `render_image` over [`Renderer::frame_scene`] | all of it | the image |
+///
+/// (The first frame builds the tree instead: `TreeState::build`, then
+/// `Log2PbState::recompute_all`.)
 pub struct Renderer {
-    scene: SceneDesc,
-    geometry: SceneGeometry,
-    settings: RenderSettings,
-    /// Node whose camera is used (first in traversal order), if any.
-    camera_node: Option<usize>,
-    /// Scene bounds at t = 0: frames the scene without a camera and places added lights.
-    rest_bounds: (Vec3, Vec3),
-    footprint: PixelFootprint,
-    /// Per source triangle: `log2 P_b` of the rest vertices in object space (NaN where the
-    /// material is untextured).
-    object_log2_pb: Vec<f32>,
-    /// Per slot: the texel terms of the deforming instances' triangles (`lod::texel_term`).
-    texel_terms: DeformingTexelTerms,
-    /// The frame's triangles in BVH order, carried over between frames.
-    triangles: FrameTriangles,
-    /// Inverse of `triangles.source`.
-    slot_of_source: Vec<u32>,
-    accel: Accel,
-    /// `None` before the first frame.
-    instances: Option<Vec<InstanceState>>,
-    /// Per instance: placed rest vertices, or skinned/morphed ones.
-    deforms: Vec<VertexSource>,
-    /// This frame's pose and the previous frame's (swapped each frame, reused).
-    pose: Pose,
-    previous_pose: Pose,
-    /// Reused buffers of the update (deformed vertices, per-instance plan, per-slot marks).
-    update: UpdateScratch,
-    /// When the update splits its steps across rayon's threads.
-    parallelism: UpdateParallelism,
-    dirty: DirtySet,
-    /// Scratch for the `log2 P_b` update: one value per updated slot, reused every frame.
-    log2_pb_values: Vec<Option<f32>>,
-    /// Scratch for the `log2 P_b` update: the dirty entries it visits one by one.
-    log2_pb_entries: Vec<u32>,
-    /// The shared meshes, placements and top-level tree under `--bvh two-level` (`None`
-    /// for the flat tree, or before the first frame).
-    two_level: Option<two_level::TwoLevel>,
-    /// What this frame's placed instances changed (two-level only; counted into the record).
-    placed_changes: two_level::PlacedChanges,
+    /// What never changes between frames: scene, geometry, settings, view constants.
+    setup: FrameSetup,
+    /// This frame's pose, shapes and instance placements, and the previous frame's.
+    animation: AnimationState,
+    /// The triangles in slot order and their trees.
+    tree: TreeState,
+    /// What moved this frame.
+    changes: FrameChanges,
+    /// The constants `log2 P_b` is kept from, and the per-slot texel terms.
+    log2_pb: Log2PbState,
 }
 
 impl Renderer {
     pub fn new(scene: SceneDesc, settings: RenderSettings) -> Renderer {
-        let geometry = SceneGeometry::new(&scene);
-        let deforms: Vec<VertexSource> = geometry
-            .instances
-            .iter()
-            .map(|i| {
-                VertexSource::of(primitive_deforms(
-                    &scene,
-                    i.node as usize,
-                    i.mesh as usize,
-                    i.primitive as usize,
-                ))
-            })
-            .collect();
-        let mut pose = Pose::default();
-        pose.evaluate(&scene, settings.animation, 0.0);
-        // Finite vertices of every triangle (a unit box when there are none).
-        let rest_bounds = posed_bounds(&scene, &geometry, &pose, &deforms)
-            .unwrap_or((Vec3::splat(-1.0), Vec3::splat(1.0)));
-        let camera_node = first_node_with(&scene, |n| n.camera.is_some());
-        let yfov = match camera_node {
-            Some(node) => scene.cameras[scene.nodes[node].camera.unwrap_or(0)].yfov,
-            None => {
-                Camera::framing(
-                    rest_bounds.0,
-                    rest_bounds.1,
-                    settings.width,
-                    settings.height,
-                )
-                .yfov
-            }
-        };
-        let footprint = PixelFootprint::new(yfov, settings.height);
-        let object_log2_pb = object_space_log2_pb(&scene, &geometry, footprint);
+        let (setup, rest_pose) = FrameSetup::new(scene, settings);
+        let log2_pb = Log2PbState::new(&setup);
         Renderer {
-            scene,
-            geometry,
-            settings,
-            camera_node,
-            rest_bounds,
-            footprint,
-            object_log2_pb,
-            texel_terms: DeformingTexelTerms::default(),
-            triangles: FrameTriangles::default(),
-            slot_of_source: Vec::new(),
-            accel: Accel::default(),
-            instances: None,
-            deforms,
-            pose,
-            previous_pose: Pose::default(),
-            update: UpdateScratch::default(),
-            parallelism: UpdateParallelism::Auto,
-            dirty: DirtySet::default(),
-            log2_pb_values: Vec::new(),
-            log2_pb_entries: Vec::new(),
-            two_level: None,
-            placed_changes: Default::default(),
+            setup,
+            animation: AnimationState::new(rest_pose),
+            tree: TreeState::default(),
+            changes: FrameChanges::default(),
+            log2_pb,
         }
     }
 
     /// Sets when the per-frame update splits across rayon's threads (default
     /// [`UpdateParallelism::Auto`]); the results do not depend on it, only the time.
     pub fn set_update_parallelism(&mut self, parallelism: UpdateParallelism) {
-        self.parallelism = parallelism;
+        self.setup.parallelism = parallelism;
     }
 
     pub fn scene(&self) -> &SceneDesc {
-        &self.scene
+        &self.setup.scene
     }
 
     pub fn settings(&self) -> &RenderSettings {
-        &self.settings
+        &self.setup.settings
     }
 
     /// The frame's world-space triangles in BVH order (valid after `prepare`): every
@@ -205,33 +130,32 @@ impl Renderer {
     /// morphed and static instances: the shared meshes' instances keep theirs in object
     /// space).
     pub fn triangles(&self) -> &FrameTriangles {
-        &self.triangles
+        &self.tree.triangles
     }
 
     /// The current BVH (valid after `prepare`).
     pub fn accel(&self) -> &Accel {
-        &self.accel
+        &self.tree.accel
     }
 
     /// The scene's drawn instances and source triangles.
     pub fn geometry(&self) -> &SceneGeometry {
-        &self.geometry
+        &self.setup.geometry
     }
 
     /// Materials indexed by `FrameTriangles::material` (the scene's, plus a default last).
     pub fn materials(&self) -> &[crate::render::Material] {
-        &self.geometry.materials
+        &self.setup.geometry.materials
     }
 
     /// What moved in the last `prepare` (empty after the first frame's: everything was new).
     pub fn dirty(&self) -> &DirtySet {
-        &self.dirty
+        &self.changes.dirty
     }
 
     /// Number of lights each frame is lit by.
     pub fn light_count(&self) -> usize {
-        let scene_lights = self.scene_light_nodes().len();
-        self.settings.lights.unwrap_or(scene_lights.max(1))
+        self.setup.light_count()
     }
 
     /// Renders frame `frame` at time `time_s`.
@@ -265,7 +189,7 @@ impl Renderer {
         let (image, counters) = render_image(
             &self.frame_scene(&prepared),
             &prepared.camera,
-            self.settings.spp.max(1),
+            self.setup.settings.spp.max(1),
         );
         let render_ms = ms_since(t);
         let record = self.record(
@@ -290,78 +214,129 @@ impl Renderer {
     pub fn prepare(&mut self, frame: u32, time_s: f32) -> Result<PreparedFrame, FrameError> {
         let mut stats = UpdateStats::default();
         let pose_start = Instant::now();
-        std::mem::swap(&mut self.pose, &mut self.previous_pose);
-        self.pose
-            .evaluate(&self.scene, self.settings.animation, time_s);
-        let scales = node_shapes(&self.scene, self.settings.animation, time_s);
+        self.animation.advance(&self.setup, time_s);
         let pose_ms = ms_since(pose_start);
-        let accel_error = |source| FrameError::Accel {
-            frame,
-            time_s,
-            source,
-        };
-        let first = self.instances.is_none();
-        let updated = if first {
-            self.first_frame(&scales, &mut stats)
+        let updated = if self.tree.is_carried() {
+            self.update(&mut stats)
         } else {
-            self.update_moved(&scales, &mut stats);
-            self.check_moved_finite()
-                .and_then(|()| self.update_accel(&mut stats))
+            self.first_frame(&mut stats)
         };
         if let Err(source) = updated {
             // The carried state is half updated: the next frame starts afresh.
-            self.instances = None;
-            self.two_level = None;
-            return Err(accel_error(source));
-        }
-        if !first {
-            let t = Instant::now();
-            if self.settings.lod.needs_log2_pb() {
-                self.update_dirty_log2_pb(&mut stats);
-            }
-            stats.lod_update_ms = ms_since(t);
+            self.tree.reset();
+            return Err(FrameError::Accel {
+                frame,
+                time_s,
+                source,
+            });
         }
         // Evaluating the animation belongs to the animate phase too.
         stats.animate_ms += pose_ms;
-        stats.moved_triangles = self.dirty.len();
-        stats.deformed_triangles = self.dirty.count(Motion::Deformed);
-        stats.add_placed(std::mem::take(&mut self.placed_changes));
-        stats.sah_ratio = self.accel.sah_ratio();
-        let world = &self.pose.world_from_node;
+        stats.moved_triangles = self.changes.dirty.len();
+        stats.deformed_triangles = self.changes.dirty.count(Motion::Deformed);
+        std::mem::take(&mut self.changes.placed).add_to(&mut stats);
+        stats.sah_ratio = self.tree.accel.sah_ratio();
+        let world = &self.animation.pose().world_from_node;
         Ok(PreparedFrame {
-            camera: self.camera(world),
-            lights: self.lights(world),
+            camera: self.setup.camera(world),
+            lights: self.setup.lights(world),
             update: stats,
         })
     }
 
+    /// First frame: every triangle placed, the tree built, every `log2 P_b` computed.
+    fn first_frame(&mut self, stats: &mut UpdateStats) -> Result<(), AccelError> {
+        let (setup, tree) = (&self.setup, &mut self.tree);
+        let built = tree.build(
+            setup,
+            &self.animation,
+            &self.log2_pb.object,
+            &mut self.changes,
+        )?;
+        stats.animate_ms = built.write_ms;
+        stats.build_ms = built.build_ms + self.index_slots();
+        stats.rebuild = true;
+        let t = Instant::now();
+        if self.setup.needs_log2_pb() {
+            let states = self.animation.instances();
+            let tree = &mut self.tree;
+            let computed = self
+                .log2_pb
+                .recompute_all(&self.setup, states, &mut tree.triangles);
+            stats.lod_recomputed = computed + tree.placed_textured();
+        }
+        stats.lod_update_ms = ms_since(t);
+        Ok(())
+    }
+
+    /// A frame after the first: the dirty set, the tree's refit or rebuild, the dirty
+    /// triangles' `log2 P_b`.
+    fn update(&mut self, stats: &mut UpdateStats) -> Result<(), AccelError> {
+        let (setup, animation) = (&self.setup, &self.animation);
+        let marked = self.tree.mark_moved(setup, animation, &mut self.changes);
+        stats.dirty_ms = marked.dirty_ms;
+        stats.animate_ms = marked.write_ms;
+        self.tree.check_moved_finite(&self.changes)?;
+        let tree = self
+            .tree
+            .refit_or_rebuild(setup, animation, &mut self.changes)?;
+        stats.refit_ms = tree.refit_ms;
+        if let Some(build_ms) = tree.build_ms {
+            stats.build_ms = build_ms + self.index_slots();
+            stats.rebuild = true;
+        }
+        let t = Instant::now();
+        if self.setup.needs_log2_pb() {
+            let counts = self.log2_pb.update(
+                &self.setup,
+                self.animation.instances(),
+                &self.changes,
+                &mut self.tree.triangles,
+            );
+            stats.lod_recomputed += counts.recomputed;
+            stats.lod_shifted += counts.shifted;
+        }
+        stats.lod_update_ms = ms_since(t);
+        Ok(())
+    }
+
+    /// After a build of the tree (new slot order): the per-slot texel terms again; returns
+    /// the milliseconds it took (counted as building).
+    fn index_slots(&mut self) -> f64 {
+        let t = Instant::now();
+        self.log2_pb.index_slots(&self.setup, &self.tree.triangles);
+        ms_since(t)
+    }
+
     /// What the integrator reads for a prepared frame (valid until the next `prepare`).
     pub fn frame_scene<'a>(&'a self, prepared: &'a PreparedFrame) -> FrameScene<'a> {
-        let bvh = match &self.two_level {
+        let (setup, tree) = (&self.setup, &self.tree);
+        let bvh = match &tree.two_level {
             None => SceneBvh::Flat {
-                triangles: &self.triangles,
-                accel: &self.accel,
+                triangles: &tree.triangles,
+                accel: &tree.accel,
             },
             Some(two) => SceneBvh::TwoLevel(Instanced {
-                world_triangles: &self.triangles,
-                world: &self.accel,
+                world_triangles: &tree.triangles,
+                world: &tree.accel,
                 accel: &two.accel,
                 instances: &two.shading,
-                footprint: self.footprint,
-                needs_log2_pb: self.settings.lod.needs_log2_pb(),
+                footprint: setup.footprint,
+                needs_log2_pb: setup.needs_log2_pb(),
             }),
         };
+        let (scene, settings) = (&setup.scene, &setup.settings);
         FrameScene {
             bvh,
-            materials: &self.geometry.materials,
-            textures: &self.scene.textures,
+            materials: &setup.geometry.materials,
+            textures: &scene.textures,
             lights: &prepared.lights,
-            background: Vec3A::from(self.scene.background),
-            additive_ambient: Vec3A::from(self.scene.ambient.unwrap_or(Vec3::ONE)),
-            lod: self.settings.lod,
-            lod_bias: self.settings.lod_bias,
+            background: Vec3A::from(scene.background),
+            additive_ambient: Vec3A::from(scene.ambient.unwrap_or(Vec3::ONE)),
+            lod: settings.lod,
+            lod_bias: settings.lod_bias,
             lod_camera: LodCamera::new(&prepared.camera.view_frame()),
-            max_depth: self.settings.max_depth,
+            max_depth: settings.max_depth,
         }
     }
 
@@ -374,18 +349,18 @@ impl Renderer {
         render_ms: f64,
         total_ms: f64,
     ) -> FrameRecord {
-        let u = prepared.update;
+        let settings = &self.setup.settings;
         FrameRecord {
             frame,
             time_s,
-            width: self.settings.width,
-            height: self.settings.height,
-            lod_method: self.settings.lod.to_string(),
-            lod_bias: self.settings.lod_bias,
-            triangles: self.geometry.triangle_count(),
+            width: settings.width,
+            height: settings.height,
+            lod_method: settings.lod.to_string(),
+            lod_bias: settings.lod_bias,
+            triangles: self.setup.geometry.triangle_count(),
             lights: prepared.lights.len(),
-            spp: self.settings.spp.max(1),
-            update: u,
+            spp: settings.spp.max(1),
+            update: prepared.update,
             render_ms,
             total_ms,
             rays: counters.rays,
@@ -393,55 +368,6 @@ impl Renderer {
             nonfinite_samples: counters.nonfinite_samples,
         }
     }
-
-    fn camera(&self, world: &[glam::Mat4]) -> Camera {
-        let (w, h) = (self.settings.width, self.settings.height);
-        match self.camera_node {
-            Some(node) => {
-                let desc = self.scene.cameras[self.scene.nodes[node].camera.unwrap_or(0)];
-                Camera::from_world(world[node], desc.yfov, w, h)
-            }
-            None => Camera::framing(self.rest_bounds.0, self.rest_bounds.1, w, h),
-        }
-    }
-
-    fn scene_light_nodes(&self) -> Vec<usize> {
-        self.scene
-            .traversal_order()
-            .into_iter()
-            .filter(|&i| self.scene.nodes[i].light.is_some())
-            .collect()
-    }
-
-    fn lights(&self, world: &[glam::Mat4]) -> Vec<Light> {
-        let wanted = self.light_count();
-        let mut lights: Vec<Light> = self
-            .scene_light_nodes()
-            .into_iter()
-            .take(wanted)
-            .map(|node| {
-                Light::placed(
-                    &self.geometry.lights[self.scene.nodes[node].light.unwrap_or(0)],
-                    world[node],
-                )
-            })
-            .collect();
-        if lights.len() < wanted {
-            let (min, max) = self.rest_bounds;
-            lights.extend(ring_lights(min, max, wanted - lights.len(), wanted));
-        }
-        lights
-    }
-}
-
-fn first_node_with(
-    scene: &SceneDesc,
-    predicate: impl Fn(&crate::scene::NodeDesc) -> bool,
-) -> Option<usize> {
-    scene
-        .traversal_order()
-        .into_iter()
-        .find(|&i| predicate(&scene.nodes[i]))
 }
 
 pub(crate) fn ms_since(t: Instant) -> f64 {

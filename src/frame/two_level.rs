@@ -20,18 +20,21 @@ use std::collections::HashMap;
 
 use glam::{Mat4, Vec3, Vec3A};
 
+use super::Motion;
+use super::animation::InstanceState;
 use super::posed::VertexSource;
-use super::{InstanceState, Motion, Renderer, UpdateStats};
+use super::setup::FrameSetup;
 use crate::accel::{AccelError, TlasInstance, TwoLevelAccel};
 use crate::anim::{NodeShape, moving_nodes};
 use crate::geometry::{FrameTriangles, Placement};
+use crate::record::UpdateStats;
 use crate::render::{InstanceShading, PbRule};
 
 /// Most extra world-space triangles the static copies of one mesh may add (beyond its first
 /// copy) and still be merged into the world tree: 65,536 triangles are ~10 MB.
 const FLATTEN_BUDGET: usize = 65_536;
 
-/// What the two-level structure keeps between frames.
+/// What the two-level structure keeps between frames (part of the tree state).
 #[derive(Default)]
 pub(super) struct TwoLevel {
     pub accel: TwoLevelAccel,
@@ -50,7 +53,7 @@ pub(super) struct TwoLevel {
     pub textured: Vec<usize>,
 }
 
-/// Which placed instances [`Renderer::place_instances`] places.
+/// Which placed instances [`TwoLevel::place_instances`] places.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub(super) enum Which {
     All,
@@ -66,22 +69,23 @@ pub(super) struct PlacedChanges {
     pub lod_shifted: usize,
 }
 
-impl Renderer {
+impl TwoLevel {
     /// First frame: which instances place shared meshes, and the meshes' trees (the caller
     /// then writes the other instances' triangles, builds the world tree over them and
-    /// places the instances).
-    pub(super) fn build_two_level(&mut self) -> Result<(), AccelError> {
+    /// places the instances). `object_log2_pb`: per source triangle, its object-space
+    /// constant (NaN where untextured).
+    pub fn build(setup: &FrameSetup, object_log2_pb: &[f32]) -> Result<TwoLevel, AccelError> {
         let mut two = TwoLevel::default();
-        let moving = moving_nodes(&self.scene, self.settings.animation);
+        let moving = moving_nodes(&setup.scene, setup.settings.animation);
         // Per mesh primitive: its static copies' triangles.
         let mut static_triangles: HashMap<(u32, u32), (usize, usize)> = HashMap::new();
-        for (i, instance) in self.geometry.instances.iter().enumerate() {
+        for (i, instance) in setup.geometry.instances.iter().enumerate() {
             if !moving[instance.node as usize] {
                 let entry = static_triangles
                     .entry((instance.mesh, instance.primitive))
                     .or_default();
                 entry.0 += 1;
-                entry.1 = self.geometry.instance_triangles[i].len();
+                entry.1 = setup.geometry.instance_triangles[i].len();
             }
         }
         let flattened = |key| {
@@ -91,18 +95,18 @@ impl Renderer {
         };
         let mut mesh_of_key: HashMap<(u32, u32), u32> = HashMap::new();
         let mut meshes = Vec::new();
-        for (i, (instance, source)) in self
+        for (i, (instance, source)) in setup
             .geometry
             .instances
             .iter()
-            .zip(&self.deforms)
+            .zip(&setup.deforms)
             .enumerate()
         {
-            let range = self.geometry.instance_triangles[i].clone();
+            let range = setup.geometry.instance_triangles[i].clone();
             two.textured.push(
                 range
                     .clone()
-                    .filter(|&s| !self.object_log2_pb[s as usize].is_nan())
+                    .filter(|&s| !object_log2_pb[s as usize].is_nan())
                     .count(),
             );
             let key = (instance.mesh, instance.primitive);
@@ -114,9 +118,9 @@ impl Renderer {
             let mesh = match mesh_of_key.get(&key) {
                 Some(&mesh) => mesh,
                 None => {
-                    let triangles = self.object_triangles(i);
+                    let triangles = object_triangles(setup, object_log2_pb, i);
                     // Named by the scene's source triangle, as the flat path names it.
-                    let first = self.geometry.instance_triangles[i].start as usize;
+                    let first = setup.geometry.instance_triangles[i].start as usize;
                     for (local, tri) in triangles.positions.iter().enumerate() {
                         if let Some(v) = tri.iter().find(|v| !v.is_finite()) {
                             return Err(AccelError::NonFiniteVertex {
@@ -135,35 +139,10 @@ impl Renderer {
             two.fixed.push(fixed);
             // By instance, not by its first triangle: an instance may have none.
             two.texture_size
-                .push(self.instance_texture_size(i).unwrap_or((1, 1)));
+                .push(setup.instance_texture_size(i).unwrap_or((1, 1)));
         }
         two.accel = TwoLevelAccel::new(meshes)?;
-        self.two_level = Some(two);
-        Ok(())
-    }
-
-    /// Instance `i`'s triangles in object space as the shared tree stores them: the mesh's
-    /// winding, its normals as stored (zero where it has none), the object-space `log2 P_b`
-    /// (NaN where untextured) and the mesh's own triangle index as `source`.
-    fn object_triangles(&self, i: usize) -> FrameTriangles {
-        let primitive = self.geometry.primitive(&self.scene, i);
-        let range = self.geometry.instance_triangles[i].clone();
-        let material = self.geometry.instances[i].material;
-        let mut t = FrameTriangles::default();
-        for (local, source) in range.enumerate() {
-            let v = self.geometry.triangle_vertices[source as usize];
-            t.positions
-                .push(v.map(|k| Vec3A::from(primitive.positions[k as usize])));
-            t.normals.push(v.map(|k| match &primitive.normals {
-                Some(n) => n[k as usize],
-                None => Vec3::ZERO,
-            }));
-            t.uvs.push(self.geometry.triangle_uvs[source as usize]);
-            t.material.push(material);
-            t.log2_pb.push(self.object_log2_pb[source as usize]);
-            t.source.push(local as u32);
-        }
-        t
+        Ok(two)
     }
 
     /// This frame's placements of the placed instances and the top-level tree over them:
@@ -173,18 +152,16 @@ impl Renderer {
     /// # Errors
     /// A placement that makes a vertex non-finite (as the flat path reports it: the first
     /// such triangle of the first such instance).
-    pub(super) fn place_instances(
+    pub fn place_instances(
         &mut self,
+        setup: &FrameSetup,
         states: &[InstanceState],
         which: Which,
     ) -> Result<(), AccelError> {
-        let Some(two) = self.two_level.as_mut() else {
-            return Ok(());
-        };
         if which == Which::All {
-            two.shading.clear();
-            two.shading.resize(
-                two.placed.len(),
+            self.shading.clear();
+            self.shading.resize(
+                self.placed.len(),
                 InstanceShading {
                     placement: Placement::new(Mat4::IDENTITY),
                     mesh: 0,
@@ -195,21 +172,21 @@ impl Renderer {
             );
         }
         let (mut fixed, mut moving) = (Vec::new(), Vec::new());
-        for (k, &i) in two.placed.iter().enumerate() {
+        for (k, &i) in self.placed.iter().enumerate() {
             let i = i as usize;
-            if which == Which::Moving && two.fixed[k] {
+            if which == Which::Moving && self.fixed[k] {
                 continue;
             }
             let state = states[i];
-            let mesh = two.mesh_of[i].unwrap_or(0);
-            let source_base = self.geometry.instance_triangles[i].start;
+            let mesh = self.mesh_of[i].unwrap_or(0);
+            let source_base = setup.geometry.instance_triangles[i].start;
             let placement = Placement::new(state.world_from_object);
-            two.shading[k] = InstanceShading {
+            self.shading[k] = InstanceShading {
                 placement,
                 mesh,
                 source_base,
                 pb: pb_rule(state.shape),
-                texture_size: two.texture_size[k],
+                texture_size: self.texture_size[k],
             };
             let instance = TlasInstance {
                 index: k as u32,
@@ -217,25 +194,26 @@ impl Renderer {
                 world_from_object: state.world_from_object,
                 source_base,
             };
-            if two.fixed[k] {
+            if self.fixed[k] {
                 fixed.push(instance);
             } else {
                 moving.push(instance);
             }
         }
-        let mut placed = two.accel.set_instances(&moving);
+        let mut placed = self.accel.set_instances(&moving);
         if which == Which::All {
-            placed = two.accel.set_fixed_instances(&fixed).and(placed);
+            placed = self.accel.set_fixed_instances(&fixed).and(placed);
         }
         let Err(k) = placed else {
             return Ok(());
         };
-        let i = two.placed[k as usize] as usize;
+        let i = self.placed[k as usize] as usize;
         let placement = Placement::new(states[i].world_from_object);
-        let primitive = self.geometry.primitive(&self.scene, i);
-        for source in self.geometry.instance_triangles[i].clone() {
+        let primitive = setup.geometry.primitive(&setup.scene, i);
+        for source in setup.geometry.instance_triangles[i].clone() {
             let (p, _) =
-                self.geometry
+                setup
+                    .geometry
                     .world_triangle(source, &placement, &primitive.positions, None);
             if let Some(v) = p.iter().find(|v| !v.is_finite()) {
                 return Err(AccelError::NonFiniteVertex {
@@ -246,36 +224,34 @@ impl Renderer {
         }
         // The box overflowed though no vertex did (its corners lie further out).
         Err(AccelError::NonFiniteVertex {
-            triangle: self.geometry.instance_triangles[i].start as usize,
+            triangle: setup.geometry.instance_triangles[i].start as usize,
             vertex: [f32::INFINITY; 3],
         })
     }
 
     /// The counters of the placed instances that moved between `previous` and `current`.
-    pub(super) fn placed_changes(
+    pub fn placed_changes(
         &self,
+        setup: &FrameSetup,
         current: &[InstanceState],
         previous: &[InstanceState],
     ) -> PlacedChanges {
         let mut changes = PlacedChanges::default();
-        let Some(two) = &self.two_level else {
-            return changes;
-        };
-        let lod = self.settings.lod.needs_log2_pb();
-        for &i in &two.placed {
+        let lod = setup.needs_log2_pb();
+        for &i in &self.placed {
             let i = i as usize;
             let (now, before) = (&current[i], &previous[i]);
             if now.world_from_object == before.world_from_object {
                 continue;
             }
-            let count = self.geometry.instance_triangles[i].len();
+            let count = setup.geometry.instance_triangles[i].len();
             changes.moved += count;
             match super::update::placed_motion(now.shape, before.shape) {
                 Motion::Deformed => {
                     changes.deformed += count;
-                    changes.lod_recomputed += if lod { two.textured[i] } else { 0 };
+                    changes.lod_recomputed += if lod { self.textured[i] } else { 0 };
                 }
-                Motion::Scaled => changes.lod_shifted += if lod { two.textured[i] } else { 0 },
+                Motion::Scaled => changes.lod_shifted += if lod { self.textured[i] } else { 0 },
                 Motion::Rigid => {}
             }
         }
@@ -284,11 +260,34 @@ impl Renderer {
 
     /// The first frame's `lod_recomputed` share of the placed instances (their constants
     /// come from the object-space ones computed at load).
-    pub(super) fn placed_textured(&self) -> usize {
-        self.two_level.as_ref().map_or(0, |two| {
-            two.placed.iter().map(|&i| two.textured[i as usize]).sum()
-        })
+    pub fn placed_textured(&self) -> usize {
+        self.placed.iter().map(|&i| self.textured[i as usize]).sum()
     }
+}
+
+/// Instance `i`'s triangles in object space as the shared tree stores them: the mesh's
+/// winding, its normals as stored (zero where it has none), the object-space `log2 P_b`
+/// (NaN where untextured) and the mesh's own triangle index as `source`.
+fn object_triangles(setup: &FrameSetup, object_log2_pb: &[f32], i: usize) -> FrameTriangles {
+    let geometry = &setup.geometry;
+    let primitive = geometry.primitive(&setup.scene, i);
+    let range = geometry.instance_triangles[i].clone();
+    let material = geometry.instances[i].material;
+    let mut t = FrameTriangles::default();
+    for (local, source) in range.enumerate() {
+        let v = geometry.triangle_vertices[source as usize];
+        t.positions
+            .push(v.map(|k| Vec3A::from(primitive.positions[k as usize])));
+        t.normals.push(v.map(|k| match &primitive.normals {
+            Some(n) => n[k as usize],
+            None => Vec3::ZERO,
+        }));
+        t.uvs.push(geometry.triangle_uvs[source as usize]);
+        t.material.push(material);
+        t.log2_pb.push(object_log2_pb[source as usize]);
+        t.source.push(local as u32);
+    }
+    t
 }
 
 /// The `log2 P_b` rule of a placed instance with shape key `shape` (see `log2_pb.rs`).
@@ -310,12 +309,12 @@ fn pb_rule(shape: Option<NodeShape>) -> PbRule {
     }
 }
 
-impl UpdateStats {
-    /// Adds the placed instances' changes to the counters.
-    pub(super) fn add_placed(&mut self, changes: PlacedChanges) {
-        self.moved_triangles += changes.moved;
-        self.deformed_triangles += changes.deformed;
-        self.lod_recomputed += changes.lod_recomputed;
-        self.lod_shifted += changes.lod_shifted;
+impl PlacedChanges {
+    /// Adds these changes to the frame's counters.
+    pub fn add_to(self, stats: &mut UpdateStats) {
+        stats.moved_triangles += self.moved;
+        stats.deformed_triangles += self.deformed;
+        stats.lod_recomputed += self.lod_recomputed;
+        stats.lod_shifted += self.lod_shifted;
     }
 }

@@ -1,34 +1,40 @@
-//! The per-frame update of the scene's triangles and tree: place or deform what moved,
-//! mark it in the dirty set as rigid, scaled or deformed, and refit or rebuild the BVH.
-//! Only what changed is touched; `tests/frame_loop.rs` checks every changed-only path
-//! against a fresh build.
+//! The tree state of the frame loop and its steps: the world-space triangles in BVH slot
+//! order with their tree (flat, or the world tree under the two-level structure), and the
+//! steps that keep them: the first frame's build, the *dirty* step (place or deform what
+//! moved, write it into its slots and mark it in the dirty set as rigid, scaled or
+//! deformed) and the *refit or rebuild* step. Only what changed is touched;
+//! `tests/frame_loop.rs` checks every changed-only path against a fresh build.
 //!
-//! Three steps, each split across rayon's threads when its work is large enough to pay
-//! ([`UpdateParallelism`]): pose the vertices of the instances that moved (skinned or morphed
-//! then placed, or rest vertices placed; each instance into its own world-space buffers),
-//! write their triangles into the BVH slots in source order (`scatter`; recording each
-//! triangle's motion), then list the marked slots in the dirty set in source-triangle order. Every written value is a
-//! pure function of the pose and its triangle, and the dirty order is fixed by source order,
-//! so the parallel update is bit-identical to the sequential one, dirty order included.
-//! Timing: classifying instances and listing the dirty set count as `dirty_ms`; posing and
-//! writing (including the per-triangle "did its vertices change" test, fused with the write)
-//! as `animate_ms`.
+//! The dirty step has three parts, each split across rayon's threads when its work is large
+//! enough to pay ([`UpdateParallelism`]): pose the vertices of the instances that moved
+//! (skinned or morphed then placed, or rest vertices placed; each instance into its own
+//! world-space buffers), write their triangles into the BVH slots in source order
+//! (`scatter`; recording each triangle's motion), then list the marked slots in the dirty
+//! set in source-triangle order. Every written value is a pure function of the pose and its
+//! triangle, and the dirty order is fixed by source order, so the parallel update is
+//! bit-identical to the sequential one, dirty order included. Timing: classifying instances
+//! and listing the dirty set count as `dirty_ms`; posing and writing (including the
+//! per-triangle "did its vertices change" test, fused with the write) as `animate_ms`.
 
-use std::ops::Range;
 use std::sync::atomic::AtomicBool;
 use std::time::Instant;
 
 use rayon::prelude::*;
 
+use super::Motion;
+use super::animation::{AnimationState, InstanceState};
+use super::dirty::FrameChanges;
+use super::ms_since;
 use super::posed::{
     PosedVertices, Rewrite, TriangleWriter, VertexSource, WRITE_CHUNK, same_deformation,
     write_all_triangles,
 };
 use super::scatter::SlotScatter;
-use super::two_level::Which;
-use super::{InstanceState, Motion, Renderer, UpdateStats, ms_since};
+use super::setup::FrameSetup;
+use super::two_level::{TwoLevel, Which};
 use crate::accel::{Accel, AccelError, BvhLayout, TreeStep};
 use crate::anim::NodeShape;
+use crate::geometry::FrameTriangles;
 
 /// Below this much work (triangles or vertices) an update step stays on the calling thread:
 /// rayon's split and join cost more than the work (tens of ns per item).
@@ -70,45 +76,100 @@ pub struct UpdateScratch {
     /// Per source triangle: the motion the write gave it. All `None` between frames (the
     /// dirty listing takes them).
     source_motion: Vec<Option<Motion>>,
-    /// Whether this frame's write gave a moved triangle a non-finite vertex.
-    moved_nonfinite: bool,
     /// Per instance: whether the placement its slots' uvs were last written under mirrored
     /// (`None`: never written). Uvs change only with that, so a write under the same winding
     /// skips them (a fifth of the bytes a moved triangle writes).
     uv_flips: Vec<Option<bool>>,
     /// Per visited instance: how many dirty entries it gave (scratch of the listing).
     listed: Vec<usize>,
-    /// The runs of the dirty list (entry indices, increasing) whose slots belong to deforming
-    /// instances: the `log2 P_b` update walks those slots in slot order instead.
-    pub(super) deformed_entries: Vec<Range<usize>>,
-    /// The runs of placed instances that scaled or changed shape: the entries the `log2
-    /// P_b` update visits one by one (rigid runs keep their constants and are skipped whole).
-    pub(super) reshaped_entries: Vec<Range<usize>>,
 }
 
-impl Renderer {
-    /// First frame: every triangle placed, the tree built, every `log2 P_b` computed.
-    pub(super) fn first_frame(
+/// The world-space triangles in BVH slot order and the trees over them, carried from one
+/// frame to the next.
+#[derive(Default)]
+pub(super) struct TreeState {
+    /// The frame's triangles in BVH order (under the two-level BVH only the world tree's).
+    pub triangles: FrameTriangles,
+    /// Inverse of `triangles.source` (`u32::MAX` for sources without a slot).
+    slot_of_source: Vec<u32>,
+    pub accel: Accel,
+    /// The shared meshes, placements and top-level tree under `--bvh two-level` (`None`
+    /// for the flat tree, or before the first frame).
+    pub two_level: Option<TwoLevel>,
+    /// Reused buffers of the write (posed vertices, per-instance plan, per-slot marks).
+    scratch: UpdateScratch,
+    /// Whether the triangles and trees hold the previous frame's state: false before the
+    /// first frame and after a frame that failed half way (the next one starts afresh).
+    carried: bool,
+}
+
+/// What the first frame's build cost.
+#[derive(Debug, Clone, Copy)]
+pub(super) struct BuildTimes {
+    /// Writing every triangle (counted as `animate_ms`).
+    pub write_ms: f64,
+    /// The trees (two-level meshes, world tree, top-level trees).
+    pub build_ms: f64,
+}
+
+/// What the dirty step cost.
+#[derive(Debug, Clone, Copy)]
+pub(super) struct DirtyTimes {
+    /// Classifying instances and listing the dirty set.
+    pub dirty_ms: f64,
+    /// Posing and writing the moved triangles (counted as `animate_ms`).
+    pub write_ms: f64,
+}
+
+/// What the refit-or-rebuild step did.
+#[derive(Debug, Clone, Copy, Default)]
+pub(super) struct TreeUpdate {
+    /// Refitting (and, under two-level, rebuilding the top-level tree over moved instances).
+    pub refit_ms: f64,
+    /// `Some(ms)` when the world tree was rebuilt: the slots are in a new order.
+    pub build_ms: Option<f64>,
+}
+
+impl TreeState {
+    /// Whether the triangles and trees hold the previous frame's state (else the next frame
+    /// is built afresh).
+    pub fn is_carried(&self) -> bool {
+        self.carried
+    }
+
+    /// Drops the carried state (after a frame that failed half way).
+    pub fn reset(&mut self) {
+        self.carried = false;
+        self.two_level = None;
+    }
+
+    /// First frame: every triangle placed and written, the trees built, the dirty set
+    /// emptied. `object_log2_pb`: per source triangle, its object-space constant (the
+    /// two-level meshes store it).
+    pub fn build(
         &mut self,
-        scales: &[Option<NodeShape>],
-        stats: &mut UpdateStats,
-    ) -> Result<(), AccelError> {
+        setup: &FrameSetup,
+        animation: &AnimationState,
+        object_log2_pb: &[f32],
+        changes: &mut FrameChanges,
+    ) -> Result<BuildTimes, AccelError> {
         let t = Instant::now();
-        if self.settings.layout == BvhLayout::TwoLevel {
-            self.build_two_level()?;
-        }
-        let build_ms = ms_since(t);
+        self.two_level = match setup.settings.layout {
+            BvhLayout::TwoLevel => Some(TwoLevel::build(setup, object_log2_pb)?),
+            BvhLayout::Flat => None,
+        };
+        let two_level_ms = ms_since(t);
         let t = Instant::now();
         // Under the two-level BVH only what is not an instance of a shared mesh.
         let two_level = self.two_level.as_ref();
         write_all_triangles(
-            &self.scene,
-            &self.geometry,
-            &self.pose,
-            &self.deforms,
-            &mut self.update.posed,
-            &mut self.update.plan,
-            self.parallelism.splits(self.geometry.triangle_count()),
+            &setup.scene,
+            &setup.geometry,
+            animation.pose(),
+            &setup.deforms,
+            &mut self.scratch.posed,
+            &mut self.scratch.plan,
+            setup.parallelism.splits(setup.geometry.triangle_count()),
             |i| two_level.is_none_or(|two| two.mesh_of[i].is_none()),
             &mut self.triangles,
         );
@@ -117,88 +178,91 @@ impl Renderer {
             plan,
             uv_flips,
             ..
-        } = &mut self.update;
+        } = &mut self.scratch;
         uv_flips.clear();
         uv_flips.extend(
             plan.iter()
                 .enumerate()
                 .map(|(i, r)| (*r != Rewrite::Keep).then(|| posed.placement(i).flips_winding)),
         );
-        let states = self.instance_states(scales);
-        stats.animate_ms = ms_since(t);
+        let write_ms = ms_since(t);
 
         let t = Instant::now();
         self.accel = Accel::build(&mut self.triangles)?;
-        self.index_slots();
-        self.place_instances(&states, Which::All)?;
-        stats.build_ms = build_ms + ms_since(t);
-        stats.rebuild = true;
-
-        let t = Instant::now();
-        self.dirty.reset(self.triangles.len());
-        if self.settings.lod.needs_log2_pb() {
-            stats.lod_recomputed = self.recompute_all_log2_pb(&states) + self.placed_textured();
-        }
-        stats.lod_update_ms = ms_since(t);
-        self.instances = Some(states);
-        Ok(())
-    }
-
-    /// Each instance's placement now; a deforming instance has no shape key (its `log2 P_b`
-    /// always comes from its world vertices).
-    fn instance_states(&self, scales: &[Option<NodeShape>]) -> Vec<InstanceState> {
-        self.geometry
-            .instances
-            .iter()
-            .zip(&self.deforms)
-            .map(|(inst, &source)| InstanceState {
-                world_from_object: self.pose.world_from_node[inst.node as usize],
-                shape: match source {
-                    VertexSource::Deformed => None,
-                    VertexSource::Placed => scales[inst.node as usize],
-                },
-            })
-            .collect()
+        self.index_slots(setup);
+        self.place_instances(setup, animation.instances(), Which::All)?;
+        changes.dirty.reset(self.triangles.len());
+        self.carried = true;
+        Ok(BuildTimes {
+            write_ms,
+            build_ms: two_level_ms + ms_since(t),
+        })
     }
 
     /// Inverts `triangles.source` (sources without a slot, instances of shared meshes
-    /// under the two-level BVH, map to `u32::MAX`) and remakes the per-slot texel areas.
-    fn index_slots(&mut self) {
+    /// under the two-level BVH, map to `u32::MAX`).
+    fn index_slots(&mut self, setup: &FrameSetup) {
         self.slot_of_source.clear();
         self.slot_of_source
-            .resize(self.geometry.triangle_count(), u32::MAX);
+            .resize(setup.geometry.triangle_count(), u32::MAX);
         for (slot, &source) in self.triangles.source.iter().enumerate() {
             self.slot_of_source[source as usize] = slot as u32;
         }
-        self.index_texel_terms();
     }
 
-    /// Rewrites the triangles of every instance whose placement or deformation changed and
-    /// records them in the dirty set.
-    pub(super) fn update_moved(&mut self, scales: &[Option<NodeShape>], stats: &mut UpdateStats) {
+    /// Places the two-level structure's instances (nothing under the flat tree).
+    fn place_instances(
+        &mut self,
+        setup: &FrameSetup,
+        states: &[InstanceState],
+        which: Which,
+    ) -> Result<(), AccelError> {
+        match &mut self.two_level {
+            Some(two) => two.place_instances(setup, states, which),
+            None => Ok(()),
+        }
+    }
+
+    /// The first frame's `lod_recomputed` share of the two-level structure's placed
+    /// instances (0 under the flat tree).
+    pub fn placed_textured(&self) -> usize {
+        self.two_level.as_ref().map_or(0, TwoLevel::placed_textured)
+    }
+
+    /// The dirty step: rewrites the triangles of every instance whose placement or
+    /// deformation changed since the previous frame and records them in `changes`.
+    pub fn mark_moved(
+        &mut self,
+        setup: &FrameSetup,
+        animation: &AnimationState,
+        changes: &mut FrameChanges,
+    ) -> DirtyTimes {
         let t = Instant::now();
-        self.dirty.reset(self.triangles.len());
-        let previous = self.instances.take().unwrap_or_default();
-        let current = self.instance_states(scales);
-        self.placed_changes = self.placed_changes(&current, &previous);
-        let visited = self.plan_rewrites(&current, &previous);
-        self.instances = Some(current);
-        stats.dirty_ms = ms_since(t);
+        changes.dirty.reset(self.triangles.len());
+        let (current, previous) = (animation.instances(), animation.previous_instances());
+        changes.placed = match &self.two_level {
+            Some(two) => two.placed_changes(setup, current, previous),
+            None => Default::default(),
+        };
+        let visited = self.plan_rewrites(setup, animation);
+        let mut dirty_ms = ms_since(t);
 
         let t = Instant::now();
-        self.pose_planned();
-        self.write_planned(visited);
-        stats.animate_ms = ms_since(t);
+        self.pose_planned(setup, animation);
+        changes.moved_nonfinite = self.write_planned(setup, visited);
+        let write_ms = ms_since(t);
 
         let t = Instant::now();
-        self.list_dirty(visited);
-        stats.dirty_ms += ms_since(t);
+        self.list_dirty(setup, visited, changes);
+        dirty_ms += ms_since(t);
+        DirtyTimes { dirty_ms, write_ms }
     }
 
     /// Decides each instance's [`Rewrite`] from its placement now and before (and records
     /// the placement of those to rewrite); returns how many triangles the write visits.
-    fn plan_rewrites(&mut self, current: &[InstanceState], previous: &[InstanceState]) -> usize {
-        let UpdateScratch { posed, plan, .. } = &mut self.update;
+    fn plan_rewrites(&mut self, setup: &FrameSetup, animation: &AnimationState) -> usize {
+        let UpdateScratch { posed, plan, .. } = &mut self.scratch;
+        let (current, previous) = (animation.instances(), animation.previous_instances());
         posed.resize(current.len());
         plan.clear();
         let mut visited = 0;
@@ -208,13 +272,13 @@ impl Renderer {
                 .is_some_and(|two| two.mesh_of[i].is_some())
         };
         for (i, (now, before)) in current.iter().zip(previous).enumerate() {
-            let rewrite = if self.deforms[i] == VertexSource::Deformed {
+            let rewrite = if setup.deforms[i] == VertexSource::Deformed {
                 let same = same_deformation(
-                    &self.scene,
-                    &self.geometry,
+                    &setup.scene,
+                    &setup.geometry,
                     i,
-                    &self.pose,
-                    &self.previous_pose,
+                    animation.pose(),
+                    animation.previous_pose(),
                 );
                 if same {
                     Rewrite::Keep
@@ -230,7 +294,7 @@ impl Renderer {
                 Rewrite::All(placed_motion(now.shape, before.shape))
             };
             if rewrite != Rewrite::Keep {
-                visited += self.geometry.instance_triangles[i].len();
+                visited += setup.geometry.instance_triangles[i].len();
             }
             plan.push(rewrite);
         }
@@ -239,47 +303,48 @@ impl Renderer {
 
     /// Writes the world-space vertices of the planned instances (skinned or morphed, then
     /// placed; or rest vertices placed), on rayon's threads when there are enough of them.
-    fn pose_planned(&mut self) {
-        let UpdateScratch { posed, plan, .. } = &mut self.update;
+    fn pose_planned(&mut self, setup: &FrameSetup, animation: &AnimationState) {
+        let UpdateScratch { posed, plan, .. } = &mut self.scratch;
         let planned = |i: usize| plan[i] != Rewrite::Keep;
         let vertices: usize = (0..plan.len())
             .filter(|&i| planned(i))
-            .map(|i| self.geometry.primitive(&self.scene, i).positions.len())
+            .map(|i| setup.geometry.primitive(&setup.scene, i).positions.len())
             .sum();
         posed.pose(
-            &self.scene,
-            &self.geometry,
-            &self.pose,
-            &self.deforms,
+            &setup.scene,
+            &setup.geometry,
+            animation.pose(),
+            &setup.deforms,
             planned,
-            self.parallelism.splits(vertices),
+            setup.parallelism.splits(vertices),
         );
     }
 
     /// Writes the triangles of the planned instances into their slots and records each
-    /// written triangle's motion in `source_motion`. Triangles are visited in source order (reads
-    /// stay sequential); in parallel, instances and chunks of their triangles run as
-    /// separate tasks, writing distinct slots (`scatter`).
-    fn write_planned(&mut self, visited: usize) {
+    /// written triangle's motion in `source_motion`; returns whether a moved triangle got a
+    /// non-finite vertex. Triangles are visited in source order (reads stay sequential); in
+    /// parallel, instances and chunks of their triangles run as separate tasks, writing
+    /// distinct slots (`scatter`).
+    fn write_planned(&mut self, setup: &FrameSetup, visited: usize) -> bool {
         let UpdateScratch {
             posed,
             plan,
             source_motion,
-            moved_nonfinite,
             uv_flips,
             ..
-        } = &mut self.update;
-        source_motion.resize(self.geometry.triangle_count(), None);
+        } = &mut self.scratch;
+        let geometry = &setup.geometry;
+        source_motion.resize(geometry.triangle_count(), None);
         let writer = TriangleWriter {
-            geometry: &self.geometry,
+            geometry,
             posed,
             plan,
             uv_flips,
             moved_nonfinite: AtomicBool::new(false),
         };
-        let ranges = &self.geometry.instance_triangles;
+        let ranges = &geometry.instance_triangles;
         let slot_of_source = &self.slot_of_source;
-        if self.parallelism.splits(visited) {
+        if setup.parallelism.splits(visited) {
             let slots = SlotScatter::new(&mut self.triangles, source_motion);
             plan.par_iter()
                 .enumerate()
@@ -324,35 +389,40 @@ impl Renderer {
                 }
             }
         }
-        *moved_nonfinite = writer.moved_nonfinite.into_inner();
+        let moved_nonfinite = writer.moved_nonfinite.into_inner();
         for (i, rewrite) in plan.iter().enumerate() {
             if *rewrite != Rewrite::Keep {
                 uv_flips[i] = Some(posed.placement(i).flips_winding);
             }
         }
+        moved_nonfinite
     }
 
     /// Lists the slots the write marked in the dirty set, in source-triangle order (the
     /// order of instances, then of their triangles), and clears the marks; notes which runs
     /// of the list the deforming instances gave.
-    fn list_dirty(&mut self, visited: usize) {
+    fn list_dirty(&mut self, setup: &FrameSetup, visited: usize, changes: &mut FrameChanges) {
         let UpdateScratch {
             plan,
             source_motion,
             listed,
+            ..
+        } = &mut self.scratch;
+        let FrameChanges {
+            dirty,
             deformed_entries,
             reshaped_entries,
             ..
-        } = &mut self.update;
-        let ranges = &self.geometry.instance_triangles;
+        } = changes;
+        let ranges = &setup.geometry.instance_triangles;
         let visited_instances = || {
             plan.iter()
                 .enumerate()
                 .filter(|(_, r)| **r != Rewrite::Keep)
                 .map(|(i, _)| i)
         };
-        if self.parallelism.splits(visited) {
-            self.dirty.assign_in_source_order(
+        if setup.parallelism.splits(visited) {
+            dirty.assign_in_source_order(
                 visited_instances().map(|i| ranges[i].clone()),
                 source_motion,
                 &self.slot_of_source,
@@ -361,14 +431,13 @@ impl Renderer {
         } else {
             listed.clear();
             for i in visited_instances() {
-                let before = self.dirty.len();
+                let before = dirty.len();
                 for source in ranges[i].clone() {
                     if let Some(motion) = source_motion[source as usize].take() {
-                        self.dirty
-                            .mark(self.slot_of_source[source as usize], motion);
+                        dirty.mark(self.slot_of_source[source as usize], motion);
                     }
                 }
-                listed.push(self.dirty.len() - before);
+                listed.push(dirty.len() - before);
             }
         }
         deformed_entries.clear();
@@ -392,11 +461,11 @@ impl Renderer {
     }
 
     /// A moved vertex that came out NaN or infinite stops the frame (never a NaN pixel).
-    pub(super) fn check_moved_finite(&self) -> Result<(), AccelError> {
-        if !self.update.moved_nonfinite {
+    pub fn check_moved_finite(&self, changes: &FrameChanges) -> Result<(), AccelError> {
+        if !changes.moved_nonfinite {
             return Ok(()); // the write saw none: skip the scan
         }
-        for &slot in &self.dirty.slots {
+        for &slot in &changes.dirty.slots {
             let tri = self.triangles.positions[slot as usize];
             if let Some(v) = tri.iter().find(|v| !v.is_finite()) {
                 return Err(AccelError::NonFiniteVertex {
@@ -408,54 +477,59 @@ impl Renderer {
         Ok(())
     }
 
-    /// Refits the tree to the dirty triangles, or rebuilds it when the policy asks (the
-    /// decision is `Accel::refit_or_rebuild`'s; the rebuild is here because it reorders the
-    /// triangle slots and the dirty set must follow).
-    pub(super) fn update_accel(&mut self, stats: &mut UpdateStats) -> Result<(), AccelError> {
+    /// The refit-or-rebuild step: refits the tree to the dirty triangles, or rebuilds it
+    /// when the policy asks (the decision is `Accel::refit_or_rebuild`'s; the rebuild is
+    /// here because it reorders the triangle slots and the dirty set must follow); under
+    /// two-level, rebuilds the top-level tree when a placed instance moved.
+    pub fn refit_or_rebuild(
+        &mut self,
+        setup: &FrameSetup,
+        animation: &AnimationState,
+        changes: &mut FrameChanges,
+    ) -> Result<TreeUpdate, AccelError> {
+        let mut update = TreeUpdate::default();
         let step =
             self.accel
-                .refit_or_rebuild(&self.triangles, &self.dirty.slots, self.settings.bvh);
+                .refit_or_rebuild(&self.triangles, &changes.dirty.slots, setup.settings.bvh);
         match step {
             TreeStep::Unchanged => {}
-            TreeStep::Refitted { refit_ms } => stats.refit_ms = refit_ms,
+            TreeStep::Refitted { refit_ms } => update.refit_ms = refit_ms,
             TreeStep::Rebuild { refit_ms } => {
-                stats.refit_ms = refit_ms;
-                self.rebuild_accel(stats)?;
+                update.refit_ms = refit_ms;
+                update.build_ms = Some(self.rebuild(setup, changes)?);
             }
         }
-        if self.two_level.is_some() && self.placed_changes.moved > 0 {
+        if self.two_level.is_some() && changes.placed.moved > 0 {
             // The top-level tree over the new placements: counted as refit.
             let t = Instant::now();
-            let states = self.instances.take().unwrap_or_default();
-            let placed = self.place_instances(&states, Which::Moving);
-            self.instances = Some(states);
-            placed?;
-            stats.refit_ms += ms_since(t);
+            self.place_instances(setup, animation.instances(), Which::Moving)?;
+            update.refit_ms += ms_since(t);
         }
-        Ok(())
+        Ok(update)
     }
 
     /// Builds a fresh tree over the moved triangles; the dirty marks follow their triangles
-    /// into the new slot order (by source triangle).
-    fn rebuild_accel(&mut self, stats: &mut UpdateStats) -> Result<(), AccelError> {
+    /// into the new slot order (by source triangle). Returns the milliseconds it took.
+    fn rebuild(
+        &mut self,
+        setup: &FrameSetup,
+        changes: &mut FrameChanges,
+    ) -> Result<f64, AccelError> {
         let t = Instant::now();
-        let moved: Vec<(u32, Motion)> = self
-            .dirty
+        let dirty = &mut changes.dirty;
+        let moved: Vec<(u32, Motion)> = dirty
             .slots
             .iter()
-            .zip(&self.dirty.motions)
+            .zip(&dirty.motions)
             .map(|(&slot, &m)| (self.triangles.source[slot as usize], m))
             .collect();
         self.accel = Accel::build(&mut self.triangles)?;
-        self.index_slots();
-        self.dirty.reset(self.triangles.len());
+        self.index_slots(setup);
+        dirty.reset(self.triangles.len());
         for (source, motion) in moved {
-            self.dirty
-                .mark(self.slot_of_source[source as usize], motion);
+            dirty.mark(self.slot_of_source[source as usize], motion);
         }
-        stats.build_ms = ms_since(t);
-        stats.rebuild = true;
-        Ok(())
+        Ok(ms_since(t))
     }
 }
 

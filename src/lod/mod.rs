@@ -1,8 +1,9 @@
 //! Texture level-of-detail selection: one file per method, all behind [`RayLod`].
 //!
 //! Every ray carries the state its method needs (its "LOD payload"): nothing for `none`, the
-//! path length for `paper` and `paper-cos`, a cone (width, spread angle) for `cones`, four
-//! differential vectors for `diffs` and `diffs-aniso`. The integrator is generic over the
+//! path length for `paper` (and its pixel's two widths for `paper-cos`), a cone (width,
+//! spread angle, radial ratio) for `cones`, four differential vectors for `diffs`,
+//! `diffs-aniso` and `diffs-ewa`. The integrator is generic over the
 //! state, so each method pays only for its own payload and arithmetic (the dispatch on
 //! [`LodMethod`] happens once per primary ray).
 //!
@@ -17,17 +18,20 @@
 mod cones;
 mod diffs;
 mod diffs_aniso;
+mod diffs_ewa;
 pub mod log2;
 mod none;
 mod paper;
 mod paper_cos;
 mod pb;
+mod pixel;
 #[cfg(test)]
 mod test_support;
 
 pub use cones::RayCone;
 pub use diffs::{RayDiffs, TexelGradients};
 pub use diffs_aniso::RayDiffsAniso;
+pub use diffs_ewa::{EllipticalFootprint, RayDiffsEwa};
 pub use none::NoLod;
 pub use paper::PathLength;
 pub use paper_cos::PathLengthCos;
@@ -35,6 +39,7 @@ pub use pb::{
     LOG2_PB_LIMIT, PixelFootprint, cross_squared, log2_pb, log2_pb_from_parts,
     log2_pb_with_texel_term, shift_log2_pb, texel_area, texel_term, uv_area,
 };
+pub use pixel::{PixelWidths, footprint_longest_axis};
 
 use std::fmt;
 use std::str::FromStr;
@@ -51,16 +56,20 @@ pub enum LodMethod {
     None,
     /// Park & Kim: `log2(path length) - log2 P_b`.
     Paper,
-    /// Park & Kim plus the incidence term of ray cones: `- log2 max(|n.d|, 1/16)`.
+    /// Park & Kim plus the incidence term of ray cones (`- log2 max(|n.d|, 1/16)` on the
+    /// axis), with each primary ray's own pixel: exact on a facing plane at any field of view.
     PaperCos,
-    /// Ray cones (Akenine-Moller et al. 2019/2021): width and spread angle, curvature
-    /// spread at mirrors, refraction of the spread.
+    /// Ray cones (Akenine-Moller et al. 2019/2021): width and spread angle of each primary
+    /// ray's own pixel, curvature spread at mirrors, refraction of the spread.
     Cones,
     /// Igehy's ray differentials; isotropic level, OpenGL convention.
     Diffs,
     /// Ray differentials with anisotropic filtering: up to 16 trilinear taps along the
     /// footprint's major axis.
     DiffsAniso,
+    /// Ray differentials with EWA filtering (pbrt-v4's): a Gaussian over the footprint's
+    /// ellipse in the level of its minor axis, anisotropy up to 16.
+    DiffsEwa,
 }
 
 /// Smallest `|n.d|` the incidence term uses (anisotropy 16, as the OptiX toolkit clamps),
@@ -75,13 +84,14 @@ pub const MAX_ANISOTROPY: u32 = 16;
 pub const COARSEST_LEVEL: f32 = 1024.0;
 
 impl LodMethod {
-    pub const ALL: [LodMethod; 6] = [
+    pub const ALL: [LodMethod; 7] = [
         LodMethod::None,
         LodMethod::Paper,
         LodMethod::PaperCos,
         LodMethod::Cones,
         LodMethod::Diffs,
         LodMethod::DiffsAniso,
+        LodMethod::DiffsEwa,
     ];
 
     pub fn as_str(self) -> &'static str {
@@ -92,6 +102,7 @@ impl LodMethod {
             LodMethod::Cones => "cones",
             LodMethod::Diffs => "diffs",
             LodMethod::DiffsAniso => "diffs-aniso",
+            LodMethod::DiffsEwa => "diffs-ewa",
         }
     }
 
@@ -161,6 +172,10 @@ macro_rules! with_lod_state {
             }
             $crate::lod::LodMethod::DiffsAniso => {
                 type $L = $crate::lod::RayDiffsAniso;
+                $body
+            }
+            $crate::lod::LodMethod::DiffsEwa => {
+                type $L = $crate::lod::RayDiffsEwa;
                 $body
             }
         }
@@ -327,6 +342,13 @@ pub enum Footprint {
     /// `taps` trilinear lookups at `level`, spread evenly over `axis` (a texture-coordinate
     /// offset spanning the footprint's major axis, centred on the hit), averaged.
     Anisotropic { level: f32, axis: Vec2, taps: u32 },
+    /// EWA over the ellipse with conjugate semi-axes `major` and `minor` (texture-coordinate
+    /// offsets per pixel), in the levels around `level`, the minor axis's level.
+    Elliptical {
+        level: f32,
+        major: Vec2,
+        minor: Vec2,
+    },
 }
 
 impl Footprint {
@@ -334,7 +356,9 @@ impl Footprint {
     pub fn level(&self) -> f32 {
         match *self {
             Footprint::Base => 0.0,
-            Footprint::Level(level) | Footprint::Anisotropic { level, .. } => level,
+            Footprint::Level(level)
+            | Footprint::Anisotropic { level, .. }
+            | Footprint::Elliptical { level, .. } => level,
         }
     }
 }
@@ -442,8 +466,10 @@ mod tests {
     fn payload_sizes_are_as_documented() {
         assert_eq!(LodMethod::None.bytes_per_ray(), 0);
         assert_eq!(LodMethod::Paper.bytes_per_ray(), 4);
-        assert_eq!(LodMethod::Cones.bytes_per_ray(), 8);
+        assert_eq!(LodMethod::PaperCos.bytes_per_ray(), 12);
+        assert_eq!(LodMethod::Cones.bytes_per_ray(), 12);
         assert_eq!(LodMethod::Diffs.bytes_per_ray(), 48);
+        assert_eq!(LodMethod::DiffsEwa.bytes_per_ray(), 48);
     }
 
     #[test]

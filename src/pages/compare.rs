@@ -149,7 +149,7 @@ fn write_heat_map(reference: &Path, test: &Path, out: &Path) -> Result<(), PageE
         path: folder.to_path_buf(),
         source,
     })?;
-    crate::output::write_rgb8_atomically(out, &crate::metrics::heat_map(&error_map))
+    crate::atomic_file::write_rgb8_atomically(out, &crate::metrics::heat_map(&error_map))
         .map_err(|e| PageError::input(out, e.to_string()))
 }
 

@@ -5,9 +5,10 @@
 //! a swipe divider, FLIP heat map, LOD view) and [`write_diff_page`] (`mipray diff`: frames
 //! worst first, swipe and toggle, metrics, verdict).
 //!
-//! The pages read back the files the command already wrote (`stats*.jsonl`, `compare.csv`,
-//! `compare_frames.csv`, `compare.md`, `diff.csv`, the PNG/SVG files), so they depend on
-//! the file formats, not on the types that wrote them. Each page is static and
+//! The pages read back the files the command already wrote (the stats files, through
+//! their one reader [`crate::record`]; `compare.csv`, `compare_frames.csv`, `compare.md`,
+//! `diff.csv`, the PNG/SVG files), so they depend on the file formats, not on the code
+//! that wrote them. Each page is static and
 //! self-contained apart from links to images relative to its folder: hand-written CSS and
 //! JavaScript are inlined (`assets/`), nothing is fetched from the network, and the page
 //! works from `file://`. The scripts record errors and image loads on `<html>` (`data-errors`,
@@ -39,6 +40,9 @@ pub enum PageError {
     /// An input file is malformed or missing what the page needs.
     #[error("{path}: {message}")]
     Input { path: PathBuf, message: String },
+    /// The stats files could not be read (the error names the file and line).
+    #[error(transparent)]
+    Stats(#[from] crate::record::StatsFileError),
 }
 
 impl PageError {

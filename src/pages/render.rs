@@ -2,55 +2,49 @@
 //! per-frame phase times and triangle counts as a chart with the current frame marked, the
 //! current frame's stats record, and the summary (preprocessing share, rebuilds, rays/s).
 //!
-//! Records come from every `stats*.jsonl` in the given folders (shards merged; when a frame
-//! has several records, the last one read wins, as in `mipray report`). Each frame shows
+//! Records come from the stats files of the given folders, read by
+//! [`crate::record::load_sequence`] as `mipray report` reads them (shards merged; when a
+//! frame has several records, the last one read wins); each frame shows its line as read. Each frame shows
 //! `frame_NNNN.png`, or for EXR sequences the `preview_NNNN.png` written beside it, and
 //! `lod_NNNN.png` when `--view lod` wrote one.
 
-use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
 use serde_json::{Map, Value, json};
 
 use super::html::{document, escape, json_data, relative_url};
 use super::{PageError, write_page};
+use crate::record::{Phase, Record, load_sequence};
 
 const RENDER_JS: &str = include_str!("assets/render.js");
-
-/// Phase times (ms) that sum to the frame's preprocessing, as in `summary.json`.
-const PREPROCESSING_FIELDS: [&str; 5] = [
-    "animate_ms",
-    "dirty_ms",
-    "refit_ms",
-    "build_ms",
-    "lod_update_ms",
-];
 
 /// Writes `page_dir/index.html` for the sequence whose stats files and frames are in `dirs`
 /// (folders, or stats files whose folder holds the frames); frames are linked relative to
 /// `page_dir`, and `plot` (the `mipray report` SVG) is shown when given.
 ///
 /// # Errors
-/// No stats record is found, a stats line (other than a torn last one) is not a JSON object
-/// with a `frame` number, or a file cannot be read or written.
+/// The stats files cannot be read (see [`crate::record::load_sequence`]: no stats file or
+/// no record, a line other than a torn last one that is not a record), or a file cannot be
+/// read or written.
 pub fn write_render_page(
     dirs: &[PathBuf],
     page_dir: &Path,
     plot: Option<&Path>,
 ) -> Result<PathBuf, PageError> {
     let page_dir = super::non_empty(page_dir);
-    let records = merged_records(dirs)?;
+    let records = load_sequence(dirs)?.records;
     let folders: Vec<PathBuf> = dirs.iter().map(|d| frame_folder(d)).collect();
     let mut frames = Vec::with_capacity(records.len());
-    for (&frame, record) in &records {
+    for record in &records {
+        let frame = record.frame();
         frames.push(json!({
             "frame": frame,
             "image": find_image(&folders, page_dir, &[&format!("frame_{frame:04}.png"), &format!("preview_{frame:04}.png")])?,
             "lod": find_image(&folders, page_dir, &[&format!("lod_{frame:04}.png")])?,
-            "stats": record,
+            "stats": record.line(),
         }));
     }
-    let records: Vec<&Map<String, Value>> = records.values().collect();
+    let records: Vec<&Map<String, Value>> = records.iter().map(Record::line).collect();
     let summary = summary_of(&records);
     let plot = match plot {
         Some(p) if p.is_file() => Some(relative_url(page_dir, p)?),
@@ -72,86 +66,6 @@ fn frame_folder(path: &Path) -> PathBuf {
     } else {
         path.parent().map(Path::to_path_buf).unwrap_or_default()
     }
-}
-
-/// Every record of the stats files in `dirs` by frame; a later record of a frame replaces
-/// an earlier one.
-fn merged_records(dirs: &[PathBuf]) -> Result<BTreeMap<u64, Map<String, Value>>, PageError> {
-    let mut records = BTreeMap::new();
-    for path in dirs
-        .iter()
-        .map(|d| stats_files(d))
-        .collect::<Result<Vec<_>, _>>()?
-        .concat()
-    {
-        for record in read_stats(&path)? {
-            let frame = record
-                .get("frame")
-                .and_then(Value::as_u64)
-                .unwrap_or_default();
-            records.insert(frame, record);
-        }
-    }
-    if records.is_empty() {
-        let dir = dirs.first().cloned().unwrap_or_default();
-        return Err(PageError::input(
-            &dir,
-            "no frame records (stats*.jsonl) to show",
-        ));
-    }
-    Ok(records)
-}
-
-/// `stats.jsonl` and `stats.shard-I-of-N.jsonl` in a folder (sorted by name), or the file.
-fn stats_files(path: &Path) -> Result<Vec<PathBuf>, PageError> {
-    if !path.is_dir() {
-        return Ok(vec![path.to_path_buf()]);
-    }
-    let entries = std::fs::read_dir(path).map_err(|source| PageError::Io {
-        path: path.to_path_buf(),
-        source,
-    })?;
-    let mut files: Vec<PathBuf> = entries
-        .flatten()
-        .map(|e| e.path())
-        .filter(|p| {
-            let name = p
-                .file_name()
-                .map(|n| n.to_string_lossy().into_owned())
-                .unwrap_or_default();
-            name.starts_with("stats") && name.ends_with(".jsonl")
-        })
-        .collect();
-    files.sort();
-    Ok(files)
-}
-
-/// The JSON objects of a stats file; a torn last line (an interrupted run) is skipped.
-fn read_stats(path: &Path) -> Result<Vec<Map<String, Value>>, PageError> {
-    let text = std::fs::read_to_string(path).map_err(|source| PageError::Io {
-        path: path.to_path_buf(),
-        source,
-    })?;
-    let lines: Vec<&str> = text.lines().filter(|l| !l.trim().is_empty()).collect();
-    let mut records = Vec::with_capacity(lines.len());
-    for (i, line) in lines.iter().enumerate() {
-        match serde_json::from_str::<Value>(line) {
-            Ok(Value::Object(record)) if record.get("frame").is_some_and(Value::is_u64) => {
-                records.push(record)
-            }
-            _ if i + 1 == lines.len() && !text.ends_with('\n') => {}
-            _ => {
-                return Err(PageError::input(
-                    path,
-                    format!(
-                        "line {}: not a frame record (a JSON object with a \"frame\" number)",
-                        i + 1
-                    ),
-                ));
-            }
-        }
-    }
-    Ok(records)
 }
 
 /// The first of `names` found in `folders`, as a URL relative to the page; `null` if none.
@@ -185,7 +99,7 @@ fn summary_of(records: &[&Map<String, Value>]) -> PageSummary {
     let sum = |key: &str| records.iter().map(|r| number(r, key)).sum::<f64>();
     let total_ms = sum("total_ms");
     let render_ms = sum("render_ms");
-    let preprocessing: f64 = PREPROCESSING_FIELDS.iter().map(|k| sum(k)).sum();
+    let preprocessing: f64 = Phase::ALL.iter().map(|p| sum(p.field_name())).sum();
     let text = |key: &str| {
         records
             .first()
@@ -306,38 +220,18 @@ mod tests {
     }
 
     #[test]
-    fn shards_merge_and_a_later_record_of_a_frame_wins() {
-        let dir = tempfile::tempdir().unwrap();
-        let line = |r: Map<String, Value>| Value::Object(r).to_string() + "\n";
-        std::fs::write(
-            dir.path().join("stats.shard-0-of-2.jsonl"),
-            line(record(0, 10.0, true)),
-        )
-        .unwrap();
-        std::fs::write(
-            dir.path().join("stats.shard-1-of-2.jsonl"),
-            line(record(1, 6.0, false)) + &line(record(1, 7.0, false)) + "{\"frame\": 2, \"tor",
-        )
-        .unwrap();
-        let records = merged_records(&[dir.path().to_path_buf()]).unwrap();
-        assert_eq!(
-            records.keys().copied().collect::<Vec<_>>(),
-            [0, 1],
-            "torn line skipped"
-        );
-        assert_eq!(records[&1]["total_ms"], 7.0);
-    }
-
-    #[test]
     fn a_bad_stats_line_names_the_file_and_line() {
         let dir = tempfile::tempdir().unwrap();
         std::fs::write(dir.path().join("stats.jsonl"), "[1]\n{\"frame\": 1}\n").unwrap();
-        let message = merged_records(&[dir.path().to_path_buf()])
+        let message = write_render_page(&[dir.path().to_path_buf()], dir.path(), None)
             .unwrap_err()
             .to_string();
-        assert!(message.contains("stats.jsonl: line 1"), "{message}");
+        assert!(
+            message.ends_with("stats.jsonl:1: not a JSON object"),
+            "{message}"
+        );
         let empty = tempfile::tempdir().unwrap();
-        assert!(merged_records(&[empty.path().to_path_buf()]).is_err());
+        assert!(write_render_page(&[empty.path().to_path_buf()], empty.path(), None).is_err());
     }
 
     #[test]

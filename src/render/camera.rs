@@ -174,4 +174,50 @@ mod tests {
         assert!((dx - fd_x).length() < 1e-3 * dx.length(), "{dx} vs {fd_x}");
         assert!((dy - fd_y).length() < 1e-3 * dy.length(), "{dy} vs {fd_y}");
     }
+
+    #[test]
+    fn lod_pixel_widths_are_the_singular_values_of_the_pixel_in_directions() {
+        // The pixel square maps to a small patch of directions with Jacobian
+        // [dD/dx, dD/dy]; its singular values are the patch's tangential and radial widths,
+        // `k cos(theta)` and `k cos^2(theta)`.
+        for (yfov, (px, py)) in [
+            (1.0f32, (10.3f32, 40.7f32)),
+            (2.0, (0.5, 0.5)),
+            (3.0, (60.0, 5.5)),
+            (3.0, (32.0, 24.0)),
+        ] {
+            let camera = Camera::look(
+                Vec3::ZERO,
+                Vec3::new(0.2, -0.1, -1.0),
+                Vec3::Y,
+                yfov,
+                64,
+                48,
+            );
+            let lod = crate::lod::LodCamera::new(&camera.view_frame());
+            let h = 1e-2;
+            let dx = (camera.primary_direction(px + h, py) - camera.primary_direction(px - h, py))
+                / (2.0 * h);
+            let dy = (camera.primary_direction(px, py + h) - camera.primary_direction(px, py - h))
+                / (2.0 * h);
+            let (a, b, c) = (dx.dot(dx), dx.dot(dy), dy.dot(dy));
+            let root = (0.25 * (a - c) * (a - c) + b * b).sqrt();
+            let (larger, smaller) = (
+                (0.5 * (a + c) + root).sqrt(),
+                (0.5 * (a + c) - root).max(0.0).sqrt(),
+            );
+            let widths = lod.pixel_widths(px, py);
+            let k = lod.spread;
+            let what =
+                format!("yfov {yfov} at ({px}, {py}): {larger}, {smaller} vs {widths:?} k {k}");
+            assert!(
+                (larger - k * widths.tangential).abs() < 2e-3 * larger,
+                "{what}"
+            );
+            assert!(
+                (smaller - k * widths.radial).abs() < 2e-3 * larger,
+                "{what}"
+            );
+        }
+    }
 }

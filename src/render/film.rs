@@ -5,10 +5,9 @@
 //! of pixel and sample index, not from a shared random state) and tiles are reassembled in
 //! a fixed order, so the image is byte-identical whatever the thread count.
 
-use glam::{Vec3, Vec3A};
+use glam::Vec3;
 use rayon::prelude::*;
 
-use crate::accel::PACKET;
 use crate::lod::{RayLod, with_lod_state};
 use crate::render::camera::Camera;
 use crate::render::integrator::{FrameScene, TraceCounters};
@@ -108,10 +107,7 @@ fn render_tile(
     with_lod_state!(scene.lod, L => render_tile_with::<L>(scene, camera, spp, x0, y0, record))
 }
 
-/// One tile's pixels, row by row. Primary rays are traced as packets of up to
-/// [`PACKET`] (pixel by pixel, each pixel's samples in order: a 16 x 4 block at one sample
-/// per pixel), then shaded one by one; each pixel sums its samples in sample order, so the
-/// result is the same as tracing each ray alone.
+/// One tile's pixels, row by row, traced breadth first (`render::tile`).
 fn render_tile_with<L: RayLod>(
     scene: &FrameScene,
     camera: &Camera,
@@ -120,60 +116,12 @@ fn render_tile_with<L: RayLod>(
     y0: u32,
     record: bool,
 ) -> (Vec<Vec3>, TraceCounters) {
-    let x1 = (x0 + TILE).min(camera.width);
-    let y1 = (y0 + TILE).min(camera.height);
     let mut counters = if record {
         TraceCounters::recording()
     } else {
         TraceCounters::default()
     };
-    let mut pixels = Vec::with_capacity(((x1 - x0) * (y1 - y0)) as usize);
-    let mut samples = (y0..y1)
-        .flat_map(|y| (x0..x1).map(move |x| (x, y)))
-        .flat_map(|(x, y)| (0..spp).map(move |i| (x, y, i)));
-    let mut film_points = [(0.0f32, 0.0f32); PACKET];
-    let mut pixel_of = [0u32; PACKET];
-    let mut rays = [(Vec3A::ZERO, Vec3A::ZERO); PACKET];
-    let mut hits = [None; PACKET];
-    let mut sum = Vec3A::ZERO;
-    let mut summed = 0;
-    loop {
-        let mut n = 0;
-        for (x, y, i) in samples.by_ref().take(PACKET) {
-            let (sx, sy) = sample_offset(x, y, i, spp);
-            let point = (x as f32 + sx, y as f32 + sy);
-            film_points[n] = point;
-            pixel_of[n] = y * camera.width + x;
-            rays[n] = (camera.eye, camera.primary_direction(point.0, point.1));
-            n += 1;
-        }
-        if n == 0 {
-            break;
-        }
-        scene
-            .bvh
-            .closest_hits(&rays[..n], f32::INFINITY, &mut hits[..n]);
-        for k in 0..n {
-            counters.set_pixel(pixel_of[k]);
-            let radiance = scene.primary_radiance_at::<L>(
-                camera,
-                film_points[k],
-                rays[k].1,
-                hits[k],
-                &mut counters,
-            );
-            if radiance.is_finite() {
-                sum += radiance.max(Vec3A::ZERO);
-            } else {
-                counters.nonfinite_samples += 1;
-            }
-            summed += 1;
-            if summed == spp {
-                pixels.push(Vec3::from(sum / spp as f32));
-                (sum, summed) = (Vec3A::ZERO, 0);
-            }
-        }
-    }
+    let pixels = crate::render::tile::trace_tile::<L>(scene, camera, spp, (x0, y0), &mut counters);
     (pixels, counters)
 }
 

@@ -5,16 +5,23 @@
 //!
 //! Every ray carries its LOD method's state (`lod::RayLod`: the path length for `paper`, a
 //! cone, or differentials); at a textured hit the method turns it into a texture lookup. The
-//! integrator is generic over that state, so each method pays only for its own. No
-//! allocation per ray: recursion lives on the stack and per-tile counters are plain arrays.
+//! integrator is generic over that state, so each method pays only for its own.
+//!
+//! Shading a hit is split in two steps so that a tile can trace its rays breadth first
+//! (`render::tile`): [`FrameScene::arrive`] makes the surface, looks up the texture and asks
+//! for the shadow rays ([`ShadowRequest`]); once those are traced, [`FrameScene::finish`]
+//! sums the direct light and spawns the reflected and refracted rays, and records how the
+//! hit's radiance combines with theirs ([`Combine`]). Evaluated bottom up, `Combine` performs
+//! the same floating-point operations in the same order as a depth-first recursion would
+//! (`color += weight * child`, the glass terms summed from zero before they are added), so
+//! the image does not depend on the order in which rays are traced.
 
-use glam::{Vec3, Vec3A};
+use glam::Vec3A;
 
 use crate::accel::Hit;
 use crate::geometry::HitTriangle;
 use crate::lod::{Footprint, LodCamera, LodMethod, RayLod, SurfaceHit, finite_level};
-use crate::render::camera::Camera;
-use crate::render::light::Light;
+use crate::render::light::{Incident, Light};
 use crate::render::material::{Material, ShadingModel};
 use crate::render::ray_log::{RayClass, RayLog};
 use crate::render::scene_bvh::SceneBvh;
@@ -29,7 +36,7 @@ const MIN_WEIGHT: f32 = 1e-3;
 
 /// Glass surfaces a shadow ray passes through before it counts as blocked (a fixed bound
 /// keeps the per-ray state on the stack).
-const MAX_SHADOW_GLASS: usize = 16;
+pub(super) const MAX_SHADOW_GLASS: usize = 16;
 
 /// Ambient radiance (linear RGB) reflected by every diffuse surface.
 const AMBIENT: Vec3A = Vec3A::splat(0.03);
@@ -78,14 +85,6 @@ impl TraceCounters {
             log.rays.extend_from_slice(&more.rays);
         }
     }
-
-    /// Sets the pixel the next recorded rays belong to.
-    #[inline]
-    pub(super) fn set_pixel(&mut self, pixel: u32) {
-        if let Some(log) = &mut self.log {
-            log.pixel = pixel;
-        }
-    }
 }
 
 /// Everything the integrator reads for one frame.
@@ -106,61 +105,121 @@ pub struct FrameScene<'a> {
     pub max_depth: u32,
 }
 
+/// A ray a shaded hit spawns, waiting to be traced.
+#[derive(Clone, Copy)]
+pub(super) struct Spawned<L> {
+    pub(super) class: RayClass,
+    pub(super) origin: Vec3A,
+    pub(super) direction: Vec3A,
+    pub(super) lod: L,
+}
+
+/// A hit whose surface is made and texture looked up, waiting for its shadow rays.
+pub(super) struct Arrival<L> {
+    hit: Hit,
+    triangle: HitTriangle,
+    surface: SurfacePoint,
+    /// Direction of the ray that arrived.
+    direction: Vec3A,
+    /// The ray's LOD state after `arrive`.
+    lod: L,
+    material: u32,
+    /// Energy-weighted model: the base colour times the texel (the albedo). Additive:
+    /// the texel.
+    texel: Vec3A,
+    /// Bounces before this hit.
+    depth: u32,
+}
+
+impl<L> Arrival<L> {
+    /// Bounces before this hit.
+    pub(super) fn depth(&self) -> u32 {
+        self.depth
+    }
+}
+
+/// A shadow ray a hit asks for toward one light, and (once traced) what reaches it.
+#[derive(Clone, Copy)]
+pub(super) struct ShadowRequest {
+    /// The light, and what it sends toward the hit.
+    pub(super) light: u32,
+    pub(super) incident: Incident,
+    /// `shading normal . to_light`.
+    pub(super) cos: f32,
+    /// The ray: origin, direction (`incident.to_light`) and search distance; `None` when
+    /// the light is closer than the lift off the surface (nothing can shadow it).
+    pub(super) ray: Option<(Vec3A, f32)>,
+    /// What reaches the hit: filled by the tracer ([`shadow_transmittance`]).
+    pub(super) transmittance: Vec3A,
+}
+
+/// How one path vertex's radiance is made from its children's: `radiance` starts as the
+/// hit's own light and each step adds `weight * child` (a grouped run of steps is first
+/// summed from zero, then added, as the glass term is).
+#[derive(Clone, Copy, Debug)]
+pub(super) struct Combine {
+    pub(super) radiance: Vec3A,
+    steps: [Step; 3],
+    count: u8,
+    /// Index of the first grouped step (`count` when none is), and whether a group exists
+    /// (a glass term whose two branches were both below the weight limit still adds zero).
+    group_from: u8,
+    has_group: bool,
+}
+
+#[derive(Clone, Copy, Debug, Default)]
+struct Step {
+    weight: Vec3A,
+    child: u32,
+}
+
+impl Combine {
+    /// A vertex whose radiance is `radiance` alone (a miss: the background).
+    pub(super) fn leaf(radiance: Vec3A) -> Combine {
+        Combine {
+            radiance,
+            steps: [Step::default(); 3],
+            count: 0,
+            group_from: 0,
+            has_group: false,
+        }
+    }
+
+    fn add(&mut self, weight: Vec3A, child: u32) {
+        self.steps[self.count as usize] = Step { weight, child };
+        self.count += 1;
+    }
+
+    fn begin_group(&mut self) {
+        self.group_from = self.count;
+        self.has_group = true;
+    }
+
+    /// The vertex's radiance from its children's (`radiance_of(child)`), in the order and
+    /// grouping of the depth-first recursion.
+    #[inline]
+    pub(super) fn evaluate(&self, radiance_of: impl Fn(u32) -> Vec3A) -> Vec3A {
+        let mut color = self.radiance;
+        let group_from = if self.has_group {
+            self.group_from
+        } else {
+            self.count
+        };
+        for step in &self.steps[..group_from as usize] {
+            color += step.weight * radiance_of(step.child);
+        }
+        if self.has_group {
+            let mut group = Vec3A::ZERO;
+            for step in &self.steps[group_from as usize..self.count as usize] {
+                group += step.weight * radiance_of(step.child);
+            }
+            color += group;
+        }
+        color
+    }
+}
+
 impl FrameScene<'_> {
-    /// Radiance of the primary ray through film point `(px, py)` of `camera`, carrying the
-    /// LOD state of method `L` (the film picks `L` from `self.lod` with `lod::with_lod_state!`).
-    #[inline]
-    pub fn primary_radiance<L: RayLod>(
-        &self,
-        camera: &Camera,
-        px: f32,
-        py: f32,
-        counters: &mut TraceCounters,
-    ) -> Vec3A {
-        let direction = camera.primary_direction(px, py);
-        let lod = L::primary(&self.lod_camera, px, py);
-        self.radiance(RayClass::Primary, camera.eye, direction, lod, 0, counters)
-    }
-
-    /// [`FrameScene::primary_radiance`] for a primary ray already traced: `direction` is
-    /// `camera.primary_direction(px, py)` and `hit` what `closest_hit` found along it (the
-    /// film traces a tile's primary rays as packets, then shades each).
-    #[inline]
-    pub fn primary_radiance_at<L: RayLod>(
-        &self,
-        camera: &Camera,
-        (px, py): (f32, f32),
-        direction: Vec3A,
-        hit: Option<Hit>,
-        counters: &mut TraceCounters,
-    ) -> Vec3A {
-        let lod = L::primary(&self.lod_camera, px, py);
-        counters.rays += 1;
-        if let Some(log) = &mut counters.log {
-            log.closest(RayClass::Primary, camera.eye, direction, f32::INFINITY, hit);
-        }
-        self.shade(hit, camera.eye, direction, lod, 0, counters)
-    }
-
-    /// Radiance arriving at `origin` from `direction` along a ray of class `class`; `lod`
-    /// is the ray's LOD state, `depth` the number of bounces so far.
-    pub fn radiance<L: RayLod>(
-        &self,
-        class: RayClass,
-        origin: Vec3A,
-        direction: Vec3A,
-        lod: L,
-        depth: u32,
-        counters: &mut TraceCounters,
-    ) -> Vec3A {
-        counters.rays += 1;
-        let hit = self.bvh.closest_hit(origin, direction, f32::INFINITY);
-        if let Some(log) = &mut counters.log {
-            log.closest(class, origin, direction, f32::INFINITY, hit);
-        }
-        self.shade(hit, origin, direction, lod, depth, counters)
-    }
-
     /// The hit triangle in world space (the hit's distance and barycentrics made those of
     /// that triangle, see `scene_bvh`).
     #[inline]
@@ -168,61 +227,62 @@ impl FrameScene<'_> {
         self.bvh.hit_triangle(hit, origin, direction)
     }
 
-    /// Radiance leaving the hit `hit` (background when `None`) of a ray from `origin` along
-    /// `direction`, toward that ray.
-    fn shade<L: RayLod>(
+    /// Radiance of the primary ray through film point `(px, py)` of `camera`, traced depth
+    /// first one ray at a time (its shadow rays too), with the LOD state of method `L`: the
+    /// reference the film's breadth-first tiles are tested against (they must agree bit for
+    /// bit). It allocates per hit; the film does not use it.
+    pub fn primary_radiance<L: RayLod>(
         &self,
-        hit: Option<Hit>,
+        camera: &crate::render::Camera,
+        px: f32,
+        py: f32,
+        counters: &mut TraceCounters,
+    ) -> Vec3A {
+        let direction = camera.primary_direction(px, py);
+        let lod = L::primary(&self.lod_camera, px, py);
+        self.radiance_depth_first(camera.eye, direction, lod, 0, counters)
+    }
+
+    /// Radiance arriving at `origin` from `direction` (see [`Self::primary_radiance`]).
+    fn radiance_depth_first<L: RayLod>(
+        &self,
         origin: Vec3A,
         direction: Vec3A,
-        mut lod: L,
+        lod: L,
         depth: u32,
         counters: &mut TraceCounters,
     ) -> Vec3A {
-        let Some(mut hit) = hit else {
+        counters.rays += 1;
+        let Some(hit) = self.bvh.closest_hit(origin, direction, f32::INFINITY) else {
             return self.background;
         };
-        let triangle = self.hit_triangle(&mut hit, origin, direction);
-        let surface = SurfacePoint::at(&triangle, &hit, origin, direction);
-        let lod_hit = surface.lod_hit(&triangle, &hit, direction);
-        lod.arrive(&lod_hit);
-        let material = &self.materials[triangle.material as usize];
-        if let ShadingModel::Additive { ambient } = material.model {
-            return self
-                .shade_additive(&lod_hit, &surface, material, ambient, lod, depth, counters);
+        let mut requests = Vec::new();
+        let arrival = self.arrive(hit, origin, direction, lod, depth, &mut requests, counters);
+        for request in &mut requests {
+            let Some((from, t_max)) = request.ray else {
+                continue;
+            };
+            let mut glass = [(0.0f32, 0u32, 0u32); MAX_SHADOW_GLASS];
+            let mut met = 0;
+            let clear =
+                self.bvh
+                    .visit_hits(from, request.incident.to_light, t_max, |t, m, source| {
+                        if !self.passes_through(m, met) {
+                            return false;
+                        }
+                        glass[met] = (t, source, m);
+                        met += 1;
+                        true
+                    });
+            request.transmittance = self.shadow_transmittance(!clear, &mut glass[..met]);
         }
-        let albedo =
-            Vec3A::from(material.base_color) * self.texel(&lod_hit, material, &lod, counters);
-
-        let opaque = 1.0 - material.transmission;
-        let mut color = Vec3A::ZERO;
-        if opaque > 0.0 {
-            let diffuse = albedo * (opaque * (1.0 - material.reflectance));
-            color += self.direct_light(&surface, direction, diffuse, material, opaque, counters);
-            color += AMBIENT * diffuse;
-        }
-        if depth >= self.max_depth {
-            return color;
-        }
-        let mirror = opaque * material.reflectance;
-        if mirror > MIN_WEIGHT {
-            let reflected = reflect(direction, surface.shading_normal, surface.face_normal);
-            let lod = lod.reflect(&lod_hit, reflected);
-            color += albedo
-                * mirror
-                * self.spawn(
-                    RayClass::Reflection,
-                    &surface,
-                    reflected,
-                    lod,
-                    depth,
-                    counters,
-                );
-        }
-        if material.transmission > MIN_WEIGHT {
-            color += self.transmit(&lod_hit, &surface, albedo, material, lod, depth, counters);
-        }
-        color
+        let mut spawned = Vec::new();
+        let combine = self.finish(&arrival, &requests, 0, &mut spawned);
+        let children: Vec<Vec3A> = spawned
+            .iter()
+            .map(|s| self.radiance_depth_first(s.origin, s.direction, s.lod, depth + 1, counters))
+            .collect();
+        combine.evaluate(|child| children[child as usize])
     }
 
     /// The method's level with the bias, and the level the pyramid lookup uses.
@@ -236,72 +296,199 @@ impl FrameScene<'_> {
         }
     }
 
-    /// The additive NFF/Whitted convention (AFF files, FORMAT.md 1.8):
-    /// `am*amb*tex + sum_lights(diff*tex*Lc*N.L + highlight) + spec*L_reflect + T*L_refract`,
-    /// with `ambient` the material's ambient reflectance.
+    /// Makes the surface of a hit (of a ray from `origin` along `direction` carrying `lod`,
+    /// after `depth` bounces), looks up its texture and appends the shadow rays its direct
+    /// light needs to `requests` (in light order).
     #[allow(clippy::too_many_arguments)]
-    fn shade_additive<L: RayLod>(
+    pub(super) fn arrive<L: RayLod>(
+        &self,
+        mut hit: Hit,
+        origin: Vec3A,
+        direction: Vec3A,
+        mut lod: L,
+        depth: u32,
+        requests: &mut Vec<ShadowRequest>,
+        counters: &mut TraceCounters,
+    ) -> Arrival<L> {
+        let triangle = self.hit_triangle(&mut hit, origin, direction);
+        let surface = SurfacePoint::at(&triangle, &hit, origin, direction);
+        let lod_hit = surface.lod_hit(&triangle, &hit, direction);
+        lod.arrive(&lod_hit);
+        let material = &self.materials[triangle.material as usize];
+        let texel = self.texel(&lod_hit, material, &lod, counters);
+        let lit = match material.model {
+            // The energy-weighted model lights only what is not fully transmissive.
+            ShadingModel::EnergyWeighted => 1.0 - material.transmission > 0.0,
+            ShadingModel::Additive { .. } => true,
+        };
+        if lit {
+            self.request_shadows(&surface, requests, counters);
+        }
+        let texel = match material.model {
+            ShadingModel::EnergyWeighted => Vec3A::from(material.base_color) * texel,
+            ShadingModel::Additive { .. } => texel,
+        };
+        Arrival {
+            material: triangle.material,
+            hit,
+            triangle,
+            surface,
+            direction,
+            lod,
+            texel,
+            depth,
+        }
+    }
+
+    /// The shadow ray toward every light that shines on the surface's side.
+    fn request_shadows(
+        &self,
+        surface: &SurfacePoint,
+        requests: &mut Vec<ShadowRequest>,
+        counters: &mut TraceCounters,
+    ) {
+        for (l, light) in self.lights.iter().enumerate() {
+            let Some(incident) = light.incident(surface.position) else {
+                continue;
+            };
+            if !surface.faces(incident.to_light) {
+                continue;
+            }
+            counters.rays += 1;
+            requests.push(ShadowRequest {
+                light: l as u32,
+                incident,
+                cos: surface.shading_normal.dot(incident.to_light),
+                ray: surface.shadow_ray(incident.distance),
+                transmittance: Vec3A::ONE,
+            });
+        }
+    }
+
+    /// Sums the hit's own light (its shadow rays traced, `requests` as `arrive` appended
+    /// them) and spawns the reflected and refracted rays: returns the vertex's [`Combine`],
+    /// whose steps name the spawned rays as `first_child`, `first_child + 1`, ... in the
+    /// order they are pushed to `spawned`.
+    pub(super) fn finish<L: RayLod>(
+        &self,
+        arrival: &Arrival<L>,
+        requests: &[ShadowRequest],
+        first_child: u32,
+        spawned: &mut Vec<Spawned<L>>,
+    ) -> Combine {
+        let material = &self.materials[arrival.material as usize];
+        let surface = &arrival.surface;
+        let direction = arrival.direction;
+        let lod_hit = surface.lod_hit(&arrival.triangle, &arrival.hit, direction);
+        let mut children = Children {
+            first: first_child,
+            spawned,
+        };
+        match material.model {
+            ShadingModel::EnergyWeighted => {
+                let albedo = arrival.texel;
+                let opaque = 1.0 - material.transmission;
+                let mut color = Vec3A::ZERO;
+                if opaque > 0.0 {
+                    let diffuse = albedo * (opaque * (1.0 - material.reflectance));
+                    color += direct_light(surface, direction, diffuse, material, opaque, requests);
+                    color += AMBIENT * diffuse;
+                }
+                let mut combine = Combine::leaf(color);
+                if arrival.depth >= self.max_depth {
+                    return combine;
+                }
+                let mirror = opaque * material.reflectance;
+                if mirror > MIN_WEIGHT {
+                    let reflected = reflect(direction, surface.shading_normal, surface.face_normal);
+                    let lod = arrival.lod.reflect(&lod_hit, reflected);
+                    let child = children.spawn(RayClass::Reflection, surface, reflected, lod);
+                    combine.add(albedo * mirror, child);
+                }
+                if material.transmission > MIN_WEIGHT {
+                    self.transmit(
+                        &lod_hit,
+                        arrival,
+                        albedo,
+                        material,
+                        &mut children,
+                        &mut combine,
+                    );
+                }
+                combine
+            }
+            ShadingModel::Additive { ambient } => {
+                let texel = arrival.texel;
+                let diffuse = Vec3A::from(material.base_color) * texel;
+                let ambient = Vec3A::from(ambient) * texel;
+                let mut color = self.additive_ambient * ambient;
+                color += direct_light(surface, direction, diffuse, material, 1.0, requests);
+                let mut combine = Combine::leaf(color);
+                if arrival.depth >= self.max_depth {
+                    return combine;
+                }
+                if material.reflectance > MIN_WEIGHT {
+                    let reflected = reflect(direction, surface.shading_normal, surface.face_normal);
+                    let lod = arrival.lod.reflect(&lod_hit, reflected);
+                    let child = children.spawn(RayClass::Reflection, surface, reflected, lod);
+                    combine.add(Vec3A::splat(material.reflectance), child);
+                }
+                if material.transmission > MIN_WEIGHT {
+                    let r = surface.refraction(direction, material.ior);
+                    let child = match r.transmitted {
+                        Some((refracted, _)) => {
+                            let lod = arrival.lod.refract(&lod_hit, r.eta, refracted);
+                            let far = surface.far_side();
+                            children.spawn(RayClass::Refraction, &far, refracted, lod)
+                        }
+                        None => {
+                            let reflected =
+                                reflect(direction, surface.shading_normal, surface.face_normal);
+                            let lod = arrival.lod.reflect(&lod_hit, reflected);
+                            children.spawn(RayClass::Reflection, surface, reflected, lod)
+                        }
+                    };
+                    combine.add(Vec3A::splat(material.transmission), child);
+                }
+                combine
+            }
+        }
+    }
+
+    /// Glass: Fresnel-weighted reflection plus refraction tinted by the albedo; total
+    /// internal reflection sends everything to the reflection.
+    fn transmit<L: RayLod>(
         &self,
         lod_hit: &SurfaceHit,
-        surface: &SurfacePoint,
+        arrival: &Arrival<L>,
+        albedo: Vec3A,
         material: &Material,
-        ambient: Vec3,
-        lod: L,
-        depth: u32,
-        counters: &mut TraceCounters,
-    ) -> Vec3A {
+        children: &mut Children<L>,
+        combine: &mut Combine,
+    ) {
+        let surface = &arrival.surface;
         let direction = lod_hit.direction;
-        let texel = self.texel(lod_hit, material, &lod, counters);
-        let diffuse = Vec3A::from(material.base_color) * texel;
-        let ambient = Vec3A::from(ambient) * texel;
-        let mut color = self.additive_ambient * ambient;
-        color += self.direct_light(surface, direction, diffuse, material, 1.0, counters);
-        if depth >= self.max_depth {
-            return color;
+        let reflected = reflect(direction, surface.shading_normal, surface.face_normal);
+        let weight = material.transmission;
+        let r = surface.refraction(direction, material.ior);
+        let Some((refracted, cos_t)) = r.transmitted else {
+            let lod = arrival.lod.reflect(lod_hit, reflected);
+            let child = children.spawn(RayClass::Reflection, surface, reflected, lod);
+            combine.add(Vec3A::splat(weight), child);
+            return;
+        };
+        let fresnel = dielectric_fresnel(r.cos_i, cos_t, r.eta);
+        combine.begin_group();
+        if weight * fresnel > MIN_WEIGHT {
+            let lod = arrival.lod.reflect(lod_hit, reflected);
+            let child = children.spawn(RayClass::Reflection, surface, reflected, lod);
+            combine.add(Vec3A::splat(weight * fresnel), child);
         }
-        if material.reflectance > MIN_WEIGHT {
-            let reflected = reflect(direction, surface.shading_normal, surface.face_normal);
-            let lod = lod.reflect(lod_hit, reflected);
-            color += material.reflectance
-                * self.spawn(
-                    RayClass::Reflection,
-                    surface,
-                    reflected,
-                    lod,
-                    depth,
-                    counters,
-                );
+        if weight * (1.0 - fresnel) > MIN_WEIGHT {
+            let lod = arrival.lod.refract(lod_hit, r.eta, refracted);
+            let child = children.spawn(RayClass::Refraction, &surface.far_side(), refracted, lod);
+            combine.add(albedo * (weight * (1.0 - fresnel)), child);
         }
-        if material.transmission > MIN_WEIGHT {
-            let r = surface.refraction(direction, material.ior);
-            let traced = match r.transmitted {
-                Some((refracted, _)) => {
-                    let lod = lod.refract(lod_hit, r.eta, refracted);
-                    self.spawn(
-                        RayClass::Refraction,
-                        &surface.far_side(),
-                        refracted,
-                        lod,
-                        depth,
-                        counters,
-                    )
-                }
-                None => {
-                    let reflected = reflect(direction, surface.shading_normal, surface.face_normal);
-                    let lod = lod.reflect(lod_hit, reflected);
-                    self.spawn(
-                        RayClass::Reflection,
-                        surface,
-                        reflected,
-                        lod,
-                        depth,
-                        counters,
-                    )
-                }
-            };
-            color += material.transmission * traced;
-        }
-        color
     }
 
     /// The filtered base-colour texel at a hit (white when untextured).
@@ -330,85 +517,27 @@ impl FrameScene<'_> {
             Footprint::Anisotropic { axis, taps, .. } => {
                 pyramid.sample_anisotropic(uv, level, axis, taps, texture.sampler)
             }
+            // The bias scales the ellipse, so its minor axis fits the biased level.
+            Footprint::Elliptical { major, minor, .. } => {
+                let scale = self.lod_bias.exp2();
+                pyramid.sample_ewa(uv, level, (major, minor), scale, texture.sampler)
+            }
         };
         Vec3A::new(texel.x, texel.y, texel.z)
     }
 
-    /// Lambert + Blinn-Phong from every light, each through a shadow ray.
-    fn direct_light(
+    /// What reaches a surface through a shadow ray that met the glass surfaces `glass`
+    /// (`(t, source, material)`, any order) and nothing else (`blocked`: something opaque,
+    /// or more glass than [`MAX_SHADOW_GLASS`]): 0 when blocked, else the product of the
+    /// glass transmissions in distance order (so it does not depend on the order of visits).
+    pub(super) fn shadow_transmittance(
         &self,
-        surface: &SurfacePoint,
-        direction: Vec3A,
-        diffuse: Vec3A,
-        material: &Material,
-        opaque: f32,
-        counters: &mut TraceCounters,
+        blocked: bool,
+        glass: &mut [(f32, u32, u32)],
     ) -> Vec3A {
-        let mut color = Vec3A::ZERO;
-        for light in self.lights {
-            let Some(incident) = light.incident(surface.position) else {
-                continue;
-            };
-            if !surface.faces(incident.to_light) {
-                continue;
-            }
-            let cos = surface.shading_normal.dot(incident.to_light);
-            let transmittance =
-                self.shadow_transmittance(surface, incident.to_light, incident.distance, counters);
-            if transmittance == Vec3A::ZERO {
-                continue;
-            }
-            let irradiance = incident.irradiance * transmittance * cos;
-            color += diffuse * irradiance * std::f32::consts::FRAC_1_PI;
-            if material.specular > 0.0 {
-                let half = (incident.to_light - direction).normalize_or_zero();
-                let highlight = surface
-                    .shading_normal
-                    .dot(half)
-                    .max(0.0)
-                    .powf(material.shininess);
-                let normalization = (material.shininess + 8.0) / (8.0 * std::f32::consts::PI);
-                color += irradiance * (opaque * material.specular * normalization * highlight);
-            }
-        }
-        color
-    }
-
-    /// Fraction of light that reaches the surface: 0 behind anything opaque, the product of
-    /// transmission times untextured base colour through glass.
-    fn shadow_transmittance(
-        &self,
-        surface: &SurfacePoint,
-        to_light: Vec3A,
-        distance: f32,
-        counters: &mut TraceCounters,
-    ) -> Vec3A {
-        counters.rays += 1;
-        let Some((origin, t_max)) = surface.shadow_ray(distance) else {
-            return Vec3A::ONE;
-        };
-        // Collect the glass surfaces on the way and multiply them in distance order, so the
-        // result does not depend on the tree's traversal order (float products do).
-        let mut glass = [(0.0f32, 0u32, 0u32); MAX_SHADOW_GLASS];
-        let mut count = 0;
-        let unblocked = self
-            .bvh
-            .visit_hits(origin, to_light, t_max, |t, m, source| {
-                let material = &self.materials[m as usize];
-                if material.transmission <= 0.0 || count == MAX_SHADOW_GLASS {
-                    return false;
-                }
-                glass[count] = (t, source, m);
-                count += 1;
-                true
-            });
-        if let Some(log) = &mut counters.log {
-            log.shadow(origin, to_light, t_max, !unblocked || count > 0);
-        }
-        if !unblocked {
+        if blocked {
             return Vec3A::ZERO;
         }
-        let glass = &mut glass[..count];
         glass.sort_unstable_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
         let mut transmittance = Vec3A::ONE;
         for &(_, _, m) in glass.iter() {
@@ -429,78 +558,105 @@ impl FrameScene<'_> {
         }
     }
 
-    /// Glass: Fresnel-weighted reflection plus refraction tinted by the albedo; total
-    /// internal reflection sends everything to the reflection.
-    #[allow(clippy::too_many_arguments)]
-    fn transmit<L: RayLod>(
-        &self,
-        lod_hit: &SurfaceHit,
-        surface: &SurfacePoint,
-        albedo: Vec3A,
-        material: &Material,
-        lod: L,
-        depth: u32,
-        counters: &mut TraceCounters,
-    ) -> Vec3A {
-        let direction = lod_hit.direction;
-        let reflected = reflect(direction, surface.shading_normal, surface.face_normal);
-        let weight = material.transmission;
-        let r = surface.refraction(direction, material.ior);
-        let Some((refracted, cos_t)) = r.transmitted else {
-            let lod = lod.reflect(lod_hit, reflected);
-            return weight
-                * self.spawn(
-                    RayClass::Reflection,
-                    surface,
-                    reflected,
-                    lod,
-                    depth,
-                    counters,
-                );
-        };
-        let fresnel = dielectric_fresnel(r.cos_i, cos_t, r.eta);
-        let mut color = Vec3A::ZERO;
-        if weight * fresnel > MIN_WEIGHT {
-            let lod = lod.reflect(lod_hit, reflected);
-            color += weight
-                * fresnel
-                * self.spawn(
-                    RayClass::Reflection,
-                    surface,
-                    reflected,
-                    lod,
-                    depth,
-                    counters,
-                );
-        }
-        if weight * (1.0 - fresnel) > MIN_WEIGHT {
-            let lod = lod.refract(lod_hit, r.eta, refracted);
-            let through = self.spawn(
-                RayClass::Refraction,
-                &surface.far_side(),
-                refracted,
-                lod,
-                depth,
-                counters,
-            );
-            color += albedo * (weight * (1.0 - fresnel)) * through;
-        }
-        color
-    }
-
-    /// Traces a secondary ray of class `class` leaving the surface on the side
-    /// `face_normal` points to.
+    /// Whether a shadow ray's visit of a surface of material `m` lets it go on (glass, and
+    /// fewer than [`MAX_SHADOW_GLASS`] met so far).
     #[inline]
-    fn spawn<L: RayLod>(
-        &self,
-        class: RayClass,
-        surface: &SurfacePoint,
-        direction: Vec3A,
-        lod: L,
-        depth: u32,
-        counters: &mut TraceCounters,
-    ) -> Vec3A {
+    pub(super) fn passes_through(&self, m: u32, glass_so_far: usize) -> bool {
+        self.materials[m as usize].transmission > 0.0 && glass_so_far < MAX_SHADOW_GLASS
+    }
+}
+
+/// Lambert + Blinn-Phong from every light whose shadow ray `requests` holds (in light
+/// order), each through its transmittance.
+fn direct_light(
+    surface: &SurfacePoint,
+    direction: Vec3A,
+    diffuse: Vec3A,
+    material: &Material,
+    opaque: f32,
+    requests: &[ShadowRequest],
+) -> Vec3A {
+    let mut color = Vec3A::ZERO;
+    for request in requests {
+        let transmittance = request.transmittance;
+        if transmittance == Vec3A::ZERO {
+            continue;
+        }
+        let incident = &request.incident;
+        let irradiance = incident.irradiance * transmittance * request.cos;
+        color += diffuse * irradiance * std::f32::consts::FRAC_1_PI;
+        if material.specular > 0.0 {
+            let half = (incident.to_light - direction).normalize_or_zero();
+            let highlight = surface
+                .shading_normal
+                .dot(half)
+                .max(0.0)
+                .powf(material.shininess);
+            let normalization = (material.shininess + 8.0) / (8.0 * std::f32::consts::PI);
+            color += irradiance * (opaque * material.specular * normalization * highlight);
+        }
+    }
+    color
+}
+
+/// The rays a hit spawns, numbered from `first` in the order they are pushed.
+struct Children<'a, L> {
+    first: u32,
+    spawned: &'a mut Vec<Spawned<L>>,
+}
+
+impl<L: RayLod> Children<'_, L> {
+    /// A secondary ray of class `class` leaving the surface on the side `face_normal`
+    /// points to; returns its number.
+    fn spawn(&mut self, class: RayClass, surface: &SurfacePoint, direction: Vec3A, lod: L) -> u32 {
         let origin = surface.position + surface.face_normal * surface.epsilon;
-        self.radiance(class, origin, direction, lod, depth + 1, counters)
+        let index = self.spawned.len() as u32;
+        self.spawned.push(Spawned {
+            class,
+            origin,
+            direction,
+            lod,
+        });
+        self.first + index
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Bottom-up combination is the recursion's arithmetic: direct steps, then the grouped
+    /// glass term summed from zero and added once.
+    #[test]
+    fn combine_adds_direct_steps_then_the_group() {
+        let radiances = [
+            Vec3A::ZERO,
+            Vec3A::new(0.5, 2.0, 8.0),
+            Vec3A::new(1.0, 1.0, 1.0),
+            Vec3A::new(3.0, 0.0, 1.0),
+        ];
+        let mut c = Combine::leaf(Vec3A::new(0.1, 0.2, 0.3));
+        c.add(Vec3A::splat(0.5), 1);
+        c.begin_group();
+        c.add(Vec3A::splat(0.25), 2);
+        c.add(Vec3A::new(0.1, 0.2, 0.3), 3);
+        let got = c.evaluate(|i| radiances[i as usize]);
+        let mut expected = Vec3A::new(0.1, 0.2, 0.3);
+        expected += Vec3A::splat(0.5) * radiances[1];
+        let mut group = Vec3A::ZERO;
+        group += 0.25 * radiances[2];
+        group += Vec3A::new(0.1, 0.2, 0.3) * radiances[3];
+        expected += group;
+        assert_eq!(
+            got.to_array().map(f32::to_bits),
+            expected.to_array().map(f32::to_bits)
+        );
+        // An empty group still adds its zero (the recursion adds transmit's zero sum).
+        let mut empty = Combine::leaf(Vec3A::new(-0.0, 1.0, 2.0));
+        empty.begin_group();
+        assert_eq!(
+            empty.evaluate(|_| Vec3A::ONE).x.to_bits(),
+            (-0.0f32 + 0.0).to_bits()
+        );
     }
 }

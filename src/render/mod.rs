@@ -15,6 +15,7 @@ pub mod probe;
 pub mod ray_log;
 pub mod scene_bvh;
 mod surface;
+mod tile;
 
 pub use camera::Camera;
 pub use film::{LinearImage, render_image, render_image_recording};

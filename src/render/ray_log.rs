@@ -72,18 +72,18 @@ pub struct TracedRay {
     pub answer: RayAnswer,
 }
 
-/// The rays of one tile (then one frame), with the pixel being shaded.
+/// The rays of one tile (then one frame).
 #[derive(Debug, Clone, Default, PartialEq)]
 pub struct RayLog {
-    /// The pixel whose sample the integrator is tracing now.
-    pub(super) pixel: u32,
     pub rays: Vec<TracedRay>,
 }
 
 impl RayLog {
-    /// Records a closest-hit ray of the current pixel.
+    /// Records a closest-hit ray of a sample of `pixel`.
+    #[allow(clippy::too_many_arguments)]
     pub(super) fn closest(
         &mut self,
+        pixel: u32,
         class: RayClass,
         origin: Vec3A,
         direction: Vec3A,
@@ -96,20 +96,27 @@ impl RayLog {
             t_min: 0.0,
             t_max,
             class,
-            pixel: self.pixel,
+            pixel,
             answer: RayAnswer::Closest(hit.map(|h| (h.triangle_ref(), h.t))),
         });
     }
 
-    /// Records a shadow ray of the current pixel.
-    pub(super) fn shadow(&mut self, origin: Vec3A, direction: Vec3A, t_max: f32, blocked: bool) {
+    /// Records a shadow ray of a sample of `pixel`.
+    pub(super) fn shadow(
+        &mut self,
+        pixel: u32,
+        origin: Vec3A,
+        direction: Vec3A,
+        t_max: f32,
+        blocked: bool,
+    ) {
         self.rays.push(TracedRay {
             origin,
             direction,
             t_min: 0.0,
             t_max,
             class: RayClass::Shadow,
-            pixel: self.pixel,
+            pixel,
             answer: RayAnswer::Blocked(blocked),
         });
     }

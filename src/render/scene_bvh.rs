@@ -89,6 +89,25 @@ impl SceneBvh<'_> {
         }
     }
 
+    /// [`SceneBvh::closest_hit`] for a packet of rays from any origins (a bounce's reflected
+    /// and refracted rays): the flat tree walks them together (masked traversal), the
+    /// two-level structure one at a time.
+    pub fn closest_hits_scattered(
+        &self,
+        rays: &[(Vec3A, Vec3A)],
+        t_max: f32,
+        hits: &mut [Option<Hit>],
+    ) {
+        match self {
+            SceneBvh::Flat { accel, .. } => accel.closest_hits_masked(rays, t_max, hits),
+            SceneBvh::TwoLevel(_) => {
+                for (hit, &(origin, direction)) in hits.iter_mut().zip(rays) {
+                    *hit = self.closest_hit(origin, direction, t_max);
+                }
+            }
+        }
+    }
+
     /// Visits every hit with `t` in `[0, t_max)` as `visit(t, material, source)`, in an
     /// order that depends on the tree, until `visit` returns false; returns false when it
     /// was stopped early.
@@ -119,6 +138,38 @@ impl SceneBvh<'_> {
                         let mesh = i.accel.mesh_triangles(shading.mesh);
                         visit(t, mesh.material[s], shading.source_base + mesh.source[s])
                     })
+            }
+        }
+    }
+
+    /// [`SceneBvh::visit_hits`] for a packet of rays `(origin, direction)`, ray `r`
+    /// searched up to `t_max[r]`: visits ray `r`'s hits as `visit(r, t, material, source)`
+    /// until `visit` returns false for it; returns the mask of rays stopped early. The flat
+    /// tree walks the rays together; the two-level structure one at a time.
+    pub fn visit_hits_packet(
+        &self,
+        rays: &[(Vec3A, Vec3A)],
+        t_max: &[f32],
+        mut visit: impl FnMut(usize, f32, u32, u32) -> bool,
+    ) -> u64 {
+        match self {
+            SceneBvh::Flat { triangles, accel } => {
+                accel.visit_hits_packet(rays, t_max, |r, slot, t| {
+                    let s = slot as usize;
+                    visit(r, t, triangles.material[s], triangles.source[s])
+                })
+            }
+            SceneBvh::TwoLevel(_) => {
+                let mut stopped = 0;
+                for (r, (&(origin, direction), &limit)) in rays.iter().zip(t_max).enumerate() {
+                    let clear = self.visit_hits(origin, direction, limit, |t, m, source| {
+                        visit(r, t, m, source)
+                    });
+                    if !clear {
+                        stopped |= 1 << r;
+                    }
+                }
+                stopped
             }
         }
     }

@@ -2,35 +2,31 @@
 
 use std::path::PathBuf;
 
+use crate::record::StatsFileError;
+
 /// Why a report could not be made.
 #[derive(Debug, thiserror::Error)]
 pub enum ReportError {
-    /// A folder or file could not be listed, read or written.
+    /// The stats files could not be read (the error names the file and line).
+    #[error(transparent)]
+    Stats(#[from] StatsFileError),
+    /// A file could not be written.
     #[error("{path}: {source}")]
     Io {
         path: PathBuf,
         source: std::io::Error,
     },
-    /// A folder holds neither `stats.jsonl` nor `stats.shard-*.jsonl`.
-    #[error("{dir}: no stats.jsonl or stats.shard-*.jsonl")]
-    NoStatsFile { dir: PathBuf },
-    /// A line of a stats file is not JSON.
-    #[error("{path}:{line}: invalid JSON: {source}")]
-    Json {
-        path: PathBuf,
-        line: usize,
-        source: serde_json::Error,
+    /// Frames of the expected range have no record or no frame file (a shard failed, was
+    /// cancelled or never ran).
+    #[error(
+        "{sources}: {count} frame(s) of {expected} have no record or no frame file: {frames} (render them again with --resume)"
+    )]
+    Incomplete {
+        sources: String,
+        count: usize,
+        frames: String,
+        expected: String,
     },
-    /// A line is JSON but not a frame record (no `frame`, a field of the wrong type).
-    #[error("{path}:{line}: {message}")]
-    Record {
-        path: PathBuf,
-        line: usize,
-        message: String,
-    },
-    /// The stats files hold no record at all.
-    #[error("no frame records in {sources}")]
-    Empty { sources: String },
     /// The plot could not be drawn.
     #[error("{path}: cannot draw the plot: {message}")]
     Plot { path: PathBuf, message: String },

@@ -5,8 +5,8 @@
 //! made has every field). The timing lists are built from [`Phase::ALL`], so a new phase
 //! appears in the summary, the report table and the plot without being named here.
 
-use super::record::Record;
-use crate::frame::{FrameRecord, Phase};
+use crate::record::Record;
+use crate::record::{FrameRecord, Phase};
 
 /// One per-frame quantity: its field name and how to read it from a record.
 #[derive(Clone, Copy)]

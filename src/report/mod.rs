@@ -1,35 +1,32 @@
 //! `mipray report`: statistics and a plot of a rendered sequence from its `stats.jsonl`.
 //!
-//! The record itself is the frame loop's [`crate::frame::FrameRecord`]; [`Record`] is one
-//! read back, with the fields its line had. [`report`] loads the records of one or more output folders ([`load_sequence`]: shards
-//! merged, sorted by frame, duplicates dropped), summarises every timing phase and count
-//! with [`Percentiles`] (min / median / nearest-rank p95 / max), computes the preprocessing
+//! The record and its reader are [`crate::record`]'s ([`crate::record::Record`]: one line
+//! read back, with the fields it had). [`report`] loads the records of one or more output
+//! folders ([`crate::record::load_sequence`]: shards merged, sorted by frame, duplicates
+//! dropped), summarises every timing phase and count
+//! with [`crate::percentiles::Percentiles`] (min / median / nearest-rank p95 / max), computes the preprocessing
 //! share of frame time and the rebuild count, and writes an SVG plot ([`write_svg`]).
 //! Fields missing from older records are absent, never 0: a quantity no record has is left
-//! out of the table and the plot.
+//! out of the table and the plot. [`require_frames`] checks that an expected range is all
+//! there (`report --expect-frames`, a farm's merge step).
 
-pub(crate) mod chart;
+mod complete;
 mod error;
-mod load;
 mod metrics;
-mod percentiles;
 pub(crate) mod plot;
-mod record;
 mod stats;
 mod summary;
 mod summary_json;
 
 use std::path::{Path, PathBuf};
 
+pub use complete::{frame_folders, missing_frames, require_frames};
 pub use error::ReportError;
-pub use load::{Sequence, is_stats_file_name, load_records, load_sequence};
 pub use metrics::{
     COUNTS, DEFORMED_TRIANGLES, LOD_RECOMPUTED, MOVED_TRIANGLES, Metric, PLOTTED_COUNTS,
     PREPROCESSING_PHASES, Quantities, RAYS, RENDER_MS, TIMING_PHASES, TOTAL_MS, TRIANGLES,
 };
-pub use percentiles::{Percentiles, median, nearest_rank};
 pub use plot::{SVG_SIZE, render_svg, write_svg};
-pub use record::{Record, RecordError};
 pub use stats::{PhaseRow, PreprocessingShare, rebuild_count};
 pub use summary::ReportSummary;
 pub use summary_json::{PhasePercentiles, Summary};
@@ -38,9 +35,9 @@ pub use summary_json::{PhasePercentiles, Summary};
 /// folder) and returns the statistics (`Display`: a Markdown table and summary lines).
 ///
 /// # Errors
-/// Loading fails (see [`load_records`]), or the plot cannot be drawn or written.
+/// Loading fails (see [`crate::record::load_records`]), or the plot cannot be drawn or written.
 pub fn report(dirs: &[PathBuf], svg_out: &Path) -> Result<ReportSummary, ReportError> {
-    let sequence = load_sequence(dirs)?;
+    let sequence = crate::record::load_sequence(dirs)?;
     write_svg(&sequence.records, svg_out)?;
     Ok(ReportSummary::of(&sequence, svg_out.to_path_buf()))
 }

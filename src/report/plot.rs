@@ -19,11 +19,11 @@ use plotters::coord::Shift;
 use plotters::coord::types::RangedCoordi64;
 use plotters::prelude::*;
 
-use super::chart::{Run, chart_on, draw_legend, draw_runs, series_color, text};
 use super::error::ReportError;
 use super::metrics::{Metric, PLOTTED_COUNTS, Quantities, TIMING_PHASES};
-use super::record::Record;
 use crate::atomic_file::write_bytes_atomically;
+use crate::chart::{Run, chart_on, draw_legend, draw_runs, series_color, text};
+use crate::record::Record;
 
 /// Size of the whole plot in pixels.
 pub const SVG_SIZE: (u32, u32) = (1000, 900);
@@ -197,7 +197,7 @@ where
 mod tests {
     use super::super::metrics::RENDER_MS;
     use super::*;
-    use crate::frame::{FrameRecord, Phase};
+    use crate::record::{FrameRecord, Phase};
 
     const DIRTY_MS: Metric = Metric::phase(Phase::Dirty);
 

@@ -7,7 +7,7 @@
 //! loop just made (`summary.json`), which have every quantity.
 
 use super::metrics::{Metric, PREPROCESSING_PHASES, Quantities, TOTAL_MS};
-use super::percentiles::Percentiles;
+use crate::percentiles::Percentiles;
 
 /// The spread of one quantity over the frames that have it.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -91,9 +91,9 @@ pub fn rebuild_count<R: Quantities>(records: &[R]) -> Option<usize> {
 #[cfg(test)]
 mod tests {
     use super::super::metrics::RENDER_MS;
-    use super::super::record::Record;
     use super::*;
-    use crate::frame::{FrameRecord, Phase};
+    use crate::record::Record;
+    use crate::record::{FrameRecord, Phase};
 
     /// A record of `frame` with the given phase times (in `Phase::ALL` order) and total;
     /// `None` fields are absent.

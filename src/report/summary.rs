@@ -4,10 +4,10 @@
 use std::fmt;
 use std::path::PathBuf;
 
-use super::load::Sequence;
 use super::metrics::{COUNTS, TIMING_PHASES};
-use super::record::Record;
 use super::stats::{PhaseRow, PreprocessingShare, rebuild_count};
+use crate::record::Record;
+use crate::record::Sequence;
 
 /// The result of [`super::report`]; `Display` renders it as Markdown.
 #[derive(Debug, Clone, PartialEq)]
@@ -138,7 +138,7 @@ impl fmt::Display for ReportSummary {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::frame::FrameRecord;
+    use crate::record::FrameRecord;
 
     fn sequence() -> Sequence {
         let record = |frame: u32, ms: f64| {

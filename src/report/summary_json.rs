@@ -12,9 +12,9 @@ use super::metrics::{
     DEFORMED_TRIANGLES, LOD_RECOMPUTED, MOVED_TRIANGLES, Metric, RAYS, RENDER_MS, TOTAL_MS,
     TRIANGLES,
 };
-use super::percentiles::Percentiles;
 use super::stats::{PreprocessingShare, rebuild_count};
-use crate::frame::{FrameRecord, Phase};
+use crate::percentiles::Percentiles;
+use crate::record::{FrameRecord, Phase};
 
 /// `summary.json` (see the module comment).
 #[derive(Debug, Clone, serde::Serialize)]

@@ -4,7 +4,8 @@ use std::path::Path;
 
 use anyhow::{Result, bail};
 
-/// Loads a `.gltf`/`.glb`, `.aff` (BART) or `.obj` scene.
+/// Loads a `.gltf`/`.glb`, `.aff` (BART), `.obj` or `.usda`/`.usdc`/`.usdz`/`.usd` (OpenUSD)
+/// scene.
 ///
 /// # Errors
 /// An unsupported extension, or the loader's error (naming the file and the element).
@@ -17,8 +18,9 @@ pub fn load(path: &Path) -> Result<super::SceneDesc> {
         Some("gltf") | Some("glb") => Ok(super::gltf::load(path)?),
         Some("aff") => Ok(super::aff::load(path)?),
         Some("obj") => Ok(super::obj::load(path)?),
+        Some("usda") | Some("usdc") | Some("usdz") | Some("usd") => Ok(super::usd::load(path)?),
         _ => bail!(
-            "{}: unsupported scene format (expected .gltf, .glb, .aff or .obj)",
+            "{}: unsupported scene format (expected .gltf, .glb, .aff, .obj, .usda, .usdc, .usdz or .usd)",
             path.display()
         ),
     }

@@ -10,7 +10,9 @@
 //! - every per-vertex array of a primitive (normals, UVs, joints, skin weights, morph
 //!   deltas) has one element per position; `joints` and `weights` are both set or both not;
 //! - every primitive of a mesh has `mesh.weights.len()` morph targets, and a node's
-//!   `weights` override has that length too;
+//!   `weights` override has that length too; except a mesh whose primitives carry a point
+//!   cache: it has one weight (the cache position) and its primitives no morph targets,
+//!   joints or skin, and every sample of a cache has one position (and normal) per vertex;
 //! - a primitive drawn by a node with a skin has every joint index below that skin's
 //!   joint count.
 //!
@@ -22,6 +24,7 @@ pub mod camera_file;
 pub mod gltf;
 mod load;
 pub mod obj;
+pub mod usd;
 
 pub use load::load;
 
@@ -117,6 +120,23 @@ pub struct PrimitiveDesc {
     /// Morph targets: per-vertex deltas added to the base geometry, weighted by the node's
     /// effective morph weights (`anim::Pose::morph_weights`).
     pub morph_targets: Vec<MorphTargetDesc>,
+    /// Time-sampled vertices (a USD point cache) replacing `positions` and `normals` at
+    /// every time; `None` for everything else.
+    pub point_cache: Option<PointCacheDesc>,
+}
+
+/// A point cache: a primitive's vertices sampled at several times. Its mesh has a single
+/// morph weight, the cache position `s` in `[0, samples - 1]`, animated by a weights channel
+/// whose key `k` has the value `k` (linear keys give `s = k + u` between samples `k` and
+/// `k + 1`, step keys hold `k`). The vertices at `s` are `P_k + u (P_{k+1} - P_k)`, except
+/// that a vertex equal in both samples is `P_k` bit for bit: so exactly the triangles whose
+/// vertices changed come out changed, and only those are marked deformed by the frame loop.
+#[derive(Debug, Default, Clone)]
+pub struct PointCacheDesc {
+    /// Per sample: one position per vertex.
+    pub positions: Vec<Vec<Vec3>>,
+    /// Per sample: one unit normal per vertex; `None` keeps the primitive's `normals`.
+    pub normals: Option<Vec<Vec<Vec3>>>,
 }
 
 /// One morph target of a primitive: displacements of the base attributes (glTF

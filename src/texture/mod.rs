@@ -3,7 +3,8 @@
 //! The module is split by concept:
 //! - [`decode`](decode_texels): encoded bytes (PNG, JPEG, PNM) -> linear RGBA texels;
 //! - `pyramid`: level 0 -> the full box-filtered pyramid ([`MipPyramid::from_linear_rgba`]);
-//! - `sample`: wrap modes, bilinear and trilinear lookup (the renderer's hot path).
+//! - `sample`: wrap modes, bilinear and trilinear lookup (the renderer's hot path);
+//! - `ewa`: elliptically weighted average over the pyramid (pbrt-v4's EWA filter).
 //!
 //! Conventions shared by all three:
 //! - texels are linear RGBA `Vec4`, row-major, row 0 is the image's top row and sits at
@@ -14,6 +15,7 @@
 //! - sizes are 1..=[`MAX_SIZE`] per side.
 
 mod decode;
+mod ewa;
 mod pyramid;
 mod sample;
 

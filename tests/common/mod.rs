@@ -4,6 +4,7 @@
 #![allow(dead_code)]
 
 pub mod deform_scenes;
+pub mod farm;
 pub mod invariants;
 pub mod round_trip;
 pub mod scenes;

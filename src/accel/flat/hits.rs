@@ -6,8 +6,9 @@ use glam::Vec3A;
 
 use super::Accel;
 use crate::accel::query::{Closest, Hit, PacketQuery, Within};
-use crate::accel::triangles::ShearedRay;
-use crate::accel::wide::{LeafVisit, PACKET, RayBoxes};
+use crate::accel::triangles::{RAYS, ShearedLanes, ShearedRay};
+use crate::accel::wide::{GatheredLeaf, LeafVisit, PACKET, RayBoxes};
+use crate::simd::F32x8;
 
 impl Accel {
     /// The closest hit with `t` in `[0, t_max)`. Among hits at exactly the same distance
@@ -62,6 +63,46 @@ impl Accel {
         });
     }
 
+    /// [`Accel::closest_hits`] for rays from any origins (a bounce's reflected or refracted
+    /// rays), walked together by the masked traversal: each ray tests every node alone, so
+    /// `hits[i]` is exactly what `closest_hit` returns for ray `i`.
+    pub fn closest_hits_masked(
+        &self,
+        rays: &[(Vec3A, Vec3A)],
+        t_max: f32,
+        hits: &mut [Option<Hit>],
+    ) {
+        let n = rays.len().min(hits.len()).min(PACKET);
+        if n == 0 {
+            return;
+        }
+        PacketQuery::with_filled(
+            |q| q.fill_masked(&rays[..n], t_max),
+            |q| {
+                let PacketQuery {
+                    sheared,
+                    best,
+                    limits,
+                    boxes,
+                    ..
+                } = q;
+                self.wide.traverse_masked_ordered(
+                    &boxes[..n],
+                    limits,
+                    ClosestPacketLeaf {
+                        accel: self,
+                        within: &Within::world(),
+                        sheared,
+                        best,
+                    },
+                );
+                for (hit, best) in hits.iter_mut().zip(&best[..n]) {
+                    *hit = best.hit;
+                }
+            },
+        )
+    }
+
     /// Continues the closest-hit queries `best` of a packet (limits `limits`) in this tree.
     pub(in crate::accel) fn closest_hits_within(&self, within: &Within, query: &mut PacketQuery) {
         let PacketQuery {
@@ -71,10 +112,72 @@ impl Accel {
             limits,
             ..
         } = query;
-        self.wide
-            .traverse_packet(packet, limits, |r, first, count, limit| {
-                self.closest_in_leaf(within, &sheared[r], first, count, limit, &mut best[r]);
-            });
+        self.wide.traverse_packet_gathered(
+            packet,
+            limits,
+            ClosestPacketLeaf {
+                accel: self,
+                within,
+                sheared,
+                best,
+            },
+        );
+    }
+
+    /// Tests a leaf for the closest-hit queries of the packet rays `rays` (indices into
+    /// `sheared`, `limits` and `best`), each triangle across the rays that share an axis
+    /// permutation, eight at a time: the same answers as [`Accel::closest_in_leaf`] for each
+    /// ray alone (the same tie rule, the same limit afterwards).
+    #[allow(clippy::too_many_arguments)]
+    #[inline(always)]
+    fn closest_in_leaf_across<const AVX: bool>(
+        &self,
+        within: &Within,
+        sheared: &[ShearedRay; PACKET],
+        rays: &[u8],
+        first: u32,
+        count: u32,
+        limits: &mut [f32; PACKET],
+        best: &mut [Closest; PACKET],
+    ) {
+        let mut groups = [[0u8; PACKET]; PERMUTATIONS];
+        let mut sizes = [0usize; PERMUTATIONS];
+        for &r in rays {
+            let p = sheared[r as usize].permutation();
+            groups[p][sizes[p]] = r;
+            sizes[p] += 1;
+        }
+        for (group, &size) in groups.iter().zip(&sizes) {
+            for chunk in group[..size].chunks(RAYS) {
+                let lanes = ShearedLanes::gather(chunk.iter().map(|&r| &sheared[r as usize]));
+                // Every triangle of the leaf is cut at the limit the ray entered it with.
+                let cut = F32x8(std::array::from_fn(|l| {
+                    limits[chunk[l.min(chunk.len() - 1)] as usize]
+                }));
+                let mut improved = 0u32;
+                self.triangles.hits_in_leaf_across::<AVX>(
+                    &lanes,
+                    first,
+                    count,
+                    &cut,
+                    |l, slot, source, t, bary| {
+                        let r = chunk[l] as usize;
+                        if keep_if_closer(within, &mut best[r], slot, source, t, bary) {
+                            improved |= 1 << l;
+                        }
+                    },
+                );
+                while improved != 0 {
+                    let l = improved.trailing_zeros() as usize;
+                    improved &= improved - 1;
+                    let r = chunk[l] as usize;
+                    let t = best[r].hit.map_or(f32::INFINITY, |h| h.t);
+                    // Keep visiting boxes that start at `t` (up to rounding), where a tie
+                    // may hide.
+                    limits[r] = sheared[r].tie_limit(t);
+                }
+            }
+        }
     }
 
     /// Tests a leaf for a closest-hit query: keeps the nearest hit (ties to the lowest source
@@ -92,25 +195,48 @@ impl Accel {
         let cut = *limit;
         self.triangles
             .hits_in_leaf(ray, first, count, cut, |slot, source, t, bary| {
-                let source = within.source_base + source;
-                let better = match best.hit {
-                    None => true,
-                    Some(h) => t < h.t || (t == h.t && source < best.source),
-                };
-                if better {
-                    best.hit = Some(Hit {
-                        triangle: within.reported.map_or(slot, |r| r[slot as usize]),
-                        instance: within.instance,
-                        t,
-                        bary,
-                    });
-                    best.source = source;
+                if keep_if_closer(within, best, slot, source, t, bary) {
                     // Keep visiting boxes that start at `t` (up to rounding), where a tie
                     // may hide.
                     *limit = ray.tie_limit(t);
                 }
                 true
             });
+    }
+
+    /// [`Accel::visit_hits`] for a packet of up to [`PACKET`] rays `(origin, direction)`
+    /// walked together (shadow rays of a tile toward one light): ray `r`'s hits with `t` in
+    /// `[0, t_max[r])` are visited as `visit(r, slot, t)`, in an order that depends on the
+    /// tree, until `visit` returns false for that ray. Returns the mask of the rays stopped
+    /// early. Each ray meets exactly the triangles [`Accel::visit_hits`] meets for it alone
+    /// (the same watertight test per ray and triangle), in another order.
+    pub fn visit_hits_packet(
+        &self,
+        rays: &[(Vec3A, Vec3A)],
+        t_max: &[f32],
+        visit: impl FnMut(usize, u32, f32) -> bool,
+    ) -> u64 {
+        let n = rays.len().min(t_max.len()).min(PACKET);
+        if n == 0 {
+            return 0;
+        }
+        PacketQuery::with_filled(
+            |q| q.fill_occlusion(&rays[..n], &t_max[..n]),
+            |q| {
+                let mut ceilings = [0.0f32; PACKET];
+                ceilings[..n].copy_from_slice(&t_max[..n]);
+                let mut leaf = AnyHitPacketLeaf {
+                    accel: self,
+                    sheared: &q.sheared,
+                    t_max: &ceilings,
+                    visit,
+                    stopped: 0,
+                };
+                self.wide
+                    .traverse_masked(&q.boxes[..n], &mut q.limits, &mut leaf);
+                leaf.stopped
+            },
+        )
     }
 
     /// Visits every triangle hit with `t` in `[0, t_max)`, as `visit(slot, t)`, in an order
@@ -164,5 +290,165 @@ impl LeafVisit for ClosestLeaf<'_> {
             .closest_in_leaf(self.within, self.sheared, first, count, limit, self.best);
         *self.end = *limit;
         true
+    }
+}
+
+/// Rays in a leaf from which [`Accel::closest_in_leaf_across`] tests each triangle across
+/// the rays; below it, each ray tests the leaf's packs alone (the answers are the same).
+const ACROSS_RAYS_MIN: usize = 4;
+
+/// The six axis permutations of a sheared ray (`ShearedRay::permutation`).
+const PERMUTATIONS: usize = 6;
+
+/// Keeps the hit `(slot, source, t, bary)` in `best` when it is closer, or as close with a
+/// lower source triangle (the tie rule); returns whether it was kept.
+#[inline(always)]
+fn keep_if_closer(
+    within: &Within,
+    best: &mut Closest,
+    slot: u32,
+    source: u32,
+    t: f32,
+    bary: glam::Vec2,
+) -> bool {
+    let source = within.source_base + source;
+    let better = match best.hit {
+        None => true,
+        Some(h) => t < h.t || (t == h.t && source < best.source),
+    };
+    if better {
+        best.hit = Some(Hit {
+            triangle: within.reported.map_or(slot, |r| r[slot as usize]),
+            instance: within.instance,
+            t,
+            bary,
+        });
+        best.source = source;
+    }
+    better
+}
+
+/// The closest-hit leaf test of a packet: a few rays test the leaf one by one, more test
+/// each triangle across them.
+struct ClosestPacketLeaf<'a> {
+    accel: &'a Accel,
+    within: &'a Within<'a>,
+    sheared: &'a [ShearedRay; PACKET],
+    best: &'a mut [Closest; PACKET],
+}
+
+impl GatheredLeaf for ClosestPacketLeaf<'_> {
+    #[inline(always)]
+    fn visit<const AVX: bool>(
+        &mut self,
+        rays: &[u8],
+        first: u32,
+        count: u32,
+        limits: &mut [f32; PACKET],
+    ) {
+        if rays.len() < ACROSS_RAYS_MIN {
+            for &r in rays {
+                let r = r as usize;
+                self.accel.closest_in_leaf(
+                    self.within,
+                    &self.sheared[r],
+                    first,
+                    count,
+                    &mut limits[r],
+                    &mut self.best[r],
+                );
+            }
+            return;
+        }
+        self.accel.closest_in_leaf_across::<AVX>(
+            self.within,
+            self.sheared,
+            rays,
+            first,
+            count,
+            limits,
+            self.best,
+        );
+    }
+}
+
+/// The limit of a ray whose any-hit query has stopped: below every entry distance, so the
+/// ray enters no more boxes, and negative, which ends the packet's walk once every ray has
+/// it.
+const STOPPED: f32 = -1.0;
+
+/// The any-hit leaf test of a packet: each ray visits its hits until its visitor stops it.
+struct AnyHitPacketLeaf<'a, F> {
+    accel: &'a Accel,
+    sheared: &'a [ShearedRay; PACKET],
+    /// Each ray's own search distance (its limit drops to [`STOPPED`] when it stops).
+    t_max: &'a [f32; PACKET],
+    visit: F,
+    stopped: u64,
+}
+
+impl<F: FnMut(usize, u32, f32) -> bool> GatheredLeaf for &mut AnyHitPacketLeaf<'_, F> {
+    #[inline(always)]
+    fn visit<const AVX: bool>(
+        &mut self,
+        rays: &[u8],
+        first: u32,
+        count: u32,
+        limits: &mut [f32; PACKET],
+    ) {
+        if rays.len() < ACROSS_RAYS_MIN {
+            for &r in rays {
+                let r = r as usize;
+                let visit = &mut self.visit;
+                let finished = !self.accel.triangles.hits_in_leaf(
+                    &self.sheared[r],
+                    first,
+                    count,
+                    self.t_max[r],
+                    |slot, _, t, _| visit(r, slot, t),
+                );
+                if finished {
+                    limits[r] = STOPPED;
+                    self.stopped |= 1 << r;
+                }
+            }
+            return;
+        }
+        let mut groups = [[0u8; PACKET]; PERMUTATIONS];
+        let mut sizes = [0usize; PERMUTATIONS];
+        for &r in rays {
+            let p = self.sheared[r as usize].permutation();
+            groups[p][sizes[p]] = r;
+            sizes[p] += 1;
+        }
+        for (group, &size) in groups.iter().zip(&sizes) {
+            for chunk in group[..size].chunks(RAYS) {
+                let lanes = ShearedLanes::gather(chunk.iter().map(|&r| &self.sheared[r as usize]));
+                let cut = F32x8(std::array::from_fn(|l| {
+                    self.t_max[chunk[l.min(chunk.len() - 1)] as usize]
+                }));
+                let mut alive = (1u32 << chunk.len()) - 1;
+                let visit = &mut self.visit;
+                self.accel.triangles.hits_in_leaf_across::<AVX>(
+                    &lanes,
+                    first,
+                    count,
+                    &cut,
+                    |l, slot, _, t, _| {
+                        if alive & (1 << l) != 0 && !visit(chunk[l] as usize, slot, t) {
+                            alive &= !(1 << l);
+                        }
+                    },
+                );
+                let mut finished = ((1u32 << chunk.len()) - 1) & !alive;
+                while finished != 0 {
+                    let l = finished.trailing_zeros() as usize;
+                    finished &= finished - 1;
+                    let r = chunk[l] as usize;
+                    limits[r] = STOPPED;
+                    self.stopped |= 1 << r;
+                }
+            }
+        }
     }
 }

@@ -256,14 +256,86 @@ fn a_packet_finds_what_each_of_its_rays_finds_alone() {
     ] {
         let mut hits = vec![None; rays.len()];
         accel.closest_hits(rays, t_max, &mut hits);
-        for (&(o, d), hit) in rays.iter().zip(&hits) {
-            assert_eq!(*hit, accel.closest_hit(o, d, t_max));
+        let mut masked = vec![None; rays.len()];
+        accel.closest_hits_masked(rays, t_max, &mut masked);
+        for ((&(o, d), hit), masked) in rays.iter().zip(&hits).zip(&masked) {
+            let alone = accel.closest_hit(o, d, t_max);
+            assert_eq!(*hit, alone);
+            assert_eq!(*masked, alone, "the masked walk");
             found += hit.is_some() as usize;
         }
     }
     assert!(
         found > 40,
         "too few hits ({found}) for the test to mean much"
+    );
+}
+
+/// A packet of occlusion rays meets, for each ray, exactly the triangles the ray meets
+/// alone (every hit, with the same distance bits), and a visitor that stops a ray stops it
+/// as it would alone: rays from a tile's surface points converging on a light (several
+/// origins, interval bounds), scattered rays (no bounds), and rays whose search ends short.
+#[test]
+fn an_occlusion_packet_meets_what_each_of_its_rays_meets_alone() {
+    let mut rng = Rng(0x0dd_b1ade);
+    let mut tris = random_soup(&mut rng, 4000);
+    let accel = Accel::build(&mut tris).unwrap();
+    let light = Vec3A::new(3.0, 30.0, -2.0);
+    let converging: Vec<(Vec3A, Vec3A, f32)> = (0..64)
+        .map(|i| {
+            let (x, z) = ((i % 8) as f32, (i / 8) as f32);
+            let from = Vec3A::new(x * 0.3 - 1.0, -12.0 + rng.next(), z * 0.3 - 1.0);
+            let to = light - from;
+            (from, to.normalize(), to.length() * 0.999)
+        })
+        .collect();
+    let scattered: Vec<(Vec3A, Vec3A, f32)> = (0..64)
+        .map(|_| {
+            let origin = rng.point(30.0);
+            (
+                origin,
+                (rng.point(2.0) - origin * 0.05).normalize(),
+                10.0 + rng.next() * 30.0,
+            )
+        })
+        .collect();
+    let (mut met, mut stopped_rays) = (0, 0);
+    for rays in [&converging[..], &scattered[..], &converging[..11]] {
+        let pairs: Vec<(Vec3A, Vec3A)> = rays.iter().map(|&(o, d, _)| (o, d)).collect();
+        let limits: Vec<f32> = rays.iter().map(|r| r.2).collect();
+        // Every hit.
+        let mut seen = vec![Vec::new(); rays.len()];
+        let stopped = accel.visit_hits_packet(&pairs, &limits, |r, slot, t| {
+            seen[r].push((slot, t.to_bits()));
+            true
+        });
+        assert_eq!(stopped, 0);
+        for (r, &(o, d, t_max)) in rays.iter().enumerate() {
+            let mut alone = Vec::new();
+            assert!(accel.visit_hits(o, d, t_max, |slot, t| {
+                alone.push((slot, t.to_bits()));
+                true
+            }));
+            seen[r].sort_unstable();
+            alone.sort_unstable();
+            assert_eq!(seen[r], alone, "ray {r}");
+            met += alone.len();
+        }
+        // Stopped at the first hit on an even slot (an opaque surface; odd slots are glass).
+        let mut glass_seen = vec![0usize; rays.len()];
+        let stopped = accel.visit_hits_packet(&pairs, &limits, |r, slot, _| {
+            glass_seen[r] += 1;
+            slot % 2 == 1
+        });
+        for (r, &(o, d, t_max)) in rays.iter().enumerate() {
+            let blocked_alone = !accel.visit_hits(o, d, t_max, |slot, _| slot % 2 == 1);
+            assert_eq!(stopped & (1 << r) != 0, blocked_alone, "ray {r}");
+            stopped_rays += blocked_alone as usize;
+        }
+    }
+    assert!(
+        met > 200 && stopped_rays > 20,
+        "{met} hits met, {stopped_rays} rays stopped"
     );
 }
 

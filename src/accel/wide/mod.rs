@@ -18,13 +18,14 @@
 //!   first, or up from one leaf), and the SAH cost that decides rebuilds is measured on it,
 //!   the tree rays actually walk;
 //! - [`walk`]: one ray, near-first (closest hit) or in lane order (any hit);
-//! - [`packet`]: up to [`PACKET`] coherent rays walking together;
-//! - [`lanes`]: eight `f32` and the two ways to compute on them.
+//! - [`packet`]: up to [`PACKET`] coherent rays walking together, pruned by interval tests;
+//! - [`masked`]: up to [`PACKET`] rays walking together, each testing every node alone;
+//! - [`Lanes`] (`simd::F32x8`): eight `f32` and the two ways to compute on them.
 
 use obvhs::aabb::Aabb;
 
 mod collapse;
-mod lanes;
+mod masked;
 mod node;
 mod packet;
 mod refit;
@@ -32,9 +33,10 @@ mod refit;
 mod test_support;
 mod walk;
 
-pub use lanes::Lanes;
+/// One `f32` per child lane of a node.
+pub use crate::simd::F32x8 as Lanes;
 pub use node::WideNode;
-pub use packet::RayPacket;
+pub use packet::{GatheredLeaf, RayPacket};
 pub use walk::{LeafVisit, RayBoxes};
 
 /// Children per node.

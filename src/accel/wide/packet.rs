@@ -12,8 +12,8 @@
 //!   It is exact in floating point, not only in real numbers: with one shared origin every
 //!   ray computes the same `plane - origin`, and a product rounded to nearest is monotonic
 //!   in each factor, so each ray's rounded distance lies between the rounded bounds.
-//! - **Four rays per box at a leaf**: the rays of the packet are kept as structure of
-//!   arrays too, and a leaf's box is tested against four rays per SIMD slab test. The
+//! - **Eight rays per box at a leaf**: the rays of the packet are kept as structure of
+//!   arrays too, and a leaf's box is tested against eight rays per SIMD slab test. The
 //!   arithmetic is the scalar test's (the nearer of the two planes is the front one), so
 //!   each ray takes the same decision it would take alone.
 //!
@@ -22,11 +22,11 @@
 
 use std::mem::MaybeUninit;
 
-use glam::{BVec4A, Vec3A, Vec4};
+use glam::{Vec3A, Vec4};
 
 use super::walk::{INLINE_STACK, safe_inverse4};
 use super::{EMPTY, LEAF, Lanes, PACKET, ROBUST_FAR, RayBoxes, WIDTH, WideBvh, WideNode};
-use crate::simd;
+use crate::simd::{self, F32x8};
 
 /// The rays of a packet for the walk, as structure of arrays (four rays per SIMD test at a
 /// leaf; one ray's splatted slab constants are made when a walk needs them), and the
@@ -40,10 +40,15 @@ pub struct RayPacket {
     len: usize,
 }
 
-/// Bounds on the slab distances of every ray of a packet sharing one origin.
+/// Bounds on the slab distances of every ray of a packet: sharing one origin (primary
+/// rays), or from several origins in a box (shadow rays from a tile's hits).
 #[derive(Clone, Copy)]
 struct Frustum {
-    origin: [Lanes; 3],
+    /// Per axis, the smallest and largest origin component (equal for one origin).
+    origin_min: [Lanes; 3],
+    origin_max: [Lanes; 3],
+    /// Whether every ray starts at the same point (two products per plane, not four).
+    one_origin: bool,
     /// Per axis, the smallest and largest inverse direction component over the packet.
     inverse_min: [Lanes; 3],
     inverse_max: [Lanes; 3],
@@ -69,9 +74,23 @@ impl RayPacket {
         packet
     }
 
-    /// Refills the packet with `rays` (at most [`PACKET`]; more are ignored).
+    /// Refills the packet with `rays` (at most [`PACKET`]; more are ignored); only rays from
+    /// one origin get interval bounds.
     #[inline]
     pub fn set(&mut self, rays: &[(Vec3A, Vec3A)]) {
+        self.fill(rays, Origins::One);
+    }
+
+    /// [`RayPacket::set`], with interval bounds for rays from several origins too (when
+    /// they agree in direction along some axis): four products per plane instead of two,
+    /// which pays for rays that converge (toward a light) rather than spread.
+    #[inline]
+    pub fn set_from_several_origins(&mut self, rays: &[(Vec3A, Vec3A)]) {
+        self.fill(rays, Origins::Several);
+    }
+
+    #[inline]
+    fn fill(&mut self, rays: &[(Vec3A, Vec3A)], origins: Origins) {
         let len = rays.len().min(PACKET);
         self.len = len;
         // Directions into `inverse`, inverted there four at a time (the same IEEE division
@@ -87,7 +106,7 @@ impl RayPacket {
                 safe_inverse4(Vec4::from_slice(group)).write_to_slice(group);
             }
         }
-        self.frustum = Frustum::of(&self.origin, &self.inverse, len);
+        self.frustum = Frustum::of(&self.origin, &self.inverse, len, origins);
     }
 
     /// Ray `r`'s slab constants.
@@ -98,10 +117,10 @@ impl RayPacket {
     }
 
     /// Calls `each(ray, &mut limit)` for every ray from `first` on that enters lane `lane`
-    /// of `node` before its limit, in ray order; returns whether any did. Four rays are
-    /// tested at once, all before the first of them is handed to `each`.
+    /// of `node` before its limit, in ray order; returns whether any did. Eight rays are
+    /// tested at once ([`F32x8`]), all before the first of them is handed to `each`.
     #[inline(always)]
-    fn enter_leaf(
+    fn enter_leaf<const AVX: bool>(
         &self,
         node: &WideNode,
         lane: usize,
@@ -110,26 +129,15 @@ impl RayPacket {
         mut each: impl FnMut(usize, &mut f32),
     ) -> bool {
         let mut any = false;
-        let lower = [0, 1, 2].map(|axis| Vec4::splat(node.bounds[axis][lane]));
-        let upper = [0, 1, 2].map(|axis| Vec4::splat(node.bounds[axis + 3][lane]));
-        let groups = self.len.div_ceil(4);
-        for group in first / 4..groups {
-            let at = group * 4;
-            let mut near = Vec4::ZERO;
-            let mut far = Vec4::splat(f32::INFINITY);
-            for axis in 0..3 {
-                let origin = Vec4::from_slice(&self.origin[axis][at..at + 4]);
-                let inverse = Vec4::from_slice(&self.inverse[axis][at..at + 4]);
-                let t_lower = (lower[axis] - origin) * inverse;
-                let t_upper = (upper[axis] - origin) * inverse;
-                near = near.max(t_lower.min(t_upper));
-                far = far.min(t_lower.max(t_upper));
-            }
-            let limit = Vec4::from_slice(&limits[at..at + 4]);
-            let mut mask = near.cmple((far * ROBUST_FAR).min(limit)).bitmask();
+        let lower = [0, 1, 2].map(|axis| F32x8::splat(node.bounds[axis][lane]));
+        let upper = [0, 1, 2].map(|axis| F32x8::splat(node.bounds[axis + 3][lane]));
+        let groups = self.len.div_ceil(8);
+        for group in first / 8..groups {
+            let at = group * 8;
+            let mut mask = self.enter_box::<AVX>(&lower, &upper, at, limits);
             // Rays before `first` are not this subtree's; slots past `len` are no rays.
-            mask &= (0xf << first.saturating_sub(at).min(4)) & 0xf;
-            mask &= (1u32 << (self.len - at).min(4)) - 1;
+            mask &= (0xff << first.saturating_sub(at).min(8)) & 0xff;
+            mask &= (1u32 << (self.len - at).min(8)) - 1;
             any |= mask != 0;
             while mask != 0 {
                 let k = mask.trailing_zeros() as usize;
@@ -139,22 +147,61 @@ impl RayPacket {
         }
         any
     }
+
+    /// The slab test of one box (`lower`, `upper`, splatted) for the eight rays from `at`:
+    /// bit `k` set when ray `at + k` enters it before its limit. Per ray the arithmetic of
+    /// the scalar test: the nearer of the two planes is the front one.
+    #[inline(always)]
+    fn enter_box<const AVX: bool>(
+        &self,
+        lower: &[F32x8; 3],
+        upper: &[F32x8; 3],
+        at: usize,
+        limits: &[f32; PACKET],
+    ) -> u32 {
+        let eight = |row: &[f32; PACKET]| F32x8(row[at..at + 8].try_into().expect("8 lanes"));
+        let mut near = F32x8::splat(0.0);
+        let mut far = F32x8::splat(f32::INFINITY);
+        for axis in 0..3 {
+            let origin = eight(&self.origin[axis]);
+            let inverse = eight(&self.inverse[axis]);
+            let t_lower = lower[axis].sub::<AVX>(origin).mul::<AVX>(inverse);
+            let t_upper = upper[axis].sub::<AVX>(origin).mul::<AVX>(inverse);
+            near = near.max::<AVX>(t_lower.min::<AVX>(t_upper));
+            far = far.min::<AVX>(t_lower.max::<AVX>(t_upper));
+        }
+        let limit = eight(limits);
+        near.le_mask::<AVX>(far.mul::<AVX>(F32x8::splat(ROBUST_FAR)).min::<AVX>(limit))
+    }
+}
+
+/// Which packets [`Frustum::of`] bounds.
+#[derive(Clone, Copy, PartialEq, Eq)]
+enum Origins {
+    /// Only rays from one origin.
+    One,
+    /// Rays from any origins.
+    Several,
 }
 
 impl Frustum {
     /// The bounds of the first `len` rays of a packet (`origin[axis][ray]`,
-    /// `inverse[axis][ray]`), or `None` when they do not share one origin (or a direction
-    /// is NaN).
+    /// `inverse[axis][ray]`), or `None` when they do not share one origin and `origins`
+    /// asks for one, when no axis has every ray running the same way (nothing would be
+    /// bounded), or when a component is NaN.
     fn of(
         origin: &[[f32; PACKET]; 3],
         inverse: &[[f32; PACKET]; 3],
         len: usize,
+        origins: Origins,
     ) -> Option<Frustum> {
         if len == 0 {
             return None;
         }
         let mut frustum = Frustum {
-            origin: [0, 1, 2].map(|axis| Lanes::splat(origin[axis][0])),
+            origin_min: [Lanes::splat(0.0); 3],
+            origin_max: [Lanes::splat(0.0); 3],
+            one_origin: true,
             inverse_min: [Lanes::splat(0.0); 3],
             inverse_max: [Lanes::splat(0.0); 3],
             front: [0; 3],
@@ -162,29 +209,19 @@ impl Frustum {
             agreeing: 0,
         };
         for axis in 0..3 {
-            let o = origin[axis][0].to_bits();
-            if origin[axis][..len].iter().any(|v| v.to_bits() != o) {
-                return None;
+            let (o_min, o_max) = extremes(&origin[axis], len)?;
+            if o_min.to_bits() != o_max.to_bits() || o_min.to_bits() != origin[axis][0].to_bits() {
+                if origins == Origins::One {
+                    return None;
+                }
+                frustum.one_origin = false;
             }
-            // Four at a time; the slots of the last group past `len` repeat ray 0.
-            let row = &inverse[axis];
-            let first = Vec4::splat(row[0]);
-            let (mut min, mut max) = (first, first);
-            let (mut negative, mut nan) = (0, 0);
-            for at in (0..len).step_by(4) {
-                let live = (1u32 << (len - at).min(4)) - 1;
-                let lanes = BVec4A::new(live & 1 != 0, live & 2 != 0, live & 4 != 0, live & 8 != 0);
-                let v = Vec4::select(lanes, Vec4::from_slice(&row[at..at + 4]), first);
-                min = min.min(v);
-                max = max.max(v);
-                negative += (v.cmplt(Vec4::ZERO).bitmask() & live).count_ones() as usize;
-                nan |= v.cmpne(v).bitmask();
-            }
-            if nan != 0 {
-                return None;
-            }
-            frustum.inverse_min[axis] = Lanes::splat(min.min_element());
-            frustum.inverse_max[axis] = Lanes::splat(max.max_element());
+            frustum.origin_min[axis] = Lanes::splat(o_min);
+            frustum.origin_max[axis] = Lanes::splat(o_max);
+            let (min, max) = extremes(&inverse[axis], len)?;
+            let negative = inverse[axis][..len].iter().filter(|&&v| v < 0.0).count();
+            frustum.inverse_min[axis] = Lanes::splat(min);
+            frustum.inverse_max[axis] = Lanes::splat(max);
             // As `RayBoxes`: a negative inverse meets the upper plane first.
             let down = (negative == len) as usize;
             frustum.front[axis] = axis + 3 * down;
@@ -193,11 +230,16 @@ impl Frustum {
                 frustum.agreeing |= 1 << axis;
             }
         }
-        Some(frustum)
+        (frustum.agreeing != 0 || origins == Origins::One).then_some(frustum)
     }
 
     /// The lanes of `node` that some ray of the packet may enter before `t_max` (the
     /// largest limit of the packet's rays). A lane left out is entered by no ray.
+    ///
+    /// Exact in floating point: a ray's rounded `plane - origin` lies between the rounded
+    /// differences with the extreme origins (rounded subtraction is monotonic), and a
+    /// rounded product between the rounded products of its factors' extremes (rounding is
+    /// monotonic and a product's extremes over a box lie at its corners).
     #[inline(always)]
     fn may_enter<const AVX: bool>(&self, node: &WideNode, t_max: f32) -> (Lanes, u32) {
         let mut near = Lanes::splat(0.0);
@@ -206,17 +248,74 @@ impl Frustum {
             if self.agreeing & (1 << axis) == 0 {
                 continue;
             }
-            let front = Lanes(node.bounds[self.front[axis]]).sub::<AVX>(self.origin[axis]);
-            let back = Lanes(node.bounds[self.back[axis]]).sub::<AVX>(self.origin[axis]);
             let (low, high) = (self.inverse_min[axis], self.inverse_max[axis]);
-            near = near.max::<AVX>(front.mul::<AVX>(low).min::<AVX>(front.mul::<AVX>(high)));
-            far = far.min::<AVX>(back.mul::<AVX>(low).max::<AVX>(back.mul::<AVX>(high)));
+            let front = Lanes(node.bounds[self.front[axis]]);
+            let back = Lanes(node.bounds[self.back[axis]]);
+            if self.one_origin {
+                let front = front.sub::<AVX>(self.origin_min[axis]);
+                let back = back.sub::<AVX>(self.origin_min[axis]);
+                near = near.max::<AVX>(front.mul::<AVX>(low).min::<AVX>(front.mul::<AVX>(high)));
+                far = far.min::<AVX>(back.mul::<AVX>(low).max::<AVX>(back.mul::<AVX>(high)));
+            } else {
+                near = near.max::<AVX>(corner_products::<AVX, false>(
+                    front,
+                    self.origin_min[axis],
+                    self.origin_max[axis],
+                    low,
+                    high,
+                ));
+                far = far.min::<AVX>(corner_products::<AVX, true>(
+                    back,
+                    self.origin_min[axis],
+                    self.origin_max[axis],
+                    low,
+                    high,
+                ));
+            }
         }
         let far = far
             .mul::<AVX>(Lanes::splat(ROBUST_FAR))
             .min::<AVX>(Lanes::splat(t_max));
         (near, near.le_mask::<AVX>(far))
     }
+}
+
+/// The smallest (or with `LARGEST` the largest) of the four products
+/// `(plane - origin) * inverse` over the extremes of `origin` and `inverse`.
+#[inline(always)]
+fn corner_products<const AVX: bool, const LARGEST: bool>(
+    plane: Lanes,
+    origin_min: Lanes,
+    origin_max: Lanes,
+    low: Lanes,
+    high: Lanes,
+) -> Lanes {
+    let (a, b) = (plane.sub::<AVX>(origin_max), plane.sub::<AVX>(origin_min));
+    let (p, q, r, s) = (
+        a.mul::<AVX>(low),
+        a.mul::<AVX>(high),
+        b.mul::<AVX>(low),
+        b.mul::<AVX>(high),
+    );
+    if LARGEST {
+        p.max::<AVX>(q).max::<AVX>(r.max::<AVX>(s))
+    } else {
+        p.min::<AVX>(q).min::<AVX>(r.min::<AVX>(s))
+    }
+}
+
+/// The smallest and largest of the first `len` values of `row` (`None` if one is NaN).
+fn extremes(row: &[f32; PACKET], len: usize) -> Option<(f32, f32)> {
+    let mut min = row[0];
+    let mut max = row[0];
+    for &v in &row[..len] {
+        if v.is_nan() {
+            return None;
+        }
+        min = min.min(v);
+        max = max.max(v);
+    }
+    Some((min, max))
 }
 
 /// A pending subtree of a packet walk: the child (as in [`WideNode::child`]) with its leaf
@@ -258,7 +357,7 @@ impl WideBvh {
         &self,
         packet: &RayPacket,
         limits: &mut [f32; PACKET],
-        leaf: impl FnMut(&[u8], u32, u32, &mut [f32; PACKET]),
+        leaf: impl GatheredLeaf,
     ) {
         self.traverse_packet_with(packet, limits, Gathered(leaf));
     }
@@ -272,7 +371,7 @@ impl WideBvh {
     ) {
         let n = packet.len;
         if let Some((first, count)) = self.root_leaf {
-            leaf.enter_all(n, first, count, limits);
+            leaf.enter_all::<false>(n, first, count, limits);
             return;
         }
         if self.nodes.is_empty() || n == 0 {
@@ -340,7 +439,7 @@ impl WideBvh {
             if entry.child & LEAF != 0 {
                 let parent = &self.nodes[entry.node as usize];
                 let (leaf_ref, count) = (entry.child & !LEAF, entry.count);
-                let any = leaf.enter(
+                let any = leaf.enter::<AVX>(
                     packet,
                     parent,
                     entry.lane as usize,
@@ -351,6 +450,11 @@ impl WideBvh {
                 );
                 if any {
                     packet_limit = largest_limit(limits);
+                    if packet_limit < 0.0 {
+                        // Every ray is done (any-hit queries mark a finished ray with a
+                        // negative limit); closest-hit limits never go below 0.
+                        return;
+                    }
                 }
                 continue;
             }
@@ -435,7 +539,7 @@ impl<P: PacketLeaf> simd::Kernel for PacketWalk<'_, P> {
 /// `first` on that enter the box before their limits run the leaf; returns whether any did.
 trait PacketLeaf {
     #[allow(clippy::too_many_arguments)]
-    fn enter(
+    fn enter<const AVX: bool>(
         &mut self,
         packet: &RayPacket,
         node: &WideNode,
@@ -447,7 +551,40 @@ trait PacketLeaf {
     ) -> bool;
 
     /// The leaf of a one-leaf tree (no box kept): every ray of the `n` runs it.
-    fn enter_all(&mut self, n: usize, leaf_ref: u32, count: u32, limits: &mut [f32; PACKET]);
+    fn enter_all<const AVX: bool>(
+        &mut self,
+        n: usize,
+        leaf_ref: u32,
+        count: u32,
+        limits: &mut [f32; PACKET],
+    );
+}
+
+/// A leaf run once with every ray of a packet inside its box (in ray order):
+/// `visit(rays, leaf_ref, count, limits)`. `AVX` is true in the walk's AVX2 copy, so a leaf
+/// test that computes across rays can use [`crate::simd::F32x8`]'s AVX operations. Closures
+/// implement it (ignoring `AVX`).
+pub trait GatheredLeaf {
+    fn visit<const AVX: bool>(
+        &mut self,
+        rays: &[u8],
+        leaf_ref: u32,
+        count: u32,
+        limits: &mut [f32; PACKET],
+    );
+}
+
+impl<F: FnMut(&[u8], u32, u32, &mut [f32; PACKET])> GatheredLeaf for F {
+    #[inline(always)]
+    fn visit<const AVX: bool>(
+        &mut self,
+        rays: &[u8],
+        leaf_ref: u32,
+        count: u32,
+        limits: &mut [f32; PACKET],
+    ) {
+        self(rays, leaf_ref, count, limits)
+    }
 }
 
 /// The leaf run ray by ray, as each ray is found inside the box.
@@ -455,7 +592,7 @@ struct EachRay<F>(F);
 
 impl<F: FnMut(usize, u32, u32, &mut f32)> PacketLeaf for EachRay<F> {
     #[inline(always)]
-    fn enter(
+    fn enter<const AVX: bool>(
         &mut self,
         packet: &RayPacket,
         node: &WideNode,
@@ -465,12 +602,18 @@ impl<F: FnMut(usize, u32, u32, &mut f32)> PacketLeaf for EachRay<F> {
         count: u32,
         limits: &mut [f32; PACKET],
     ) -> bool {
-        packet.enter_leaf(node, lane, first, limits, |r, limit| {
+        packet.enter_leaf::<AVX>(node, lane, first, limits, |r, limit| {
             (self.0)(r, leaf_ref, count, limit)
         })
     }
 
-    fn enter_all(&mut self, n: usize, leaf_ref: u32, count: u32, limits: &mut [f32; PACKET]) {
+    fn enter_all<const AVX: bool>(
+        &mut self,
+        n: usize,
+        leaf_ref: u32,
+        count: u32,
+        limits: &mut [f32; PACKET],
+    ) {
         for (r, limit) in limits.iter_mut().enumerate().take(n) {
             (self.0)(r, leaf_ref, count, limit);
         }
@@ -485,9 +628,9 @@ const _: () = assert!(PACKET <= 256);
 /// each what [`EachRay`] decides.
 struct Gathered<F>(F);
 
-impl<F: FnMut(&[u8], u32, u32, &mut [f32; PACKET])> PacketLeaf for Gathered<F> {
+impl<G: GatheredLeaf> PacketLeaf for Gathered<G> {
     #[inline(always)]
-    fn enter(
+    fn enter<const AVX: bool>(
         &mut self,
         packet: &RayPacket,
         node: &WideNode,
@@ -499,20 +642,27 @@ impl<F: FnMut(&[u8], u32, u32, &mut [f32; PACKET])> PacketLeaf for Gathered<F> {
     ) -> bool {
         let mut rays = [0u8; PACKET];
         let mut inside = 0;
-        packet.enter_leaf(node, lane, first, limits, |r, _| {
+        packet.enter_leaf::<AVX>(node, lane, first, limits, |r, _| {
             rays[inside] = r as u8;
             inside += 1;
         });
         if inside > 0 {
-            (self.0)(&rays[..inside], leaf_ref, count, limits);
+            self.0
+                .visit::<AVX>(&rays[..inside], leaf_ref, count, limits);
         }
         inside > 0
     }
 
-    fn enter_all(&mut self, n: usize, leaf_ref: u32, count: u32, limits: &mut [f32; PACKET]) {
+    fn enter_all<const AVX: bool>(
+        &mut self,
+        n: usize,
+        leaf_ref: u32,
+        count: u32,
+        limits: &mut [f32; PACKET],
+    ) {
         let rays: [u8; PACKET] = std::array::from_fn(|r| r as u8);
         if n > 0 {
-            (self.0)(&rays[..n], leaf_ref, count, limits);
+            self.0.visit::<AVX>(&rays[..n], leaf_ref, count, limits);
         }
     }
 }
@@ -579,7 +729,7 @@ mod tests {
     }
 
     #[test]
-    fn four_rays_at_a_leaf_decide_as_each_ray_alone() {
+    fn eight_rays_at_a_leaf_decide_as_each_ray_alone() {
         let mut next = stream(0x9e3779b97f4a7c15);
         let mut entered = 0;
         for _ in 0..200 {
@@ -594,13 +744,20 @@ mod tests {
                 for lane in 0..WIDTH {
                     let mut found = Vec::new();
                     let mut copy = limits;
-                    packet.enter_leaf(&node, lane, first, &mut copy, |r, _| found.push(r));
+                    packet.enter_leaf::<false>(&node, lane, first, &mut copy, |r, _| found.push(r));
                     let alone: Vec<usize> = (first..rays.len())
                         .filter(|&r| {
                             packet.ray(r).enter::<false>(&node, limits[r]).1 & (1 << lane) != 0
                         })
                         .collect();
                     assert_eq!(found, alone);
+                    if crate::simd::Isa::cpu_has_avx2() {
+                        let mut found_avx = Vec::new();
+                        packet.enter_leaf::<true>(&node, lane, first, &mut copy, |r, _| {
+                            found_avx.push(r)
+                        });
+                        assert_eq!(found_avx, alone, "the AVX2 copy of the leaf box test");
+                    }
                     entered += found.len();
                 }
             }
@@ -614,26 +771,45 @@ mod tests {
     #[test]
     fn the_interval_test_never_drops_a_box_a_ray_enters_and_drops_some() {
         let mut next = stream(0x2545f4914f6cdd1d);
-        let (mut dropped, mut kept) = (0, 0);
+        let (mut dropped, mut kept, mut several) = (0, 0, 0);
         for _ in 0..300 {
             let node = random_node(&mut next);
-            for rays in packets(&mut next) {
-                let packet = RayPacket::new(&rays);
-                let limit = next().abs() * 10.0;
-                let Some(frustum) = &packet.frustum else {
-                    continue;
-                };
-                let (_, may) = frustum.may_enter::<false>(&node, limit);
-                let any = (0..rays.len())
-                    .fold(0, |m, r| m | packet.ray(r).enter::<false>(&node, limit).1);
-                assert_eq!(any & !may, 0, "a lane some ray enters was dropped");
-                dropped += (((1 << WIDTH) - 1) & !may).count_ones();
-                kept += may.count_ones();
+            let mut sets = packets(&mut next);
+            // Rays from a patch of points converging on one point (shadow rays to a light).
+            let light = Vec3A::new(next(), 3.0 + next(), next());
+            sets.push(
+                (0..48)
+                    .map(|_| {
+                        let from = Vec3A::new(next(), next() * 0.2 - 2.0, next());
+                        (from, light - from)
+                    })
+                    .collect(),
+            );
+            for rays in sets {
+                for from_several in [false, true] {
+                    let mut packet = RayPacket::new(&[]);
+                    if from_several {
+                        packet.set_from_several_origins(&rays);
+                    } else {
+                        packet.set(&rays);
+                    }
+                    let limit = next().abs() * 10.0;
+                    let Some(frustum) = &packet.frustum else {
+                        continue;
+                    };
+                    several += usize::from(!frustum.one_origin);
+                    let (_, may) = frustum.may_enter::<false>(&node, limit);
+                    let any = (0..rays.len())
+                        .fold(0, |m, r| m | packet.ray(r).enter::<false>(&node, limit).1);
+                    assert_eq!(any & !may, 0, "a lane some ray enters was dropped");
+                    dropped += (((1 << WIDTH) - 1) & !may).count_ones();
+                    kept += may.count_ones();
+                }
             }
         }
         assert!(
-            dropped > 500 && kept > 100,
-            "dropped {dropped}, kept {kept}"
+            dropped > 500 && kept > 100 && several >= 300,
+            "dropped {dropped}, kept {kept}, {several} packets from several origins"
         );
     }
 

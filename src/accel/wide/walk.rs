@@ -19,7 +19,7 @@ use std::mem::MaybeUninit;
 use glam::{Vec3A, Vec4};
 use obvhs::aabb::Aabb;
 
-use super::lanes::Lanes;
+use super::Lanes;
 use super::node::{ChildRef, WideNode};
 use super::{ROBUST_FAR, WIDTH, WideBvh};
 use crate::simd;

@@ -31,7 +31,7 @@
 //! Every file is written to a temporary sibling and renamed into place.
 //!
 //! Files: `table.rs` (the two CSV files), `markdown.rs` (`compare.md`), `plots.rs` (the
-//! three SVGs, with the chart setup shared with `mipray report` in `report::chart`).
+//! three SVGs, with the chart setup shared with `mipray report` in `crate::chart`).
 
 #[cfg(test)]
 mod fixtures;
@@ -42,7 +42,7 @@ mod table;
 use std::path::{Path, PathBuf};
 
 use super::CompareReport;
-use crate::output::write_text_atomically;
+use crate::atomic_file::write_text_atomically;
 
 pub use markdown::{markdown, markdown_with};
 pub use plots::write_plots;

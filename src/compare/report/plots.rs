@@ -12,8 +12,8 @@ use plotters::prelude::*;
 
 use super::markdown::{highest_used_level, share};
 use super::{CompareReportError, create_dir, write_file};
+use crate::chart::{FONT, Run, chart_on, draw_legend, draw_runs, series_color, text};
 use crate::compare::{CompareReport, MethodSummary};
-use crate::report::chart::{FONT, Run, chart_on, draw_legend, draw_runs, series_color, text};
 
 /// File names of the plots, with the function drawing each.
 type Renderer = fn(&CompareReport) -> Result<String, String>;

@@ -180,6 +180,10 @@ fn load_scene(path: &Path) -> Result<(SceneDesc, AffStats), String> {
 }
 
 /// Resolves key blocks, adds camera and light nodes, and assembles the description.
+/// The scene and counts of a whole parse: `k` blocks resolved onto their nodes, then the
+/// camera, the lights and the morph channels added, each section in its own step below
+/// (node order: the parse's, then the camera, then the lights; channel order: animated
+/// transforms, camera, morph weights).
 fn finish(path: &Path, mut p: Parser) -> Result<(SceneDesc, AffStats), String> {
     let mut notes = std::mem::take(&mut p.notes);
     if p.scopes.len() > 1 {
@@ -189,69 +193,118 @@ fn finish(path: &Path, mut p: Parser) -> Result<(SceneDesc, AffStats), String> {
         ));
     }
     let rest_time = p.frame_times.map_or(0.0, |f| f.start);
-    let mut channels: Vec<ChannelDesc> = Vec::new();
-    let mut used_blocks: std::collections::HashSet<&str> = Default::default();
-    let mut visibility_ignored = 0;
-    let mut approximations = 0;
+    let mut tracks = ResolvedTracks::default();
+    animate_transforms(&mut p, rest_time, &mut tracks);
+    let cameras = add_camera(&mut p, rest_time, &mut tracks, &mut notes)?;
+    let lights = add_lights(&mut p, &mut notes);
+    add_morph_channels(&p, &mut tracks.channels);
+    note_track_findings(&p, &tracks, &mut notes);
+    if p.materials.used_default {
+        notes.push("geometry before the first 'fm' uses plain white diffuse".into());
+    }
+    notes.push(
+        "textures are treated as sRGB; shine is used as the Phong exponent without the OpenGL x4"
+            .into(),
+    );
+    let stats = counts(&p);
+    Ok((
+        scene_of(path, p, cameras, lights, tracks.channels, notes),
+        stats,
+    ))
+}
 
-    // Animated transforms.
+/// The channels made from `k` blocks so far, and what was found while making them.
+#[derive(Default)]
+struct ResolvedTracks {
+    channels: Vec<ChannelDesc>,
+    /// Names of the `k` blocks some node used.
+    used_blocks: std::collections::HashSet<String>,
+    /// Nodes whose block has a `visibility` track (ignored).
+    visibility_ignored: usize,
+    /// Rotation tracks whose backward key times are approximated.
+    approximations: usize,
+}
+
+/// Animated transforms: each `x name` node takes the channels of its `k name` block and its
+/// rest TRS from them.
+fn animate_transforms(p: &mut Parser, rest_time: f32, tracks: &mut ResolvedTracks) {
     for (node, name) in &p.x_nodes {
         let Some(block) = p.key_blocks.get(name) else {
             continue;
         };
-        used_blocks.insert(name);
+        tracks.used_blocks.insert(name.clone());
         if block.visibility.is_some() {
-            visibility_ignored += 1;
+            tracks.visibility_ignored += 1;
         }
-        let local = track_channels(block, *node, rest_time, &mut channels, &mut approximations);
+        let local = track_channels(
+            block,
+            *node,
+            rest_time,
+            &mut tracks.channels,
+            &mut tracks.approximations,
+        );
         p.builder.nodes[*node].local = local;
     }
+}
 
-    // Camera.
-    let mut cameras = Vec::new();
-    if let Some(view) = p.view {
-        if !(view.angle > 0.0 && view.angle < 180.0) {
-            return Err(format!(
-                "view angle {} is outside (0, 180) degrees",
-                view.angle
-            ));
-        }
-        cameras.push(CameraDesc {
-            yfov: view.angle.to_radians(),
-            znear: view.hither,
-        });
-        let rest = Trs {
-            translation: view.from,
-            rotation: look_at_rotation(view.from, view.at, view.up),
-            scale: Vec3::ONE,
-        };
-        let node = p.builder.add_node(None, "camera".into(), rest);
-        p.builder.nodes[node].camera = Some(0);
-        if let Some(block) = p.key_blocks.get("camera") {
-            used_blocks.insert("camera");
-            let mut local =
-                track_channels(block, node, rest_time, &mut channels, &mut approximations);
-            // Only transl and rot apply to the camera: scale stays 1, a missing track keeps
-            // the `v` value.
-            local.scale = Vec3::ONE;
-            if block.translation.is_none() {
-                local.translation = view.from;
-            }
-            if block.rotation.is_none() {
-                local.rotation = rest.rotation;
-            }
-            channels.retain(|c| !(c.node == node && c.target == ChannelTarget::Scale));
-            p.builder.nodes[node].local = local;
-        }
-        let (w, h) = view.resolution;
-        notes.push(format!(
-            "the file asks for {w}x{h} pixels (v resolution); the render size options apply"
-        ));
-    } else {
+/// Camera: the `v` view as a root node named `camera` (animated by a `k camera` block's
+/// `transl` and `rot`); no camera without a `v`.
+///
+/// # Errors
+/// A view angle outside (0, 180) degrees.
+fn add_camera(
+    p: &mut Parser,
+    rest_time: f32,
+    tracks: &mut ResolvedTracks,
+    notes: &mut Vec<String>,
+) -> Result<Vec<CameraDesc>, String> {
+    let Some(view) = p.view else {
         notes.push("the file has no 'v' view: no camera".into());
+        return Ok(Vec::new());
+    };
+    if !(view.angle > 0.0 && view.angle < 180.0) {
+        return Err(format!(
+            "view angle {} is outside (0, 180) degrees",
+            view.angle
+        ));
     }
+    let cameras = vec![CameraDesc {
+        yfov: view.angle.to_radians(),
+        znear: view.hither,
+    }];
+    let rest = Trs {
+        translation: view.from,
+        rotation: look_at_rotation(view.from, view.at, view.up),
+        scale: Vec3::ONE,
+    };
+    let node = p.builder.add_node(None, "camera".into(), rest);
+    p.builder.nodes[node].camera = Some(0);
+    if let Some(block) = p.key_blocks.get("camera") {
+        tracks.used_blocks.insert("camera".into());
+        let channels = &mut tracks.channels;
+        let mut local =
+            track_channels(block, node, rest_time, channels, &mut tracks.approximations);
+        // Only transl and rot apply to the camera: scale stays 1, a missing track keeps
+        // the `v` value.
+        local.scale = Vec3::ONE;
+        if block.translation.is_none() {
+            local.translation = view.from;
+        }
+        if block.rotation.is_none() {
+            local.rotation = rest.rotation;
+        }
+        channels.retain(|c| !(c.node == node && c.target == ChannelTarget::Scale));
+        p.builder.nodes[node].local = local;
+    }
+    let (w, h) = view.resolution;
+    notes.push(format!(
+        "the file asks for {w}x{h} pixels (v resolution); the render size options apply"
+    ));
+    Ok(cameras)
+}
 
-    // Lights.
+/// Lights: one root node per `l`/`la`, a point light without distance falloff.
+fn add_lights(p: &mut Parser, notes: &mut Vec<String>) -> Vec<LightDesc> {
     let mut lights = Vec::new();
     let mut animated_lights = Vec::new();
     for (i, light) in p.lights.iter().enumerate() {
@@ -289,8 +342,12 @@ fn finish(path: &Path, mut p: Parser) -> Result<(SceneDesc, AffStats), String> {
             animated_lights.join(", ")
         ));
     }
+    lights
+}
 
-    // Vertex morphing.
+/// Vertex morphing: per `tpa` group of two samples or more, a LINEAR weights channel with
+/// one-hot keys at the sample times.
+fn add_morph_channels(p: &Parser, channels: &mut Vec<ChannelDesc>) {
     for group in &p.builder.morph_groups {
         let k = group.times.len();
         if k < 2 {
@@ -310,28 +367,34 @@ fn finish(path: &Path, mut p: Parser) -> Result<(SceneDesc, AffStats), String> {
             components: targets,
         });
     }
+}
 
+/// Notes on the key tracks: backward key times, approximated rotation segments, ignored
+/// visibility tracks, unused blocks.
+fn note_track_findings(p: &Parser, tracks: &ResolvedTracks, notes: &mut Vec<String>) {
     if p.tracks_going_back > 0 {
         notes.push(format!(
             "{} key track(s) have key times that go back; they are evaluated as the reference does (the first segment ending after t)",
             p.tracks_going_back
         ));
     }
-    if approximations > 0 {
+    if tracks.approximations > 0 {
         notes.push(format!(
-            "{approximations} rotation track(s) have key times going back that make the reference enter a squad segment part-way; such segments play in full over their time range"
+            "{} rotation track(s) have key times going back that make the reference enter a squad segment part-way; such segments play in full over their time range",
+            tracks.approximations
         ));
     }
-    if visibility_ignored > 0 {
+    if tracks.visibility_ignored > 0 {
         notes.push(format!(
-            "{visibility_ignored} node(s) have 'visibility' tracks, which are ignored (always visible)"
+            "{} node(s) have 'visibility' tracks, which are ignored (always visible)",
+            tracks.visibility_ignored
         ));
     }
     let mut unused: Vec<&str> = p
         .key_blocks
         .keys()
         .map(String::as_str)
-        .filter(|n| !used_blocks.contains(n))
+        .filter(|n| !tracks.used_blocks.contains(*n))
         .collect();
     unused.sort_unstable();
     if !unused.is_empty() {
@@ -340,20 +403,28 @@ fn finish(path: &Path, mut p: Parser) -> Result<(SceneDesc, AffStats), String> {
             unused.join(", ")
         ));
     }
-    if p.materials.used_default {
-        notes.push("geometry before the first 'fm' uses plain white diffuse".into());
-    }
-    notes.push(
-        "textures are treated as sRGB; shine is used as the Phong exponent without the OpenGL x4"
-            .into(),
-    );
+}
 
+/// The per-command counts, completed with what is known only at the end.
+fn counts(p: &Parser) -> AffStats {
     let mut stats = p.stats.clone();
     stats.files = p.files.expanded;
     stats.key_blocks = p.key_blocks.len();
     stats.lights = p.lights.len();
     stats.textures = p.materials.textures.len();
+    stats
+}
 
+/// The scene description: the parse's nodes, meshes and materials with the camera, lights
+/// and one clip named `"aff"` holding every channel (none when nothing is animated).
+fn scene_of(
+    path: &Path,
+    p: Parser,
+    cameras: Vec<CameraDesc>,
+    lights: Vec<LightDesc>,
+    channels: Vec<ChannelDesc>,
+    notes: Vec<String>,
+) -> SceneDesc {
     let animations = if channels.is_empty() {
         Vec::new()
     } else {
@@ -362,7 +433,7 @@ fn finish(path: &Path, mut p: Parser) -> Result<(SceneDesc, AffStats), String> {
             channels,
         }]
     };
-    let scene = SceneDesc {
+    SceneDesc {
         source: path.to_path_buf(),
         meshes: p.builder.meshes,
         nodes: p.builder.nodes,
@@ -377,8 +448,7 @@ fn finish(path: &Path, mut p: Parser) -> Result<(SceneDesc, AffStats), String> {
         ambient: Some(p.ambient.unwrap_or(Vec3::ONE)),
         frame_times: p.frame_times,
         notes,
-    };
-    Ok((scene, stats))
+    }
 }
 
 /// Adds the channels of `block` for `node` and returns the node's TRS sampled at

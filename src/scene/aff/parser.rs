@@ -65,6 +65,44 @@ pub struct Parser {
     pub tracks_going_back: usize,
 }
 
+/// `a start end frames`: the scene's frame times.
+fn frame_times(r: &mut Reader) -> Result<FrameTimes, String> {
+    let start = r.number("a")?;
+    let end = r.number("a")?;
+    let frames = r.count("a", u32::MAX as usize)? as u32;
+    Ok(FrameTimes { start, end, frames })
+}
+
+/// `f r g b kd ks shine transmission ior`: NFF's material, as the `fm` state it stands for.
+fn nff_material(r: &mut Reader) -> Result<Fm, String> {
+    let color = r.vec3("f")?;
+    let kd = r.number("f")?;
+    let ks = r.number("f")?;
+    let shine = r.number("f")?;
+    let transmission = r.number("f")?;
+    let ior = r.number("f")?;
+    Ok(Fm {
+        ambient: Vec3::ZERO,
+        diffuse: color * kd,
+        specular: Vec3::splat(ks),
+        shine,
+        transmission,
+        ior,
+    })
+}
+
+/// `fm ambient diffuse specular shine transmission ior`.
+fn fm_material(r: &mut Reader) -> Result<Fm, String> {
+    Ok(Fm {
+        ambient: r.vec3("fm")?,
+        diffuse: r.vec3("fm")?,
+        specular: r.vec3("fm")?,
+        shine: r.number("fm")?,
+        transmission: r.number("fm")?,
+        ior: r.number("fm")?,
+    })
+}
+
 fn tcb(r: &mut Reader, after: &str) -> Result<Tcb, String> {
     Ok(Tcb {
         tension: r.number(after)?,
@@ -157,186 +195,34 @@ impl Parser {
     fn command(&mut self, r: &mut Reader, token: Token, dir: &Path) -> Result<(), String> {
         let line = token.line;
         match token.text {
+            // Scene-wide settings.
             b"v" => self.view(r)?,
             b"b" => self.background = Some(r.vec3("b")?),
-            b"l" | b"la" => {
-                let name = if token.text == b"la" {
-                    Some(r.name("la")?.0)
-                } else {
-                    None
-                };
-                let position = r.vec3("l")?;
-                let color = if r.next_is_number() {
-                    r.vec3("l")?
-                } else {
-                    Vec3::ONE
-                };
-                self.lights.push(PointLight {
-                    position,
-                    color,
-                    name,
-                });
-            }
             b"am" => self.ambient = Some(r.vec3("am")?),
-            b"a" => {
-                let start = r.number("a")?;
-                let end = r.number("a")?;
-                let frames = r.count("a", u32::MAX as usize)? as u32;
-                self.frame_times = Some(FrameTimes { start, end, frames });
+            b"a" => self.frame_times = Some(frame_times(r)?),
+            b"l" => self.light(r, None)?,
+            b"la" => {
+                let name = r.name("la")?.0;
+                self.light(r, Some(name))?;
             }
-            b"f" => {
-                let color = r.vec3("f")?;
-                let kd = r.number("f")?;
-                let ks = r.number("f")?;
-                let shine = r.number("f")?;
-                let transmission = r.number("f")?;
-                let ior = r.number("f")?;
-                self.fm = Some(Fm {
-                    ambient: Vec3::ZERO,
-                    diffuse: color * kd,
-                    specular: Vec3::splat(ks),
-                    shine,
-                    transmission,
-                    ior,
-                });
-                self.materials.states_read += 1;
-            }
-            b"fm" => {
-                self.fm = Some(Fm {
-                    ambient: r.vec3("fm")?,
-                    diffuse: r.vec3("fm")?,
-                    specular: r.vec3("fm")?,
-                    shine: r.number("fm")?,
-                    transmission: r.number("fm")?,
-                    ior: r.number("fm")?,
-                });
-                self.materials.states_read += 1;
-            }
-            b"c" => {
-                let base = r.vec3("c")?;
-                let r0 = r.number("c")?;
-                let apex = r.vec3("c")?;
-                let r1 = r.number("c")?;
-                let material = self.material(None);
-                self.stats.cones += 1;
-                self.stats.cone_triangles += self.add(material, shapes::cone(base, r0, apex, r1));
-            }
-            b"s" => {
-                let centre = r.vec3("s")?;
-                let radius = r.number("s")?;
-                let material = self.material(None);
-                self.stats.spheres += 1;
-                self.stats.sphere_triangles += self.add(material, shapes::sphere(centre, radius));
-            }
-            b"p" | b"pp" => {
-                let cmd = if token.text == b"p" { "p" } else { "pp" };
-                let n = r.count(cmd, MAX_ITEMS)?;
-                let mut positions = Vec::with_capacity(n.min(1024));
-                let mut normals = Vec::new();
-                for _ in 0..n {
-                    positions.push(r.vec3(cmd)?);
-                    if cmd == "pp" {
-                        normals.push(r.vec3(cmd)?.try_normalize().unwrap_or(Vec3::Z));
-                    }
-                }
-                let normals = (cmd == "pp").then_some(normals);
-                let material = self.material(None);
-                self.stats.polygons += 1;
-                self.stats.polygon_triangles +=
-                    self.add(material, shapes::polygon(positions, normals));
-            }
-            b"tt" | b"ttp" => {
-                let cmd = if token.text == b"tt" { "tt" } else { "ttp" };
-                let (name, name_line) = r.name(cmd)?;
-                let texture = self.texture(r, &name, name_line, dir)?;
-                let mut g = Geometry {
-                    normals: (cmd == "ttp").then(Vec::new),
-                    indices: vec![0, 1, 2],
-                    ..Default::default()
-                };
-                let mut uvs = Vec::with_capacity(3);
-                for _ in 0..3 {
-                    g.positions.push(r.vec3(cmd)?);
-                    if let Some(n) = g.normals.as_mut() {
-                        n.push(r.vec3(cmd)?.try_normalize().unwrap_or(Vec3::Z));
-                    }
-                    let uv: Vec2 = r.vec2(cmd)?;
-                    uvs.push(uv);
-                }
-                g.uvs = Some(uvs);
-                let material = self.material(Some(texture));
-                self.stats.textured_triangles += self.add(material, g);
-            }
+            // Material state.
+            b"f" => self.set_material(nff_material(r)?),
+            b"fm" => self.set_material(fm_material(r)?),
+            // Geometry.
+            b"c" => self.cone(r)?,
+            b"s" => self.sphere(r)?,
+            b"p" => self.polygon(r, "p")?,
+            b"pp" => self.polygon(r, "pp")?,
+            b"tt" => self.textured_triangle(r, "tt", dir)?,
+            b"ttp" => self.textured_triangle(r, "ttp", dir)?,
             b"tpa" => self.tpa(r, line)?,
-            b"m" => {
-                let mesh = read_mesh(r)?;
-                let texture = match &mesh.texture {
-                    Some((name, name_line)) => Some(self.texture(r, name, *name_line, dir)?),
-                    None => None,
-                };
-                let material = self.material(texture);
-                self.stats.meshes += 1;
-                self.stats.mesh_triangles += self.add(material, mesh.geometry);
-            }
-            b"i" => {
-                let detail = r.int("i")?;
-                let (name, name_line) = r.name("i")?;
-                if detail <= self.detail {
-                    let candidates = include_candidates(dir, &self.main_dir, &name);
-                    let Some(path) = candidates.iter().find(|p| self.files.exists(p)) else {
-                        let looked: Vec<String> =
-                            candidates.iter().map(|p| p.display().to_string()).collect();
-                        return Err(r.error_at(
-                            name_line,
-                            format!(
-                                "cannot find include '{name}' (looked in {})",
-                                looked.join(", ")
-                            ),
-                        ));
-                    };
-                    let path = path.clone();
-                    // Errors inside the include carry their own file:line; a cycle is
-                    // reported at the `i` that closes it.
-                    self.builder.close_morph_group();
-                    match self.parse_file(&path, &name) {
-                        Err(e) if e.starts_with("include cycle") => {
-                            return Err(r.error_at(name_line, e));
-                        }
-                        other => other?,
-                    }
-                    self.builder.close_morph_group();
-                }
-            }
+            b"m" => self.mesh(r, dir)?,
+            // Files and detail.
+            b"i" => self.include(r, dir)?,
             b"d" => self.detail = r.int("d")?,
-            b"xs" => {
-                let scale = r.vec3("xs")?;
-                let axis = r.vec3("xs")?;
-                let degrees = r.number("xs")?;
-                let translation = r.vec3("xs")?;
-                r.expect("{", "xs")?;
-                let rotation = match axis.try_normalize() {
-                    Some(a) => Quat::from_axis_angle(a, degrees.to_radians()),
-                    None => Quat::IDENTITY,
-                };
-                let trs = Trs {
-                    translation,
-                    rotation,
-                    scale,
-                };
-                let node = self.builder.add_node(Some(self.scope()), "xs".into(), trs);
-                self.scopes.push(node);
-                self.stats.static_transforms += 1;
-            }
-            b"x" => {
-                let (name, _) = r.name("x")?;
-                r.expect("{", "x")?;
-                let node = self
-                    .builder
-                    .add_node(Some(self.scope()), name.clone(), Trs::default());
-                self.scopes.push(node);
-                self.x_nodes.push((node, name));
-                self.stats.animated_transforms += 1;
-            }
+            // Transform blocks and their key tracks.
+            b"xs" => self.static_transform(r)?,
+            b"x" => self.animated_transform(r)?,
             b"}" => {
                 if self.scopes.len() <= 1 {
                     return Err(r.error_at(line, "'}' without an open 'x' or 'xs'"));
@@ -348,6 +234,174 @@ impl Parser {
                 return Err(r.error_at(line, format!("unknown command '{}'", token.to_text())));
             }
         }
+        Ok(())
+    }
+
+    /// `l` / `la` (its name already read): a point light, white unless a colour follows.
+    fn light(&mut self, r: &mut Reader, name: Option<String>) -> Result<(), String> {
+        let position = r.vec3("l")?;
+        let color = if r.next_is_number() {
+            r.vec3("l")?
+        } else {
+            Vec3::ONE
+        };
+        self.lights.push(PointLight {
+            position,
+            color,
+            name,
+        });
+        Ok(())
+    }
+
+    /// `f` or `fm`: the material state for the geometry that follows.
+    fn set_material(&mut self, fm: Fm) {
+        self.fm = Some(fm);
+        self.materials.states_read += 1;
+    }
+
+    /// `c`: an open cone.
+    fn cone(&mut self, r: &mut Reader) -> Result<(), String> {
+        let base = r.vec3("c")?;
+        let r0 = r.number("c")?;
+        let apex = r.vec3("c")?;
+        let r1 = r.number("c")?;
+        let material = self.material(None);
+        self.stats.cones += 1;
+        self.stats.cone_triangles += self.add(material, shapes::cone(base, r0, apex, r1));
+        Ok(())
+    }
+
+    /// `s`: a sphere.
+    fn sphere(&mut self, r: &mut Reader) -> Result<(), String> {
+        let centre = r.vec3("s")?;
+        let radius = r.number("s")?;
+        let material = self.material(None);
+        self.stats.spheres += 1;
+        self.stats.sphere_triangles += self.add(material, shapes::sphere(centre, radius));
+        Ok(())
+    }
+
+    /// `p` (positions) or `pp` (positions and normals): a polygon, as a fan.
+    fn polygon(&mut self, r: &mut Reader, cmd: &str) -> Result<(), String> {
+        let n = r.count(cmd, MAX_ITEMS)?;
+        let mut positions = Vec::with_capacity(n.min(1024));
+        let mut normals = Vec::new();
+        for _ in 0..n {
+            positions.push(r.vec3(cmd)?);
+            if cmd == "pp" {
+                normals.push(r.vec3(cmd)?.try_normalize().unwrap_or(Vec3::Z));
+            }
+        }
+        let normals = (cmd == "pp").then_some(normals);
+        let material = self.material(None);
+        self.stats.polygons += 1;
+        self.stats.polygon_triangles += self.add(material, shapes::polygon(positions, normals));
+        Ok(())
+    }
+
+    /// `tt` (positions and uvs) or `ttp` (with normals): one textured triangle.
+    fn textured_triangle(&mut self, r: &mut Reader, cmd: &str, dir: &Path) -> Result<(), String> {
+        let (name, name_line) = r.name(cmd)?;
+        let texture = self.texture(r, &name, name_line, dir)?;
+        let mut g = Geometry {
+            normals: (cmd == "ttp").then(Vec::new),
+            indices: vec![0, 1, 2],
+            ..Default::default()
+        };
+        let mut uvs = Vec::with_capacity(3);
+        for _ in 0..3 {
+            g.positions.push(r.vec3(cmd)?);
+            if let Some(n) = g.normals.as_mut() {
+                n.push(r.vec3(cmd)?.try_normalize().unwrap_or(Vec3::Z));
+            }
+            let uv: Vec2 = r.vec2(cmd)?;
+            uvs.push(uv);
+        }
+        g.uvs = Some(uvs);
+        let material = self.material(Some(texture));
+        self.stats.textured_triangles += self.add(material, g);
+        Ok(())
+    }
+
+    /// `m`: an indexed mesh, textured when it names a texture.
+    fn mesh(&mut self, r: &mut Reader, dir: &Path) -> Result<(), String> {
+        let mesh = read_mesh(r)?;
+        let texture = match &mesh.texture {
+            Some((name, name_line)) => Some(self.texture(r, name, *name_line, dir)?),
+            None => None,
+        };
+        let material = self.material(texture);
+        self.stats.meshes += 1;
+        self.stats.mesh_triangles += self.add(material, mesh.geometry);
+        Ok(())
+    }
+
+    /// `i detail name`: parses the named file in place when its detail is at most the
+    /// current `d`.
+    fn include(&mut self, r: &mut Reader, dir: &Path) -> Result<(), String> {
+        let detail = r.int("i")?;
+        let (name, name_line) = r.name("i")?;
+        if detail > self.detail {
+            return Ok(());
+        }
+        let candidates = include_candidates(dir, &self.main_dir, &name);
+        let Some(path) = candidates.iter().find(|p| self.files.exists(p)) else {
+            let looked: Vec<String> = candidates.iter().map(|p| p.display().to_string()).collect();
+            return Err(r.error_at(
+                name_line,
+                format!(
+                    "cannot find include '{name}' (looked in {})",
+                    looked.join(", ")
+                ),
+            ));
+        };
+        let path = path.clone();
+        // Errors inside the include carry their own file:line; a cycle is reported at the
+        // `i` that closes it.
+        self.builder.close_morph_group();
+        match self.parse_file(&path, &name) {
+            Err(e) if e.starts_with("include cycle") => {
+                return Err(r.error_at(name_line, e));
+            }
+            other => other?,
+        }
+        self.builder.close_morph_group();
+        Ok(())
+    }
+
+    /// `xs scale axis degrees translation {`: opens a static transform block.
+    fn static_transform(&mut self, r: &mut Reader) -> Result<(), String> {
+        let scale = r.vec3("xs")?;
+        let axis = r.vec3("xs")?;
+        let degrees = r.number("xs")?;
+        let translation = r.vec3("xs")?;
+        r.expect("{", "xs")?;
+        let rotation = match axis.try_normalize() {
+            Some(a) => Quat::from_axis_angle(a, degrees.to_radians()),
+            None => Quat::IDENTITY,
+        };
+        let trs = Trs {
+            translation,
+            rotation,
+            scale,
+        };
+        let node = self.builder.add_node(Some(self.scope()), "xs".into(), trs);
+        self.scopes.push(node);
+        self.stats.static_transforms += 1;
+        Ok(())
+    }
+
+    /// `x name {`: opens a transform block driven by the `k name` block (resolved after the
+    /// parse).
+    fn animated_transform(&mut self, r: &mut Reader) -> Result<(), String> {
+        let (name, _) = r.name("x")?;
+        r.expect("{", "x")?;
+        let node = self
+            .builder
+            .add_node(Some(self.scope()), name.clone(), Trs::default());
+        self.scopes.push(node);
+        self.x_nodes.push((node, name));
+        self.stats.animated_transforms += 1;
         Ok(())
     }
 

@@ -155,6 +155,7 @@ fn load_primitive(
         joints,
         weights,
         morph_targets,
+        point_cache: None,
     }))
 }
 

@@ -1,28 +1,39 @@
-//! The record every frame leaves: one line of `stats.jsonl`, and the preprocessing phases
-//! it times.
+//! The record every frame leaves: one line of `stats.jsonl`, the preprocessing phases it
+//! times, and the one reader of stats files that every tool uses.
 //!
-//! This is the only declaration of the per-frame record. The frame loop fills it, the output
-//! folder appends it to `stats.jsonl` and summarises a slice of it into `summary.json`
-//! (`report::Summary`), and `mipray report` / `mipray diff` read it back (`report::Record`
-//! adds which fields a line had, since older files lack some). The JSON field names are the
-//! Rust field names; `update` is flattened, so a line is one flat object.
+//! This is the only declaration of the per-frame record and a leaf: it imports nothing from
+//! the rest of the crate, so the frame loop that fills it and the tools that read it back
+//! (the output folder's resume, `mipray report`, `mipray diff`, the render page) all stand
+//! on it. The JSON field names are the Rust field names; `update` is flattened, so a line
+//! is one flat object. A line is written with `serde_json` ([`FrameRecord`] is
+//! `Serialize`) and read back only through [`Record::parse`] (and [`load_sequence`] for the
+//! files of a folder): tolerant of unknown fields and of fields older files lack (absent,
+//! never invented as 0), strict about the types of the fields it knows; each tool then asks
+//! for what it needs (the frame number always; a resumed render every field it rewrites,
+//! [`Record::missing`]).
 //!
 //! [`Phase`] is the one list of the preprocessing phases (the update steps before the
-//! render, in frame-loop order): the summary, the report table, its plot and `compare`
-//! iterate over [`Phase::ALL`] rather than naming the fields again.
+//! render, in frame-loop order): the summary, the report table, its plot, the render page
+//! and `compare` iterate over [`Phase::ALL`] rather than naming the fields again.
 
-use serde::{Deserialize, Serialize};
+mod load;
+mod read;
+
+pub use load::{Sequence, StatsFileError, is_stats_file_name, load_records, load_sequence};
+pub use read::{Record, RecordError};
+
+use serde::Serialize;
 
 /// What one frame cost and produced: one line of `stats.jsonl`.
-#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Default, Serialize)]
 pub struct FrameRecord {
     pub frame: u32,
     pub time_s: f32,
     pub width: u32,
     pub height: u32,
     pub lod_method: String,
-    /// `--lod-bias` (absent in records written before it existed).
-    #[serde(default)]
+    /// `--lod-bias` (absent in records written before it existed: read as 0, see
+    /// [`Record::missing`]).
     pub lod_bias: f32,
     pub triangles: usize,
     pub lights: usize,
@@ -42,7 +53,7 @@ pub struct FrameRecord {
 }
 
 /// What the per-frame update did and cost (flattened into each `stats.jsonl` line).
-#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize)]
 pub struct UpdateStats {
     /// Animation evaluated at the frame time and moved vertices written.
     pub animate_ms: f64,
@@ -141,6 +152,39 @@ impl UpdateStats {
 }
 
 impl FrameRecord {
+    /// The `stats.jsonl` name of every field, in the order a line is written.
+    pub const FIELDS: [&'static str; 25] = [
+        "frame",
+        "time_s",
+        "width",
+        "height",
+        "lod_method",
+        "lod_bias",
+        "triangles",
+        "lights",
+        "spp",
+        "animate_ms",
+        "dirty_ms",
+        "refit_ms",
+        "build_ms",
+        "rebuild",
+        "sah_ratio",
+        "lod_update_ms",
+        "moved_triangles",
+        "deformed_triangles",
+        "lod_recomputed",
+        "lod_shifted",
+        "render_ms",
+        "total_ms",
+        "rays",
+        "mip_histogram",
+        "nonfinite_samples",
+    ];
+
+    /// Fields that records written before they existed lack, and whose absence means their
+    /// default (`lod_bias`: 0, no bias): a record without them is still complete.
+    pub const DEFAULTED: &'static [&'static str] = &["lod_bias"];
+
     /// Milliseconds spent in `phase` this frame.
     pub fn phase_ms(&self, phase: Phase) -> f64 {
         self.update.phase_ms(phase)
@@ -180,15 +224,16 @@ mod tests {
     }
 
     #[test]
-    fn records_without_lod_bias_load() {
-        let mut json = serde_json::to_value(FrameRecord {
-            frame: 3,
-            lod_bias: 0.5,
-            ..FrameRecord::default()
-        })
-        .unwrap();
-        json.as_object_mut().unwrap().remove("lod_bias");
-        let record: FrameRecord = serde_json::from_value(json).unwrap();
-        assert_eq!((record.frame, record.lod_bias), (3, 0.0));
+    fn field_list_is_the_written_line_in_order() {
+        let line = serde_json::to_string(&FrameRecord::default()).unwrap();
+        let at: Vec<usize> = FrameRecord::FIELDS
+            .iter()
+            .map(|f| line.find(&format!("\"{f}\":")).expect(f))
+            .collect();
+        assert!(at.windows(2).all(|w| w[0] < w[1]), "{line}");
+        assert_eq!(line.matches("\":").count(), FrameRecord::FIELDS.len());
+        for name in FrameRecord::DEFAULTED {
+            assert!(FrameRecord::FIELDS.contains(name), "{name}");
+        }
     }
 }

@@ -7,14 +7,58 @@
 //! than once (a resumed render appends a frame it already had) the last record read wins:
 //! later lines of a file over earlier ones, later files of a folder (by name, `stats.jsonl`
 //! first) and later paths given over earlier ones. The same file named twice is read once.
-//! Blank lines are skipped; any other line that is not a record is an error naming the file
-//! and the 1-based line.
+//! Blank lines are skipped, and so is a last line without its newline that is not a record
+//! (what an interrupted write leaves while a render runs); any other line that is not a
+//! record is an error naming the file and the 1-based line.
+//!
+//! Every tool that reads stats files reads them here: `mipray report`, `mipray diff`, the
+//! render page (and, line by line through [`Record::parse`], a resumed render).
 
 use std::fs;
 use std::path::{Path, PathBuf};
 
-use super::error::ReportError;
-use super::record::{Record, RecordError};
+use super::read::{Record, RecordError};
+
+/// Why the stats files of a sequence could not be read: every error names the file (and
+/// line) it is about.
+#[derive(Debug, thiserror::Error)]
+pub enum StatsFileError {
+    /// A folder or file could not be listed or read.
+    #[error("{path}: {source}")]
+    Io {
+        path: PathBuf,
+        source: std::io::Error,
+    },
+    /// A folder holds neither `stats.jsonl` nor `stats.shard-*.jsonl`.
+    #[error("{dir}: no stats.jsonl or stats.shard-*.jsonl")]
+    NoStatsFile { dir: PathBuf },
+    /// A line of a stats file is not JSON.
+    #[error("{path}:{line}: invalid JSON: {source}")]
+    Json {
+        path: PathBuf,
+        line: usize,
+        source: serde_json::Error,
+    },
+    /// A line is JSON but not a frame record (no `frame`, a field of the wrong type).
+    #[error("{path}:{line}: {message}")]
+    Record {
+        path: PathBuf,
+        line: usize,
+        message: String,
+    },
+    /// The stats files hold no record at all.
+    #[error("no frame records in {sources}")]
+    Empty { sources: String },
+}
+
+impl StatsFileError {
+    fn io(path: &Path) -> impl FnOnce(std::io::Error) -> StatsFileError + '_ {
+        move |source| StatsFileError::Io {
+            path: path.to_path_buf(),
+            source,
+        }
+    }
+}
 
 /// The merged records of a sequence and where they came from.
 #[derive(Debug, Clone, PartialEq)]
@@ -32,7 +76,7 @@ pub struct Sequence {
 /// # Errors
 /// A folder cannot be read or has no stats file, a line is not a record (the error names
 /// the file and line), or there is no record at all.
-pub fn load_records(dirs: &[PathBuf]) -> Result<Vec<Record>, ReportError> {
+pub fn load_records(dirs: &[PathBuf]) -> Result<Vec<Record>, StatsFileError> {
     load_sequence(dirs).map(|sequence| sequence.records)
 }
 
@@ -40,7 +84,7 @@ pub fn load_records(dirs: &[PathBuf]) -> Result<Vec<Record>, ReportError> {
 ///
 /// # Errors
 /// As [`load_records`].
-pub fn load_sequence(dirs: &[PathBuf]) -> Result<Sequence, ReportError> {
+pub fn load_sequence(dirs: &[PathBuf]) -> Result<Sequence, StatsFileError> {
     let mut files: Vec<PathBuf> = Vec::new();
     for dir in dirs {
         for file in stats_files(dir)? {
@@ -54,7 +98,7 @@ pub fn load_sequence(dirs: &[PathBuf]) -> Result<Sequence, ReportError> {
         records.extend(read_stats_file(file)?);
     }
     if records.is_empty() {
-        return Err(ReportError::Empty {
+        return Err(StatsFileError::Empty {
             sources: describe(dirs),
         });
     }
@@ -81,20 +125,20 @@ pub fn is_stats_file_name(name: &str) -> bool {
 
 /// The stats files of `path`: itself if it is a file, else the folder's stats files,
 /// `stats.jsonl` first, then the shard files by name.
-fn stats_files(path: &Path) -> Result<Vec<PathBuf>, ReportError> {
+fn stats_files(path: &Path) -> Result<Vec<PathBuf>, StatsFileError> {
     if path.is_file() {
         return Ok(vec![path.to_path_buf()]);
     }
     let mut names: Vec<String> = Vec::new();
-    for entry in fs::read_dir(path).map_err(ReportError::io(path))? {
-        let entry = entry.map_err(ReportError::io(path))?;
+    for entry in fs::read_dir(path).map_err(StatsFileError::io(path))? {
+        let entry = entry.map_err(StatsFileError::io(path))?;
         let name = entry.file_name().to_string_lossy().into_owned();
         if is_stats_file_name(&name) && entry.path().is_file() {
             names.push(name);
         }
     }
     if names.is_empty() {
-        return Err(ReportError::NoStatsFile {
+        return Err(StatsFileError::NoStatsFile {
             dir: path.to_path_buf(),
         });
     }
@@ -102,27 +146,37 @@ fn stats_files(path: &Path) -> Result<Vec<PathBuf>, ReportError> {
     Ok(names.into_iter().map(|name| path.join(name)).collect())
 }
 
-/// The records of one stats file, in line order.
-fn read_stats_file(path: &Path) -> Result<Vec<Record>, ReportError> {
-    let text = fs::read_to_string(path).map_err(ReportError::io(path))?;
+/// The records of one stats file, in line order (a torn last line left out).
+fn read_stats_file(path: &Path) -> Result<Vec<Record>, StatsFileError> {
+    let text = fs::read_to_string(path).map_err(StatsFileError::io(path))?;
+    let torn_tail = !text.is_empty() && !text.ends_with('\n');
+    let lines: Vec<&str> = text.lines().collect();
     let mut records = Vec::new();
-    for (index, line) in text.lines().enumerate() {
+    for (index, line) in lines.iter().enumerate() {
         if line.trim().is_empty() {
             continue;
         }
-        let record = Record::parse(line).map_err(|e| match e {
-            RecordError::Json(source) => ReportError::Json {
+        let error = match Record::parse(line) {
+            Ok(record) => {
+                records.push(record);
+                continue;
+            }
+            // An interrupted write: the line was never finished.
+            Err(_) if torn_tail && index + 1 == lines.len() => break,
+            Err(e) => e,
+        };
+        return Err(match error {
+            RecordError::Json(source) => StatsFileError::Json {
                 path: path.to_path_buf(),
                 line: index + 1,
                 source,
             },
-            RecordError::Invalid(message) => ReportError::Record {
+            RecordError::Invalid(message) => StatsFileError::Record {
                 path: path.to_path_buf(),
                 line: index + 1,
                 message,
             },
-        })?;
-        records.push(record);
+        });
     }
     Ok(records)
 }
@@ -154,7 +208,7 @@ fn describe(dirs: &[PathBuf]) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::frame::FrameRecord;
+    use crate::record::FrameRecord;
 
     fn record(frame: u32, render_ms: f64) -> Record {
         let values = FrameRecord {
@@ -181,6 +235,34 @@ mod tests {
             .collect();
         assert_eq!(frames, [(0, 1.0), (1, 1.0), (2, 3.0)]);
         assert_eq!(dropped, 2);
+    }
+
+    #[test]
+    fn a_torn_last_line_is_left_out_and_any_other_bad_line_is_an_error() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("stats.jsonl");
+        fs::write(
+            &path,
+            "{\"frame\": 0}\n\n{\"frame\": 1}\n{\"frame\": 2, \"tor",
+        )
+        .unwrap();
+        let frames: Vec<u32> = read_stats_file(&path)
+            .unwrap()
+            .iter()
+            .map(Record::frame)
+            .collect();
+        assert_eq!(frames, [0, 1]);
+        // With its newline the line was finished: it is an error.
+        fs::write(&path, "{\"frame\": 0}\n{\"frame\": 2, \"tor\n").unwrap();
+        let message = read_stats_file(&path).unwrap_err().to_string();
+        assert!(
+            message.starts_with(&format!("{}:2: invalid JSON", path.display())),
+            "{message}"
+        );
+        // A bad line before the last one is an error even when the file is torn.
+        fs::write(&path, "[1]\n{\"frame\": 2, \"tor").unwrap();
+        let message = read_stats_file(&path).unwrap_err().to_string();
+        assert_eq!(message, format!("{}:1: not a JSON object", path.display()));
     }
 
     #[test]

@@ -1,14 +1,16 @@
-//! One line of `stats.jsonl`, read tolerantly into the frame loop's [`FrameRecord`].
+//! One line of `stats.jsonl`, read into a [`FrameRecord`]: the one parser of a line.
 //!
 //! Every field but `frame` is optional: records written before a field existed load with
 //! that field absent (the record holds its default, and [`Record::has`] says it is not
 //! there), never reported as 0, so the report does not invent data. `null` (how
-//! serde_json writes a NaN) is absent too. Unknown fields are ignored, so newer files load.
-//! A field of the wrong type is an error that names the field.
+//! serde_json writes a NaN) is absent too. Unknown fields are ignored by the values and
+//! kept in the line ([`Record::line`]), so newer files load and the render page still shows
+//! them. A field of the wrong type is an error that names the field. A reader that needs
+//! more than `frame` asks [`Record::missing`].
 
 use serde_json::{Map, Value};
 
-use crate::frame::{FrameRecord, UpdateStats};
+use super::{FrameRecord, UpdateStats};
 
 /// One frame's record as read back from a stats file, and which fields the line had.
 #[derive(Debug, Clone, PartialEq, Default)]
@@ -17,14 +19,26 @@ pub struct Record {
     pub values: FrameRecord,
     /// `stats.jsonl` names of the fields the line had (non-null).
     present: Vec<&'static str>,
+    /// The line's JSON object as read (unknown fields included).
+    line: Map<String, Value>,
 }
 
 impl Record {
     /// A record whose fields named in `present` were read (the rest count as absent).
+    /// Its line is the JSON of the present fields.
     pub fn new(values: FrameRecord, present: impl IntoIterator<Item = &'static str>) -> Record {
+        let present: Vec<&'static str> = present.into_iter().collect();
+        let line = match serde_json::to_value(&values) {
+            Ok(Value::Object(all)) => all
+                .into_iter()
+                .filter(|(name, _)| present.contains(&name.as_str()))
+                .collect(),
+            _ => Map::new(),
+        };
         Record {
             values,
-            present: present.into_iter().collect(),
+            present,
+            line,
         }
     }
 
@@ -33,7 +47,7 @@ impl Record {
     /// wrong type.
     pub fn parse(line: &str) -> Result<Record, RecordError> {
         let value: Value = serde_json::from_str(line).map_err(RecordError::Json)?;
-        let Some(o) = value.as_object() else {
+        let Value::Object(o) = value else {
             return Err(RecordError::Invalid("not a JSON object".into()));
         };
         Record::from_object(o).map_err(RecordError::Invalid)
@@ -54,10 +68,25 @@ impl Record {
         self.has(name).then_some(value)
     }
 
-    fn from_object(o: &Map<String, Value>) -> Result<Record, String> {
-        let frame = integer(o, "frame")?.ok_or("missing `frame`")?;
+    /// The fields of [`FrameRecord`] the line lacked, except those whose absence means
+    /// their default ([`FrameRecord::DEFAULTED`]): empty for a complete record, one that
+    /// can be written back unchanged.
+    pub fn missing(&self) -> Vec<&'static str> {
+        FrameRecord::FIELDS
+            .into_iter()
+            .filter(|name| !self.has(name) && !FrameRecord::DEFAULTED.contains(name))
+            .collect()
+    }
+
+    /// The line's JSON object as read, unknown fields included.
+    pub fn line(&self) -> &Map<String, Value> {
+        &self.line
+    }
+
+    fn from_object(o: Map<String, Value>) -> Result<Record, String> {
+        let frame = integer(&o, "frame")?.ok_or("missing `frame`")?;
         let mut f = Fields {
-            o,
+            o: &o,
             present: vec!["frame"],
         };
         let values = FrameRecord {
@@ -89,9 +118,11 @@ impl Record {
             mip_histogram: f.counts("mip_histogram")?,
             nonfinite_samples: f.integer("nonfinite_samples")?,
         };
+        let present = f.present;
         Ok(Record {
             values,
-            present: f.present,
+            present,
+            line: o,
         })
     }
 }
@@ -260,6 +291,47 @@ mod tests {
         assert!(!r.has("dirty_ms"));
         assert!(!r.has("rebuild"));
         assert!(!r.has("future_field"));
+    }
+
+    #[test]
+    fn a_complete_record_misses_nothing_and_keeps_its_line() {
+        let mut json = serde_json::to_value(FrameRecord {
+            frame: 4,
+            ..FrameRecord::default()
+        })
+        .unwrap();
+        let object = json.as_object_mut().unwrap();
+        object.insert("future_field".into(), Value::from(2));
+        let r = Record::parse(&json.to_string()).unwrap();
+        assert!(r.missing().is_empty());
+        assert_eq!(r.line()["future_field"], 2);
+        // An older record without `lod_bias` is complete (it means no bias).
+        json.as_object_mut().unwrap().remove("lod_bias");
+        let older = Record::parse(&json.to_string()).unwrap();
+        assert!(older.missing().is_empty());
+        assert_eq!(older.values.lod_bias, 0.0);
+        json.as_object_mut().unwrap().remove("rays");
+        json.as_object_mut()
+            .unwrap()
+            .insert("spp".into(), Value::Null);
+        let partial = Record::parse(&json.to_string()).unwrap();
+        assert_eq!(partial.missing(), ["spp", "rays"]);
+    }
+
+    #[test]
+    fn made_records_have_the_line_of_their_present_fields() {
+        let r = Record::new(
+            FrameRecord {
+                frame: 2,
+                render_ms: 1.5,
+                ..FrameRecord::default()
+            },
+            ["frame", "render_ms"],
+        );
+        assert_eq!(
+            Value::Object(r.line().clone()).to_string(),
+            r#"{"frame":2,"render_ms":1.5}"#
+        );
     }
 
     #[test]

@@ -451,11 +451,11 @@ mod tests {
     use serde_json::Value;
 
     use super::*;
-    use crate::authoring::animation::Channel;
-    use crate::authoring::handles::{MeshId, NodeId};
-    use crate::authoring::node::{Node, PointLight, Primitive};
-    use crate::authoring::shapes::{cuboid, quad};
-    use crate::authoring::textures::checkerboard;
+    use crate::animation::Channel;
+    use crate::handles::{MeshId, NodeId};
+    use crate::node::{Node, PointLight, Primitive};
+    use crate::shapes::{cuboid, quad};
+    use crate::textures::checkerboard;
 
     /// A scene using every feature: a geometry shared by two meshes, a mesh instanced by
     /// two nodes, a child node, one image behind two wrap modes, and STEP, LINEAR and
@@ -624,7 +624,7 @@ mod tests {
 
     /// A two-target morphed icosphere with CUBICSPLINE weights.
     fn morph_scene() -> (GltfBuilder, NodeId) {
-        use crate::authoring::shapes::{MorphTarget, icosphere};
+        use crate::shapes::{MorphTarget, icosphere};
         let mut b = GltfBuilder::new();
         let mut sphere = icosphere(1.0, 1);
         let n = sphere.positions.len();

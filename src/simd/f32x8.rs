@@ -1,41 +1,46 @@
-//! One `f32` per child lane of a wide node, and the two ways of computing on eight of them:
-//! two 4-wide SSE instructions per operation (the x86-64 baseline every build can run) or
-//! one 8-wide AVX instruction where the CPU has AVX2.
+//! Eight `f32` lanes (a wide node's child lanes, eight rays of a packet) and the two ways of
+//! computing on them: two 4-wide SSE instructions per operation (the x86-64 baseline every
+//! build can run) or one 8-wide AVX instruction where the CPU has AVX2.
 //!
-//! Which one runs is chosen once per process by [`crate::simd`]: the walks are compiled
+//! Which one runs is chosen once per process by [`crate::simd`]: the kernels are compiled
 //! twice (as `simd::Kernel`s), and everything below is inlined into the copy compiled with
 //! AVX2, where `AVX` is true. The baseline build of the crate stays runnable on any x86-64
 //! CPU; no `-C target-cpu` is needed.
 //!
-//! Both ways take the same decisions bit for bit: `min` and `max` are written as the SSE and
-//! AVX instructions compute them (`a < b ? a : b`, the second operand when either is NaN),
-//! `le_mask` is an ordered compare (false for NaN), and there is no fused multiply-add.
+//! Both ways take the same decisions bit for bit: every operation is one IEEE operation per
+//! lane (no fused multiply-add), `min` and `max` are written as the SSE and AVX instructions
+//! compute them (`a < b ? a : b`, the second operand when either is NaN), and the masks are
+//! ordered compares (false for NaN) except `ne_mask` (true for NaN, as `!=`).
 
-use super::WIDTH;
+/// Lanes per vector.
+pub const WIDTH: usize = 8;
 
 /// One value per child lane (32-byte aligned, so a row of node bounds loads as one vector).
 #[derive(Clone, Copy, Debug, Default)]
 #[repr(C, align(32))]
-pub struct Lanes(pub [f32; WIDTH]);
+pub struct F32x8(pub [f32; WIDTH]);
 
-impl Lanes {
+#[cfg(target_arch = "x86_64")]
+use std::arch::x86_64::{_CMP_EQ_OQ, _CMP_GT_OQ, _CMP_LT_OQ, _CMP_NEQ_UQ};
+
+impl F32x8 {
     #[inline(always)]
-    pub fn splat(v: f32) -> Lanes {
-        Lanes([v; WIDTH])
+    pub fn splat(v: f32) -> F32x8 {
+        F32x8([v; WIDTH])
     }
 
     #[inline(always)]
-    fn zip(self, other: Lanes, f: impl Fn(f32, f32) -> f32) -> Lanes {
+    fn zip(self, other: F32x8, f: impl Fn(f32, f32) -> f32) -> F32x8 {
         let mut out = [0.0; WIDTH];
         for lane in 0..WIDTH {
             out[lane] = f(self.0[lane], other.0[lane]);
         }
-        Lanes(out)
+        F32x8(out)
     }
 
     /// `self - other`. With `AVX`, only callable where AVX2 was detected (see the module).
     #[inline(always)]
-    pub fn sub<const AVX: bool>(self, other: Lanes) -> Lanes {
+    pub fn sub<const AVX: bool>(self, other: F32x8) -> F32x8 {
         #[cfg(target_arch = "x86_64")]
         if AVX {
             // SAFETY: `AVX` is true only in a kernel copy `simd::dispatch` runs where the CPU
@@ -46,7 +51,7 @@ impl Lanes {
     }
 
     #[inline(always)]
-    pub fn mul<const AVX: bool>(self, other: Lanes) -> Lanes {
+    pub fn mul<const AVX: bool>(self, other: F32x8) -> F32x8 {
         #[cfg(target_arch = "x86_64")]
         if AVX {
             // SAFETY: as in `sub`.
@@ -56,7 +61,7 @@ impl Lanes {
     }
 
     #[inline(always)]
-    pub fn min<const AVX: bool>(self, other: Lanes) -> Lanes {
+    pub fn min<const AVX: bool>(self, other: F32x8) -> F32x8 {
         #[cfg(target_arch = "x86_64")]
         if AVX {
             // SAFETY: as in `sub`.
@@ -67,7 +72,7 @@ impl Lanes {
     }
 
     #[inline(always)]
-    pub fn max<const AVX: bool>(self, other: Lanes) -> Lanes {
+    pub fn max<const AVX: bool>(self, other: F32x8) -> F32x8 {
         #[cfg(target_arch = "x86_64")]
         if AVX {
             // SAFETY: as in `sub`.
@@ -77,9 +82,82 @@ impl Lanes {
         self.zip(other, |a, b| if a > b { a } else { b })
     }
 
+    #[inline(always)]
+    pub fn add<const AVX: bool>(self, other: F32x8) -> F32x8 {
+        #[cfg(target_arch = "x86_64")]
+        if AVX {
+            // SAFETY: as in `sub`.
+            return unsafe { avx::add(self, other) };
+        }
+        self.zip(other, |a, b| a + b)
+    }
+
+    #[inline(always)]
+    pub fn div<const AVX: bool>(self, other: F32x8) -> F32x8 {
+        #[cfg(target_arch = "x86_64")]
+        if AVX {
+            // SAFETY: as in `sub`.
+            return unsafe { avx::div(self, other) };
+        }
+        self.zip(other, |a, b| a / b)
+    }
+
+    /// Bit `lane` set where `self < other` (false for NaN).
+    #[inline(always)]
+    pub fn lt_mask<const AVX: bool>(self, other: F32x8) -> u32 {
+        #[cfg(target_arch = "x86_64")]
+        if AVX {
+            // SAFETY: as in `sub`.
+            return unsafe { avx::cmp_mask::<_CMP_LT_OQ>(self, other) };
+        }
+        self.mask_where(other, |a, b| a < b)
+    }
+
+    /// Bit `lane` set where `self > other` (false for NaN).
+    #[inline(always)]
+    pub fn gt_mask<const AVX: bool>(self, other: F32x8) -> u32 {
+        #[cfg(target_arch = "x86_64")]
+        if AVX {
+            // SAFETY: as in `sub`.
+            return unsafe { avx::cmp_mask::<_CMP_GT_OQ>(self, other) };
+        }
+        self.mask_where(other, |a, b| a > b)
+    }
+
+    /// Bit `lane` set where `self == other` (false for NaN; `-0 == 0`).
+    #[inline(always)]
+    pub fn eq_mask<const AVX: bool>(self, other: F32x8) -> u32 {
+        #[cfg(target_arch = "x86_64")]
+        if AVX {
+            // SAFETY: as in `sub`.
+            return unsafe { avx::cmp_mask::<_CMP_EQ_OQ>(self, other) };
+        }
+        self.mask_where(other, |a, b| a == b)
+    }
+
+    /// Bit `lane` set where `self != other` (true for NaN, as `!=`).
+    #[inline(always)]
+    pub fn ne_mask<const AVX: bool>(self, other: F32x8) -> u32 {
+        #[cfg(target_arch = "x86_64")]
+        if AVX {
+            // SAFETY: as in `sub`.
+            return unsafe { avx::cmp_mask::<_CMP_NEQ_UQ>(self, other) };
+        }
+        self.mask_where(other, |a, b| a != b)
+    }
+
+    #[inline(always)]
+    fn mask_where(self, other: F32x8, f: impl Fn(f32, f32) -> bool) -> u32 {
+        let mut mask = 0;
+        for lane in 0..WIDTH {
+            mask |= (f(self.0[lane], other.0[lane]) as u32) << lane;
+        }
+        mask
+    }
+
     /// Bit `lane` set where `self <= other` (false for NaN).
     #[inline(always)]
-    pub fn le_mask<const AVX: bool>(self, other: Lanes) -> u32 {
+    pub fn le_mask<const AVX: bool>(self, other: F32x8) -> u32 {
         #[cfg(target_arch = "x86_64")]
         if AVX {
             // SAFETY: as in `sub`.
@@ -96,20 +174,20 @@ impl Lanes {
 /// The AVX versions of the operations, inlined only into functions compiled for AVX2.
 #[cfg(target_arch = "x86_64")]
 mod avx {
-    use super::Lanes;
+    use super::F32x8;
     use std::arch::x86_64::*;
 
     #[inline]
     #[target_feature(enable = "avx")]
-    fn load(a: Lanes) -> __m256 {
-        // SAFETY: `Lanes` is 32 bytes, 32-byte aligned.
+    fn load(a: F32x8) -> __m256 {
+        // SAFETY: `F32x8` is 32 bytes, 32-byte aligned.
         unsafe { _mm256_load_ps(a.0.as_ptr()) }
     }
 
     #[inline]
     #[target_feature(enable = "avx")]
-    fn store(v: __m256) -> Lanes {
-        let mut out = Lanes::default();
+    fn store(v: __m256) -> F32x8 {
+        let mut out = F32x8::default();
         // SAFETY: as in `load`.
         unsafe { _mm256_store_ps(out.0.as_mut_ptr(), v) };
         out
@@ -117,31 +195,49 @@ mod avx {
 
     #[inline]
     #[target_feature(enable = "avx")]
-    pub fn sub(a: Lanes, b: Lanes) -> Lanes {
+    pub fn sub(a: F32x8, b: F32x8) -> F32x8 {
         store(_mm256_sub_ps(load(a), load(b)))
     }
 
     #[inline]
     #[target_feature(enable = "avx")]
-    pub fn mul(a: Lanes, b: Lanes) -> Lanes {
+    pub fn mul(a: F32x8, b: F32x8) -> F32x8 {
         store(_mm256_mul_ps(load(a), load(b)))
     }
 
     #[inline]
     #[target_feature(enable = "avx")]
-    pub fn min(a: Lanes, b: Lanes) -> Lanes {
+    pub fn add(a: F32x8, b: F32x8) -> F32x8 {
+        store(_mm256_add_ps(load(a), load(b)))
+    }
+
+    #[inline]
+    #[target_feature(enable = "avx")]
+    pub fn div(a: F32x8, b: F32x8) -> F32x8 {
+        store(_mm256_div_ps(load(a), load(b)))
+    }
+
+    #[inline]
+    #[target_feature(enable = "avx")]
+    pub fn cmp_mask<const PREDICATE: i32>(a: F32x8, b: F32x8) -> u32 {
+        _mm256_movemask_ps(_mm256_cmp_ps::<PREDICATE>(load(a), load(b))) as u32
+    }
+
+    #[inline]
+    #[target_feature(enable = "avx")]
+    pub fn min(a: F32x8, b: F32x8) -> F32x8 {
         store(_mm256_min_ps(load(a), load(b)))
     }
 
     #[inline]
     #[target_feature(enable = "avx")]
-    pub fn max(a: Lanes, b: Lanes) -> Lanes {
+    pub fn max(a: F32x8, b: F32x8) -> F32x8 {
         store(_mm256_max_ps(load(a), load(b)))
     }
 
     #[inline]
     #[target_feature(enable = "avx")]
-    pub fn le_mask(a: Lanes, b: Lanes) -> u32 {
+    pub fn le_mask(a: F32x8, b: F32x8) -> u32 {
         _mm256_movemask_ps(_mm256_cmp_ps::<_CMP_LE_OQ>(load(a), load(b))) as u32
     }
 }
@@ -166,8 +262,8 @@ mod tests {
         1e30,
     ];
 
-    fn lanes(offset: usize) -> Lanes {
-        Lanes(std::array::from_fn(|i| {
+    fn lanes(offset: usize) -> F32x8 {
+        F32x8(std::array::from_fn(|i| {
             SPECIAL[(i * 5 + offset) % SPECIAL.len()]
         }))
     }
@@ -178,9 +274,9 @@ mod tests {
     /// AVX2, against the baseline, bit for bit.
     #[test]
     fn every_copy_of_the_operations_equals_the_scalar_rules() {
-        let bits = |l: Lanes| l.0.map(f32::to_bits);
-        let scalar = |a: Lanes, b: Lanes, f: fn(f32, f32) -> f32| {
-            bits(Lanes(std::array::from_fn(|i| f(a.0[i], b.0[i]))))
+        let bits = |l: F32x8| l.0.map(f32::to_bits);
+        let scalar = |a: F32x8, b: F32x8, f: fn(f32, f32) -> f32| {
+            bits(F32x8(std::array::from_fn(|i| f(a.0[i], b.0[i]))))
         };
         let second_if_nan = |a: f32, b: f32, pick_a: bool| {
             if a.is_nan() || b.is_nan() || !pick_a {
@@ -196,6 +292,19 @@ mod tests {
                 let (a, b) = (lanes(i), lanes(j));
                 assert_eq!(bits(a.sub::<false>(b)), scalar(a, b, |x, y| x - y));
                 assert_eq!(bits(a.mul::<false>(b)), scalar(a, b, |x, y| x * y));
+                assert_eq!(bits(a.add::<false>(b)), scalar(a, b, |x, y| x + y));
+                assert_eq!(bits(a.div::<false>(b)), scalar(a, b, |x, y| x / y));
+                let rule = |f: &dyn Fn(f32, f32) -> bool| {
+                    (0..WIDTH).fold(0, |m, l| m | ((f(a.0[l], b.0[l]) as u32) << l))
+                };
+                let ordered = |x: f32, y: f32| !x.is_nan() && !y.is_nan();
+                assert_eq!(a.lt_mask::<false>(b), rule(&|x, y| ordered(x, y) && x < y));
+                assert_eq!(a.gt_mask::<false>(b), rule(&|x, y| ordered(x, y) && x > y));
+                assert_eq!(a.eq_mask::<false>(b), rule(&|x, y| ordered(x, y) && x == y));
+                assert_eq!(
+                    a.ne_mask::<false>(b),
+                    rule(&|x, y| !ordered(x, y) || x != y)
+                );
                 let min: Vec<u32> = (0..WIDTH)
                     .map(|l| second_if_nan(a.0[l], b.0[l], a.0[l] < b.0[l]).to_bits())
                     .collect();
@@ -210,6 +319,12 @@ mod tests {
                 });
                 assert_eq!(a.le_mask::<false>(b), le);
                 if avx2 {
+                    assert_eq!(bits(a.add::<true>(b)), bits(a.add::<false>(b)));
+                    assert_eq!(bits(a.div::<true>(b)), bits(a.div::<false>(b)));
+                    assert_eq!(a.lt_mask::<true>(b), a.lt_mask::<false>(b));
+                    assert_eq!(a.gt_mask::<true>(b), a.gt_mask::<false>(b));
+                    assert_eq!(a.eq_mask::<true>(b), a.eq_mask::<false>(b));
+                    assert_eq!(a.ne_mask::<true>(b), a.ne_mask::<false>(b));
                     assert_eq!(bits(a.sub::<true>(b)), bits(a.sub::<false>(b)));
                     assert_eq!(bits(a.mul::<true>(b)), bits(a.mul::<false>(b)));
                     assert_eq!(bits(a.min::<true>(b)), bits(a.min::<false>(b)));
@@ -229,7 +344,7 @@ mod tests {
 
     #[test]
     fn min_and_max_return_the_second_operand_when_either_is_nan() {
-        let (a, b) = (Lanes::splat(f32::NAN), Lanes::splat(1.0));
+        let (a, b) = (F32x8::splat(f32::NAN), F32x8::splat(1.0));
         assert_eq!(a.min::<false>(b).0[0], 1.0);
         assert!(b.max::<false>(a).0[0].is_nan());
         assert_eq!(a.le_mask::<false>(b), 0);

@@ -17,6 +17,10 @@
 use glam::{Vec2, Vec3A, Vec4};
 use rayon::prelude::*;
 
+mod across_rays;
+
+pub use across_rays::{RAYS, ShearedLanes};
+
 /// Triangles per pack.
 pub const LANES: usize = 4;
 
@@ -172,6 +176,37 @@ impl PackedTriangles {
     }
 }
 
+impl PackedTriangles {
+    /// [`PackedTriangles::hits_in_leaf`] for a group of rays at once: each triangle of the
+    /// leaf is tested across the rays of `rays` (the same answers as each ray alone), and
+    /// `hit(lane, slot, source, t, bary)` is called for every ray and triangle that cross
+    /// with `t` in `[0, t_max)` of that ray's lane.
+    #[inline(always)]
+    pub fn hits_in_leaf_across<const AVX: bool>(
+        &self,
+        rays: &ShearedLanes,
+        first_pack: u32,
+        count: u32,
+        t_max: &crate::simd::F32x8,
+        mut hit: impl FnMut(usize, u32, u32, f32, Vec2),
+    ) {
+        let first_pack = first_pack as usize;
+        let packs = (count as usize).div_ceil(LANES);
+        for pack in &self.packs[first_pack..first_pack + packs] {
+            for lane in 0..pack.live as usize {
+                let found = rays.intersect::<AVX>(pack, lane, t_max);
+                let mut mask = found.mask;
+                while mask != 0 {
+                    let l = mask.trailing_zeros() as usize;
+                    mask &= mask - 1;
+                    let slot = pack.first_slot + lane as u32;
+                    hit(l, slot, pack.source[lane], found.t[l], found.bary[l]);
+                }
+            }
+        }
+    }
+}
+
 /// A ray in the frame of Woop et al.: the axis where the direction is largest becomes z, and
 /// a shear maps the direction to (0, 0, 1). (`Default`: an all-zero placeholder for unused
 /// packet slots, never tested.)
@@ -236,6 +271,14 @@ impl ShearedRay {
     #[inline(always)]
     pub fn tie_limit(&self, t: f32) -> f32 {
         t * (1.0 + TIE_MARGIN) + self.tie_offset
+    }
+
+    /// Which of the six axis permutations the ray's frame uses (rays that share it can be
+    /// tested together, [`ShearedLanes`]).
+    #[inline(always)]
+    pub fn permutation(&self) -> usize {
+        let [kx, _, kz] = self.k;
+        kz * 2 + usize::from(kx != (kz + 1) % 3)
     }
 
     /// Tests the first `live` lanes of `pack`.

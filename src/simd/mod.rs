@@ -6,7 +6,7 @@
 //! process ([`Isa::current`]). A loop takes part by implementing [`Kernel`]: its `run` is
 //! generic over `AVX2` and `#[inline(always)]`, so [`dispatch`] inlines it whole into a
 //! function compiled with AVX2 (where `AVX2` is true) or into the baseline caller. Code
-//! inside may branch on `AVX2` to use AVX intrinsics (see `accel::wide::Lanes`); it must
+//! inside may branch on `AVX2` to use AVX intrinsics ([`F32x8`]); it must
 //! compute the same bits either way (no fused multiply-add is formed in either copy), which
 //! the tests of every such kernel check against the baseline copy or a scalar reference.
 //!
@@ -14,6 +14,10 @@
 //! testing the baseline path on a machine that has AVX2.
 
 use std::sync::OnceLock;
+
+mod f32x8;
+
+pub use f32x8::F32x8;
 
 /// The instruction sets a kernel is compiled for.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]

@@ -1,0 +1,313 @@
+//! The watertight test of one triangle against up to eight rays at once: the rays of a
+//! packet that reach a leaf together, side by side in the lanes of [`F32x8`] (eight per AVX
+//! instruction where the CPU has AVX2), instead of one ray against the four triangles of a
+//! pack.
+//!
+//! Why: a packet's leaf visits test many rays against the same few triangles; across rays,
+//! a triangle's vertices are loaded once and broadcast, and eight rays share each
+//! instruction (four in a pack test, often with dead lanes). Which way a leaf is tested is
+//! free to choose, because both compute the same bits: each lane performs, for its ray and
+//! triangle, exactly the IEEE operations of one lane of [`ShearedRay::intersect_pack`] in
+//! the same order (no fused multiply-add), including the f64 recomputation of an edge
+//! function that is exactly zero. `tests::across_rays_equals_one_ray_at_a_time` checks it on
+//! every CPU, in the baseline copy and the AVX2 copy where there is one.
+//!
+//! The rays of a group must share the axis permutation of Woop et al. (the axis where the
+//! direction is largest, and its sign): [`ShearedRay::permutation`] groups them.
+
+use glam::Vec2;
+
+use super::{ShearedRay, TrianglePack};
+use crate::simd::F32x8;
+
+/// Rays per group.
+pub const RAYS: usize = 8;
+
+/// Up to [`RAYS`] rays sharing one axis permutation, as lanes.
+#[derive(Clone, Copy)]
+pub struct ShearedLanes {
+    /// The shared permutation `kx, ky, kz`.
+    k: [usize; 3],
+    /// Per axis (unpermuted), each ray's origin.
+    origin: [F32x8; 3],
+    /// `dx / dz, dy / dz, 1 / dz` of each ray (permuted axes).
+    shear: [F32x8; 3],
+    /// Lanes that hold a ray.
+    live: u32,
+}
+
+/// What one triangle's test against a group found: the lanes (rays) hit, with distance and
+/// barycentrics.
+pub struct LaneHits {
+    pub mask: u32,
+    pub t: [f32; RAYS],
+    pub bary: [Vec2; RAYS],
+}
+
+impl ShearedLanes {
+    /// The group of `rays` (at most [`RAYS`], all with the same permutation; lanes past
+    /// their number hold copies of the first, masked off).
+    ///
+    /// # Panics
+    /// If `rays` is empty or longer than [`RAYS`] (debug builds also check the permutation).
+    #[inline(always)]
+    pub fn gather<'a>(rays: impl ExactSizeIterator<Item = &'a ShearedRay> + Clone) -> ShearedLanes {
+        let n = rays.len();
+        assert!((1..=RAYS).contains(&n), "{n} rays in a lane group");
+        let mut first = rays.clone();
+        let k = first.next().expect("at least one ray").k;
+        let mut group = ShearedLanes {
+            k,
+            origin: [F32x8::splat(0.0); 3],
+            shear: [F32x8::splat(0.0); 3],
+            live: (1u32 << n) - 1,
+        };
+        let mut lane = 0;
+        let mut last = None;
+        for ray in rays {
+            debug_assert_eq!(ray.k, k, "rays of a lane group share their permutation");
+            group.fill_lane(lane, ray);
+            last = Some(ray);
+            lane += 1;
+        }
+        let last = last.expect("at least one ray");
+        for lane in n..RAYS {
+            group.fill_lane(lane, last);
+        }
+        group
+    }
+
+    #[inline(always)]
+    fn fill_lane(&mut self, lane: usize, ray: &ShearedRay) {
+        for axis in 0..3 {
+            self.origin[axis].0[lane] = ray.origin[axis].x;
+            self.shear[axis].0[lane] = ray.shear[axis].x;
+        }
+    }
+
+    /// Vertex `i` of triangle `lane` relative to each ray's origin, sheared into the ray's
+    /// frame: `(x, y)` in the ray's plane and `z` along it (one lane of `intersect_pack`).
+    #[inline(always)]
+    fn sheared_vertex<const AVX: bool>(
+        &self,
+        pack: &TrianglePack,
+        i: usize,
+        lane: usize,
+    ) -> (F32x8, F32x8, F32x8) {
+        let [kx, ky, kz] = self.k;
+        let [sx, sy, _] = self.shear;
+        let v = &pack.v[i];
+        let z = F32x8::splat(v[kz][lane]).sub::<AVX>(self.origin[kz]);
+        let x = F32x8::splat(v[kx][lane])
+            .sub::<AVX>(self.origin[kx])
+            .sub::<AVX>(sx.mul::<AVX>(z));
+        let y = F32x8::splat(v[ky][lane])
+            .sub::<AVX>(self.origin[ky])
+            .sub::<AVX>(sy.mul::<AVX>(z));
+        (x, y, z)
+    }
+
+    /// Tests triangle `lane` of `pack` against every ray of the group; a ray's hit counts
+    /// when `t` lies in `[0, t_max)` of that ray's lane.
+    #[inline(always)]
+    pub fn intersect<const AVX: bool>(
+        &self,
+        pack: &TrianglePack,
+        lane: usize,
+        t_max: &F32x8,
+    ) -> LaneHits {
+        // Plain functions, not closures: a closure is compiled on its own, without the AVX2
+        // copy's target features, and then cannot inline the AVX operations.
+        let (ax, ay, az) = self.sheared_vertex::<AVX>(pack, 0, lane);
+        let (bx, by, bz) = self.sheared_vertex::<AVX>(pack, 1, lane);
+        let (cx, cy, cz) = self.sheared_vertex::<AVX>(pack, 2, lane);
+        let mut u = edge_function::<AVX>(cx, by, cy, bx);
+        let mut v = edge_function::<AVX>(ax, cy, ay, cx);
+        let mut w = edge_function::<AVX>(bx, ay, by, ax);
+        let sz = self.shear[2];
+        let zero = F32x8::splat(0.0);
+        let on_edge =
+            (u.eq_mask::<AVX>(zero) | v.eq_mask::<AVX>(zero) | w.eq_mask::<AVX>(zero)) & self.live;
+        if on_edge != 0 {
+            // Exactly on an edge in f32: decided in f64 (rare), as the pack test does.
+            let mut bits = on_edge;
+            while bits != 0 {
+                let l = bits.trailing_zeros() as usize;
+                bits &= bits - 1;
+                u.0[l] = edge_function_f64(cx.0[l], by.0[l], cy.0[l], bx.0[l]);
+                v.0[l] = edge_function_f64(ax.0[l], cy.0[l], ay.0[l], cx.0[l]);
+                w.0[l] = edge_function_f64(bx.0[l], ay.0[l], by.0[l], ax.0[l]);
+            }
+        }
+        let negative = u.lt_mask::<AVX>(zero) | v.lt_mask::<AVX>(zero) | w.lt_mask::<AVX>(zero);
+        let positive = u.gt_mask::<AVX>(zero) | v.gt_mask::<AVX>(zero) | w.gt_mask::<AVX>(zero);
+        let det = u.add::<AVX>(v).add::<AVX>(w);
+        let t_scaled = u
+            .mul::<AVX>(sz.mul::<AVX>(az))
+            .add::<AVX>(v.mul::<AVX>(sz.mul::<AVX>(bz)))
+            .add::<AVX>(w.mul::<AVX>(sz.mul::<AVX>(cz)));
+        let inside = !(negative & positive) & det.ne_mask::<AVX>(zero) & self.live;
+        let mut hits = LaneHits {
+            mask: 0,
+            t: [0.0; RAYS],
+            bary: [Vec2::ZERO; RAYS],
+        };
+        if inside == 0 {
+            return hits;
+        }
+        let inverse = F32x8::splat(1.0).div::<AVX>(det);
+        let t = t_scaled.mul::<AVX>(inverse);
+        let (v, w) = (v.mul::<AVX>(inverse), w.mul::<AVX>(inverse));
+        let mut bits = inside;
+        while bits != 0 {
+            let l = bits.trailing_zeros() as usize;
+            bits &= bits - 1;
+            if t.0[l] >= 0.0 && t.0[l] < t_max.0[l] && t.0[l].is_finite() {
+                hits.mask |= 1 << l;
+                hits.t[l] = t.0[l];
+                hits.bary[l] = Vec2::new(v.0[l], w.0[l]);
+            }
+        }
+        hits
+    }
+}
+
+/// `p q - r s`, one of Woop's edge functions.
+#[inline(always)]
+fn edge_function<const AVX: bool>(p: F32x8, q: F32x8, r: F32x8, s: F32x8) -> F32x8 {
+    p.mul::<AVX>(q).sub::<AVX>(r.mul::<AVX>(s))
+}
+
+/// An edge function recomputed in f64 and rounded once (for a lane where it was exactly 0).
+#[inline(always)]
+fn edge_function_f64(p: f32, q: f32, r: f32, s: f32) -> f32 {
+    (p as f64 * q as f64 - r as f64 * s as f64) as f32
+}
+
+#[cfg(test)]
+mod tests {
+    use glam::Vec3A;
+
+    use super::*;
+    use crate::simd;
+
+    /// Runs `intersect` in one copy (a kernel, so the AVX2 copy runs where there is one).
+    struct Intersect<'a> {
+        group: &'a ShearedLanes,
+        pack: &'a TrianglePack,
+        lane: usize,
+        t_max: F32x8,
+    }
+
+    impl simd::Kernel for Intersect<'_> {
+        type Output = LaneHits;
+        #[inline(always)]
+        fn run<const AVX2: bool>(self) -> LaneHits {
+            self.group
+                .intersect::<AVX2>(self.pack, self.lane, &self.t_max)
+        }
+    }
+
+    fn xorshift(state: &mut u64) -> f32 {
+        *state ^= *state << 13;
+        *state ^= *state >> 7;
+        *state ^= *state << 17;
+        (*state >> 40) as f32 / (1u64 << 24) as f32 * 2.0 - 1.0
+    }
+
+    /// Random triangles against random rays, grouped by permutation: every lane of every
+    /// copy (baseline always, AVX2 where the CPU has it) finds exactly what the ray finds
+    /// alone against the pack (mask, distance and barycentric bits). Includes rays through
+    /// shared vertices and edges (the f64 recomputation) and rays with limits.
+    #[test]
+    fn across_rays_equals_one_ray_at_a_time() {
+        let mut s = 0x9e37_79b9_7f4a_7c15u64;
+        let mut next = || xorshift(&mut s);
+        let (mut compared, mut hit, mut edges) = (0, 0, 0);
+        for round in 0..400 {
+            let mut pack = TrianglePack::default();
+            // A fan around one shared vertex: rays aimed at it cross exact edges.
+            let centre = Vec3A::new(next(), next(), next() - 3.0);
+            for lane in 0..4 {
+                let a = centre + Vec3A::new(next(), next(), next()) * 2.0;
+                let b = centre + Vec3A::new(next(), next(), next()) * 2.0;
+                pack.set(lane, &[centre, a, b]);
+            }
+            let origin = Vec3A::new(next(), next(), next()) * 0.5;
+            let rays: Vec<ShearedRay> = (0..RAYS)
+                .map(|i| {
+                    let target = if round % 3 == 0 && i % 2 == 0 {
+                        centre
+                    } else {
+                        centre + Vec3A::new(next(), next(), next()) * 1.5
+                    };
+                    let o = if round % 2 == 0 {
+                        origin
+                    } else {
+                        origin + Vec3A::new(next(), next(), next())
+                    };
+                    ShearedRay::new(o, target - o)
+                })
+                .collect();
+            let limits: [f32; RAYS] =
+                std::array::from_fn(|i| if i % 3 == 0 { 2.5 } else { f32::INFINITY });
+            // groups of one permutation, in ray order
+            for code in 0..6 {
+                let members: Vec<usize> = (0..RAYS)
+                    .filter(|&i| rays[i].permutation() == code)
+                    .collect();
+                if members.is_empty() {
+                    continue;
+                }
+                let group = ShearedLanes::gather(members.iter().map(|&i| &rays[i]));
+                let t_max = F32x8(std::array::from_fn(|l| {
+                    limits[members[l.min(members.len() - 1)]]
+                }));
+                for lane in 0..4 {
+                    let run = |avx2: bool| {
+                        let k = Intersect {
+                            group: &group,
+                            pack: &pack,
+                            lane,
+                            t_max,
+                        };
+                        if avx2 {
+                            simd::run_avx2_if_available(k)
+                        } else {
+                            Some(simd::run_baseline(k))
+                        }
+                    };
+                    let copies = [run(false), run(true)].into_iter().flatten();
+                    for hits in copies {
+                        for (l, &r) in members.iter().enumerate() {
+                            let alone = rays[r].intersect_pack(&pack, 4, limits[r]);
+                            let hit_alone = alone.mask & (1 << lane) != 0;
+                            assert_eq!(
+                                hits.mask & (1 << l) != 0,
+                                hit_alone,
+                                "round {round} ray {r} lane {lane}"
+                            );
+                            if hit_alone {
+                                assert_eq!(hits.t[l].to_bits(), alone.t[lane].to_bits());
+                                assert_eq!(hits.bary[l].x.to_bits(), alone.bary[lane].x.to_bits());
+                                assert_eq!(hits.bary[l].y.to_bits(), alone.bary[lane].y.to_bits());
+                                hit += 1;
+                            }
+                            compared += 1;
+                        }
+                        assert_eq!(
+                            hits.mask >> members.len(),
+                            0,
+                            "lanes past the group hit nothing"
+                        );
+                    }
+                }
+            }
+            edges += usize::from(round % 3 == 0);
+        }
+        assert!(
+            compared > 10_000 && hit > 1_000 && edges > 100,
+            "{compared} compared, {hit} hits"
+        );
+    }
+}

@@ -1,0 +1,315 @@
+//! One tile of the film traced breadth first: every sample's primary ray, then every hit's
+//! shadow rays, then every reflected and refracted ray, bounce by bounce, so that rays
+//! that share a light or a direction are traced together as packets.
+//!
+//! A tile holds its rays as path vertices: a sample's primary ray is vertex `k` for the
+//! `k`-th sample (in pixel order, each pixel's samples in order), and the rays a hit spawns
+//! get the next free numbers, so a vertex's children always come after it. Each bounce:
+//! 1. the pending rays are traced as packets of up to [`PACKET`] (the primary rays from the
+//!    camera with interval bounds, later bounces from their hits by the masked walk);
+//! 2. each hit's surface is made and its texture looked up (`FrameScene::arrive`), which
+//!    lists the shadow rays its direct light needs;
+//! 3. the shadow rays are traced, grouped by light, as packets of up to [`PACKET`]
+//!    ([`SceneBvh::visit_hits_packet`]: rays from a tile's hits converge on the light);
+//! 4. each hit's own light is summed and its reflected and refracted rays are spawned
+//!    (`FrameScene::finish`), which become the next bounce's pending rays.
+//!
+//! Then every vertex's radiance is combined from its children's, last vertex first. The
+//! image is bit for bit what tracing each sample depth first gives: every ray and every
+//! lookup is the same, shadow rays meet the same surfaces (their order does not matter:
+//! glass is multiplied in distance order), and `Combine` adds children in the recursion's
+//! order. Memory: a tile's vertices and its current bounce's hits, cleared per tile.
+
+use glam::{Vec3, Vec3A};
+
+use crate::accel::{Hit, PACKET};
+use crate::lod::RayLod;
+use crate::render::camera::Camera;
+use crate::render::film::{TILE, sample_offset};
+use crate::render::integrator::{
+    Arrival, Combine, FrameScene, MAX_SHADOW_GLASS, ShadowRequest, Spawned, TraceCounters,
+};
+use crate::render::ray_log::RayClass;
+
+/// A ray waiting to be traced: its vertex, the sample it serves, and how deep it is.
+#[derive(Clone, Copy)]
+struct Pending<L> {
+    ray: Spawned<L>,
+    vertex: u32,
+    /// Pixel index (`y * width + x`) of the sample, for the ray log.
+    pixel: u32,
+    depth: u32,
+}
+
+/// A hit waiting for its shadow rays: its vertex, the sample's pixel, and its requests
+/// (`requests[first..end]`).
+struct Waiting<L> {
+    arrival: Arrival<L>,
+    vertex: u32,
+    pixel: u32,
+    first: usize,
+    end: usize,
+}
+
+/// The tile's pixels, row by row, with the LOD state `L`.
+pub(super) fn trace_tile<L: RayLod>(
+    scene: &FrameScene,
+    camera: &Camera,
+    spp: u32,
+    (x0, y0): (u32, u32),
+    counters: &mut TraceCounters,
+) -> Vec<Vec3> {
+    let x1 = (x0 + TILE).min(camera.width);
+    let y1 = (y0 + TILE).min(camera.height);
+    let samples: Vec<(u32, u32, u32)> = (y0..y1)
+        .flat_map(|y| (x0..x1).map(move |x| (x, y)))
+        .flat_map(|(x, y)| (0..spp).map(move |i| (x, y, i)))
+        .collect();
+    let mut vertices: Vec<Combine> = vec![Combine::leaf(Vec3A::ZERO); samples.len()];
+    let mut bounce = primary_bounce::<L>(scene, camera, spp, &samples, counters);
+    let mut waiting: Vec<Waiting<L>> = Vec::new();
+    let mut requests: Vec<ShadowRequest> = Vec::new();
+    let mut spawned: Vec<Spawned<L>> = Vec::new();
+    let mut next: Vec<Pending<L>> = Vec::new();
+    while !bounce.is_empty() {
+        // Arrive at every hit; a miss is the background.
+        waiting.clear();
+        requests.clear();
+        for (pending, hit) in bounce.drain(..) {
+            let Some(hit) = hit else {
+                vertices[pending.vertex as usize] = Combine::leaf(scene.background);
+                continue;
+            };
+            let first = requests.len();
+            let ray = &pending.ray;
+            let arrival = scene.arrive(
+                hit,
+                ray.origin,
+                ray.direction,
+                ray.lod,
+                pending.depth,
+                &mut requests,
+                counters,
+            );
+            waiting.push(Waiting {
+                arrival,
+                vertex: pending.vertex,
+                pixel: pending.pixel,
+                first,
+                end: requests.len(),
+            });
+        }
+        trace_shadows(scene, &waiting, &mut requests, counters);
+        // Finish every hit and spawn the next bounce.
+        next.clear();
+        for w in &waiting {
+            spawned.clear();
+            let first_child = vertices.len() as u32;
+            let combine = scene.finish(
+                &w.arrival,
+                &requests[w.first..w.end],
+                first_child,
+                &mut spawned,
+            );
+            vertices[w.vertex as usize] = combine;
+            for (k, ray) in spawned.iter().enumerate() {
+                vertices.push(Combine::leaf(Vec3A::ZERO));
+                next.push(Pending {
+                    ray: *ray,
+                    vertex: first_child + k as u32,
+                    pixel: w.pixel,
+                    depth: w.arrival.depth() + 1,
+                });
+            }
+        }
+        bounce = trace_bounce(scene, &next, counters);
+    }
+    // Last vertex first: children are numbered after their parents.
+    for v in (0..vertices.len()).rev() {
+        let radiance = vertices[v].evaluate(|child| vertices[child as usize].radiance);
+        vertices[v].radiance = radiance;
+    }
+    let mut pixels = Vec::with_capacity(((x1 - x0) * (y1 - y0)) as usize);
+    let mut sum = Vec3A::ZERO;
+    for (k, vertex) in vertices[..samples.len()].iter().enumerate() {
+        let radiance = vertex.radiance;
+        if radiance.is_finite() {
+            sum += radiance.max(Vec3A::ZERO);
+        } else {
+            counters.nonfinite_samples += 1;
+        }
+        if (k as u32 + 1) % spp == 0 {
+            pixels.push(Vec3::from(sum / spp as f32));
+            sum = Vec3A::ZERO;
+        }
+    }
+    pixels
+}
+
+/// The samples' primary rays traced as packets of up to [`PACKET`] (pixel by pixel, each
+/// pixel's samples in order: a 16 x 4 block at one sample per pixel), each with its hit.
+fn primary_bounce<L: RayLod>(
+    scene: &FrameScene,
+    camera: &Camera,
+    spp: u32,
+    samples: &[(u32, u32, u32)],
+    counters: &mut TraceCounters,
+) -> Vec<(Pending<L>, Option<Hit>)> {
+    let mut bounce = Vec::with_capacity(samples.len());
+    let mut rays = [(Vec3A::ZERO, Vec3A::ZERO); PACKET];
+    let mut hits = [None; PACKET];
+    for (chunk_index, chunk) in samples.chunks(PACKET).enumerate() {
+        for (ray, &(x, y, i)) in rays.iter_mut().zip(chunk) {
+            let (sx, sy) = sample_offset(x, y, i, spp);
+            *ray = (
+                camera.eye,
+                camera.primary_direction(x as f32 + sx, y as f32 + sy),
+            );
+        }
+        let n = chunk.len();
+        scene
+            .bvh
+            .closest_hits(&rays[..n], f32::INFINITY, &mut hits[..n]);
+        for (k, &(x, y, i)) in chunk.iter().enumerate() {
+            let (sx, sy) = sample_offset(x, y, i, spp);
+            let (origin, direction) = rays[k];
+            let pixel = y * camera.width + x;
+            counters.rays += 1;
+            if let Some(log) = &mut counters.log {
+                log.closest(
+                    pixel,
+                    RayClass::Primary,
+                    origin,
+                    direction,
+                    f32::INFINITY,
+                    hits[k],
+                );
+            }
+            let lod = L::primary(&scene.lod_camera, x as f32 + sx, y as f32 + sy);
+            bounce.push((
+                Pending {
+                    ray: Spawned {
+                        class: RayClass::Primary,
+                        origin,
+                        direction,
+                        lod,
+                    },
+                    vertex: (chunk_index * PACKET + k) as u32,
+                    pixel,
+                    depth: 0,
+                },
+                hits[k],
+            ));
+        }
+    }
+    bounce
+}
+
+/// A bounce's reflected and refracted rays, each with its hit: traced as packets of up to
+/// [`PACKET`] in the order they were spawned (`SceneBvh::closest_hits_scattered`: each ray
+/// finds exactly what it finds alone).
+fn trace_bounce<L: RayLod>(
+    scene: &FrameScene,
+    pending: &[Pending<L>],
+    counters: &mut TraceCounters,
+) -> Vec<(Pending<L>, Option<Hit>)> {
+    let mut bounce = Vec::with_capacity(pending.len());
+    let mut rays = [(Vec3A::ZERO, Vec3A::ZERO); PACKET];
+    let mut hits = [None; PACKET];
+    for packet in pending.chunks(PACKET) {
+        for (ray, p) in rays.iter_mut().zip(packet) {
+            *ray = (p.ray.origin, p.ray.direction);
+        }
+        let n = packet.len();
+        scene
+            .bvh
+            .closest_hits_scattered(&rays[..n], f32::INFINITY, &mut hits[..n]);
+        for (p, &hit) in packet.iter().zip(&hits[..n]) {
+            let ray = &p.ray;
+            counters.rays += 1;
+            if let Some(log) = &mut counters.log {
+                log.closest(
+                    p.pixel,
+                    ray.class,
+                    ray.origin,
+                    ray.direction,
+                    f32::INFINITY,
+                    hit,
+                );
+            }
+            bounce.push((*p, hit));
+        }
+    }
+    bounce
+}
+
+/// Traces every request's shadow ray and fills in its transmittance: per light, the
+/// requests in the order they were made, as packets of up to [`PACKET`].
+fn trace_shadows<L>(
+    scene: &FrameScene,
+    waiting: &[Waiting<L>],
+    requests: &mut [ShadowRequest],
+    counters: &mut TraceCounters,
+) {
+    // The pixel each request serves (for the ray log).
+    let mut pixel_of = Vec::new();
+    if counters.log.is_some() {
+        pixel_of = vec![0; requests.len()];
+        for w in waiting {
+            pixel_of[w.first..w.end].fill(w.pixel);
+        }
+    }
+    let mut chosen = [0usize; PACKET];
+    let mut rays = [(Vec3A::ZERO, Vec3A::ZERO); PACKET];
+    let mut t_max = [0.0f32; PACKET];
+    let mut glass = [[(0.0f32, 0u32, 0u32); MAX_SHADOW_GLASS]; PACKET];
+    let mut of_light = Vec::with_capacity(requests.len());
+    for light in 0..scene.lights.len() as u32 {
+        of_light.clear();
+        of_light.extend(
+            requests
+                .iter()
+                .enumerate()
+                .filter(|(_, r)| r.light == light && r.ray.is_some())
+                .map(|(i, _)| i),
+        );
+        for packet in of_light.chunks(PACKET) {
+            let n = packet.len();
+            for (k, &index) in packet.iter().enumerate() {
+                let request = &requests[index];
+                let (origin, limit) = request.ray.expect("requests with a ray");
+                chosen[k] = index;
+                rays[k] = (origin, request.incident.to_light);
+                t_max[k] = limit;
+            }
+            let mut met = [0usize; PACKET];
+            let stopped =
+                scene
+                    .bvh
+                    .visit_hits_packet(&rays[..n], &t_max[..n], |r, t, m, source| {
+                        if !scene.passes_through(m, met[r]) {
+                            return false;
+                        }
+                        glass[r][met[r]] = (t, source, m);
+                        met[r] += 1;
+                        true
+                    });
+            for r in 0..n {
+                let blocked = stopped & (1 << r) != 0;
+                let request = &mut requests[chosen[r]];
+                request.transmittance =
+                    scene.shadow_transmittance(blocked, &mut glass[r][..met[r]]);
+                if let Some(log) = &mut counters.log {
+                    let (origin, direction) = rays[r];
+                    log.shadow(
+                        pixel_of[chosen[r]],
+                        origin,
+                        direction,
+                        t_max[r],
+                        blocked || met[r] > 0,
+                    );
+                }
+            }
+        }
+    }
+}

@@ -1,0 +1,53 @@
+//! The end of a regression check, shared by `mipray diff` and `render --check`: write the
+//! report files and the diff page, and say whether every frame passed.
+
+use std::path::{Path, PathBuf};
+
+use anyhow::{Context, Result};
+
+use crate::atomic_file::write_text_atomically;
+use crate::diff::{DiffReport, Verdict, junit_xml};
+
+/// A check's report, written, and its verdict.
+#[derive(Debug, Clone, PartialEq)]
+pub struct CheckFinished {
+    pub verdict: Verdict,
+    /// The verdict in one line ([`DiffReport::verdict`]).
+    pub summary: String,
+    /// `diff.md`.
+    pub report: PathBuf,
+    /// The diff page.
+    pub page: PathBuf,
+}
+
+/// Writes diff.md / diff.csv (and the JUnit XML when asked) and the diff page into `out`;
+/// returns the verdict and where they are.
+///
+/// # Errors
+/// A report file or the page cannot be written.
+pub fn finish_check(
+    report: &DiffReport,
+    out: &Path,
+    junit: Option<&Path>,
+) -> Result<CheckFinished> {
+    report
+        .write(out)
+        .with_context(|| format!("{}: cannot write the diff report", out.display()))?;
+    if let Some(path) = junit {
+        write_text_atomically(path, &junit_xml(report))
+            .with_context(|| format!("{}: cannot write JUnit XML", path.display()))?;
+    }
+    let summary = report.verdict();
+    let page =
+        crate::pages::write_diff_page(out, report.metric.name(), report.threshold, &summary)?;
+    Ok(CheckFinished {
+        verdict: if report.failed() == 0 {
+            Verdict::Passed
+        } else {
+            Verdict::Failed
+        },
+        summary,
+        report: out.join("diff.md"),
+        page,
+    })
+}

@@ -1,0 +1,227 @@
+//! The sequence loop: what happens to each frame of a render, in order.
+//!
+//! For each frame of the range (this shard's block of it, minus frames already complete on
+//! disk when resuming): update and render it (`Renderer::render_frame_with_view`), write the
+//! frame (temporary file, then rename), its `--view lod` level image, and one stats record;
+//! judge it against a reference when checking. At the end, the summary, the render page and
+//! (when checking) the check's report. The range is only iterated, so its length costs no
+//! memory: memory grows with the frames actually rendered (one record each).
+//!
+//! Nothing here prints: each step is told to a [`SequenceProgress`] as it happens, and what
+//! the sequence wrote comes back as a [`SequenceReport`] (the CLI turns both into lines).
+
+use std::collections::BTreeSet;
+use std::ops::Range;
+use std::path::{Path, PathBuf};
+use std::time::{Duration, Instant};
+
+use anyhow::{Context, Result};
+
+use super::check::{CheckFinished, finish_check};
+use super::output::{FrameFormat, OutputDir, Shard, frame_file_name};
+use crate::atomic_file::write_rgb8_atomically;
+use crate::diff::{DiffOptions, DiffReport, FrameDiff, compare_stats, diff_frame};
+use crate::frame::{FrameClock, LevelImage, Renderer};
+use crate::record::FrameRecord;
+
+/// Where and how a sequence is written.
+#[derive(Debug, Clone)]
+pub struct SequenceOutput {
+    pub dir: PathBuf,
+    pub format: FrameFormat,
+    pub shard: Option<Shard>,
+    /// Skip frames already complete on disk (frame file and stats record).
+    pub resume: Resume,
+    /// Whether each frame also writes `lod_NNNN.png` (`--view lod`).
+    pub level_image: LevelImage,
+}
+
+/// Whether a sequence continues an interrupted run in its folder.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Resume {
+    /// Render every frame of the range (earlier records of the folder are replaced).
+    Restart,
+    /// Skip frames whose file exists and whose record was written after it.
+    SkipComplete,
+}
+
+/// `render --check`: judge each frame against a reference as soon as it is written.
+#[derive(Debug, Clone)]
+pub struct Check {
+    pub reference: PathBuf,
+    pub options: DiffOptions,
+    pub fail_fast: bool,
+    pub junit: Option<PathBuf>,
+}
+
+/// One frame just rendered and written.
+#[derive(Debug, Clone, Copy)]
+pub struct WrittenFrame<'a> {
+    pub frame: u32,
+    pub time_s: f32,
+    pub record: &'a FrameRecord,
+    /// The frame file.
+    pub path: &'a Path,
+}
+
+/// What a sequence tells as it goes, in this order: `resumed` (when frames were already
+/// complete), `started`, then per frame `frame_written` (and `frame_checked`, and
+/// `stopping` when `--fail-fast` ends the run there), then `finished` once no more frames
+/// will be rendered, before the summary and the page are written. Every method does
+/// nothing by default.
+pub trait SequenceProgress {
+    /// `complete` of the range's `of` frames are already on disk and will not be rendered.
+    fn resumed(&mut self, complete: usize, of: usize) {
+        let _ = (complete, of);
+    }
+    /// `frames` frames are about to be rendered.
+    fn started(&mut self, frames: u64) {
+        let _ = frames;
+    }
+    fn frame_written(&mut self, frame: &WrittenFrame) {
+        let _ = frame;
+    }
+    /// The frame just written, judged against the reference's frame of the same number.
+    fn frame_checked(&mut self, judged: &FrameDiff) {
+        let _ = judged;
+    }
+    /// `--fail-fast`: frame `frame` failed its check and is the last one rendered.
+    fn stopping(&mut self, frame: u32) {
+        let _ = frame;
+    }
+    fn finished(&mut self) {}
+}
+
+/// A sequence run with nobody watching.
+impl SequenceProgress for () {}
+
+/// What a sequence wrote.
+#[derive(Debug, Clone)]
+pub struct SequenceReport {
+    /// The frames of this run: the range, or this shard's block of it.
+    pub frames: Range<u32>,
+    /// Frames of `frames` with a record in the folder: rendered now or, when resuming,
+    /// complete before.
+    pub records: usize,
+    /// From the first frame rendered to the summary (the page not included).
+    pub elapsed: Duration,
+    pub dir: PathBuf,
+    /// `summary.json` (or the shard's summary file).
+    pub summary: PathBuf,
+    /// The render page.
+    pub page: PathBuf,
+    /// The check's report and verdict (`render --check`).
+    pub check: Option<CheckFinished>,
+}
+
+/// Renders `frames` (this shard's part of them) into the output folder, one record per
+/// frame, then the summary, the page and, when checking, the check's report; tells
+/// `progress` each step.
+///
+/// # Errors
+/// A frame fails to update (non-finite vertices), a file cannot be written, or a checked
+/// frame cannot be compared (missing reference frame, different sizes).
+pub fn render_sequence(
+    renderer: &mut Renderer,
+    frames: Range<u32>,
+    clock: FrameClock,
+    out: &SequenceOutput,
+    check: Option<&Check>,
+    progress: &mut dyn SequenceProgress,
+) -> Result<SequenceReport> {
+    let frames = match out.shard {
+        Some(shard) => shard.frames(frames),
+        None => frames,
+    };
+    let resume = out.resume == Resume::SkipComplete;
+    let (mut output, previous) =
+        OutputDir::open(&out.dir, out.format, out.shard, frames.clone(), resume)?;
+    // A frame is complete when its file exists and its record was written after it.
+    let mut records: Vec<FrameRecord> = previous
+        .into_iter()
+        .filter(|r| frames.contains(&r.frame) && output.frame_path(r.frame).is_file())
+        .collect();
+    let done: BTreeSet<u32> = records.iter().map(|r| r.frame).collect();
+    if !done.is_empty() {
+        progress.resumed(done.len(), frames.len());
+    }
+    let mut checked: Vec<FrameDiff> = Vec::new();
+    progress.started(frames.len() as u64 - done.len() as u64);
+    let start = Instant::now();
+    for frame in frames.clone().filter(|f| !done.contains(f)) {
+        let time_s = clock.time(frame);
+        let (image, record, view) =
+            renderer.render_frame_with_view(frame, time_s, out.level_image)?;
+        let path = output.write_frame(frame, &image)?;
+        if let Some(view) = view {
+            let view_path = output.path().join(format!("lod_{frame:04}.png"));
+            write_rgb8_atomically(&view_path, &view)
+                .with_context(|| format!("cannot write {}", view_path.display()))?;
+        }
+        output.append_record(&record)?;
+        progress.frame_written(&WrittenFrame {
+            frame,
+            time_s,
+            record: &record,
+            path: &path,
+        });
+        records.push(record);
+        if let Some(check) = check {
+            let judged = check_frame(frame, &path, out.format, check)?;
+            progress.frame_checked(&judged);
+            let stop = !judged.passed && check.fail_fast;
+            checked.push(judged);
+            if stop {
+                progress.stopping(frame);
+                break;
+            }
+        }
+    }
+    progress.finished();
+    records.sort_by_key(|r| r.frame);
+    let summary = output.write_summary(&records)?;
+    let elapsed = start.elapsed();
+    let page = crate::pages::write_render_page(std::slice::from_ref(&out.dir), &out.dir, None)?;
+    let check = match check {
+        None => None,
+        Some(check) => Some(finish_sequence_check(check, &out.dir, checked)?),
+    };
+    Ok(SequenceReport {
+        frames,
+        records: records.len(),
+        elapsed,
+        dir: output.path().to_path_buf(),
+        summary,
+        page,
+        check,
+    })
+}
+
+/// Compares a written frame with the reference's frame of the same number.
+fn check_frame(frame: u32, path: &Path, format: FrameFormat, check: &Check) -> Result<FrameDiff> {
+    let name = frame_file_name(frame, format);
+    Ok(diff_frame(
+        frame,
+        &check.reference.join(&name),
+        path,
+        &check.options,
+    )?)
+}
+
+/// The check's report over the frames judged, with the two folders' stats compared.
+fn finish_sequence_check(
+    check: &Check,
+    dir: &Path,
+    frames: Vec<FrameDiff>,
+) -> Result<CheckFinished> {
+    let mut report = DiffReport {
+        reference_dir: check.reference.clone(),
+        test_dir: dir.to_path_buf(),
+        metric: check.options.metric,
+        threshold: check.options.threshold,
+        frames,
+        stats_note: None,
+    };
+    report.stats_note = compare_stats(&check.reference, dir, &mut report.frames).err();
+    finish_check(&report, &check.options.out, check.junit.as_deref())
+}
