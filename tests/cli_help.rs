@@ -61,7 +61,10 @@ fn every_command_help_ends_with_examples_the_parser_accepts() {
         helps.push((name.clone(), stdout(&mipray(&[name, "--help"]))));
         // The short help (-h) ends with them too.
         let short = stdout(&mipray(&[name, "-h"]));
-        assert!(short.contains("\nExamples:\n"), "mipray {name} -h: no examples");
+        assert!(
+            short.contains("\nExamples:\n"),
+            "mipray {name} -h: no examples"
+        );
     }
     for (name, help) in helps {
         let lines = examples(&help);
@@ -77,16 +80,18 @@ fn every_command_help_ends_with_examples_the_parser_accepts() {
             }
             // `mipray help render` parses to clap's request to show help.
             let shows_help = |e: &clap::Error| e.kind() == clap::error::ErrorKind::DisplayHelp;
-            if let Err(error) = Cli::try_parse_from(&words).map(drop).or_else(|e| {
-                if shows_help(&e) { Ok(()) } else { Err(e) }
-            }) {
+            if let Err(error) = Cli::try_parse_from(&words)
+                .map(drop)
+                .or_else(|e| if shows_help(&e) { Ok(()) } else { Err(e) })
+            {
                 panic!("mipray {name}: example {words:?} does not parse:\n{error}");
             }
         }
         // The section is the last thing printed.
         let tail = help.rsplit_once("\nExamples:\n").unwrap().1;
         assert!(
-            tail.lines().all(|l| l.trim().is_empty() || l.trim_start().starts_with("mipray ")),
+            tail.lines()
+                .all(|l| l.trim().is_empty() || l.trim_start().starts_with("mipray ")),
             "mipray {name}: text after the examples:\n{tail}"
         );
     }
@@ -99,19 +104,26 @@ fn completions_cover_every_command_for_every_shell() {
         for name in command_names() {
             assert!(script.contains(&name), "{shell}: no `{name}` in the script");
         }
-        assert!(script.contains("--resume"), "{shell}: render's flags missing");
+        // Flags by their long name (fish writes `-l resume`, the others `--resume`).
+        for flag in ["resume", "fail-fast", "reference-spp", "expect-frames"] {
+            assert!(script.contains(flag), "{shell}: no --{flag} in the script");
+        }
     }
     let bash = stdout(&mipray(&["completions", "bash"]));
-    assert!(bash.contains("complete -F _mipray"), "not a bash completion:\n{bash}");
+    assert!(
+        bash.contains("complete -F _mipray"),
+        "not a bash completion:\n{bash}"
+    );
     // Bash itself checks the script's syntax where it is installed (it is on CI's image).
-    if let Ok(status) = Command::new("bash")
-        .args(["-n", "-c", &bash])
-        .status()
-    {
+    if let Ok(status) = Command::new("bash").args(["-n", "-c", &bash]).status() {
         assert!(status.success(), "bash -n rejects the completion script");
     }
     let unknown = mipray(&["completions", "tcsh"]);
-    assert_eq!(unknown.status.code(), Some(2), "an unknown shell is a usage error");
+    assert_eq!(
+        unknown.status.code(),
+        Some(2),
+        "an unknown shell is a usage error"
+    );
 }
 
 #[test]

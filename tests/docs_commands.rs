@@ -57,8 +57,7 @@ fn runnable_commands(file: &Path, text: &str) -> Result<Vec<DocCommand>, String>
                 }
             }
             Some((marker, runnable)) => {
-                if trimmed.starts_with(marker.as_str())
-                    && trimmed[marker.len()..].trim().is_empty()
+                if trimmed.starts_with(marker.as_str()) && trimmed[marker.len()..].trim().is_empty()
                 {
                     if let Some((line, _)) = pending {
                         return Err(format!(
@@ -102,7 +101,10 @@ fn runnable_commands(file: &Path, text: &str) -> Result<Vec<DocCommand>, String>
         }
     }
     if open.is_some() {
-        return Err(format!("{}: a fenced block is never closed", file.display()));
+        return Err(format!(
+            "{}: a fenced block is never closed",
+            file.display()
+        ));
     }
     Ok(commands)
 }
@@ -205,7 +207,11 @@ fn run_file(file: &Path, commands: &[DocCommand]) -> Vec<String> {
             .output()
             .expect("the mipray binary starts");
         let place = format!("{}:{}", command.file.display(), command.line);
-        println!("{place}: mipray {} -> {}", command.args.join(" "), output.status);
+        println!(
+            "{place}: mipray {} -> {}",
+            command.args.join(" "),
+            output.status
+        );
         if !output.status.success() {
             failures.push(format!(
                 "{place}: `mipray {}` exited with {}\nstderr:\n{}",
@@ -231,10 +237,17 @@ fn every_runnable_command_in_the_docs_succeeds() {
             Err(error) => errors.push(error),
         }
     }
-    assert!(errors.is_empty(), "malformed runnable blocks:\n{}", errors.join("\n"));
+    assert!(
+        errors.is_empty(),
+        "malformed runnable blocks:\n{}",
+        errors.join("\n")
+    );
     let total: usize = parsed.iter().map(|(_, c)| c.len()).sum();
     // The README's quick start alone has six: far fewer means the marker stopped matching.
-    assert!(total >= 6, "only {total} runnable commands found in the docs");
+    assert!(
+        total >= 6,
+        "only {total} runnable commands found in the docs"
+    );
     let readme = &parsed[0];
     assert!(
         readme.0.ends_with("README.md") && readme.1.len() >= 3,
@@ -289,7 +302,10 @@ mipray info default
             vec!["info", "default"],
         ]
     );
-    assert_eq!(commands.iter().map(|c| c.line).collect::<Vec<_>>(), [8, 11, 15]);
+    assert_eq!(
+        commands.iter().map(|c| c.line).collect::<Vec<_>>(),
+        [8, 11, 15]
+    );
 }
 
 #[test]
