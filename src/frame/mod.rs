@@ -11,12 +11,14 @@
 //! id rather than by tree order (see `accel`).
 
 mod animation;
+pub mod appearance;
 mod clock;
 mod dirty;
 mod log2_pb;
 mod posed;
 mod prefetch;
 mod scatter;
+mod scene_geometry;
 mod settings;
 mod setup;
 mod two_level;
@@ -25,6 +27,7 @@ mod update;
 pub use crate::accel::{BvhLayout, BvhPolicy};
 pub use clock::FrameClock;
 pub use dirty::{DirtySet, Motion};
+pub use scene_geometry::{Instance, SceneGeometry};
 pub use settings::RenderSettings;
 pub use update::UpdateParallelism;
 
@@ -33,7 +36,7 @@ use std::time::Instant;
 use glam::{Vec3, Vec3A};
 
 use crate::accel::{Accel, AccelError};
-use crate::geometry::{FrameTriangles, SceneGeometry};
+use crate::geometry::FrameTriangles;
 use crate::lod::LodCamera;
 use crate::record::{FrameRecord, UpdateStats};
 use crate::render::{
