@@ -1,5 +1,6 @@
 //! mipray: a CPU ray tracer for animated scenes with ray-length MIP-map level selection
-//! (Park & Kim 2010). See `README.md` for the frame loop and the LOD derivation.
+//! (Park & Kim 2010). See ARCHITECTURE.md for the frame loop and `docs/src/lod-methods.md`
+//! for the LOD derivation.
 
 pub mod accel;
 pub mod anim;

@@ -1,15 +1,18 @@
 //! An exported frame in Blender: `mipray export default --frames 24`, then
-//! `blender -b --python tests/blender/check_import.py` imports the OBJ with the README's axes
-//! (File > Import > Wavefront (.obj)), runs the README's camera script, and prints what came
+//! `blender -b --python tests/blender/check_import.py` imports the OBJ with the guide's axes
+//! (File > Import > Wavefront (.obj)), runs the guide's camera script, and prints what came
 //! in. Checked against the exported files: face, material, textured-material and image
 //! counts exactly; glass as transmission with its IOR, alpha 1, not metallic, smooth; every
-//! vertex at the README's axis conversion of its OBJ position; the camera's location,
+//! vertex at the guide's axis conversion of its OBJ position; the camera's location,
 //! rotation, vertical field of view and resolution against `camera_0024.json` (within 1e-4);
 //! and every vertex in front of the camera projecting where mipray's primary-ray convention
 //! puts it.
 //!
 //! Without `blender` on the PATH the test prints that it skipped (Debian package `blender`,
 //! 3.4). It is not run in CI (.ci/run does not install Blender).
+
+/// The guide page whose Blender steps and camera script this test follows.
+const GUIDE_PAGE: &str = "docs/src/export.md";
 
 use std::collections::{BTreeMap, BTreeSet};
 use std::fs::File;
@@ -137,7 +140,7 @@ fn read_exported(dir: &Path) -> Exported {
 
 // ------------------------------------------------------------------ conversions
 
-/// The README's conversion: mipray (+Y up, -Z forward) -> Blender (+Z up).
+/// The guide's conversion: mipray (+Y up, -Z forward) -> Blender (+Z up).
 fn to_blender(v: [f64; 3]) -> [f64; 3] {
     [v[0], -v[2], v[1]]
 }
@@ -271,7 +274,7 @@ fn check_camera(record: &Value, camera: &Value) {
     );
 }
 
-/// Every imported vertex is its OBJ position through the README's axes, and those in front
+/// Every imported vertex is its OBJ position through the guide's axes, and those in front
 /// of the camera project where mipray's rays see them (f32 rotations in Blender: the
 /// tolerance grows with the coordinate).
 fn check_vertices(record: &Value, exported: &Exported, camera: &Value) {
@@ -315,7 +318,7 @@ fn check_vertices(record: &Value, exported: &Exported, camera: &Value) {
 }
 
 #[test]
-fn exported_frame_imports_into_blender_with_glass_and_the_readme_camera() {
+fn exported_frame_imports_into_blender_with_glass_and_the_guide_camera() {
     let Some(blender) = blender_on_path() else {
         println!("skipped: `blender` is not on the PATH (Debian package `blender`, 3.4)");
         return;
@@ -333,10 +336,10 @@ fn exported_frame_imports_into_blender_with_glass_and_the_readme_camera() {
         String::from_utf8_lossy(&export.stderr)
     );
 
-    let readme = std::fs::read_to_string(manifest_dir().join("README.md")).unwrap();
+    let guide = std::fs::read_to_string(manifest_dir().join(GUIDE_PAGE)).unwrap();
     assert!(
-        readme.contains("**Forward: -Z, Up: Y**"),
-        "the README names the axes the script imports with"
+        guide.contains("**Forward: -Z, Up: Y**"),
+        "{GUIDE_PAGE} names the axes the script imports with"
     );
     let mut command = Command::new(&blender);
     command
@@ -351,7 +354,7 @@ fn exported_frame_imports_into_blender_with_glass_and_the_readme_camera() {
         .arg("--")
         .arg(dir.path())
         .arg(FRAME.to_string())
-        .arg(manifest_dir().join("README.md"));
+        .arg(manifest_dir().join(GUIDE_PAGE));
     let (ok, stdout, stderr) = run_to_files(command, dir.path(), BLENDER_TIMEOUT);
     assert!(ok, "blender failed\nstdout:\n{stdout}\nstderr:\n{stderr}");
     let line = stdout

@@ -1,7 +1,7 @@
 //! Numerically hard scenes, each rendered with every LOD method at 24x16 through the
 //! frame loop: no panic, every pixel finite, no sample written black for being non-finite
 //! (`nonfinite_samples == 0`), and a frame for every requested time. The documented
-//! behaviour of each case is in its comment (and in the README's testing section).
+//! behaviour of each case is in its comment (and in CONTRIBUTING.md's testing section).
 
 use glam::{Quat, Vec2, Vec3, Vec4};
 use mipray::frame::{BvhLayout, RenderSettings, Renderer};

@@ -8,11 +8,13 @@ mod args;
 mod bench;
 mod compare;
 mod diff;
+mod examples;
 mod export;
 mod info;
 mod progress;
 mod render;
 mod scene;
+mod shell;
 
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
@@ -30,12 +32,14 @@ pub use export::ExportArgs;
 pub use info::{InfoArgs, TriangleMotion, describe};
 pub use render::{BvhMode, RenderArgs, resolve_shard};
 pub use scene::{OpenedScene, load_scene, open_scene, resolve_scene};
+pub use shell::{CompletionsArgs, ManArgs, man_page};
 
 #[derive(Parser, Debug)]
 #[command(
     name = "mipray",
     version,
-    about = "Ray-traced animations with ray-length MIP-map level selection"
+    about = "Ray-traced animations with ray-length MIP-map level selection",
+    after_help = examples::MIPRAY
 )]
 pub struct Cli {
     #[command(subcommand)]
@@ -45,20 +49,33 @@ pub struct Cli {
 #[derive(Subcommand, Debug)]
 pub enum Command {
     /// Render an animation to an image sequence with per-frame stats.
+    #[command(after_help = examples::RENDER)]
     Render(RenderArgs),
     /// Time LOD methods and thread counts side by side (interleaved, repeated, median).
+    #[command(after_help = examples::BENCH)]
     Bench(BenchArgs),
     /// Per-phase statistics and an SVG plot of rendered sequences (shards merged).
+    #[command(after_help = examples::REPORT)]
     Report(ReportArgs),
     /// Compare a rendered sequence with a reference sequence, frame by frame.
+    #[command(after_help = examples::DIFF)]
     Diff(DiffArgs),
     /// Every LOD method on the same frames: time (interleaved) against error from a
     /// supersampled level-0 reference; optionally the paper's Table 1 (`--lights 1..6`).
+    #[command(after_help = examples::COMPARE)]
     Compare(CompareArgs),
     /// Write each frame's world-space triangles (OBJ or PLY), camera and lights.
+    #[command(after_help = examples::EXPORT)]
     Export(ExportArgs),
     /// Print what a scene contains.
+    #[command(after_help = examples::INFO)]
     Info(InfoArgs),
+    /// Print a shell completion script (bash, zsh, fish, elvish, powershell) to stdout.
+    #[command(after_help = examples::COMPLETIONS)]
+    Completions(shell::CompletionsArgs),
+    /// Print the man page (roff) of mipray or of one of its commands to stdout.
+    #[command(after_help = examples::MAN)]
+    Man(shell::ManArgs),
 }
 
 #[derive(clap::Args, Debug, Clone)]
@@ -88,6 +105,8 @@ pub fn run(cli: Cli) -> Result<ExitCode> {
         Some(Command::Export(args)) => export::export(&args).map(ok),
         Some(Command::Report(args)) => report(&args).map(ok),
         Some(Command::Info(args)) => info::info(&args).map(ok),
+        Some(Command::Completions(args)) => shell::completions(&args).map(ok),
+        Some(Command::Man(args)) => shell::man(&args).map(ok),
     }
 }
 

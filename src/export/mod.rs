@@ -3,7 +3,8 @@
 //! convention and the frame's lights, for other tools (Blender, a second renderer) and for
 //! regression checks.
 //!
-//! Files per frame `N` in the output folder (see `docs/export.md` for the formats):
+//! Files per frame `N` in the output folder (formats in `docs/src/export.md` and
+//! `docs/src/files.md`):
 //! - `frame_NNNN.obj` (+ one shared `materials.mtl` and `textures/*.png`), or
 //!   `frame_NNNN.ply` (binary little-endian, with per-face material, `log2_pb`, `deformed`);
 //! - `camera_NNNN.json`: camera, primary-ray convention, lights, background;

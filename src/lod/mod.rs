@@ -10,7 +10,7 @@
 //! The state is created for a primary ray ([`RayLod::primary`]), carried to each hit
 //! ([`RayLod::arrive`]), turned into a texture lookup there ([`RayLod::footprint`]), and
 //! bent by mirrors and glass ([`RayLod::reflect`], [`RayLod::refract`]). Formulas per
-//! method are in the method's file and in README.md.
+//! method are in the method's file and in docs/src/lod-methods.md.
 //!
 //! Convention: levels are OpenGL's `log2` of the footprint's longest axis in texels (the
 //! ray-cone width, full angle); `--lod-bias` is added to every level afterwards.

@@ -15,7 +15,7 @@
 //! Computed in f64 from f32 vertices: edge differences are then exact, which keeps huge
 //! world coordinates from destroying the area.
 //!
-//! Degenerate triangles get a finite constant, never NaN (documented in README):
+//! Degenerate triangles get a finite constant, never NaN (documented in docs/src/lod-methods.md):
 //! - zero world area (`A = 0`, hit only edge-on, if at all): `-LOG2_PB_LIMIT`, so the level
 //!   clamps to the coarsest MIP level;
 //! - zero UV area with `A > 0` (the texture is constant along the triangle or a line): the

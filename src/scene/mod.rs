@@ -222,7 +222,8 @@ pub struct MaterialDesc {
     pub base_color: Vec3,
     /// Index into `SceneDesc::textures`.
     pub base_color_texture: Option<usize>,
-    /// Mirror reflectance in [0, 1] (see `README.md` for the metallic/roughness mapping).
+    /// Mirror reflectance in [0, 1] (see `docs/src/formats.md` for the metallic/roughness
+    /// mapping).
     pub reflectance: f32,
     /// Specular transmission in [0, 1] (`KHR_materials_transmission`).
     pub transmission: f32,

@@ -1,14 +1,14 @@
-"""Imports a `mipray export` frame into Blender as the README says and prints what came in.
+"""Imports a `mipray export` frame into Blender as the guide (docs/src/export.md) says and prints what came in.
 
 Run by tests/blender_import.rs:
 
     blender -b --factory-startup --python-exit-code 1 --python tests/blender/check_import.py \
-        -- EXPORT_DIR FRAME README.md
+        -- EXPORT_DIR FRAME docs/src/export.md
 
 Imports `frame_NNNN.obj` with File > Import > Wavefront (.obj) (the `wm.obj_import`
-operator; the add-on listed as "(legacy)" does not read `Tf`) and the README's axes, then
-runs the README's camera script itself (the Python block under "Importing a frame into
-Blender", with its JSON path pointed at `camera_NNNN.json`), so the test checks the README's
+operator; the add-on listed as "(legacy)" does not read `Tf`) and the guide's axes, then
+runs the guide's camera script itself (the Python block under "Importing a frame into
+Blender", with its JSON path pointed at `camera_NNNN.json`), so the test checks the guide's
 instructions, not a copy of them. Prints one line, `MIPRAY_BLENDER_CHECK <json>`, with the
 face count, the materials on the imported objects (Principled BSDF inputs and base-colour
 image), the loaded images, every imported vertex (world position and camera-view
@@ -22,29 +22,29 @@ import sys
 import bpy
 from bpy_extras.object_utils import world_to_camera_view
 
-README_HEADING = "### Importing a frame into Blender"
+GUIDE_HEADING = "## Importing a frame into Blender"
 
 
 def arguments():
     args = sys.argv[sys.argv.index("--") + 1:]
     if len(args) != 3:
-        raise SystemExit("usage: ... -- EXPORT_DIR FRAME README.md")
+        raise SystemExit("usage: ... -- EXPORT_DIR FRAME docs/src/export.md")
     return args[0], int(args[1]), args[2]
 
 
-def readme_camera_script(readme_path, camera_json_path):
-    """The README's camera script with its camera_NNNN.json path replaced."""
-    text = open(readme_path, encoding="utf-8").read()
-    start = text.find(README_HEADING)
+def guide_camera_script(guide_path, camera_json_path):
+    """The guide's camera script with its camera_NNNN.json path replaced."""
+    text = open(guide_path, encoding="utf-8").read()
+    start = text.find(GUIDE_HEADING)
     if start < 0:
-        raise SystemExit(f"{readme_path}: no '{README_HEADING}' section")
+        raise SystemExit(f"{guide_path}: no '{GUIDE_HEADING}' section")
     block = re.search(r"```python\n(.*?)```", text[start:], re.S)
     if block is None:
-        raise SystemExit(f"{readme_path}: no python block in '{README_HEADING}'")
+        raise SystemExit(f"{guide_path}: no python block in '{GUIDE_HEADING}'")
     code, count = re.subn(r'open\("[^"]*camera_\d+\.json"\)',
                           lambda _: f"open({camera_json_path!r})", block.group(1))
     if count != 1:
-        raise SystemExit(f"{readme_path}: the camera script should open one camera_NNNN.json, found {count}")
+        raise SystemExit(f"{guide_path}: the camera script should open one camera_NNNN.json, found {count}")
     return code
 
 
@@ -83,9 +83,9 @@ def main():
     camera_path = f"{export_dir}/camera_{frame:04}.json"
 
     bpy.ops.wm.read_factory_settings(use_empty=True)  # no default cube, camera or light
-    # The README's axes: Forward -Z, Up Y (mipray's, turned into Blender's +Z up).
+    # The guide's axes: Forward -Z, Up Y (mipray's, turned into Blender's +Z up).
     bpy.ops.wm.obj_import(filepath=obj_path, forward_axis="NEGATIVE_Z", up_axis="Y")
-    exec(readme_camera_script(readme, camera_path), {})
+    exec(guide_camera_script(readme, camera_path), {})
 
     scene = bpy.context.scene
     camera = scene.camera
