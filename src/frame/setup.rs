@@ -6,6 +6,7 @@
 
 use glam::{Mat4, Vec3};
 
+use super::layout::{LayoutPlan, RestView};
 use super::posed::{VertexSource, posed_bounds};
 use super::settings::RenderSettings;
 use super::update::UpdateParallelism;
@@ -34,6 +35,8 @@ pub(super) struct FrameSetup {
     rest_bounds: (Vec3, Vec3),
     /// The pixel footprint every `log2 P_b` is measured with.
     pub footprint: PixelFootprint,
+    /// Which instances are placed as instances of shared meshes (decided once, at t = 0).
+    pub layout: LayoutPlan,
 }
 
 impl FrameSetup {
@@ -80,6 +83,22 @@ impl FrameSetup {
             }
         };
         let footprint = PixelFootprint::new(yfov, settings.height);
+        let lights = settings.lights.unwrap_or(light_nodes.len().max(1));
+        let (w, h) = (settings.width, settings.height);
+        let rest_camera = match camera_node {
+            Some(node) => Camera::from_world(pose.world_from_node[node], yfov, w, h),
+            None => Camera::framing(rest_bounds.0, rest_bounds.1, w, h),
+        };
+        let layout = LayoutPlan::new(
+            &scene,
+            &geometry,
+            &deforms,
+            settings.animation,
+            &pose,
+            &RestView::of(&rest_camera),
+            settings.layout,
+            rays_per_frame(&settings, lights),
+        );
         let setup = FrameSetup {
             scene,
             geometry,
@@ -90,6 +109,7 @@ impl FrameSetup {
             light_nodes,
             rest_bounds,
             footprint,
+            layout,
         };
         (setup, pose)
     }
@@ -152,4 +172,11 @@ impl FrameSetup {
         let texture = self.scene.textures.get(material.base_color_texture?)?;
         Some(texture.pyramid.base_size())
     }
+}
+
+/// Rays a frame traces, as the layout's cost model estimates them: per sample a primary
+/// ray and a shadow ray per light (bounces and misses left out).
+fn rays_per_frame(settings: &RenderSettings, lights: usize) -> f64 {
+    let samples = settings.width as f64 * settings.height as f64 * settings.spp.max(1) as f64;
+    samples * (1 + lights) as f64
 }
