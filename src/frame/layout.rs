@@ -24,9 +24,9 @@
 //!   stretched `log2 P_b` at every hit on top of the entry cost;
 //! - a copy's expected ray entries are the frame's rays (pixels x samples x (1 + lights):
 //!   primary rays and a shadow ray per light from each hit) times the share of the film its
-//!   rest box covers seen from the camera at t = 0 (a box reaching the eye plane counts as
-//!   the whole film). A camera that travels far from its first view makes this a guess;
-//!   the decision is of cost only, never of what a frame shows.
+//!   box covers seen from the camera, averaged over [`VIEW_SAMPLES`] times spread evenly over
+//!   the animation (a box reaching the eye plane counts as the whole film). Between the
+//!   samples this is a guess; the decision is of cost only, never of what a frame shows.
 //!
 //! The constants were measured on a shared 2-core machine (other sessions compiling; medians
 //! of alternated runs), see the comment on each and the user page `docs/src/bvh-layout.md`.
@@ -43,23 +43,33 @@ use crate::anim::{AnimationSelection, NodeShape, Pose, moving_nodes};
 use crate::geometry::SceneGeometry;
 use crate::scene::{ChannelTarget, SceneDesc};
 
-/// Per-ray cost of entering an instance, in ns: transforming the ray into object space and
-/// setting up its walk. Measured on BART Robots (1,340 moving parts of ~28 triangles; 800x600,
-/// `--lod paper`, 2 threads, frames 100..102): the extra render time of `--bvh two-level`
-/// over `--bvh flat` divided by the entries this model predicts for its parts (see the
-/// docs page for the figures).
-pub const ENTRY_NS_PER_RAY: f64 = 25.0;
+// The three time constants were measured together, from one set of runs alternated on a
+// shared 2-core machine (load average 6-8 from other sessions compiling):
+//   mipray render Robot.aff --frames 100..105 --size 800x600 --lod paper --threads 2
+//     --bvh flat | --bvh two-level, three runs each, alternated (BART Robots: 1,340 moving
+//     parts of ~28 triangles, 62,490 moving triangles), medians of frames 101..105.
+// The load slows every figure alike (the quiet machine was ~4x faster); the decision
+// compares sums of them, so only their ratios matter.
+
+/// How many times over the animation (its start and end included) the model looks at the
+/// scene through its camera to estimate the rays entering each copy.
+pub const VIEW_SAMPLES: usize = 9;
+
+/// Per-ray cost of entering an instance, in ns per entry the model predicts: the extra
+/// render time of `two-level` over `flat` on Robots (median 2,104 against 1,853 ms a frame)
+/// over the 666,000 entries this model predicts for its 1,340 parts at 800x600.
+pub const ENTRY_NS_PER_RAY: f64 = 377.0;
 
 /// Per-frame cost of a moving instance beyond its entries, in ns: its placement (inverse
-/// transform, hull boxes) and its share of the top-level rebuild. Measured on the
-/// frame-loop bench's rigid crowd (200 instances, `cargo bench --bench frame_loop -- rigid`):
-/// the two-level update (0.25 ms) over 200 instances.
-pub const PLACE_NS_PER_INSTANCE: f64 = 1_250.0;
+/// transform, hull boxes) and its share of the top-level rebuild: the `two-level` update
+/// on Robots (median 2.15 ms a frame, no world triangle moving) over its 1,340 instances.
+pub const PLACE_NS_PER_INSTANCE: f64 = 1_600.0;
 
-/// Per-frame cost of a moving triangle merged into the world tree, in ns: writing it, listing
-/// it as dirty, refitting its leaf and shifting its `log2 P_b`. Measured on the same crowd
-/// under `--bvh flat`: the update (21 ms) over its 1 M moving triangles.
-pub const REFIT_NS_PER_TRIANGLE: f64 = 21.0;
+/// Per-frame cost of a moving triangle merged into the world tree, in ns: writing it,
+/// listing it as dirty, refitting its leaf and shifting its `log2 P_b` (and its part's
+/// share of the per-instance work): the `flat` update on Robots (median 6.86 ms a frame)
+/// over its 62,490 moving triangles.
+pub const REFIT_NS_PER_TRIANGLE: f64 = 110.0;
 
 /// Resident bytes of a triangle merged into the world tree (positions, normals, uvs,
 /// material, `log2 P_b`, source, packs, its share of the tree and the build's peak).
@@ -90,7 +100,7 @@ pub enum CopyMotion {
 pub struct CopyUse {
     pub motion: CopyMotion,
     /// Share of a frame's rays expected to enter the copy's box, in [0, 1]: the share of
-    /// the film its rest box covers seen from the camera at t = 0.
+    /// the film its box covers seen from the camera, averaged over the animation.
     pub ray_share: f64,
 }
 
@@ -327,18 +337,21 @@ impl FromStr for UsedLayout {
 
 impl LayoutPlan {
     /// The plan for `scene` under `layout` (`pose`: the scene at t = 0; `deforms`: per
-    /// instance, where its vertices come from; `view`: the camera at t = 0).
+    /// instance, where its vertices come from; `samples`: the scene and its camera at a few
+    /// times spread over the animation, t = 0 first).
+    #[allow(clippy::too_many_arguments)]
     pub(super) fn new(
         scene: &SceneDesc,
         geometry: &SceneGeometry,
         deforms: &[VertexSource],
         selection: AnimationSelection,
         pose: &Pose,
-        view: &RestView,
+        samples: &[ViewSample],
         layout: BvhLayout,
         rays_per_frame: f64,
     ) -> LayoutPlan {
         let motions = copy_motions(scene, geometry, deforms, selection, pose);
+        let mut object_boxes: HashMap<(u32, u32), (Vec3, Vec3)> = HashMap::new();
         let mut meshes: Vec<MeshPlan> = Vec::new();
         let mut index_of: HashMap<(u32, u32), usize> = HashMap::new();
         for (i, instance) in geometry.instances.iter().enumerate() {
@@ -365,9 +378,10 @@ impl LayoutPlan {
             let ray_share = match motions[i] {
                 CopyMotion::Deformed => 1.0,
                 _ => {
-                    let world = pose.world_from_node[instance.node as usize];
-                    let primitive = geometry.primitive(scene, i);
-                    ray_share(&primitive.positions, world, view)
+                    let object = *object_boxes
+                        .entry(key)
+                        .or_insert_with(|| finite_box(&geometry.primitive(scene, i).positions));
+                    mean_film_share(object, instance.node as usize, samples)
                 }
             };
             meshes[k].usage.copies.push(CopyUse {
@@ -611,7 +625,7 @@ fn reshaping_nodes(
     out
 }
 
-/// The view the model estimates primary rays from: the camera at t = 0.
+/// A camera as the model estimates primary rays from it.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct RestView {
     pub eye: Vec3,
@@ -681,18 +695,55 @@ impl RestView {
     }
 }
 
-/// Share of the primary rays that enter the world box of `positions` placed by `world`, seen
-/// from `view` (see [`RestView::film_share`]).
-fn ray_share(positions: &[Vec3], world: Mat4, view: &RestView) -> f64 {
+/// The scene and its camera at one time, as the model samples them.
+#[derive(Debug, Clone)]
+pub struct ViewSample {
+    /// Per node: world from node.
+    pub world_from_node: Vec<Mat4>,
+    pub view: RestView,
+}
+
+/// The box of the finite points of `positions` (an empty, inverted box when none).
+fn finite_box(positions: &[Vec3]) -> (Vec3, Vec3) {
     let (mut min, mut max) = (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY));
-    for &p in positions {
-        let w = world.transform_point3(p);
-        if w.is_finite() {
-            min = min.min(w);
-            max = max.max(w);
-        }
+    for &p in positions.iter().filter(|p| p.is_finite()) {
+        min = min.min(p);
+        max = max.max(p);
     }
-    view.film_share(min, max)
+    (min, max)
+}
+
+/// The world box of the object box `(min, max)` placed by `world` (its eight corners).
+fn placed_box((min, max): (Vec3, Vec3), world: Mat4) -> (Vec3, Vec3) {
+    if !min.cmple(max).all() {
+        return (min, max);
+    }
+    let corners = (0..8).map(|k| {
+        world.transform_point3(Vec3::new(
+            if k & 1 == 0 { min.x } else { max.x },
+            if k & 2 == 0 { min.y } else { max.y },
+            if k & 4 == 0 { min.z } else { max.z },
+        ))
+    });
+    let corners: Vec<Vec3> = corners.collect();
+    finite_box(&corners)
+}
+
+/// Mean over `samples` of the share of the film the object box placed by `node` covers:
+/// the share of a frame's primary rays expected to enter it (0 without samples).
+fn mean_film_share(object: (Vec3, Vec3), node: usize, samples: &[ViewSample]) -> f64 {
+    if samples.is_empty() {
+        return 0.0;
+    }
+    let total: f64 = samples
+        .iter()
+        .map(|s| {
+            let world = s.world_from_node.get(node).copied().unwrap_or(Mat4::IDENTITY);
+            let (min, max) = placed_box(object, world);
+            s.view.film_share(min, max)
+        })
+        .sum();
+    total / samples.len() as f64
 }
 
 #[cfg(test)]
@@ -729,8 +780,12 @@ mod tests {
 
     #[test]
     fn a_large_rigid_mesh_drawn_once_is_instanced() {
-        let c = decide_auto(&mesh(200_000, &[(CopyMotion::Similarity, 0.3)]), RAYS);
+        // A twentieth of the film: 23,000 entries cost less than refitting 200,000 triangles.
+        let c = decide_auto(&mesh(200_000, &[(CopyMotion::Similarity, 0.05)]), RAYS);
         assert_eq!(c.similarity, Some(Choice::instanced(Reason::UpdateCostsMore)));
+        // Filling the film, it costs more in entries than merged.
+        let c = decide_auto(&mesh(200_000, &[(CopyMotion::Similarity, 1.0)]), RAYS);
+        assert_eq!(c.similarity, Some(Choice::merged(Reason::EntriesCostMore)));
     }
 
     #[test]
@@ -768,8 +823,8 @@ mod tests {
     #[test]
     fn uniform_scale_may_instance_but_a_changing_shape_is_merged() {
         let big = 200_000;
-        let uniform = decide_auto(&mesh(big, &[(CopyMotion::Similarity, 0.3)]), RAYS);
-        let stretched = decide_auto(&mesh(big, &[(CopyMotion::Reshaping, 0.3)]), RAYS);
+        let uniform = decide_auto(&mesh(big, &[(CopyMotion::Similarity, 0.05)]), RAYS);
+        let stretched = decide_auto(&mesh(big, &[(CopyMotion::Reshaping, 0.05)]), RAYS);
         assert!(uniform.any_instanced());
         assert_eq!(stretched.reshaping, Some(Choice::merged(Reason::Reshapes)));
     }
@@ -847,10 +902,71 @@ mod tests {
         // Reaching the eye plane: the camera may be inside it.
         assert_eq!(view.film_share(Vec3::splat(-1.0), Vec3::splat(1.0)), 1.0);
         // No vertex at all, and a placement that overflows.
-        assert_eq!(ray_share(&[], Mat4::IDENTITY, &view), 0.0);
+        let sample = |world: Mat4| ViewSample {
+            world_from_node: vec![world],
+            view,
+        };
+        let nothing = finite_box(&[]);
+        assert_eq!(mean_film_share(nothing, 0, &[sample(Mat4::IDENTITY)]), 0.0);
+        let unit = finite_box(&[Vec3::ZERO, Vec3::ONE]);
         let huge = Mat4::from_translation(Vec3::new(0.0, 0.0, -1e30))
             * Mat4::from_scale(Vec3::splat(1e30));
-        let share = ray_share(&[Vec3::ZERO, Vec3::ONE], huge, &view);
+        let share = mean_film_share(unit, 0, &[sample(huge)]);
         assert!((0.0..=1.0).contains(&share), "{share}");
+        // The mean over the samples: in view at one time of two.
+        let ahead = Mat4::from_translation(Vec3::new(-0.5, -0.5, -1.5));
+        let behind = Mat4::from_translation(Vec3::new(0.0, 0.0, 5.0));
+        let one = mean_film_share(unit, 0, &[sample(ahead)]);
+        let half = mean_film_share(unit, 0, &[sample(ahead), sample(behind)]);
+        assert!(one > 0.0 && (half - one / 2.0).abs() < 1e-12, "{one} {half}");
+        assert_eq!(mean_film_share(unit, 0, &[]), 0.0);
+    }
+
+    /// A root with a child, the child scaled by a channel keyed with `values` (three per
+    /// key), optionally under a statically stretched root.
+    fn scaled_child_scene(values: &[f32], root_scale: Vec3) -> SceneDesc {
+        use crate::scene::{AnimationDesc, ChannelDesc, Interpolation, NodeDesc, Trs};
+        let mut scene = SceneDesc::default();
+        scene.nodes.push(NodeDesc {
+            local: Trs {
+                scale: root_scale,
+                ..Default::default()
+            },
+            children: vec![1],
+            ..Default::default()
+        });
+        scene.nodes.push(NodeDesc::default());
+        scene.roots = vec![0];
+        scene.animations.push(AnimationDesc {
+            name: "scale".into(),
+            channels: vec![ChannelDesc {
+                node: 1,
+                target: ChannelTarget::Scale,
+                interpolation: Interpolation::Linear,
+                times: (0..values.len() / 3).map(|k| k as f32).collect(),
+                values: values.to_vec(),
+                components: 3,
+            }],
+        });
+        scene
+    }
+
+    fn reshaping_child(values: &[f32], root_scale: Vec3) -> bool {
+        let scene = scaled_child_scene(values, root_scale);
+        let mut pose = Pose::default();
+        pose.evaluate(&scene, AnimationSelection::All, 0.0);
+        let mut shapes = Vec::new();
+        pose.node_shapes(&scene, &mut shapes);
+        reshaping_nodes(&scene, AnimationSelection::All, &shapes)[1]
+    }
+
+    #[test]
+    fn a_uniform_scale_animation_keeps_the_shape_a_non_uniform_one_changes_it() {
+        let uniform = [1.0, 1.0, 1.0, 2.0, 2.0, 2.0];
+        let non_uniform = [1.0, 1.0, 1.0, 2.0, 1.0, 1.0];
+        assert!(!reshaping_child(&uniform, Vec3::ONE));
+        assert!(reshaping_child(&non_uniform, Vec3::ONE));
+        // A uniform scale of a node under a stretched parent still changes the stretch key.
+        assert!(reshaping_child(&uniform, Vec3::new(2.0, 1.0, 1.0)));
     }
 }

@@ -6,7 +6,7 @@
 
 use glam::{Mat4, Vec3};
 
-use super::layout::{LayoutPlan, RestView};
+use super::layout::{LayoutPlan, RestView, VIEW_SAMPLES, ViewSample};
 use super::posed::{VertexSource, posed_bounds};
 use super::settings::RenderSettings;
 use super::update::UpdateParallelism;
@@ -84,18 +84,14 @@ impl FrameSetup {
         };
         let footprint = PixelFootprint::new(yfov, settings.height);
         let lights = settings.lights.unwrap_or(light_nodes.len().max(1));
-        let (w, h) = (settings.width, settings.height);
-        let rest_camera = match camera_node {
-            Some(node) => Camera::from_world(pose.world_from_node[node], yfov, w, h),
-            None => Camera::framing(rest_bounds.0, rest_bounds.1, w, h),
-        };
+        let samples = view_samples(&scene, &settings, &pose, camera_node, yfov, rest_bounds);
         let layout = LayoutPlan::new(
             &scene,
             &geometry,
             &deforms,
             settings.animation,
             &pose,
-            &RestView::of(&rest_camera),
+            &samples,
             settings.layout,
             rays_per_frame(&settings, lights),
         );
@@ -179,4 +175,43 @@ impl FrameSetup {
 fn rays_per_frame(settings: &RenderSettings, lights: usize) -> f64 {
     let samples = settings.width as f64 * settings.height as f64 * settings.spp.max(1) as f64;
     samples * (1 + lights) as f64
+}
+
+/// The scene and its camera at [`VIEW_SAMPLES`] times spread evenly over the selected
+/// animation (only t = 0, `rest`, when nothing plays), for the layout's cost model.
+fn view_samples(
+    scene: &SceneDesc,
+    settings: &RenderSettings,
+    rest: &Pose,
+    camera_node: Option<usize>,
+    yfov: f32,
+    rest_bounds: (Vec3, Vec3),
+) -> Vec<ViewSample> {
+    let duration = settings.animation.duration(scene);
+    let times = if duration > 0.0 && duration.is_finite() {
+        VIEW_SAMPLES
+    } else {
+        1
+    };
+    let (w, h) = (settings.width, settings.height);
+    let mut pose = Pose::default();
+    (0..times)
+        .map(|k| {
+            let posed = if k == 0 {
+                rest
+            } else {
+                let t = duration * k as f32 / (times - 1) as f32;
+                pose.evaluate(scene, settings.animation, t);
+                &pose
+            };
+            let camera = match camera_node {
+                Some(node) => Camera::from_world(posed.world_from_node[node], yfov, w, h),
+                None => Camera::framing(rest_bounds.0, rest_bounds.1, w, h),
+            };
+            ViewSample {
+                world_from_node: posed.world_from_node.clone(),
+                view: RestView::of(&camera),
+            }
+        })
+        .collect()
 }
