@@ -22,7 +22,7 @@
 
 use std::mem::MaybeUninit;
 
-use glam::{Vec3A, Vec4};
+use glam::{BVec4A, Vec3A, Vec4};
 
 use super::walk::{INLINE_STACK, safe_inverse4};
 use super::{EMPTY, LEAF, Lanes, PACKET, ROBUST_FAR, RayBoxes, WIDTH, WideBvh, WideNode};
@@ -40,15 +40,10 @@ pub struct RayPacket {
     len: usize,
 }
 
-/// Bounds on the slab distances of every ray of a packet: sharing one origin (primary
-/// rays), or from several origins in a box (shadow rays from a tile's hits).
+/// Bounds on the slab distances of every ray of a packet sharing one origin.
 #[derive(Clone, Copy)]
 struct Frustum {
-    /// Per axis, the smallest and largest origin component (equal for one origin).
-    origin_min: [Lanes; 3],
-    origin_max: [Lanes; 3],
-    /// Whether every ray starts at the same point (two products per plane, not four).
-    one_origin: bool,
+    origin: [Lanes; 3],
     /// Per axis, the smallest and largest inverse direction component over the packet.
     inverse_min: [Lanes; 3],
     inverse_max: [Lanes; 3],
@@ -74,23 +69,9 @@ impl RayPacket {
         packet
     }
 
-    /// Refills the packet with `rays` (at most [`PACKET`]; more are ignored); only rays from
-    /// one origin get interval bounds.
+    /// Refills the packet with `rays` (at most [`PACKET`]; more are ignored).
     #[inline]
     pub fn set(&mut self, rays: &[(Vec3A, Vec3A)]) {
-        self.fill(rays, Origins::One);
-    }
-
-    /// [`RayPacket::set`], with interval bounds for rays from several origins too (when
-    /// they agree in direction along some axis): four products per plane instead of two,
-    /// which pays for rays that converge (toward a light) rather than spread.
-    #[inline]
-    pub fn set_from_several_origins(&mut self, rays: &[(Vec3A, Vec3A)]) {
-        self.fill(rays, Origins::Several);
-    }
-
-    #[inline]
-    fn fill(&mut self, rays: &[(Vec3A, Vec3A)], origins: Origins) {
         let len = rays.len().min(PACKET);
         self.len = len;
         // Directions into `inverse`, inverted there four at a time (the same IEEE division
@@ -106,7 +87,7 @@ impl RayPacket {
                 safe_inverse4(Vec4::from_slice(group)).write_to_slice(group);
             }
         }
-        self.frustum = Frustum::of(&self.origin, &self.inverse, len, origins);
+        self.frustum = Frustum::of(&self.origin, &self.inverse, len);
     }
 
     /// Ray `r`'s slab constants.
@@ -175,33 +156,20 @@ impl RayPacket {
     }
 }
 
-/// Which packets [`Frustum::of`] bounds.
-#[derive(Clone, Copy, PartialEq, Eq)]
-enum Origins {
-    /// Only rays from one origin.
-    One,
-    /// Rays from any origins.
-    Several,
-}
-
 impl Frustum {
     /// The bounds of the first `len` rays of a packet (`origin[axis][ray]`,
-    /// `inverse[axis][ray]`), or `None` when they do not share one origin and `origins`
-    /// asks for one, when no axis has every ray running the same way (nothing would be
-    /// bounded), or when a component is NaN.
+    /// `inverse[axis][ray]`), or `None` when they do not share one origin (or a direction
+    /// is NaN).
     fn of(
         origin: &[[f32; PACKET]; 3],
         inverse: &[[f32; PACKET]; 3],
         len: usize,
-        origins: Origins,
     ) -> Option<Frustum> {
         if len == 0 {
             return None;
         }
         let mut frustum = Frustum {
-            origin_min: [Lanes::splat(0.0); 3],
-            origin_max: [Lanes::splat(0.0); 3],
-            one_origin: true,
+            origin: [0, 1, 2].map(|axis| Lanes::splat(origin[axis][0])),
             inverse_min: [Lanes::splat(0.0); 3],
             inverse_max: [Lanes::splat(0.0); 3],
             front: [0; 3],
@@ -209,19 +177,29 @@ impl Frustum {
             agreeing: 0,
         };
         for axis in 0..3 {
-            let (o_min, o_max) = extremes(&origin[axis], len)?;
-            if o_min.to_bits() != o_max.to_bits() || o_min.to_bits() != origin[axis][0].to_bits() {
-                if origins == Origins::One {
-                    return None;
-                }
-                frustum.one_origin = false;
+            let o = origin[axis][0].to_bits();
+            if origin[axis][..len].iter().any(|v| v.to_bits() != o) {
+                return None;
             }
-            frustum.origin_min[axis] = Lanes::splat(o_min);
-            frustum.origin_max[axis] = Lanes::splat(o_max);
-            let (min, max) = extremes(&inverse[axis], len)?;
-            let negative = inverse[axis][..len].iter().filter(|&&v| v < 0.0).count();
-            frustum.inverse_min[axis] = Lanes::splat(min);
-            frustum.inverse_max[axis] = Lanes::splat(max);
+            // Four at a time; the slots of the last group past `len` repeat ray 0.
+            let row = &inverse[axis];
+            let first = Vec4::splat(row[0]);
+            let (mut min, mut max) = (first, first);
+            let (mut negative, mut nan) = (0, 0);
+            for at in (0..len).step_by(4) {
+                let live = (1u32 << (len - at).min(4)) - 1;
+                let lanes = BVec4A::new(live & 1 != 0, live & 2 != 0, live & 4 != 0, live & 8 != 0);
+                let v = Vec4::select(lanes, Vec4::from_slice(&row[at..at + 4]), first);
+                min = min.min(v);
+                max = max.max(v);
+                negative += (v.cmplt(Vec4::ZERO).bitmask() & live).count_ones() as usize;
+                nan |= v.cmpne(v).bitmask();
+            }
+            if nan != 0 {
+                return None;
+            }
+            frustum.inverse_min[axis] = Lanes::splat(min.min_element());
+            frustum.inverse_max[axis] = Lanes::splat(max.max_element());
             // As `RayBoxes`: a negative inverse meets the upper plane first.
             let down = (negative == len) as usize;
             frustum.front[axis] = axis + 3 * down;
@@ -230,16 +208,11 @@ impl Frustum {
                 frustum.agreeing |= 1 << axis;
             }
         }
-        (frustum.agreeing != 0 || origins == Origins::One).then_some(frustum)
+        Some(frustum)
     }
 
     /// The lanes of `node` that some ray of the packet may enter before `t_max` (the
     /// largest limit of the packet's rays). A lane left out is entered by no ray.
-    ///
-    /// Exact in floating point: a ray's rounded `plane - origin` lies between the rounded
-    /// differences with the extreme origins (rounded subtraction is monotonic), and a
-    /// rounded product between the rounded products of its factors' extremes (rounding is
-    /// monotonic and a product's extremes over a box lie at its corners).
     #[inline(always)]
     fn may_enter<const AVX: bool>(&self, node: &WideNode, t_max: f32) -> (Lanes, u32) {
         let mut near = Lanes::splat(0.0);
@@ -248,74 +221,17 @@ impl Frustum {
             if self.agreeing & (1 << axis) == 0 {
                 continue;
             }
+            let front = Lanes(node.bounds[self.front[axis]]).sub::<AVX>(self.origin[axis]);
+            let back = Lanes(node.bounds[self.back[axis]]).sub::<AVX>(self.origin[axis]);
             let (low, high) = (self.inverse_min[axis], self.inverse_max[axis]);
-            let front = Lanes(node.bounds[self.front[axis]]);
-            let back = Lanes(node.bounds[self.back[axis]]);
-            if self.one_origin {
-                let front = front.sub::<AVX>(self.origin_min[axis]);
-                let back = back.sub::<AVX>(self.origin_min[axis]);
-                near = near.max::<AVX>(front.mul::<AVX>(low).min::<AVX>(front.mul::<AVX>(high)));
-                far = far.min::<AVX>(back.mul::<AVX>(low).max::<AVX>(back.mul::<AVX>(high)));
-            } else {
-                near = near.max::<AVX>(corner_products::<AVX, false>(
-                    front,
-                    self.origin_min[axis],
-                    self.origin_max[axis],
-                    low,
-                    high,
-                ));
-                far = far.min::<AVX>(corner_products::<AVX, true>(
-                    back,
-                    self.origin_min[axis],
-                    self.origin_max[axis],
-                    low,
-                    high,
-                ));
-            }
+            near = near.max::<AVX>(front.mul::<AVX>(low).min::<AVX>(front.mul::<AVX>(high)));
+            far = far.min::<AVX>(back.mul::<AVX>(low).max::<AVX>(back.mul::<AVX>(high)));
         }
         let far = far
             .mul::<AVX>(Lanes::splat(ROBUST_FAR))
             .min::<AVX>(Lanes::splat(t_max));
         (near, near.le_mask::<AVX>(far))
     }
-}
-
-/// The smallest (or with `LARGEST` the largest) of the four products
-/// `(plane - origin) * inverse` over the extremes of `origin` and `inverse`.
-#[inline(always)]
-fn corner_products<const AVX: bool, const LARGEST: bool>(
-    plane: Lanes,
-    origin_min: Lanes,
-    origin_max: Lanes,
-    low: Lanes,
-    high: Lanes,
-) -> Lanes {
-    let (a, b) = (plane.sub::<AVX>(origin_max), plane.sub::<AVX>(origin_min));
-    let (p, q, r, s) = (
-        a.mul::<AVX>(low),
-        a.mul::<AVX>(high),
-        b.mul::<AVX>(low),
-        b.mul::<AVX>(high),
-    );
-    if LARGEST {
-        p.max::<AVX>(q).max::<AVX>(r.max::<AVX>(s))
-    } else {
-        p.min::<AVX>(q).min::<AVX>(r.min::<AVX>(s))
-    }
-}
-
-/// The smallest and largest of the first `len` values of `row` (`None` if one is NaN).
-fn extremes(row: &[f32; PACKET], len: usize) -> Option<(f32, f32)> {
-    let mut min = row[0];
-    let mut max = row[0];
-    for &v in &row[..len] {
-        if v.is_nan() {
-            return None;
-        }
-        min = min.min(v);
-        max = max.max(v);
-    }
-    Some((min, max))
 }
 
 /// A pending subtree of a packet walk: the child (as in [`WideNode::child`]) with its leaf
@@ -771,45 +687,26 @@ mod tests {
     #[test]
     fn the_interval_test_never_drops_a_box_a_ray_enters_and_drops_some() {
         let mut next = stream(0x2545f4914f6cdd1d);
-        let (mut dropped, mut kept, mut several) = (0, 0, 0);
+        let (mut dropped, mut kept) = (0, 0);
         for _ in 0..300 {
             let node = random_node(&mut next);
-            let mut sets = packets(&mut next);
-            // Rays from a patch of points converging on one point (shadow rays to a light).
-            let light = Vec3A::new(next(), 3.0 + next(), next());
-            sets.push(
-                (0..48)
-                    .map(|_| {
-                        let from = Vec3A::new(next(), next() * 0.2 - 2.0, next());
-                        (from, light - from)
-                    })
-                    .collect(),
-            );
-            for rays in sets {
-                for from_several in [false, true] {
-                    let mut packet = RayPacket::new(&[]);
-                    if from_several {
-                        packet.set_from_several_origins(&rays);
-                    } else {
-                        packet.set(&rays);
-                    }
-                    let limit = next().abs() * 10.0;
-                    let Some(frustum) = &packet.frustum else {
-                        continue;
-                    };
-                    several += usize::from(!frustum.one_origin);
-                    let (_, may) = frustum.may_enter::<false>(&node, limit);
-                    let any = (0..rays.len())
-                        .fold(0, |m, r| m | packet.ray(r).enter::<false>(&node, limit).1);
-                    assert_eq!(any & !may, 0, "a lane some ray enters was dropped");
-                    dropped += (((1 << WIDTH) - 1) & !may).count_ones();
-                    kept += may.count_ones();
-                }
+            for rays in packets(&mut next) {
+                let packet = RayPacket::new(&rays);
+                let limit = next().abs() * 10.0;
+                let Some(frustum) = &packet.frustum else {
+                    continue;
+                };
+                let (_, may) = frustum.may_enter::<false>(&node, limit);
+                let any = (0..rays.len())
+                    .fold(0, |m, r| m | packet.ray(r).enter::<false>(&node, limit).1);
+                assert_eq!(any & !may, 0, "a lane some ray enters was dropped");
+                dropped += (((1 << WIDTH) - 1) & !may).count_ones();
+                kept += may.count_ones();
             }
         }
         assert!(
-            dropped > 500 && kept > 100 && several >= 300,
-            "dropped {dropped}, kept {kept}, {several} packets from several origins"
+            dropped > 500 && kept > 100,
+            "dropped {dropped}, kept {kept}"
         );
     }
 
