@@ -57,8 +57,9 @@ pub const VIEW_SAMPLES: usize = 9;
 
 /// Per-ray cost of entering an instance, in ns per entry the model predicts: the extra
 /// render time of `two-level` over `flat` on Robots (median 2,104 against 1,853 ms a frame)
-/// over the 666,000 entries this model predicts for its 1,340 parts at 800x600.
-pub const ENTRY_NS_PER_RAY: f64 = 377.0;
+/// over the 1,451,000 entries this model predicts for its 1,340 parts at 800x600
+/// (`mipray info` lists 696,600 at 640x360).
+pub const ENTRY_NS_PER_RAY: f64 = 173.0;
 
 /// Per-frame cost of a moving instance beyond its entries, in ns: its placement (inverse
 /// transform, hull boxes) and its share of the top-level rebuild: the `two-level` update
