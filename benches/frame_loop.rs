@@ -24,7 +24,7 @@
 //! Arguments (after `--`): words choosing rows: a size (`100k`, `1M`), a scene (`patches`,
 //! `skin`, `rigid`) and/or a layout (`flat`, `two-level`, `auto`); none runs every row. Rayon's global pool is set to 2
 //! threads (the figures in BENCHMARKS.md are for a 2-core machine); `RAYON_NUM_THREADS`
-//! overrides it. Prints a Markdown table of medians (see BENCHMARKS.md).
+//! overrides it. Prints a Markdown table of medians (see BENCHMARKS.md and docs/benchmark-log.md).
 
 #[path = "common/generated.rs"]
 mod generated;

@@ -7,6 +7,7 @@ pub mod atomic_file;
 pub mod bench;
 pub mod chart;
 pub mod cli;
+pub mod colour;
 pub mod compare;
 pub mod csv;
 pub mod diff;

@@ -100,7 +100,12 @@ fn where_auto_instances_nothing_frames_are_flat_byte_for_byte() {
     for lod in LodMethod::ALL {
         let mut flat = Renderer::new(small_parts_scene(), settings(lod, BvhLayout::Flat));
         let mut auto = Renderer::new(small_parts_scene(), settings(lod, BvhLayout::Auto));
-        assert_eq!(auto.layout().used(), UsedLayout::Flat, "{}", auto.layout().describe(99));
+        assert_eq!(
+            auto.layout().used(),
+            UsedLayout::Flat,
+            "{}",
+            auto.layout().describe(99)
+        );
         for frame in 0..20 {
             let time = frame as f32 / FPS;
             let (a, ra) = flat.render_frame(frame, time).unwrap();
@@ -146,7 +151,10 @@ fn a_mixed_layout_matches_flat_within_the_tolerance_with_the_same_counters() {
                 counters(&rb.update),
                 "{lod} frame {frame}: [moved, deformed, lod_recomputed, lod_shifted]"
             );
-            assert_eq!((rb.bvh_layout.as_str(), rb.instanced_meshes), ("two-level", 1));
+            assert_eq!(
+                (rb.bvh_layout.as_str(), rb.instanced_meshes),
+                ("two-level", 1)
+            );
             assert_eq!(ra.bvh_layout, "flat");
             if frame > 0 {
                 merged_moved += auto.dirty().len();
@@ -165,7 +173,8 @@ fn an_auto_frame_alone_equals_the_same_frame_of_a_sequence() {
         let time = frame as f32 / FPS;
         let (a, ra) = sequence.render_frame(frame, time).unwrap();
         if frame % 6 == 5 {
-            let mut alone = Renderer::new(mixed_scene(), settings(LodMethod::Cones, BvhLayout::Auto));
+            let mut alone =
+                Renderer::new(mixed_scene(), settings(LodMethod::Cones, BvhLayout::Auto));
             let (b, rb) = alone.render_frame(frame, time).unwrap();
             assert!(
                 a.pixels == b.pixels,
@@ -191,7 +200,11 @@ fn info_prints_the_layout_decision() {
         &["info", "default"],
         std::path::Path::new(env!("CARGO_MANIFEST_DIR")),
     );
-    assert!(run.status.success(), "{}", String::from_utf8_lossy(&run.stderr));
+    assert!(
+        run.status.success(),
+        "{}",
+        String::from_utf8_lossy(&run.stderr)
+    );
     let out = String::from_utf8_lossy(&run.stdout);
     assert!(out.contains("bvh auto: "), "{out}");
     assert!(out.contains("merged") || out.contains("instanced"), "{out}");
@@ -199,7 +212,10 @@ fn info_prints_the_layout_decision() {
 
 #[test]
 fn the_record_names_the_layout_of_each_explicit_choice() {
-    for (layout, name) in [(BvhLayout::Flat, "flat"), (BvhLayout::TwoLevel, "two-level")] {
+    for (layout, name) in [
+        (BvhLayout::Flat, "flat"),
+        (BvhLayout::TwoLevel, "two-level"),
+    ] {
         let mut r = Renderer::new(mixed_scene(), settings(LodMethod::Paper, layout));
         let (_, record) = r.render_frame(0, 0.0).unwrap();
         assert_eq!(record.bvh_layout, name);

@@ -8,8 +8,8 @@ use std::process::{Command, Output};
 
 use glam::{Quat, Vec2, Vec3, Vec4};
 use mipray::export::{ExportFormat, ExportOptions, export_frames};
+use mipray::frame::appearance::material_descs;
 use mipray::frame::{Motion, RenderSettings, Renderer};
-use mipray::geometry::appearance::material_descs;
 use mipray::scene::{
     AnimationDesc, ChannelDesc, ChannelTarget, Interpolation, MaterialDesc, MeshDesc, NodeDesc,
     PrimitiveDesc, SceneDesc, Trs,

@@ -162,9 +162,7 @@ pub fn apply_bvh(
         bail!("--rebuild-threshold {rebuild_threshold}: must be a number >= 1");
     }
     settings.bvh = match mode {
-        BvhMode::Auto | BvhMode::Flat | BvhMode::TwoLevel => {
-            BvhPolicy::Refit { rebuild_threshold }
-        }
+        BvhMode::Auto | BvhMode::Flat | BvhMode::TwoLevel => BvhPolicy::Refit { rebuild_threshold },
         BvhMode::Rebuild => BvhPolicy::Rebuild,
     };
     settings.layout = match mode {

@@ -14,9 +14,9 @@ use std::path::Path;
 use image::{DynamicImage, ImageFormat, RgbImage, RgbaImage};
 
 use super::{ExportError, io_error, write_atomically};
+use crate::colour::encode_srgb8;
 use crate::frame::Renderer;
-use crate::geometry::appearance::material_descs;
-use crate::render::film::encode_srgb8;
+use crate::frame::appearance::material_descs;
 use crate::scene::MaterialDesc;
 use crate::texture::{Texture, WrapMode};
 
@@ -142,7 +142,7 @@ fn wrap_name(mode: WrapMode) -> &'static str {
 }
 
 /// Writes `materials.mtl`: one `newmtl` per entry of `Renderer::materials()`, described by
-/// `geometry::appearance::material_descs` (in order, so a re-load keeps the indices),
+/// `frame::appearance::material_descs` (in order, so a re-load keeps the indices),
 /// standard statements for other tools and `mipray_*` statements with the exact parameters.
 pub(crate) fn write_mtl(
     renderer: &Renderer,

@@ -38,9 +38,9 @@ use std::str::FromStr;
 use glam::{Mat4, Vec3};
 
 use super::posed::VertexSource;
+use super::scene_geometry::SceneGeometry;
 use crate::accel::BvhLayout;
 use crate::anim::{AnimationSelection, NodeShape, Pose, moving_nodes};
-use crate::geometry::SceneGeometry;
 use crate::scene::{ChannelTarget, SceneDesc};
 
 // The three time constants were measured together, from one set of runs alternated on a
@@ -271,7 +271,10 @@ pub fn decide_two_level(mesh: &MeshUse) -> MeshChoice {
             CopyMotion::Similarity,
             Choice::instanced(Reason::TwoLevelRule),
         ),
-        reshaping: present(CopyMotion::Reshaping, Choice::instanced(Reason::TwoLevelRule)),
+        reshaping: present(
+            CopyMotion::Reshaping,
+            Choice::instanced(Reason::TwoLevelRule),
+        ),
         deformed: present(CopyMotion::Deformed, Choice::merged(Reason::Deforms)),
     }
 }
@@ -403,10 +406,7 @@ impl LayoutPlan {
             .enumerate()
             .map(|(i, instance)| {
                 let k = index_of[&(instance.mesh, instance.primitive)];
-                meshes[k]
-                    .choice
-                    .of(motions[i])
-                    .is_some_and(|c| c.instanced)
+                meshes[k].choice.of(motions[i]).is_some_and(|c| c.instanced)
             })
             .collect();
         LayoutPlan {
@@ -739,7 +739,11 @@ fn mean_film_share(object: (Vec3, Vec3), node: usize, samples: &[ViewSample]) ->
     let total: f64 = samples
         .iter()
         .map(|s| {
-            let world = s.world_from_node.get(node).copied().unwrap_or(Mat4::IDENTITY);
+            let world = s
+                .world_from_node
+                .get(node)
+                .copied()
+                .unwrap_or(Mat4::IDENTITY);
             let (min, max) = placed_box(object, world);
             s.view.film_share(min, max)
         })
@@ -783,7 +787,10 @@ mod tests {
     fn a_large_rigid_mesh_drawn_once_is_instanced() {
         // A twentieth of the film: 23,000 entries cost less than refitting 200,000 triangles.
         let c = decide_auto(&mesh(200_000, &[(CopyMotion::Similarity, 0.05)]), RAYS);
-        assert_eq!(c.similarity, Some(Choice::instanced(Reason::UpdateCostsMore)));
+        assert_eq!(
+            c.similarity,
+            Some(Choice::instanced(Reason::UpdateCostsMore))
+        );
         // Filling the film, it costs more in entries than merged.
         let c = decide_auto(&mesh(200_000, &[(CopyMotion::Similarity, 1.0)]), RAYS);
         assert_eq!(c.similarity, Some(Choice::merged(Reason::EntriesCostMore)));
@@ -795,8 +802,14 @@ mod tests {
         // frame's entries and its placement.
         let entries_ns = PLACE_NS_PER_INSTANCE + ENTRY_NS_PER_RAY * RAYS;
         let break_even = (entries_ns / REFIT_NS_PER_TRIANGLE) as usize;
-        let just_below = decide_auto(&mesh(break_even - 1, &[(CopyMotion::Similarity, 1.0)]), RAYS);
-        let just_above = decide_auto(&mesh(break_even + 1, &[(CopyMotion::Similarity, 1.0)]), RAYS);
+        let just_below = decide_auto(
+            &mesh(break_even - 1, &[(CopyMotion::Similarity, 1.0)]),
+            RAYS,
+        );
+        let just_above = decide_auto(
+            &mesh(break_even + 1, &[(CopyMotion::Similarity, 1.0)]),
+            RAYS,
+        );
         assert!(!just_below.any_instanced());
         assert!(just_above.any_instanced());
     }
@@ -919,7 +932,10 @@ mod tests {
         let behind = Mat4::from_translation(Vec3::new(0.0, 0.0, 5.0));
         let one = mean_film_share(unit, 0, &[sample(ahead)]);
         let half = mean_film_share(unit, 0, &[sample(ahead), sample(behind)]);
-        assert!(one > 0.0 && (half - one / 2.0).abs() < 1e-12, "{one} {half}");
+        assert!(
+            one > 0.0 && (half - one / 2.0).abs() < 1e-12,
+            "{one} {half}"
+        );
         assert_eq!(mean_film_share(unit, 0, &[]), 0.0);
     }
 

@@ -18,9 +18,10 @@ use super::animation::InstanceState;
 use super::dirty::FrameChanges;
 use super::posed::VertexSource;
 use super::prefetch::prefetch;
+use super::scene_geometry::SceneGeometry;
 use super::setup::FrameSetup;
 use crate::anim::NodeShape;
-use crate::geometry::{FrameTriangles, Placement, SceneGeometry};
+use crate::geometry::{FrameTriangles, Placement};
 use crate::lod::log2::log2_in_place;
 use crate::lod::{
     PixelFootprint, cross_squared, log2_pb, log2_pb_from_parts, log2_pb_with_texel_term,

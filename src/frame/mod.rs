@@ -11,6 +11,7 @@
 //! id rather than by tree order (see `accel`).
 
 mod animation;
+pub mod appearance;
 mod clock;
 mod dirty;
 mod layout;
@@ -18,6 +19,7 @@ mod log2_pb;
 mod posed;
 mod prefetch;
 mod scatter;
+mod scene_geometry;
 mod settings;
 mod setup;
 mod two_level;
@@ -27,10 +29,11 @@ pub use crate::accel::{BvhLayout, BvhPolicy};
 pub use clock::FrameClock;
 pub use dirty::{DirtySet, Motion};
 pub use layout::{
-    BYTES_PER_TRIANGLE, Choice, CopyMotion, CopyUse, ENTRY_NS_PER_RAY, LayoutPlan, MERGE_BUDGET_TRIANGLES,
-    MeshChoice, MeshPlan, MeshUse, PLACE_NS_PER_INSTANCE, REFIT_NS_PER_TRIANGLE, Reason, UsedLayout,
-    decide_auto, decide_two_level,
+    BYTES_PER_TRIANGLE, Choice, CopyMotion, CopyUse, ENTRY_NS_PER_RAY, LayoutPlan,
+    MERGE_BUDGET_TRIANGLES, MeshChoice, MeshPlan, MeshUse, PLACE_NS_PER_INSTANCE,
+    REFIT_NS_PER_TRIANGLE, Reason, UsedLayout, decide_auto, decide_two_level,
 };
+pub use scene_geometry::{Instance, SceneGeometry};
 pub use settings::RenderSettings;
 pub use update::UpdateParallelism;
 
@@ -39,7 +42,7 @@ use std::time::Instant;
 use glam::{Vec3, Vec3A};
 
 use crate::accel::{Accel, AccelError};
-use crate::geometry::{FrameTriangles, SceneGeometry};
+use crate::geometry::FrameTriangles;
 use crate::lod::LodCamera;
 use crate::record::{FrameRecord, UpdateStats};
 use crate::render::{

@@ -13,8 +13,9 @@ use glam::{Mat4, Vec2, Vec3, Vec3A};
 use rayon::prelude::*;
 
 use super::Motion;
+use super::scene_geometry::SceneGeometry;
 use crate::anim::{Pose, VertexSpace, deform_primitive};
-use crate::geometry::{FrameTriangles, Placement, SceneGeometry};
+use crate::geometry::{FrameTriangles, Placement};
 use crate::scene::SceneDesc;
 
 /// Where an instance's vertices come from.

@@ -8,10 +8,10 @@ use glam::{Mat4, Vec3};
 
 use super::layout::{LayoutPlan, RestView, VIEW_SAMPLES, ViewSample};
 use super::posed::{VertexSource, posed_bounds};
+use super::scene_geometry::SceneGeometry;
 use super::settings::RenderSettings;
 use super::update::UpdateParallelism;
 use crate::anim::{Pose, primitive_deforms};
-use crate::geometry::SceneGeometry;
 use crate::lod::PixelFootprint;
 use crate::render::Camera;
 use crate::render::Light;

@@ -24,6 +24,7 @@ use rayon::prelude::*;
 use super::Motion;
 use super::animation::{AnimationState, InstanceState};
 use super::dirty::FrameChanges;
+use super::layout::UsedLayout;
 use super::ms_since;
 use super::posed::{
     PosedVertices, Rewrite, TriangleWriter, VertexSource, WRITE_CHUNK, same_deformation,
@@ -32,7 +33,6 @@ use super::posed::{
 use super::scatter::SlotScatter;
 use super::setup::FrameSetup;
 use super::two_level::{TwoLevel, Which};
-use super::layout::UsedLayout;
 use crate::accel::{Accel, AccelError, TreeStep};
 use crate::anim::NodeShape;
 use crate::geometry::FrameTriangles;

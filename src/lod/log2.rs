@@ -4,7 +4,7 @@
 //!
 //! The deforming meshes' `log2 P_b` pass takes one `log2` per triangle and frame, and libm's
 //! is a call the loop cannot vectorise: about 3 of a million triangles' ~4.4 ms
-//! (BENCHMARKS.md). This one is branch-free arithmetic, so a batch compiles to vector code,
+//! (docs/benchmark-log.md). This one is branch-free arithmetic, so a batch compiles to vector code,
 //! and every path (one value, a baseline batch, an AVX2 batch) performs the same IEEE
 //! operations in the same order (no fused multiply-add is formed), so all give the same
 //! bits. Within a few ulps of the exact `log2` (tested against libm); inputs that are not

@@ -59,7 +59,7 @@ pub fn read_srgb8(path: &Path) -> Result<RgbImage, MetricsError> {
             let bytes = linear
                 .into_raw()
                 .into_iter()
-                .map(crate::render::film::encode_srgb8)
+                .map(crate::colour::encode_srgb8)
                 .collect();
             RgbImage::from_raw(w, h, bytes).expect("same size")
         }

@@ -265,7 +265,10 @@ mod tests {
         );
         assert_eq!(v.mip_histogram, [1, 2, 3]);
         assert_eq!((v.rays, v.nonfinite_samples), (4096, 0));
-        assert_eq!((v.bvh_layout.as_str(), v.instanced_meshes), ("two-level", 3));
+        assert_eq!(
+            (v.bvh_layout.as_str(), v.instanced_meshes),
+            ("two-level", 3)
+        );
         // Every field of the line is present, `false` and 0 included.
         let all = serde_json::to_value(FrameRecord::default()).unwrap();
         for name in all.as_object().unwrap().keys() {

@@ -1,5 +1,5 @@
 //! The film: pixels rendered in 16x16 tiles in parallel, stratified supersampling, and the
-//! conversion of linear radiance to output pixels.
+//! conversion of linear radiance to output pixels (with the sRGB encoding of `colour`).
 //!
 //! Determinism: every pixel is a pure function of its coordinates (jitter comes from a hash
 //! of pixel and sample index, not from a shared random state) and tiles are reassembled in
@@ -8,6 +8,7 @@
 use glam::Vec3;
 use rayon::prelude::*;
 
+use crate::colour::encode_srgb8;
 use crate::lod::{RayLod, with_lod_state};
 use crate::render::camera::Camera;
 use crate::render::integrator::{FrameScene, TraceCounters};
@@ -153,33 +154,9 @@ fn hash3(x: u32, y: u32, z: u32) -> u32 {
     h ^ (h >> 16)
 }
 
-/// Linear [0, 1] to an 8-bit sRGB code value.
-pub fn encode_srgb8(linear: f32) -> u8 {
-    let c = if linear.is_finite() {
-        linear.clamp(0.0, 1.0)
-    } else {
-        0.0
-    };
-    let encoded = if c <= 0.003_130_8 {
-        12.92 * c
-    } else {
-        1.055 * c.powf(1.0 / 2.4) - 0.055
-    };
-    (encoded * 255.0 + 0.5) as u8
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn srgb_encoding_endpoints_and_midpoint() {
-        assert_eq!(encode_srgb8(0.0), 0);
-        assert_eq!(encode_srgb8(1.0), 255);
-        assert_eq!(encode_srgb8(0.214_041_14), 128);
-        assert_eq!(encode_srgb8(f32::NAN), 0);
-        assert_eq!(encode_srgb8(7.0), 255);
-    }
 
     #[test]
     fn samples_are_stratified_and_inside_the_pixel() {

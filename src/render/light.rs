@@ -7,7 +7,7 @@
 //! `color * intensity` at any distance (range window and spot cone still apply).
 //!
 //! A [`LightSource`] is what a scene light emits, built once from the scene description by
-//! `geometry::appearance`; [`Light::placed`] puts it at its node's world transform each frame.
+//! `frame::appearance`; [`Light::placed`] puts it at its node's world transform each frame.
 
 use glam::{Mat4, Vec3, Vec3A};
 

@@ -1,7 +1,7 @@
 //! A surface's appearance in the integrator's own terms: the Whitted parameters and the
 //! shading model that combines them.
 //!
-//! The renderer does not know which file format a material came from: `geometry::appearance`
+//! The renderer does not know which file format a material came from: `frame::appearance`
 //! builds these from the scene description, and the integrator reads only this type. Two
 //! models exist because the two conventions the loaders meet weigh the same parameters
 //! differently; each is named for what it computes.

@@ -2,7 +2,7 @@
 //! film; the LOD probe for `--view lod` and `mipray compare`.
 //!
 //! `render` knows materials and lights only in its own terms (`Material`, `LightSource`):
-//! `geometry::appearance` builds them from the scene description, so nothing here names
+//! `frame::appearance` builds them from the scene description, so nothing here names
 //! a loader's type.
 
 pub mod camera;
