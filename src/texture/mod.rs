@@ -19,6 +19,9 @@ mod ewa;
 mod pyramid;
 mod sample;
 
+mod fetch;
+mod taps;
+
 pub use decode::{ColorEncoding, decode_texels, srgb_to_linear};
 
 use glam::Vec4;

@@ -9,11 +9,18 @@
 //! its floor are computed in f64: f32 has only 24 mantissa bits, so for `|u|` around 1e5 on
 //! a 1024-wide level the product would lose the texel index and all of the fraction. Wrap
 //! modes act on integer texel indices, per axis, after an exact f64 reduction to one period
-//! so even huge coordinates never overflow the integer conversion.
+//! so even huge coordinates never overflow the integer conversion. Lookups inside a level
+//! (no wrap) take a shortcut that gives the same indices and weights bit for bit, in f32
+//! where that is exact (`taps.rs`).
+//!
+//! Each public lookup is one `simd::Kernel`: the coordinates, the texel reads and the blends
+//! are compiled into a baseline and an AVX2 copy (`fetch.rs`), which compute the same bits.
 
 use glam::{Vec2, Vec4};
 
-use super::{MipLevel, MipPyramid, Sampler, Texels, WrapMode};
+use super::taps::BilinearTaps;
+use super::{MipLevel, MipPyramid, Sampler, WrapMode, fetch};
+use crate::simd::{Kernel, dispatch};
 
 /// Largest `|texel index|` the integer Repeat path takes (exact in f64 and far from i64
 /// overflow); beyond it the exact f64 reduction below is used.
@@ -21,8 +28,8 @@ const REPEAT_FAST_LIMIT: f64 = 1e15;
 
 /// The two texel indices (already wrapped into `0..n`) and the weight of the second one,
 /// for a lookup at texture coordinate `t` along an axis of `n` texels.
-#[inline]
-fn axis(t: f32, n: u32, mode: WrapMode) -> (usize, usize, f32) {
+#[inline(always)]
+pub(super) fn axis(t: f32, n: u32, mode: WrapMode) -> (usize, usize, f32) {
     // Non-finite coordinates would poison the weights; 0 is an arbitrary but valid point.
     let t = if t.is_finite() { f64::from(t) } else { 0.0 };
     let n_f = f64::from(n);
@@ -48,6 +55,14 @@ fn axis(t: f32, n: u32, mode: WrapMode) -> (usize, usize, f32) {
         let i1 = if i0 + 1 == n { 0 } else { i0 + 1 };
         return (i0 as usize, i1 as usize, frac);
     }
+    axis_reduced(x0, n, mode, frac)
+}
+
+/// `axis` for a huge coordinate, or one outside the image under Clamp or Mirror.
+#[cold]
+#[inline(never)]
+fn axis_reduced(x0: f64, n: u32, mode: WrapMode, frac: f32) -> (usize, usize, f32) {
+    let n_f = f64::from(n);
     // Reduce x0 to a small range with the same wrapped result before converting to an
     // integer: `rem_euclid` on f64 is exact, and the bounds keep `i0 + 1` in range too.
     let i0 = match mode {
@@ -92,32 +107,85 @@ pub(super) fn wrap(i: i64, n: i64, mode: WrapMode) -> usize {
     }) as usize
 }
 
-#[inline]
-fn bilinear(level: &MipLevel, uv: Vec2, sampler: Sampler) -> Vec4 {
-    let (x0, x1, fx) = axis(uv.x, level.width, sampler.wrap_s);
-    let (y0, y1, fy) = axis(uv.y, level.height, sampler.wrap_t);
-    let w = level.width as usize;
-    // The texel storage is matched once per lookup, not once per texel.
-    match &level.texels {
-        Texels::Linear(texels) => blend(|i| texels[i], w, (x0, x1, fx), (y0, y1, fy)),
-        Texels::Srgb8 { codes, tables } => {
-            blend(|i| tables.texel(codes[i]), w, (x0, x1, fx), (y0, y1, fy))
-        }
+/// Bilinear lookup in one level (any storage, any coordinate).
+#[inline(always)]
+fn bilinear<const AVX2: bool>(level: &MipLevel, uv: Vec2, sampler: Sampler) -> Vec4 {
+    fetch::bilinear::<AVX2>(level, &BilinearTaps::new(level, uv, sampler))
+}
+
+/// Trilinear lookup at `lod` (see [`MipPyramid::sample_trilinear`]).
+#[inline(always)]
+fn trilinear<const AVX2: bool>(pyramid: &MipPyramid, uv: Vec2, lod: f32, sampler: Sampler) -> Vec4 {
+    let lod = pyramid.clamp_level(lod);
+    // `lod` is in [0, last], where truncation is the floor (without a libm call).
+    let k = lod as usize;
+    let frac = lod - k as f32;
+    let levels = &pyramid.levels;
+    if frac == 0.0 || k + 1 >= levels.len() {
+        // Integer level (including 0, magnification, and the last level): no blend, so
+        // integer LODs agree exactly with `sample_bilinear`.
+        return bilinear::<AVX2>(&levels[k], uv, sampler);
+    }
+    let (lower, upper) = (&levels[k], &levels[k + 1]);
+    let taps = [
+        BilinearTaps::new(lower, uv, sampler),
+        BilinearTaps::new(upper, uv, sampler),
+    ];
+    fetch::trilinear::<AVX2>([lower, upper], &taps, frac)
+}
+
+/// [`MipPyramid::sample_bilinear`] as a kernel.
+struct Bilinear<'a> {
+    level: &'a MipLevel,
+    uv: Vec2,
+    sampler: Sampler,
+}
+
+impl Kernel for Bilinear<'_> {
+    type Output = Vec4;
+    #[inline(always)]
+    fn run<const AVX2: bool>(self) -> Vec4 {
+        bilinear::<AVX2>(self.level, self.uv, self.sampler)
     }
 }
 
-/// The bilinear blend of the four texels around a lookup, read through `t`.
-#[inline(always)]
-fn blend(
-    t: impl Fn(usize) -> Vec4,
-    w: usize,
-    (x0, x1, fx): (usize, usize, f32),
-    (y0, y1, fy): (usize, usize, f32),
-) -> Vec4 {
-    // Weighted form (not a + (b - a) f) so a zero weight returns the texel bit-exactly.
-    let row0 = t(y0 * w + x0) * (1.0 - fx) + t(y0 * w + x1) * fx;
-    let row1 = t(y1 * w + x0) * (1.0 - fx) + t(y1 * w + x1) * fx;
-    row0 * (1.0 - fy) + row1 * fy
+/// [`MipPyramid::sample_trilinear`] as a kernel.
+struct Trilinear<'a> {
+    pyramid: &'a MipPyramid,
+    uv: Vec2,
+    lod: f32,
+    sampler: Sampler,
+}
+
+impl Kernel for Trilinear<'_> {
+    type Output = Vec4;
+    #[inline(always)]
+    fn run<const AVX2: bool>(self) -> Vec4 {
+        trilinear::<AVX2>(self.pyramid, self.uv, self.lod, self.sampler)
+    }
+}
+
+/// [`MipPyramid::sample_anisotropic`] with more than one tap, as a kernel: `taps`
+/// trilinear lookups at `first + step * i`, averaged.
+struct Anisotropic<'a> {
+    pyramid: &'a MipPyramid,
+    first: Vec2,
+    step: Vec2,
+    taps: u32,
+    lod: f32,
+    sampler: Sampler,
+}
+
+impl Kernel for Anisotropic<'_> {
+    type Output = Vec4;
+    #[inline(always)]
+    fn run<const AVX2: bool>(self) -> Vec4 {
+        let sum = (0..self.taps).fold(Vec4::ZERO, |sum, i| {
+            let uv = self.first + self.step * i as f32;
+            sum + trilinear::<AVX2>(self.pyramid, uv, self.lod, self.sampler)
+        });
+        sum / self.taps as f32
+    }
 }
 
 impl MipPyramid {
@@ -126,7 +194,7 @@ impl MipPyramid {
     /// Wrap modes apply per axis to integer texel indices. Non-finite u or v reads as 0.
     pub fn sample_bilinear(&self, level: usize, uv: Vec2, sampler: Sampler) -> Vec4 {
         let level = &self.levels[level.min(self.levels.len() - 1)];
-        bilinear(level, uv, sampler)
+        dispatch(Bilinear { level, uv, sampler })
     }
 
     /// Trilinear lookup at a fractional level (clamped with [`Self::clamp_level`]).
@@ -135,18 +203,12 @@ impl MipPyramid {
     /// results of `floor(lod)` and `floor(lod) + 1` are blended by the fraction; at the last
     /// level it is bilinear there.
     pub fn sample_trilinear(&self, uv: Vec2, lod: f32, sampler: Sampler) -> Vec4 {
-        let lod = self.clamp_level(lod);
-        let lower = lod.floor();
-        let k = lower as usize;
-        let frac = lod - lower;
-        if frac == 0.0 || k + 1 >= self.levels.len() {
-            // Integer level (including 0, magnification, and the last level): no blend, so
-            // integer LODs agree exactly with `sample_bilinear`.
-            return bilinear(&self.levels[k], uv, sampler);
-        }
-        let a = bilinear(&self.levels[k], uv, sampler);
-        let b = bilinear(&self.levels[k + 1], uv, sampler);
-        a * (1.0 - frac) + b * frac
+        dispatch(Trilinear {
+            pyramid: self,
+            uv,
+            lod,
+            sampler,
+        })
     }
 
     /// Anisotropic lookup: the mean of `taps` trilinear lookups at `lod`, placed at the
@@ -165,11 +227,14 @@ impl MipPyramid {
             return self.sample_trilinear(uv, lod, sampler);
         }
         let step = axis / taps as f32;
-        let first = uv - axis * 0.5 + step * 0.5;
-        let sum = (0..taps).fold(Vec4::ZERO, |sum, i| {
-            sum + self.sample_trilinear(first + step * i as f32, lod, sampler)
-        });
-        sum / taps as f32
+        dispatch(Anisotropic {
+            pyramid: self,
+            first: uv - axis * 0.5 + step * 0.5,
+            step,
+            taps,
+            lod,
+            sampler,
+        })
     }
 }
 
@@ -556,5 +621,171 @@ mod tests {
                 assert_eq!(axis(t, n, REPEAT), expected, "t {t}, n {n}");
             }
         }
+    }
+
+    /// The lookup as a plain scalar formula, independent of `taps.rs` and `fetch.rs`: the
+    /// texel coordinate in f64 (`axis`), texels through `MipLevel::texel`.
+    fn reference_bilinear(level: &MipLevel, uv: Vec2, sampler: Sampler) -> Vec4 {
+        let (x0, x1, fx) = axis(uv.x, level.width, sampler.wrap_s);
+        let (y0, y1, fy) = axis(uv.y, level.height, sampler.wrap_t);
+        let t = |x: usize, y: usize| level.texel(y * level.width as usize + x);
+        let row0 = t(x0, y0) * (1.0 - fx) + t(x1, y0) * fx;
+        let row1 = t(x0, y1) * (1.0 - fx) + t(x1, y1) * fx;
+        row0 * (1.0 - fy) + row1 * fy
+    }
+
+    fn reference_trilinear(p: &MipPyramid, uv: Vec2, lod: f32, sampler: Sampler) -> Vec4 {
+        let lod = p.clamp_level(lod);
+        let lower = lod.floor();
+        let (k, frac) = (lower as usize, lod - lower);
+        let a = reference_bilinear(&p.levels[k], uv, sampler);
+        if frac == 0.0 || k + 1 >= p.levels.len() {
+            return a;
+        }
+        let b = reference_bilinear(&p.levels[k + 1], uv, sampler);
+        a * (1.0 - frac) + b * frac
+    }
+
+    /// A pyramid of an 8-bit sRGB image with varied codes in every channel.
+    fn codes_pyramid(w: u32, h: u32, seed: u64) -> MipPyramid {
+        let tables = super::super::decode::Srgb8Tables::get();
+        let texels = (0..u64::from(w * h))
+            .map(|i| {
+                let z = (i + seed).wrapping_mul(0x9E37_79B9_7F4A_7C15);
+                tables.texel((z >> 32).to_le_bytes()[..4].try_into().unwrap())
+            })
+            .collect();
+        let p = MipPyramid::from_linear_rgba(w, h, texels).unwrap();
+        assert!(p.levels.iter().all(MipLevel::is_8bit));
+        p
+    }
+
+    /// Lookup points: inside, near the edges, tiled, far, non-finite.
+    fn lookup_points(seed: &mut u64, count: usize) -> Vec<Vec2> {
+        let mut next = move || {
+            *seed ^= *seed << 13;
+            *seed ^= *seed >> 7;
+            *seed ^= *seed << 17;
+            (*seed >> 40) as f32 / (1u64 << 24) as f32
+        };
+        let mut points: Vec<Vec2> = (0..count)
+            .map(|i| match i % 4 {
+                0 | 1 => Vec2::new(next(), next()),
+                2 => Vec2::new(next() * 6.0 - 3.0, next() * 6.0 - 3.0),
+                _ => Vec2::new((next() - 0.5) * 2e5, next() * 1e-3),
+            })
+            .collect();
+        points.extend([
+            Vec2::ZERO,
+            Vec2::ONE,
+            Vec2::new(f32::NAN, 0.5),
+            Vec2::new(0.5, f32::INFINITY),
+            Vec2::new(f32::MAX, f32::MIN),
+            Vec2::new(-1e-30, 1e-30),
+        ]);
+        points
+    }
+
+    fn same_bits(a: Vec4, b: Vec4) -> bool {
+        a.to_array().map(f32::to_bits) == b.to_array().map(f32::to_bits)
+    }
+
+    #[test]
+    fn both_simd_copies_compute_the_scalar_reference_bit_for_bit() {
+        use crate::simd::{run_avx2_if_available, run_baseline};
+        let pyramids = [
+            codes_pyramid(64, 32, 1),
+            codes_pyramid(37, 21, 2),
+            codes_pyramid(261, 6, 3),
+            codes_pyramid(1, 1, 4),
+            grid(16, 12),
+            grid(8, 8),
+        ];
+        let samplers = [
+            Sampler::default(),
+            sampler(CLAMP, MIRROR),
+            sampler(MIRROR, CLAMP),
+        ];
+        let mut seed = 0x9E37_79B9_7F4A_7C15;
+        let mut compared = 0;
+        for p in &pyramids {
+            let last = p.level_count() as f32 - 1.0;
+            for (i, uv) in lookup_points(&mut seed, 3000).into_iter().enumerate() {
+                let s = samplers[i % samplers.len()];
+                // Every level and the fractions between them, past the ends, and NaN.
+                let lod = match i % 7 {
+                    0 => f32::NAN,
+                    1 => last + 2.0,
+                    2 => (i % 5) as f32 - 1.0,
+                    _ => (i as f32 * 0.618_034).fract() * (last + 0.5),
+                };
+                let level = i % (p.level_count() + 1);
+                let axis_uv = Vec2::new(0.01 * (i % 9) as f32, -0.003);
+                let taps = 1 + (i % 5) as u32;
+                let want = reference_trilinear(p, uv, lod, s);
+                let want_bilinear =
+                    reference_bilinear(&p.levels[level.min(p.level_count() - 1)], uv, s);
+                let step = axis_uv / taps as f32;
+                let first = uv - axis_uv * 0.5 + step * 0.5;
+                let want_aniso = (0..taps).fold(Vec4::ZERO, |sum, t| {
+                    sum + reference_trilinear(p, first + step * t as f32, lod, s)
+                }) / taps as f32;
+                let kernels = || {
+                    (
+                        Trilinear {
+                            pyramid: p,
+                            uv,
+                            lod,
+                            sampler: s,
+                        },
+                        Bilinear {
+                            level: &p.levels[level.min(p.level_count() - 1)],
+                            uv,
+                            sampler: s,
+                        },
+                        Anisotropic {
+                            pyramid: p,
+                            first,
+                            step,
+                            taps,
+                            lod,
+                            sampler: s,
+                        },
+                    )
+                };
+                let (t, b, a) = kernels();
+                let baseline = (run_baseline(t), run_baseline(b), run_baseline(a));
+                let (t, b, a) = kernels();
+                let avx2 = [
+                    run_avx2_if_available(t),
+                    run_avx2_if_available(b),
+                    run_avx2_if_available(a),
+                ];
+                for (got, want, what) in [
+                    (Some(baseline.0), want, "trilinear"),
+                    (Some(baseline.1), want_bilinear, "bilinear"),
+                    (Some(baseline.2), want_aniso, "anisotropic"),
+                    (avx2[0], want, "trilinear (AVX2)"),
+                    (avx2[1], want_bilinear, "bilinear (AVX2)"),
+                    (avx2[2], want_aniso, "anisotropic (AVX2)"),
+                ] {
+                    let Some(got) = got else { continue };
+                    assert!(
+                        same_bits(got, want),
+                        "{what} at {uv} lod {lod} {s:?}: {got} vs {want}"
+                    );
+                    assert!(got.is_finite(), "{what} at {uv}: {got}");
+                    compared += 1;
+                }
+            }
+        }
+        assert!(compared >= 6 * 3006 * 3, "{compared}");
+        // The public lookups run one of the two copies.
+        let p = &pyramids[0];
+        let uv = Vec2::new(0.3, 0.7);
+        assert!(same_bits(
+            p.sample_trilinear(uv, 1.25, Sampler::default()),
+            reference_trilinear(p, uv, 1.25, Sampler::default())
+        ));
     }
 }

@@ -1,0 +1,202 @@
+//! Where a bilinear lookup reads in a level: four texel indices and two weights.
+//!
+//! Along each axis the answer is `sample::axis`'s, bit for bit: the texel coordinate
+//! `x = t * n - 0.5` in f64 (see `sample.rs` for why), its floor and fraction, wrapped.
+//! [`axis_taps`] reaches it in f32 when the side `n` is a power of two, the coordinate is
+//! moderate and no wrap mode but Repeat has to act (the common case: tiled or not, the
+//! lookup lands in the image or repeats it):
+//! - `p = t * n` is exact in f32 (a power of two only moves the exponent) when
+//!   `0.5 <= |p| < 2^23`, which also rules out overflow and underflow;
+//! - `p`'s ulp is then at least `2^-24`, so with `r = p - floor(p)` in `[0, 1)` (exact: both
+//!   are multiples of that ulp), `floor(x)` is `floor(p)` when `r >= 0.5` and
+//!   `floor(p) - 1` otherwise, and the fraction of `x` is `r - 0.5` or `r + 0.5`, a multiple
+//!   of `2^-24` below 1: exact in f32;
+//! - in f64, `x = p - 0.5` is exact too (at most 48 significant bits), so `x - floor(x)` is
+//!   the same real number, and its conversion to f32 rounds nothing.
+//!
+//! Everything else (other sides, `|p| < 0.5`, huge or non-finite coordinates, Clamp and
+//! Mirror outside the image) goes to `sample::axis`. The tests check the shortcut against
+//! it on edge and random coordinates (`shortcut_is_exactly_the_f64_axis`).
+
+use glam::Vec2;
+
+use super::sample::axis;
+use super::{MipLevel, Sampler, WrapMode};
+
+/// What a bilinear lookup reads in one level.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(super) struct BilinearTaps {
+    /// Indices (`y * width + x`) of the texels `(x0, y0)`, `(x1, y0)`, `(x0, y1)`,
+    /// `(x1, y1)`, already wrapped into the level.
+    pub texels: [usize; 4],
+    /// Weight of the `x1` column (`x0` has `1 - fx`).
+    pub fx: f32,
+    /// Weight of the `y1` row (`y0` has `1 - fy`).
+    pub fy: f32,
+}
+
+/// One axis of a lookup: the two texel indices along it and the weight of the second.
+type AxisTaps = (usize, usize, f32);
+
+impl BilinearTaps {
+    /// The taps at any `uv` with any wrap modes.
+    #[inline(always)]
+    pub fn new(level: &MipLevel, uv: Vec2, sampler: Sampler) -> BilinearTaps {
+        let (x0, x1, fx) = axis_taps(uv.x, level.width, sampler.wrap_s);
+        let (y0, y1, fy) = axis_taps(uv.y, level.height, sampler.wrap_t);
+        let w = level.width as usize;
+        BilinearTaps {
+            texels: [y0 * w + x0, y0 * w + x1, y1 * w + x0, y1 * w + x1],
+            fx,
+            fy,
+        }
+    }
+}
+
+/// Largest `|t * n|` the f32 shortcut takes (see the module note).
+const F32_EXACT_BELOW: f32 = 8_388_608.0; // 2^23
+
+/// `sample::axis(t, n, mode)`, through the f32 shortcut where it is exact.
+#[inline(always)]
+pub(super) fn axis_taps(t: f32, n: u32, mode: WrapMode) -> AxisTaps {
+    if n.is_power_of_two() {
+        let p = t * n as f32;
+        if p.abs() >= 0.5 && p.abs() < F32_EXACT_BELOW {
+            let (x0, frac) = floor_and_fraction_of_p_minus_half(p);
+            let last = n as i32 - 1;
+            if mode == WrapMode::Repeat {
+                // Two's complement: the mask is the Euclidean remainder for negative x0 too.
+                let i0 = x0 & last;
+                return (i0 as usize, ((i0 + 1) & last) as usize, frac);
+            }
+            if x0 >= 0 && x0 < last {
+                return (x0 as usize, x0 as usize + 1, frac);
+            }
+        }
+    }
+    axis(t, n, mode)
+}
+
+/// `floor(p - 0.5)` and `p - 0.5 - floor(p - 0.5)`, exactly, for `0.5 <= |p| < 2^23`.
+///
+/// Without branches or selects: which half of a texel `p` falls in is as good as random
+/// from one lookup to the next, and a mispredicted branch costs more than the arithmetic
+/// (the AVX2 copy compiled a select of `±0.5` into one). With `r = p - floor(p)`, the half
+/// is `h = trunc(2 r)`; `floor(x) = floor(p) + h - 1` and the fraction is `(r - h) + 0.5`,
+/// where `r - h` lies in `[-0.5, 0.5)` on `r`'s grid of `2^-24`, so both steps are exact.
+#[inline(always)]
+fn floor_and_fraction_of_p_minus_half(p: f32) -> (i32, f32) {
+    // SAFETY: |p| < 2^23, so the truncation fits an i32.
+    let truncated = unsafe { p.to_int_unchecked::<i32>() };
+    let floor = truncated - i32::from(truncated as f32 > p);
+    let r = p - floor as f32;
+    // SAFETY: 0 <= 2 r < 2.
+    let h = unsafe { (r * 2.0).to_int_unchecked::<i32>() };
+    (floor + h - 1, (r - h as f32) + 0.5)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::texture::WrapMode;
+    use glam::Vec4;
+
+    fn level(w: u32, h: u32) -> MipLevel {
+        MipLevel::linear(w, h, vec![Vec4::ZERO; (w * h) as usize])
+    }
+
+    /// Coordinates at the image's edges and the shortcut's limits, with every fraction bit
+    /// used.
+    fn hard_coordinates(n: u32, seed: &mut u64) -> Vec<f32> {
+        let n_f = n as f32;
+        let mut out = Vec::new();
+        for edge in [0.5, 1.0, 1.5, n_f - 1.5, n_f - 0.5, n_f - 1.0, n_f * 0.5] {
+            let t = edge / n_f;
+            out.extend([t, t.next_down(), t.next_up()]);
+        }
+        out.extend([0.0, -0.0, 1.0, -1e-30, 1e-30, 1e-8, 0.999_999_94, 1.0e-3]);
+        // Tiled, far, at the shortcut's limits and past them, non-finite.
+        let limit = F32_EXACT_BELOW / n_f;
+        out.extend([3.3, -7.9, 1e4, -1e4, 1e6, limit, -limit, limit.next_down()]);
+        out.extend([
+            0.5 / n_f,
+            -0.5 / n_f,
+            (0.5 / n_f).next_down(),
+            -(0.5 / n_f).next_up(),
+        ]);
+        out.extend([f32::NAN, f32::INFINITY, f32::MIN, f32::MAX]);
+        // p just below a power of two, negative: p - 0.5 would need a 25th bit in f32.
+        for k in 0..23 {
+            let p = -(2.0f32.powi(k)).next_down();
+            out.extend([p / n_f, (p - 0.5) / n_f]);
+        }
+        for _ in 0..2000 {
+            *seed ^= *seed << 13;
+            *seed ^= *seed >> 7;
+            *seed ^= *seed << 17;
+            // Uniform in [-0.25, 1.25), sometimes tiled further, then the lowest mantissa
+            // bits set at random.
+            let t = (*seed >> 40) as f32 / (1u64 << 24) as f32 * 1.5 - 0.25;
+            let t = t * [1.0, 1.0, 16.0, 300.0][(*seed >> 20) as usize % 4];
+            out.push(f32::from_bits(t.to_bits() ^ (*seed as u32 & 0x7f)));
+        }
+        out
+    }
+
+    #[test]
+    fn shortcut_is_exactly_the_f64_axis() {
+        let mut seed = 0x2545_f491_4f6c_dd1d_u64;
+        let mut shortcut = 0;
+        for n in [1u32, 2, 8, 512, 1024, 16384, 1044, 3, 1000] {
+            for t in hard_coordinates(n, &mut seed) {
+                for mode in [
+                    WrapMode::Repeat,
+                    WrapMode::ClampToEdge,
+                    WrapMode::MirroredRepeat,
+                ] {
+                    let want = axis(t, n, mode);
+                    let got = axis_taps(t, n, mode);
+                    // Bit for bit, the weight included.
+                    assert_eq!(
+                        (got.0, got.1, got.2.to_bits()),
+                        (want.0, want.1, want.2.to_bits()),
+                        "t {t:e}, n {n}, {mode:?}"
+                    );
+                    let p = t * n as f32;
+                    shortcut += usize::from(
+                        n.is_power_of_two() && p.abs() >= 0.5 && p.abs() < F32_EXACT_BELOW,
+                    );
+                }
+            }
+        }
+        // The comparison covered the shortcut, not only the fallback.
+        assert!(shortcut > 30_000, "{shortcut}");
+    }
+
+    #[test]
+    fn taps_read_the_four_texels_around_the_point() {
+        let level = level(8, 4);
+        let sampler = Sampler::default();
+        // Between texels (2, 1) and (3, 2), a quarter of the way in x, half in y.
+        let taps = BilinearTaps::new(&level, Vec2::new(2.75 / 8.0, 2.0 / 4.0), sampler);
+        assert_eq!(taps.texels, [8 + 2, 8 + 3, 16 + 2, 16 + 3]);
+        assert_eq!((taps.fx, taps.fy), (0.25, 0.5));
+        // Across the Repeat seam at u = 0: texels 7 and 0.
+        let taps = BilinearTaps::new(&level, Vec2::new(0.0, 2.0 / 4.0), sampler);
+        assert_eq!(taps.texels, [8 + 7, 8, 16 + 7, 16]);
+        assert_eq!(taps.fx, 0.5);
+    }
+
+    #[test]
+    fn f32_would_round_a_side_that_is_not_a_power_of_two() {
+        // Why the shortcut keeps to powers of two: 0.3 * 1044 - 0.5 in f32 is not the exact
+        // value f64 computes.
+        let (t, n) = (0.3f32, 1044u32);
+        let exact = f64::from(t) * f64::from(n) - 0.5;
+        assert_ne!(f64::from(t * n as f32 - 0.5), exact);
+        assert_eq!(
+            axis_taps(t, n, WrapMode::Repeat).2,
+            (exact - exact.floor()) as f32
+        );
+    }
+}
