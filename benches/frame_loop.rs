@@ -10,7 +10,8 @@
 //! - `rigid`: 200 instances of a 5,000-triangle patch, each turning and sliding (rigid
 //!   motion: no `log2 P_b` recomputed after the first frame).
 //!
-//! Each scene runs under both BVH layouts (`flat`, `two-level`: see `accel::TwoLevelAccel`).
+//! Each scene runs under each BVH layout (`flat`, `two-level`: see `accel::TwoLevelAccel`;
+//! `auto`, the default: per mesh, see `frame::LayoutPlan`).
 //! For each the per-frame update is timed over several frames with refits only and with a
 //! rebuild every frame (under `two-level` the rebuild is the world tree's, over the
 //! deforming instances; the top-level tree is rebuilt whenever an instance moved, and
@@ -21,7 +22,7 @@
 //! default-policy run (scene, renderer, tree and one rendered frame).
 //!
 //! Arguments (after `--`): words choosing rows: a size (`100k`, `1M`), a scene (`patches`,
-//! `skin`, `rigid`) and/or a layout (`flat`, `two-level`); none runs every row. Rayon's global pool is set to 2
+//! `skin`, `rigid`) and/or a layout (`flat`, `two-level`, `auto`); none runs every row. Rayon's global pool is set to 2
 //! threads (the figures in BENCHMARKS.md are for a 2-core machine); `RAYON_NUM_THREADS`
 //! overrides it. Prints a Markdown table of medians (see BENCHMARKS.md and docs/benchmark-log.md).
 
@@ -235,10 +236,7 @@ fn main() {
     if let Some(at) = args.iter().position(|a| a == "--peak-of") {
         // Child run: one row, one layout, print its peak MB.
         let index: usize = args[at + 1].parse().expect("row index");
-        let layout = match args[at + 2].as_str() {
-            "two-level" => BvhLayout::TwoLevel,
-            _ => BvhLayout::Flat,
-        };
+        let layout = args[at + 2].parse().unwrap_or(BvhLayout::Flat);
         let (_, _, _, peak_mb) = rendered_frame(&rows()[index].make, layout);
         println!("{peak_mb}");
         return;
@@ -251,6 +249,7 @@ fn main() {
     let layouts = [
         (BvhLayout::Flat, "flat"),
         (BvhLayout::TwoLevel, "two-level"),
+        (BvhLayout::Auto, "auto"),
     ];
     let layout_words: Vec<&String> = words
         .iter()

@@ -14,12 +14,47 @@ use crate::geometry::FrameTriangles;
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub enum BvhLayout {
     /// One tree over every triangle in world space, refitted as they move.
-    #[default]
     Flat,
     /// A tree per shared mesh in object space, a top-level tree over the instances placing
     /// them, and one world-space tree over the rest (what deforms or stands still; see
     /// [`super::TwoLevelAccel`]).
     TwoLevel,
+    /// Per mesh, instanced where a cost model says instancing pays and merged into the
+    /// world-space tree where it does not; exactly [`BvhLayout::Flat`] when nothing is
+    /// instanced (the decision: `frame/layout.rs`).
+    #[default]
+    Auto,
+}
+
+impl BvhLayout {
+    /// Every layout, as `--bvh` names them.
+    pub const ALL: [BvhLayout; 3] = [BvhLayout::Flat, BvhLayout::TwoLevel, BvhLayout::Auto];
+
+    /// Its `--bvh` name.
+    pub const fn name(self) -> &'static str {
+        match self {
+            BvhLayout::Flat => "flat",
+            BvhLayout::TwoLevel => "two-level",
+            BvhLayout::Auto => "auto",
+        }
+    }
+}
+
+impl std::fmt::Display for BvhLayout {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+impl std::str::FromStr for BvhLayout {
+    type Err = String;
+
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        BvhLayout::ALL
+            .into_iter()
+            .find(|l| l.name() == s)
+            .ok_or_else(|| format!("unknown BVH layout `{s}` (flat, two-level, auto)"))
+    }
 }
 
 /// How the BVH follows the animation.
@@ -91,6 +126,15 @@ impl Accel {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn layouts_read_back_their_names() {
+        for layout in BvhLayout::ALL {
+            assert_eq!(layout.to_string().parse::<BvhLayout>(), Ok(layout));
+        }
+        assert!("mixed".parse::<BvhLayout>().is_err());
+        assert_eq!(BvhLayout::default(), BvhLayout::Auto);
+    }
 
     #[test]
     fn refit_policy_rebuilds_past_the_threshold_and_on_nan() {

@@ -36,6 +36,7 @@ impl BenchConfig {
     pub fn bvh_name(&self) -> &'static str {
         match (self.layout, self.policy) {
             (BvhLayout::TwoLevel, _) => "two-level",
+            (BvhLayout::Auto, _) => "auto",
             (BvhLayout::Flat, BvhPolicy::Rebuild) => "rebuild",
             (BvhLayout::Flat, _) => "flat",
         }

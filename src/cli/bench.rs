@@ -46,7 +46,7 @@ pub struct BenchArgs {
     pub rays: Option<RaysArg>,
     /// BVH layouts and policies, comma separated, as `render --bvh` (whole frames: each is a
     /// configuration; `--rays`: the first).
-    #[arg(long, value_enum, value_delimiter = ',', default_value = "flat")]
+    #[arg(long, value_enum, value_delimiter = ',', default_value = "auto")]
     pub bvh: Vec<BvhMode>,
 }
 
@@ -73,7 +73,7 @@ pub fn bench(args: &BenchArgs) -> Result<()> {
         bail!("bench needs 1 to {MAX_REPEATS} repeats and at least one method");
     }
     let Some(&first_bvh) = args.bvh.first() else {
-        bail!("--bvh: give at least one of flat, two-level, rebuild");
+        bail!("--bvh: give at least one of auto, flat, two-level, rebuild");
     };
     apply_bvh(
         &mut settings,

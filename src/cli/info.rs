@@ -19,6 +19,7 @@ pub fn info(args: &InfoArgs) -> Result<()> {
     let path = resolve_scene(&args.scene)?;
     let desc = load_scene(&path)?;
     print!("{}", describe(&desc));
+    print!("{}", describe_layout(desc));
     if is_usd(&path) {
         print!("{}", describe_stage(&crate::scene::usd::metadata(&path)?));
     }
@@ -118,6 +119,20 @@ impl TriangleMotion {
         }
         out
     }
+}
+
+/// Most mesh primitives `mipray info` lists one by one; more are summarised by decision.
+const LAYOUT_LINES: usize = 24;
+
+/// What `--bvh auto` (the default) decides for `scene` at the default render settings.
+pub fn describe_layout(scene: SceneDesc) -> String {
+    let settings = crate::frame::RenderSettings::default();
+    let note = format!(
+        "(at {}x{}, {} spp; the decision depends on the rays per frame)\n",
+        settings.width, settings.height, settings.spp
+    );
+    let renderer = crate::frame::Renderer::new(scene, settings);
+    renderer.layout().describe(LAYOUT_LINES) + &note
 }
 
 /// The text `mipray info` prints.

@@ -39,12 +39,14 @@ pub struct RenderArgs {
     /// Frame file format.
     #[arg(long, value_enum, default_value_t = FrameFormat::Png)]
     pub format: FrameFormat,
-    /// BVH: `flat` (alias `refit`): one world-space tree refitted every frame, rebuilt past
+    /// BVH: `auto`: per mesh, instanced where a measured cost model says it pays, merged
+    /// into the world-space tree elsewhere (`mipray info` prints the decision);
+    /// `flat` (alias `refit`): one world-space tree refitted every frame, rebuilt past
     /// --rebuild-threshold; `two-level`: shared object-space meshes under a top-level tree
     /// over their instances (rigid motion moves transforms, not triangles; what deforms
     /// stays in a refitted world-space tree); `rebuild`: flat, rebuilt every frame (for
     /// comparison).
-    #[arg(long, value_enum, default_value_t = BvhMode::Flat)]
+    #[arg(long, value_enum, default_value_t = BvhMode::Auto)]
     pub bvh: BvhMode,
     /// Rebuild when the refitted tree's SAH cost exceeds this multiple of its cost right
     /// after the last build.
@@ -75,6 +77,7 @@ pub struct RenderArgs {
 /// `--bvh` values.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
 pub enum BvhMode {
+    Auto,
     #[value(alias = "refit")]
     Flat,
     TwoLevel,
@@ -159,10 +162,11 @@ pub fn apply_bvh(
         bail!("--rebuild-threshold {rebuild_threshold}: must be a number >= 1");
     }
     settings.bvh = match mode {
-        BvhMode::Flat | BvhMode::TwoLevel => BvhPolicy::Refit { rebuild_threshold },
+        BvhMode::Auto | BvhMode::Flat | BvhMode::TwoLevel => BvhPolicy::Refit { rebuild_threshold },
         BvhMode::Rebuild => BvhPolicy::Rebuild,
     };
     settings.layout = match mode {
+        BvhMode::Auto => BvhLayout::Auto,
         BvhMode::TwoLevel => BvhLayout::TwoLevel,
         BvhMode::Flat | BvhMode::Rebuild => BvhLayout::Flat,
     };

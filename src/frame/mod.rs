@@ -14,6 +14,7 @@ mod animation;
 pub mod appearance;
 mod clock;
 mod dirty;
+mod layout;
 mod log2_pb;
 mod posed;
 mod prefetch;
@@ -27,6 +28,11 @@ mod update;
 pub use crate::accel::{BvhLayout, BvhPolicy};
 pub use clock::FrameClock;
 pub use dirty::{DirtySet, Motion};
+pub use layout::{
+    BYTES_PER_TRIANGLE, Choice, CopyMotion, CopyUse, ENTRY_NS_PER_RAY, LayoutPlan,
+    MERGE_BUDGET_TRIANGLES, MeshChoice, MeshPlan, MeshUse, PLACE_NS_PER_INSTANCE,
+    REFIT_NS_PER_TRIANGLE, Reason, UsedLayout, decide_auto, decide_two_level,
+};
 pub use scene_geometry::{Instance, SceneGeometry};
 pub use settings::RenderSettings;
 pub use update::UpdateParallelism;
@@ -134,6 +140,12 @@ impl Renderer {
     /// space).
     pub fn triangles(&self) -> &FrameTriangles {
         &self.tree.triangles
+    }
+
+    /// Which meshes are placed as instances and which merged into the world tree, and why
+    /// (decided when the renderer was made).
+    pub fn layout(&self) -> &LayoutPlan {
+        &self.setup.layout
     }
 
     /// The current BVH (valid after `prepare`).
@@ -363,6 +375,8 @@ impl Renderer {
             triangles: self.setup.geometry.triangle_count(),
             lights: prepared.lights.len(),
             spp: settings.spp.max(1),
+            bvh_layout: self.setup.layout.used().to_string(),
+            instanced_meshes: self.setup.layout.instanced_meshes(),
             update: prepared.update,
             render_ms,
             total_ms,

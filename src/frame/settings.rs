@@ -20,7 +20,7 @@ pub struct RenderSettings {
     /// `None`: all of the scene's lights (at least one).
     pub lights: Option<usize>,
     pub bvh: BvhPolicy,
-    /// Flat or two-level (`--bvh two-level`).
+    /// Flat, two-level or decided per mesh (`--bvh auto`, the default).
     pub layout: BvhLayout,
     /// Which clips play (`--animation`).
     pub animation: AnimationSelection,
@@ -39,7 +39,7 @@ impl Default for RenderSettings {
             bvh: BvhPolicy::Refit {
                 rebuild_threshold: BvhPolicy::DEFAULT_REBUILD_THRESHOLD,
             },
-            layout: BvhLayout::Flat,
+            layout: BvhLayout::Auto,
             animation: AnimationSelection::All,
         }
     }

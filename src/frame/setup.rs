@@ -6,6 +6,7 @@
 
 use glam::{Mat4, Vec3};
 
+use super::layout::{LayoutPlan, RestView, VIEW_SAMPLES, ViewSample};
 use super::posed::{VertexSource, posed_bounds};
 use super::scene_geometry::SceneGeometry;
 use super::settings::RenderSettings;
@@ -34,6 +35,8 @@ pub(super) struct FrameSetup {
     rest_bounds: (Vec3, Vec3),
     /// The pixel footprint every `log2 P_b` is measured with.
     pub footprint: PixelFootprint,
+    /// Which instances are placed as instances of shared meshes (decided once, at t = 0).
+    pub layout: LayoutPlan,
 }
 
 impl FrameSetup {
@@ -80,6 +83,18 @@ impl FrameSetup {
             }
         };
         let footprint = PixelFootprint::new(yfov, settings.height);
+        let lights = settings.lights.unwrap_or(light_nodes.len().max(1));
+        let samples = view_samples(&scene, &settings, &pose, camera_node, yfov, rest_bounds);
+        let layout = LayoutPlan::new(
+            &scene,
+            &geometry,
+            &deforms,
+            settings.animation,
+            &pose,
+            &samples,
+            settings.layout,
+            rays_per_frame(&settings, lights),
+        );
         let setup = FrameSetup {
             scene,
             geometry,
@@ -90,6 +105,7 @@ impl FrameSetup {
             light_nodes,
             rest_bounds,
             footprint,
+            layout,
         };
         (setup, pose)
     }
@@ -152,4 +168,50 @@ impl FrameSetup {
         let texture = self.scene.textures.get(material.base_color_texture?)?;
         Some(texture.pyramid.base_size())
     }
+}
+
+/// Rays a frame traces, as the layout's cost model estimates them: per sample a primary
+/// ray and a shadow ray per light (bounces and misses left out).
+fn rays_per_frame(settings: &RenderSettings, lights: usize) -> f64 {
+    let samples = settings.width as f64 * settings.height as f64 * settings.spp.max(1) as f64;
+    samples * (1 + lights) as f64
+}
+
+/// The scene and its camera at [`VIEW_SAMPLES`] times spread evenly over the selected
+/// animation (only t = 0, `rest`, when nothing plays), for the layout's cost model.
+fn view_samples(
+    scene: &SceneDesc,
+    settings: &RenderSettings,
+    rest: &Pose,
+    camera_node: Option<usize>,
+    yfov: f32,
+    rest_bounds: (Vec3, Vec3),
+) -> Vec<ViewSample> {
+    let duration = settings.animation.duration(scene);
+    let times = if duration > 0.0 && duration.is_finite() {
+        VIEW_SAMPLES
+    } else {
+        1
+    };
+    let (w, h) = (settings.width, settings.height);
+    let mut pose = Pose::default();
+    (0..times)
+        .map(|k| {
+            let posed = if k == 0 {
+                rest
+            } else {
+                let t = duration * k as f32 / (times - 1) as f32;
+                pose.evaluate(scene, settings.animation, t);
+                &pose
+            };
+            let camera = match camera_node {
+                Some(node) => Camera::from_world(posed.world_from_node[node], yfov, w, h),
+                None => Camera::framing(rest_bounds.0, rest_bounds.1, w, h),
+            };
+            ViewSample {
+                world_from_node: posed.world_from_node.clone(),
+                view: RestView::of(&camera),
+            }
+        })
+        .collect()
 }

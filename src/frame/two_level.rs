@@ -1,14 +1,11 @@
-//! The frame loop under the two-level BVH (`--bvh two-level`): every instance that is only
-//! placed (rigid, scaled or stretched) by an animated node places a shared object-space
-//! mesh and updates nothing but its transform. Skinned and morphed instances and static
-//! ones keep the flat path (their triangles in world space, refitted or rebuilt by the
-//! policy) as one world-space tree: a static object gains nothing from a transform but
-//! costs a top-level box that overlaps its neighbours and a ray setup per visit (Embree
-//! users merge static geometry the same way). The exception is a mesh whose static copies
-//! would cost more than [`FLATTEN_BUDGET`] extra triangles in world space (a forest of one
-//! tree): its static instances stay instances, which is what saves the memory, under their
-//! own top-level tree built once. The top-level tree over the moving instances is rebuilt
-//! when one of them moved.
+//! The frame loop under the two-level BVH (`--bvh two-level`, or `--bvh auto` when it
+//! instances some mesh): every instance the layout plan (`layout.rs`) places as an instance
+//! of a shared object-space mesh updates nothing but its transform. Every other instance
+//! (skinned and morphed ones, static ones, and under `auto` the moving ones whose update
+//! costs less than instancing them) keeps the flat path (its triangles in world space,
+//! refitted or rebuilt by the policy) in one world-space tree. The top-level tree over the
+//! moving instances is rebuilt when one of them moved; the one over static instances (a mesh
+//! whose static copies would cost too much memory merged) is built once.
 //!
 //! The `log2 P_b` of a placed instance follows the flat rules (`log2_pb.rs`), evaluated at
 //! the hit from the object-space constant and the instance's shape key (`PbRule`), so a
@@ -22,17 +19,12 @@ use glam::{Mat4, Vec3, Vec3A};
 
 use super::Motion;
 use super::animation::InstanceState;
-use super::posed::VertexSource;
 use super::setup::FrameSetup;
 use crate::accel::{AccelError, TlasInstance, TwoLevelAccel};
 use crate::anim::{NodeShape, moving_nodes};
 use crate::geometry::{FrameTriangles, Placement};
 use crate::record::UpdateStats;
 use crate::render::{InstanceShading, PbRule};
-
-/// Most extra world-space triangles the static copies of one mesh may add (beyond its first
-/// copy) and still be merged into the world tree: 65,536 triangles are ~10 MB.
-const FLATTEN_BUDGET: usize = 65_536;
 
 /// What the two-level structure keeps between frames (part of the tree state).
 #[derive(Default)]
@@ -77,31 +69,9 @@ impl TwoLevel {
     pub fn build(setup: &FrameSetup, object_log2_pb: &[f32]) -> Result<TwoLevel, AccelError> {
         let mut two = TwoLevel::default();
         let moving = moving_nodes(&setup.scene, setup.settings.animation);
-        // Per mesh primitive: its static copies' triangles.
-        let mut static_triangles: HashMap<(u32, u32), (usize, usize)> = HashMap::new();
-        for (i, instance) in setup.geometry.instances.iter().enumerate() {
-            if !moving[instance.node as usize] {
-                let entry = static_triangles
-                    .entry((instance.mesh, instance.primitive))
-                    .or_default();
-                entry.0 += 1;
-                entry.1 = setup.geometry.instance_triangles[i].len();
-            }
-        }
-        let flattened = |key| {
-            static_triangles
-                .get(&key)
-                .is_some_and(|&(copies, triangles)| (copies - 1) * triangles <= FLATTEN_BUDGET)
-        };
         let mut mesh_of_key: HashMap<(u32, u32), u32> = HashMap::new();
         let mut meshes = Vec::new();
-        for (i, (instance, source)) in setup
-            .geometry
-            .instances
-            .iter()
-            .zip(&setup.deforms)
-            .enumerate()
-        {
+        for (i, instance) in setup.geometry.instances.iter().enumerate() {
             let range = setup.geometry.instance_triangles[i].clone();
             two.textured.push(
                 range
@@ -111,7 +81,7 @@ impl TwoLevel {
             );
             let key = (instance.mesh, instance.primitive);
             let fixed = !moving[instance.node as usize];
-            if *source == VertexSource::Deformed || (fixed && flattened(key)) {
+            if !setup.layout.instanced[i] {
                 two.mesh_of.push(None);
                 continue;
             }

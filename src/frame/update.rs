@@ -24,6 +24,7 @@ use rayon::prelude::*;
 use super::Motion;
 use super::animation::{AnimationState, InstanceState};
 use super::dirty::FrameChanges;
+use super::layout::UsedLayout;
 use super::ms_since;
 use super::posed::{
     PosedVertices, Rewrite, TriangleWriter, VertexSource, WRITE_CHUNK, same_deformation,
@@ -32,7 +33,7 @@ use super::posed::{
 use super::scatter::SlotScatter;
 use super::setup::FrameSetup;
 use super::two_level::{TwoLevel, Which};
-use crate::accel::{Accel, AccelError, BvhLayout, TreeStep};
+use crate::accel::{Accel, AccelError, TreeStep};
 use crate::anim::NodeShape;
 use crate::geometry::FrameTriangles;
 
@@ -154,9 +155,9 @@ impl TreeState {
         changes: &mut FrameChanges,
     ) -> Result<BuildTimes, AccelError> {
         let t = Instant::now();
-        self.two_level = match setup.settings.layout {
-            BvhLayout::TwoLevel => Some(TwoLevel::build(setup, object_log2_pb)?),
-            BvhLayout::Flat => None,
+        self.two_level = match setup.layout.used() {
+            UsedLayout::TwoLevel => Some(TwoLevel::build(setup, object_log2_pb)?),
+            UsedLayout::Flat => None,
         };
         let two_level_ms = ms_since(t);
         let t = Instant::now();

@@ -38,6 +38,12 @@ pub struct FrameRecord {
     pub triangles: usize,
     pub lights: usize,
     pub spp: u32,
+    /// What the frame was traced through: `flat` (one world-space tree) or `two-level`
+    /// (instances of shared meshes beside the world-space tree), whichever `--bvh` asked for
+    /// (`auto` picks per scene). Empty in records written before it existed.
+    pub bvh_layout: String,
+    /// Mesh primitives placed as instances (0 under `flat`; absent in older records).
+    pub instanced_meshes: usize,
     /// The per-frame update: what moved and what each step cost.
     #[serde(flatten)]
     pub update: UpdateStats,
@@ -153,7 +159,7 @@ impl UpdateStats {
 
 impl FrameRecord {
     /// The `stats.jsonl` name of every field, in the order a line is written.
-    pub const FIELDS: [&'static str; 25] = [
+    pub const FIELDS: [&'static str; 27] = [
         "frame",
         "time_s",
         "width",
@@ -163,6 +169,8 @@ impl FrameRecord {
         "triangles",
         "lights",
         "spp",
+        "bvh_layout",
+        "instanced_meshes",
         "animate_ms",
         "dirty_ms",
         "refit_ms",
@@ -182,8 +190,9 @@ impl FrameRecord {
     ];
 
     /// Fields that records written before they existed lack, and whose absence means their
-    /// default (`lod_bias`: 0, no bias): a record without them is still complete.
-    pub const DEFAULTED: &'static [&'static str] = &["lod_bias"];
+    /// default (`lod_bias`: 0, no bias; `bvh_layout` and `instanced_meshes`: not recorded,
+    /// empty and 0): a record without them is still complete.
+    pub const DEFAULTED: &'static [&'static str] = &["lod_bias", "bvh_layout", "instanced_meshes"];
 
     /// Milliseconds spent in `phase` this frame.
     pub fn phase_ms(&self, phase: Phase) -> f64 {
@@ -219,7 +228,7 @@ mod tests {
     #[test]
     fn line_is_flat_and_in_declaration_order() {
         let line = serde_json::to_string(&FrameRecord::default()).unwrap();
-        let expected = r#"{"frame":0,"time_s":0.0,"width":0,"height":0,"lod_method":"","lod_bias":0.0,"triangles":0,"lights":0,"spp":0,"animate_ms":0.0,"dirty_ms":0.0,"refit_ms":0.0,"build_ms":0.0,"rebuild":false,"sah_ratio":0.0,"lod_update_ms":0.0,"moved_triangles":0,"deformed_triangles":0,"lod_recomputed":0,"lod_shifted":0,"render_ms":0.0,"total_ms":0.0,"rays":0,"mip_histogram":[],"nonfinite_samples":0}"#;
+        let expected = r#"{"frame":0,"time_s":0.0,"width":0,"height":0,"lod_method":"","lod_bias":0.0,"triangles":0,"lights":0,"spp":0,"bvh_layout":"","instanced_meshes":0,"animate_ms":0.0,"dirty_ms":0.0,"refit_ms":0.0,"build_ms":0.0,"rebuild":false,"sah_ratio":0.0,"lod_update_ms":0.0,"moved_triangles":0,"deformed_triangles":0,"lod_recomputed":0,"lod_shifted":0,"render_ms":0.0,"total_ms":0.0,"rays":0,"mip_histogram":[],"nonfinite_samples":0}"#;
         assert_eq!(line, expected);
     }
 

@@ -99,6 +99,8 @@ impl Record {
             triangles: f.integer("triangles")?,
             lights: f.integer("lights")?,
             spp: f.integer("spp")?,
+            bvh_layout: f.string("bvh_layout")?,
+            instanced_meshes: f.integer("instanced_meshes")?,
             update: UpdateStats {
                 animate_ms: f.number("animate_ms")?,
                 dirty_ms: f.number("dirty_ms")?,
@@ -239,7 +241,8 @@ mod tests {
     #[test]
     fn current_format_loads_every_field() {
         let line = r#"{"frame":2,"time_s":0.5,"width":64,"height":32,"lod_method":"paper",
-            "lod_bias":0.5,"triangles":100,"lights":2,"spp":4,"animate_ms":1.0,"dirty_ms":0.25,
+            "lod_bias":0.5,"triangles":100,"lights":2,"spp":4,"bvh_layout":"two-level",
+            "instanced_meshes":3,"animate_ms":1.0,"dirty_ms":0.25,
             "refit_ms":0.5,"build_ms":0.0,"rebuild":false,"sah_ratio":1.1,"lod_update_ms":0.75,
             "moved_triangles":10,"deformed_triangles":5,"lod_recomputed":15,"lod_shifted":3,
             "render_ms":20.0,"total_ms":23.0,"rays":4096,"mip_histogram":[1,2,3],
@@ -262,6 +265,10 @@ mod tests {
         );
         assert_eq!(v.mip_histogram, [1, 2, 3]);
         assert_eq!((v.rays, v.nonfinite_samples), (4096, 0));
+        assert_eq!(
+            (v.bvh_layout.as_str(), v.instanced_meshes),
+            ("two-level", 3)
+        );
         // Every field of the line is present, `false` and 0 included.
         let all = serde_json::to_value(FrameRecord::default()).unwrap();
         for name in all.as_object().unwrap().keys() {
@@ -310,6 +317,14 @@ mod tests {
         let older = Record::parse(&json.to_string()).unwrap();
         assert!(older.missing().is_empty());
         assert_eq!(older.values.lod_bias, 0.0);
+        // So is one written before the layout was recorded (it reads as not recorded).
+        for name in ["bvh_layout", "instanced_meshes"] {
+            json.as_object_mut().unwrap().remove(name);
+        }
+        let unrecorded = Record::parse(&json.to_string()).unwrap();
+        assert!(unrecorded.missing().is_empty());
+        assert!(!unrecorded.has("bvh_layout"));
+        assert_eq!(unrecorded.values.bvh_layout, "");
         json.as_object_mut().unwrap().remove("rays");
         json.as_object_mut()
             .unwrap()
