@@ -324,32 +324,8 @@ fn trace_records(kernel: FileKernel, bvh: &SceneBvh, rays: &[&RayRecord]) -> Vec
     rays.par_chunks(1024)
         .flat_map_iter(|chunk| -> Vec<Answer> {
             match kernel {
-                FileKernel::ClosestPackets => chunk
-                    .chunks(PACKET)
-                    .flat_map(|packet| {
-                        let mut pairs = [(Vec3A::ZERO, Vec3A::ZERO); PACKET];
-                        for (pair, r) in pairs.iter_mut().zip(packet) {
-                            *pair = (r.origin, r.direction);
-                        }
-                        let mut hits = [None; PACKET];
-                        let n = packet.len();
-                        bvh.closest_hits(&pairs[..n], f32::INFINITY, &mut hits[..n]);
-                        hits[..n].iter().map(|&h| closest(h)).collect::<Vec<_>>()
-                    })
-                    .collect(),
-                FileKernel::ClosestScattered => chunk
-                    .chunks(PACKET)
-                    .flat_map(|packet| {
-                        let mut pairs = [(Vec3A::ZERO, Vec3A::ZERO); PACKET];
-                        for (pair, r) in pairs.iter_mut().zip(packet) {
-                            *pair = (r.origin, r.direction);
-                        }
-                        let mut hits = [None; PACKET];
-                        let n = packet.len();
-                        bvh.closest_hits_scattered(&pairs[..n], f32::INFINITY, &mut hits[..n]);
-                        hits[..n].iter().map(|&h| closest(h)).collect::<Vec<_>>()
-                    })
-                    .collect(),
+                FileKernel::ClosestPackets => closest_in_packets(bvh, chunk, false),
+                FileKernel::ClosestScattered => closest_in_packets(bvh, chunk, true),
                 FileKernel::ClosestSingle => chunk
                     .iter()
                     .map(|r| closest(bvh.closest_hit(r.origin, r.direction, r.t_max)))
@@ -381,6 +357,28 @@ fn trace_records(kernel: FileKernel, bvh: &SceneBvh, rays: &[&RayRecord]) -> Vec
             }
         })
         .collect()
+}
+
+/// Closest hits of `rays` in packets of up to [`PACKET`] consecutive rays: from one origin
+/// with interval bounds (primary rays), or with `scattered` from any origins by the masked
+/// walk (a bounce's rays).
+fn closest_in_packets(bvh: &SceneBvh, rays: &[&RayRecord], scattered: bool) -> Vec<Answer> {
+    let mut answers = Vec::with_capacity(rays.len());
+    for packet in rays.chunks(PACKET) {
+        let mut pairs = [(Vec3A::ZERO, Vec3A::ZERO); PACKET];
+        for (pair, r) in pairs.iter_mut().zip(packet) {
+            *pair = (r.origin, r.direction);
+        }
+        let mut hits = [None; PACKET];
+        let n = packet.len();
+        if scattered {
+            bvh.closest_hits_scattered(&pairs[..n], f32::INFINITY, &mut hits[..n]);
+        } else {
+            bvh.closest_hits(&pairs[..n], f32::INFINITY, &mut hits[..n]);
+        }
+        answers.extend(hits[..n].iter().map(|h| h.map(|h| (h.triangle, h.t))));
+    }
+    answers
 }
 
 /// Whether `answer` is what record `r` holds (the same face and distance bits, or the same
