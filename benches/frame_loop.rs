@@ -19,7 +19,9 @@
 //! the render time and the preprocessing share (medians). Peak resident memory (VmHWM from
 //! /proc/self/status, reset through /proc/self/clear_refs before the scene is generated)
 //! is reported above the resident size at the reset, in MB per million triangles, for the
-//! default-policy run (scene, renderer, tree and one rendered frame).
+//! default-policy run (scene, renderer, tree and the rendered frames), beside the resident
+//! size after those frames (VmRSS: what stays between frames). Below the table, the floor of
+//! a flat build: the peak of obvhs's builder alone over a million triangle boxes.
 //!
 //! Arguments (after `--`): words choosing rows: a size (`100k`, `1M`), a scene (`patches`,
 //! `skin`, `rigid`) and/or a layout (`flat`, `two-level`, `auto`); none runs every row. Rayon's global pool is set to 2
@@ -149,12 +151,13 @@ fn update_medians(
 }
 
 /// Rendered frames 1..=RENDERED (after the initial build) at 640x480 with the default
-/// policy: medians of (preprocessing share, frame ms, render ms), and the peak resident MB
-/// above the start. (One frame alone made the share swing by several points run to run.)
+/// policy: medians of (preprocessing share, frame ms, render ms), and the resident MB above
+/// the start at its peak and after the last frame. (One frame alone made the share swing by
+/// several points run to run.)
 fn rendered_frame(
     make_scene: impl FnOnce() -> SceneDesc,
     layout: BvhLayout,
-) -> (f64, f64, f64, f64) {
+) -> (f64, f64, f64, Resident) {
     let start_mb = reset_peak_resident_mb();
     let settings = RenderSettings {
         width: 640,
@@ -169,14 +172,52 @@ fn rendered_frame(
         let (_, r) = renderer.render_frame(frame, frame as f32 / 30.0).unwrap();
         frames.push(r);
     }
-    let peak_mb = status_mb("VmHWM:") - start_mb;
+    let resident = Resident {
+        peak_mb: status_mb("VmHWM:") - start_mb,
+        after_mb: status_mb("VmRSS:") - start_mb,
+    };
     let median = |f: &dyn Fn(&FrameRecord) -> f64| Percentiles::of(frames.iter().map(f)).median;
     (
         median(&|r| r.update.preprocessing_ms() / r.total_ms),
         median(&|r| r.total_ms),
         median(&|r| r.render_ms),
-        peak_mb,
+        resident,
     )
+}
+
+/// Resident memory of a run above the resident size at its start (MB).
+#[derive(Clone, Copy)]
+struct Resident {
+    /// At its peak (VmHWM): the first frame's tree build, for the flat layouts.
+    peak_mb: f64,
+    /// After the last rendered frame (VmRSS): what the frame loop keeps between frames,
+    /// plus whatever the allocator has not returned to the system.
+    after_mb: f64,
+}
+
+/// The BVH builder's own peak over `triangles` primitives: resident MB above the start
+/// while obvhs builds its binary tree over a grid of triangle boxes, with the boxes counted
+/// out (mipray hands the builder its triangles without copying their boxes). No caller of
+/// this builder can peak lower during a build than this plus what it keeps.
+fn builder_peak_mb(triangles: usize) -> f64 {
+    use obvhs::{BvhBuildParams, aabb::Aabb, bvh2::builder::build_bvh2};
+    let side = ((triangles as f64 / 2.0).sqrt().ceil()) as usize;
+    let boxes: Vec<Aabb> = (0..2 * side * side)
+        .map(|i| {
+            let (x, y) = ((i / 2) % side, (i / 2) / side);
+            let min = glam::Vec3A::new(x as f32, y as f32, 0.0);
+            Aabb::new(min, min + glam::Vec3A::new(1.0, 1.0, 1e-3))
+        })
+        .collect();
+    let start_mb = reset_peak_resident_mb();
+    let bvh = build_bvh2(
+        &boxes,
+        BvhBuildParams::medium_build(),
+        &mut std::time::Duration::default(),
+    );
+    let peak = status_mb("VmHWM:") - start_mb;
+    std::hint::black_box(bvh);
+    peak
 }
 
 /// Resets the process's peak resident size to its current one (Linux: `clear_refs` 5) and
@@ -237,8 +278,14 @@ fn main() {
         // Child run: one row, one layout, print its peak MB.
         let index: usize = args[at + 1].parse().expect("row index");
         let layout = args[at + 2].parse().unwrap_or(BvhLayout::Flat);
-        let (_, _, _, peak_mb) = rendered_frame(&rows()[index].make, layout);
-        println!("{peak_mb}");
+        let (_, _, _, resident) = rendered_frame(&rows()[index].make, layout);
+        println!("{} {}", resident.peak_mb, resident.after_mb);
+        return;
+    }
+    if let Some(at) = args.iter().position(|a| a == "--builder-peak-of") {
+        // Child run: the builder alone over this many triangles, print its peak MB.
+        let triangles: usize = args[at + 1].parse().expect("triangle count");
+        println!("{}", builder_peak_mb(triangles));
         return;
     }
     // `cargo bench` passes `--bench`; row filters like `1M`, `skin` or `two-level` may follow.
@@ -263,10 +310,10 @@ fn main() {
             .unwrap();
     }
     println!(
-        "| scene | triangles | moving | bvh | animate+dirty ms | refit ms | LOD update ms | update ms (refit) | rebuild ms | update ms (rebuild) | refit/rebuild | LOD recomputed | preprocessing share @640x480 | frame ms | animate ms | dirty ms | render ms | peak MB per 1M triangles |"
+        "| scene | triangles | moving | bvh | animate+dirty ms | refit ms | LOD update ms | update ms (refit) | rebuild ms | update ms (rebuild) | refit/rebuild | LOD recomputed | preprocessing share @640x480 | frame ms | animate ms | dirty ms | render ms | peak MB per 1M triangles | MB per 1M triangles after the frames |"
     );
     println!(
-        "|---|---:|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|"
+        "|---|---:|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|"
     );
     for (index, row) in rows().iter().enumerate() {
         if row_words.iter().any(|w| **w != row.kind && **w != row.size) {
@@ -279,21 +326,46 @@ fn main() {
             print_row(index, row, layout, layout_name);
         }
     }
+    if row_words.is_empty() || row_words.iter().any(|w| *w == "1M") {
+        println!(
+            "\nFloor: obvhs's build over 1M triangle boxes alone peaks at {:.0} MB (its node arrays and the binary tree; the boxes not counted).",
+            builder_peak_in_fresh_process(1_000_000)
+        );
+    }
 }
 
-/// Peak resident MB of row `index` under `layout_name`, measured by a fresh run of this
-/// bench (`--peak-of`); NaN when that fails.
-fn peak_in_fresh_process(index: usize, layout_name: &str) -> f64 {
-    let Ok(exe) = std::env::current_exe() else {
-        return f64::NAN;
-    };
+/// [`builder_peak_mb`] measured by a fresh run of this bench; NaN when that fails.
+fn builder_peak_in_fresh_process(triangles: usize) -> f64 {
+    child_output(&["--builder-peak-of", &triangles.to_string()])
+        .and_then(|out| out.trim().parse().ok())
+        .unwrap_or(f64::NAN)
+}
+
+/// What a fresh run of this bench with `args` prints, if it succeeds.
+fn child_output(args: &[&str]) -> Option<String> {
+    let exe = std::env::current_exe().ok()?;
     std::process::Command::new(exe)
-        .args(["--peak-of", &index.to_string(), layout_name])
+        .args(args)
         .output()
         .ok()
         .filter(|o| o.status.success())
-        .and_then(|o| String::from_utf8_lossy(&o.stdout).trim().parse().ok())
-        .unwrap_or(f64::NAN)
+        .map(|o| String::from_utf8_lossy(&o.stdout).into_owned())
+}
+
+/// Resident MB of row `index` under `layout_name` (peak, after the frames), measured by a
+/// fresh run of this bench (`--peak-of`); NaN when that fails.
+fn resident_in_fresh_process(index: usize, layout_name: &str) -> Resident {
+    let parsed = child_output(&["--peak-of", &index.to_string(), layout_name]).and_then(|out| {
+        let mut words = out.split_whitespace().map(|w| w.parse::<f64>().ok());
+        Some(Resident {
+            peak_mb: words.next()??,
+            after_mb: words.next()??,
+        })
+    });
+    parsed.unwrap_or(Resident {
+        peak_mb: f64::NAN,
+        after_mb: f64::NAN,
+    })
 }
 
 /// Times one scene under one layout and prints its table row.
@@ -305,9 +377,10 @@ fn print_row(index: usize, row: &Row, layout: BvhLayout, layout_name: &str) {
         let (last, refit, _, triangles) = update_medians((row.make)(), refit_only, layout);
         let (_, rebuild, _, _) = update_medians((row.make)(), BvhPolicy::Rebuild, layout);
         let (pre_share, frame_ms, render_ms, _) = rendered_frame(&row.make, layout);
-        let peak_mb = peak_in_fresh_process(index, layout_name);
+        let resident = resident_in_fresh_process(index, layout_name);
+        let per_million = |mb: f64| mb / (triangles as f64 / 1e6);
         println!(
-            "| {} | {} | {} | {} | {:.3} | {:.3} | {:.3} | {:.3} | {:.3} | {:.3} | {:.3} | {} | {:.1}% | {:.1} | {:.3} | {:.3} | {:.1} | {:.0} |",
+            "| {} | {} | {} | {} | {:.3} | {:.3} | {:.3} | {:.3} | {:.3} | {:.3} | {:.3} | {} | {:.1}% | {:.1} | {:.3} | {:.3} | {:.1} | {:.0} | {:.0} |",
             row.kind,
             triangles,
             row.moving,
@@ -325,7 +398,8 @@ fn print_row(index: usize, row: &Row, layout: BvhLayout, layout_name: &str) {
             refit[5],
             refit[6],
             render_ms,
-            peak_mb / (triangles as f64 / 1e6),
+            per_million(resident.peak_mb),
+            per_million(resident.after_mb),
         );
     }
 }

@@ -10,6 +10,7 @@
 
 use std::time::Duration;
 
+use bytemuck::TransparentWrapper;
 use glam::Vec3A;
 use obvhs::{BvhBuildParams, aabb::Aabb, bvh2::builder::build_bvh2};
 
@@ -71,9 +72,10 @@ impl Accel {
         if triangles.is_empty() {
             return Ok(Accel::default());
         }
-        let boxes: Vec<Aabb> = triangles.positions.iter().map(padded_box).collect();
+        // The builder reads each primitive's box once: computed on the fly from the
+        // positions, not held in a second array (32 bytes per triangle at the build's peak).
         let bvh = build_bvh2(
-            &boxes,
+            PaddedTriangle::wrap_slice(&triangles.positions),
             BvhBuildParams::medium_build(),
             &mut Duration::default(),
         );
@@ -175,6 +177,21 @@ pub fn padded_box(tri: &[Vec3A; 3]) -> Aabb {
     let magnitude = min.abs().max(max.abs()).max_element();
     let pad = Vec3A::splat(magnitude * 2f32.powi(-20) + f32::MIN_POSITIVE * 8.0);
     Aabb::new(min - pad, max + pad)
+}
+
+/// A triangle as the BVH builder's primitive: its box is [`padded_box`].
+#[repr(transparent)]
+struct PaddedTriangle([Vec3A; 3]);
+
+// SAFETY: `PaddedTriangle` is `repr(transparent)` over `[Vec3A; 3]`, its only field, so a
+// slice of one is a slice of the other (what `TransparentWrapper` requires).
+unsafe impl bytemuck::TransparentWrapper<[Vec3A; 3]> for PaddedTriangle {}
+
+impl obvhs::Boundable for PaddedTriangle {
+    #[inline]
+    fn aabb(&self) -> Aabb {
+        padded_box(&self.0)
+    }
 }
 
 /// The union of the padded boxes of the `count` triangles from slot `first` (a leaf).
