@@ -75,11 +75,12 @@ pub const REFIT_NS_PER_TRIANGLE: f64 = 110.0;
 /// Resident bytes of a triangle merged into the world tree (positions, normals, uvs,
 /// material, `log2 P_b`, source, packs, its share of the tree and the build's peak).
 /// Measured as the peak resident memory of the crowd under `--bvh flat` less that under
-/// `--bvh two-level` (415 MB against 68 MB), over the 995,000 triangles instancing stores once.
-pub const BYTES_PER_TRIANGLE: f64 = 350.0;
+/// `--bvh two-level` (374 MB against 59 MB, `cargo bench --bench frame_loop -- rigid 1M`),
+/// over the 995,000 triangles instancing stores once.
+pub const BYTES_PER_TRIANGLE: f64 = 317.0;
 
 /// Most extra world-space triangles the copies of one mesh of one class may add (beyond the
-/// first copy) and still be merged: 65,536 triangles are ~23 MB at [`BYTES_PER_TRIANGLE`].
+/// first copy) and still be merged: 65,536 triangles are ~21 MB at [`BYTES_PER_TRIANGLE`].
 pub const MERGE_BUDGET_TRIANGLES: usize = 65_536;
 
 /// How one drawn copy (instance) of a mesh primitive moves over the selected animation.
