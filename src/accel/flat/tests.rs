@@ -506,3 +506,28 @@ fn rays_through_shared_edges_and_vertices_of_a_mesh_never_slip_through() {
         "{misses} of {rays} rays slipped through the mesh"
     );
 }
+
+#[test]
+fn the_builder_reads_the_same_boxes_from_the_positions_as_from_a_box_array() {
+    // The build hands obvhs the positions themselves (`PaddedTriangle`); the tree must be
+    // the one a separate array of padded boxes gives, node for node.
+    let mut rng = Rng(0xb0c5);
+    let tris = random_soup(&mut rng, 3000);
+    let params = BvhBuildParams::medium_build();
+    let boxes: Vec<Aabb> = tris.positions.iter().map(padded_box).collect();
+    let from_boxes = build_bvh2(&boxes, params, &mut Duration::default());
+    let wrapped = PaddedTriangle::wrap_slice(&tris.positions);
+    let from_positions = build_bvh2(wrapped, params, &mut Duration::default());
+    assert_eq!(
+        from_positions.primitive_indices,
+        from_boxes.primitive_indices
+    );
+    assert_eq!(from_positions.nodes.len(), from_boxes.nodes.len());
+    for (a, b) in from_positions.nodes.iter().zip(&from_boxes.nodes) {
+        assert_eq!((a.aabb().min, a.aabb().max), (b.aabb().min, b.aabb().max));
+        assert_eq!((a.first_index, a.prim_count), (b.first_index, b.prim_count));
+    }
+    for (w, b) in wrapped.iter().zip(&boxes) {
+        assert_eq!(obvhs::Boundable::aabb(w), *b);
+    }
+}
