@@ -94,7 +94,8 @@ impl Accel {
         }
         // Packs and leaves in slot order; each leaf then refers to its first pack.
         leaves.sort_unstable_by_key(|l| l.first);
-        let mut packed = PackedTriangles::default();
+        leaves.shrink_to_fit();
+        let mut packed = PackedTriangles::with_pack_capacity(leaves.iter().map(|l| l.count));
         let mut leaf_of_slot = vec![0; triangles.len()];
         for (i, leaf) in leaves.iter().enumerate() {
             let (first, count) = (leaf.first as usize, leaf.count as usize);

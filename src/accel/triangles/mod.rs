@@ -82,6 +82,29 @@ impl PackedTriangles {
         packed
     }
 
+    /// No packs yet, with room for exactly the packs of leaves of `counts` triangles (each
+    /// leaf fills whole packs): pushing them never reallocates, and the array keeps no spare
+    /// capacity (growing by doubling left up to half of it unused).
+    pub fn with_pack_capacity(counts: impl Iterator<Item = u32>) -> Self {
+        let packs: usize = counts.map(|c| (c as usize).div_ceil(LANES)).sum();
+        PackedTriangles {
+            packs: Vec::with_capacity(packs),
+            lane_of_slot: Vec::new(),
+        }
+    }
+
+    /// Packs held.
+    #[cfg(test)]
+    pub fn pack_count(&self) -> usize {
+        self.packs.len()
+    }
+
+    /// Packs the array has room for.
+    #[cfg(test)]
+    pub fn pack_capacity(&self) -> usize {
+        self.packs.capacity()
+    }
+
     /// Appends the packs of the leaf of `count` slots from `first` (`source[slot]`: the
     /// slot's source triangle, which hits report for the tie rule); returns its first pack
     /// (what the tree stores for the leaf).

@@ -50,6 +50,11 @@ impl WideBvh {
             }
             wide.nodes[at as usize] = node;
         }
+        // The arrays grew by doubling; a tree is kept for many frames, so give back the
+        // spare capacity (up to half of each array).
+        wide.nodes.shrink_to_fit();
+        wide.parent.shrink_to_fit();
+        wide.leaf_lanes.shrink_to_fit();
         wide
     }
 
