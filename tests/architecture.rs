@@ -10,6 +10,9 @@
 //! build its fixtures from anywhere. A rule that fails names the path through the graph
 //! and, for each step, the file and line that names the next module.
 
+#[path = "common/files.rs"]
+mod files;
+
 use std::collections::{BTreeMap, BTreeSet, VecDeque};
 use std::path::{Path, PathBuf};
 
@@ -95,26 +98,6 @@ const PRINTING: &[&str] = &[
 
 fn src() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("src")
-}
-
-/// Every `.rs` file under `dir` (recursively), sorted.
-fn rust_files(dir: &Path) -> Vec<PathBuf> {
-    let mut files = Vec::new();
-    let mut pending = vec![dir.to_path_buf()];
-    while let Some(dir) = pending.pop() {
-        let entries = std::fs::read_dir(&dir)
-            .unwrap_or_else(|e| panic!("cannot list {}: {e}", dir.display()));
-        for entry in entries {
-            let path = entry.expect("directory entry").path();
-            if path.is_dir() {
-                pending.push(path);
-            } else if path.extension().is_some_and(|e| e == "rs") {
-                files.push(path);
-            }
-        }
-    }
-    files.sort();
-    files
 }
 
 /// The top-level modules of `src/` (folders and files, without `lib.rs` and `main.rs`).
@@ -285,7 +268,7 @@ fn library_sources(src: &Path) -> Vec<Source> {
     let modules = top_level_modules(src);
     let mut sources = Vec::new();
     let mut test_only: BTreeSet<PathBuf> = BTreeSet::new();
-    for path in rust_files(src) {
+    for path in files::files_with_extension(src, "rs") {
         let text = std::fs::read_to_string(&path)
             .unwrap_or_else(|e| panic!("cannot read {}: {e}", path.display()));
         let (code, test_modules) = library_code(&text);

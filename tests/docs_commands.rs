@@ -159,17 +159,10 @@ fn split_words(line: &str) -> Result<Vec<String>, String> {
 fn documented_files() -> Vec<PathBuf> {
     let root = Path::new(env!("CARGO_MANIFEST_DIR"));
     let mut files = vec![root.join("README.md")];
-    let mut folders = vec![root.join("docs/src")];
-    while let Some(folder) = folders.pop() {
-        for entry in std::fs::read_dir(&folder).expect("docs/src is readable") {
-            let path = entry.expect("a docs/src entry").path();
-            if path.is_dir() {
-                folders.push(path);
-            } else if path.extension().is_some_and(|e| e == "md") {
-                files.push(path);
-            }
-        }
-    }
+    files.extend(common::files::files_with_extension(
+        &root.join("docs/src"),
+        "md",
+    ));
     files.sort();
     files
 }

@@ -5,6 +5,7 @@
 
 pub mod deform_scenes;
 pub mod farm;
+pub mod files;
 pub mod invariants;
 pub mod round_trip;
 pub mod scenes;
