@@ -127,12 +127,14 @@ impl Accel {
     pub fn sah_cost(&self) -> f32 {
         self.wide
             .sah_cost(SAH_TRAVERSAL_COST, SAH_INTERSECTION_COST)
-            .unwrap_or_else(|| {
-                // One leaf (or nothing): every ray tests every triangle.
-                self.leaves
-                    .first()
-                    .map_or(0.0, |l| l.count as f32 * SAH_INTERSECTION_COST)
-            })
+            .unwrap_or_else(|| self.one_leaf_cost())
+    }
+
+    /// The SAH cost of a tree of one leaf (or nothing): every ray tests every triangle.
+    pub(in crate::accel) fn one_leaf_cost(&self) -> f32 {
+        self.leaves
+            .first()
+            .map_or(0.0, |l| l.count as f32 * SAH_INTERSECTION_COST)
     }
 
     /// The box of every triangle in the tree (`None` when empty).

@@ -15,7 +15,6 @@
 //! live lane), so a leaf is a run of packs and no pack straddles two leaves.
 
 use glam::{Vec2, Vec3A, Vec4};
-use rayon::prelude::*;
 
 mod across_rays;
 
@@ -43,6 +42,21 @@ impl TrianglePack {
             for axis in 0..3 {
                 self.v[vertex][axis][lane] = p[axis];
             }
+        }
+    }
+
+    /// Copies its live lanes' triangles from `positions` (by slot) and calls `each` on each
+    /// one copied, in lane order (a refit takes the leaf box from the values it has just
+    /// loaded instead of reading the positions a second time).
+    #[inline]
+    pub fn refresh(&mut self, positions: &[[Vec3A; 3]], mut each: impl FnMut(&[Vec3A; 3])) {
+        let first = self.first_slot as usize;
+        for (lane, tri) in positions[first..first + self.live as usize]
+            .iter()
+            .enumerate()
+        {
+            self.set(lane, tri);
+            each(tri);
         }
     }
 
@@ -141,26 +155,26 @@ impl PackedTriangles {
         first_pack
     }
 
+    /// The packs in runs cut before the pack of each slot of `cuts` (increasing; each the
+    /// first slot of a leaf, so no cut splits a leaf's packs): disjoint mutable runs, in
+    /// slot order, for tasks that refresh separate runs of leaves.
+    pub fn runs_mut(&mut self, cuts: impl Iterator<Item = u32>) -> Vec<&mut [TrianglePack]> {
+        let mut runs = Vec::new();
+        let (mut rest, mut consumed) = (&mut self.packs[..], 0);
+        for slot in cuts {
+            let pack = self.lane_of_slot[slot as usize] as usize / LANES;
+            let (run, tail) = std::mem::take(&mut rest).split_at_mut(pack - consumed);
+            runs.push(run);
+            (rest, consumed) = (tail, pack);
+        }
+        runs.push(rest);
+        runs
+    }
+
     /// Copies slot `slot`'s moved triangle into its lane.
     pub fn update(&mut self, slot: u32, tri: &[Vec3A; 3]) {
         let at = self.lane_of_slot[slot as usize] as usize;
         self.packs[at / LANES].set(at % LANES, tri);
-    }
-
-    /// Copies every triangle into its lane (after a full refit), on all threads when
-    /// `parallel`.
-    pub fn update_all(&mut self, positions: &[[Vec3A; 3]], parallel: bool) {
-        let fill = |pack: &mut TrianglePack| {
-            for lane in 0..pack.live as usize {
-                let tri = positions[pack.first_slot as usize + lane];
-                pack.set(lane, &tri);
-            }
-        };
-        if parallel {
-            self.packs.par_iter_mut().for_each(fill);
-        } else {
-            self.packs.iter_mut().for_each(fill);
-        }
     }
 
     /// The stored triangle of `slot`.
@@ -490,11 +504,20 @@ mod tests {
         for p in &mut positions {
             *p = p.map(|v| v * 2.0);
         }
-        for parallel in [false, true] {
-            packed.update_all(&positions, parallel);
-            for (slot, p) in positions.iter().enumerate() {
-                assert_eq!(packed.triangle(slot as u32), *p);
+        // Refreshed in runs cut at the second leaf (slot 5, pack 2): each lane is copied
+        // once and handed over in slot order.
+        let mut seen = Vec::new();
+        let runs = packed.runs_mut([5].into_iter());
+        assert_eq!(runs.iter().map(|r| r.len()).collect::<Vec<_>>(), [2, 2]);
+        for run in runs {
+            for pack in run {
+                pack.refresh(&positions, |t| seen.push(*t));
             }
         }
+        assert_eq!(seen, positions);
+        for (slot, p) in positions.iter().enumerate() {
+            assert_eq!(packed.triangle(slot as u32), *p);
+        }
+        assert_eq!(packed.runs_mut(std::iter::empty()).len(), 1);
     }
 }

@@ -2,7 +2,7 @@
 //! eight `f32`, one 32-byte vector) and what each child is (an inner node, a leaf's first
 //! record and count, or unused: an inverted box no ray enters).
 
-use glam::Vec3A;
+use glam::{Vec3A, Vec4};
 use obvhs::aabb::Aabb;
 
 use super::{EMPTY, LEAF, WIDTH};
@@ -42,11 +42,26 @@ impl WideNode {
         )
     }
 
-    /// The union of the used lanes' boxes.
+    /// The union of the used lanes' boxes: the least of each lower row and the greatest of
+    /// each upper row over all eight lanes at once (unused lanes hold an inverted box, which
+    /// neither changes; a node with no used lane gives the empty box).
+    #[inline]
     pub(super) fn bounds_union(&self) -> Aabb {
-        (0..WIDTH)
-            .filter(|&lane| self.child[lane] != EMPTY)
-            .fold(Aabb::empty(), |a, lane| a.union(&self.lane_box(lane)))
+        let halves =
+            |row: &[f32; WIDTH]| (Vec4::from_slice(&row[..4]), Vec4::from_slice(&row[4..]));
+        let least = |row| {
+            let (a, b) = halves(row);
+            a.min(b).min_element()
+        };
+        let greatest = |row| {
+            let (a, b) = halves(row);
+            a.max(b).max_element()
+        };
+        let b = &self.bounds;
+        Aabb::new(
+            Vec3A::new(least(&b[0]), least(&b[1]), least(&b[2])),
+            Vec3A::new(greatest(&b[3]), greatest(&b[4]), greatest(&b[5])),
+        )
     }
 
     pub(super) fn set_box(&mut self, lane: usize, aabb: &Aabb) {

@@ -7,6 +7,8 @@
 
 use obvhs::aabb::Aabb;
 
+use rayon::prelude::*;
+
 use super::node::WideNode;
 use super::{EMPTY, LEAF, WIDTH, WideBvh};
 
@@ -55,7 +57,9 @@ impl LeafLanes<'_> {
 impl WideBvh {
     /// Sets the box of the leaf in lane `at` (`node * WIDTH + lane`); a full refit sets
     /// every leaf's, then calls [`WideBvh::refit_inner`]. A tree of one leaf keeps no box
-    /// (rays test that leaf whatever), so there it does nothing.
+    /// (rays test that leaf whatever), so there it does nothing. (Refits write leaf boxes
+    /// through [`WideBvh::leaf_lanes_writer`]; tests build trees with this.)
+    #[cfg(test)]
     pub fn set_leaf_box(&mut self, at: u32, aabb: &Aabb) {
         if self.root_leaf.is_none() {
             self.set_lane(at, aabb);
@@ -82,12 +86,21 @@ impl WideBvh {
         }
     }
 
-    /// Refits every inner lane as the union of its child's lanes, children first.
-    pub fn refit_inner(&mut self) {
-        for index in (1..self.nodes.len()).rev() {
-            let aabb = self.nodes[index].bounds_union();
-            self.set_lane(self.parent[index], &aabb);
+    /// Refits every inner lane as the union of its child's lanes, children first, and
+    /// returns the refitted tree's SAH cost ([`WideBvh::sah_cost`], the same bits): each
+    /// node's share is taken while the refit has it in cache (every node's lanes are final
+    /// when the backward walk reaches it), instead of a second pass over the nodes.
+    pub fn refit_inner(&mut self, traversal: f32, intersection: f32) -> Option<f32> {
+        let mut runs = vec![0.0f64; self.nodes.len().div_ceil(SAH_CHUNK)];
+        for index in (0..self.nodes.len()).rev() {
+            let node = &self.nodes[index];
+            runs[index / SAH_CHUNK] += node.weighted_area(traversal, intersection);
+            if index > 0 {
+                let aabb = node.bounds_union();
+                self.set_lane(self.parent[index], &aabb);
+            }
         }
+        self.cost_of_runs(&runs, traversal)
     }
 
     /// Refits the leaf in lane `at` (`node * WIDTH + lane`) to `aabb`, then its ancestors
@@ -121,25 +134,70 @@ impl WideBvh {
     /// through the root (one traversal step per node entered, one intersection per
     /// triangle of a leaf entered), the sum over lanes of its share of the root's area
     /// times its cost. `None` when the tree is one leaf or empty.
+    ///
+    /// Summed per run of [`SAH_CHUNK`] nodes (each run from its last node back, the order
+    /// [`WideBvh::refit_inner`] meets them), then over the runs in order, so the value is
+    /// the same whether the runs are summed on one thread or several.
     pub fn sah_cost(&self, traversal: f32, intersection: f32) -> Option<f32> {
+        let run = |nodes: &[WideNode]| {
+            nodes.iter().rev().fold(0.0f64, |sum, node| {
+                sum + node.weighted_area(traversal, intersection)
+            })
+        };
+        let runs: Vec<f64> = if self.nodes.len() >= PARALLEL_SAH_MIN_NODES {
+            self.nodes.par_chunks(SAH_CHUNK).map(run).collect()
+        } else {
+            self.nodes.chunks(SAH_CHUNK).map(run).collect()
+        };
+        self.cost_of_runs(&runs, traversal)
+    }
+
+    /// The SAH cost from the per-run sums of `WideNode::weighted_area`.
+    fn cost_of_runs(&self, runs: &[f64], traversal: f32) -> Option<f32> {
         let root = self.nodes.first()?.bounds_union();
         let root_area = f64::from(root.half_area().max(f32::MIN_POSITIVE));
-        let mut cost = f64::from(traversal);
-        for node in &self.nodes {
-            for lane in 0..WIDTH {
-                if node.child[lane] == EMPTY {
-                    continue;
-                }
-                let share = f64::from(node.lane_box(lane).half_area()) / root_area;
-                let step = if node.child[lane] & LEAF != 0 {
-                    node.count[lane] as f32 * intersection
-                } else {
-                    traversal
-                };
-                cost += share * f64::from(step);
-            }
+        let weighted = runs.iter().fold(0.0f64, |a, &b| a + b);
+        Some((f64::from(traversal) + weighted / root_area) as f32)
+    }
+}
+
+/// Nodes per run of the SAH sum (fixed, so the sum's rounding does not depend on threads).
+const SAH_CHUNK: usize = 1024;
+
+/// Past this many nodes the SAH runs are summed on rayon's threads.
+const PARALLEL_SAH_MIN_NODES: usize = 8 * SAH_CHUNK;
+
+impl WideNode {
+    /// The sum over used lanes of the lane box's half area times its cost (`traversal` for
+    /// an inner child, `intersection` per triangle for a leaf). The areas are computed for
+    /// all eight lanes side by side (one vector per row), the same `f32` arithmetic as
+    /// `Aabb::half_area`.
+    #[inline]
+    fn weighted_area(&self, traversal: f32, intersection: f32) -> f64 {
+        let b = &self.bounds;
+        let mut areas = [0f32; WIDTH];
+        for (lane, area) in areas.iter_mut().enumerate() {
+            let (dx, dy, dz) = (
+                b[3][lane] - b[0][lane],
+                b[4][lane] - b[1][lane],
+                b[5][lane] - b[2][lane],
+            );
+            *area = (dx + dy) * dz + dx * dy;
         }
-        Some(cost as f32)
+        let mut sum = 0.0f64;
+        for lane in 0..WIDTH {
+            let child = self.child[lane];
+            if child == EMPTY {
+                continue;
+            }
+            let step = if child & LEAF != 0 {
+                self.count[lane] as f32 * intersection
+            } else {
+                traversal
+            };
+            sum += f64::from(areas[lane]) * f64::from(step);
+        }
+        sum
     }
 }
 
@@ -193,7 +251,10 @@ mod tests {
         for (leaf, aabb) in leaf_boxes.iter().enumerate() {
             full.set_leaf_box(full.leaf_lanes[leaf], aabb);
         }
-        full.refit_inner();
+        let cost = full.refit_inner(1.0, 1.0);
+        // The cost taken on the way up is the cost of the refitted tree, to the bit.
+        assert_eq!(cost, full.sah_cost(1.0, 1.0));
+        assert!(cost.is_some_and(|c| c > 1.0));
         for (a, b) in full.nodes.iter().zip(&wide.nodes) {
             assert_eq!(a.bounds, b.bounds);
         }
