@@ -110,8 +110,15 @@ impl WideBvh {
         all: u64,
         leaf: &mut impl GatheredLeaf,
     ) {
+        // Eight rays per step (one vector compare and mask where the compiler vectorises
+        // it); rays past `rays.len()` are dropped by `all`.
         let live = |limits: &[f32; PACKET]| {
-            (0..rays.len()).fold(0u64, |m, r| m | (u64::from(limits[r] >= 0.0) << r))
+            let mut live = 0u64;
+            for (group, eight) in limits.chunks_exact(8).enumerate() {
+                let bits = (0..8).fold(0u64, |m, k| m | (u64::from(eight[k] >= 0.0) << k));
+                live |= bits << (8 * group);
+            }
+            live & all
         };
         let mut alive = all & live(limits);
         stack[0] = MaybeUninit::new(MaskedEntry {
@@ -146,27 +153,25 @@ impl WideBvh {
                 }
                 ChildRef::Node(index) => {
                     let node = &self.nodes[index as usize];
-                    let mut entered_by = [0u64; WIDTH];
+                    // Per ray, the lanes it enters (zero for the rays not in the mask).
+                    let mut lanes_of = [0u8; PACKET];
                     let mut bits = mask;
                     let (first_near, first_lanes) = {
                         let r = bits.trailing_zeros() as usize;
                         rays[r].enter::<AVX>(node, limits[r])
                     };
-                    let mut lanes_of = first_lanes;
-                    loop {
+                    lanes_of[bits.trailing_zeros() as usize] = first_lanes as u8;
+                    bits &= bits - 1;
+                    while bits != 0 {
                         let r = bits.trailing_zeros() as usize;
                         bits &= bits - 1;
-                        while lanes_of != 0 {
-                            let lane = lanes_of.trailing_zeros() as usize;
-                            lanes_of &= lanes_of - 1;
-                            entered_by[lane] |= 1 << r;
-                        }
-                        if bits == 0 {
-                            break;
-                        }
-                        let next = bits.trailing_zeros() as usize;
-                        lanes_of = rays[next].enter::<AVX>(node, limits[next]).1;
+                        lanes_of[r] = rays[r].enter::<AVX>(node, limits[r]).1 as u8;
                     }
+                    let entered_by = if mask.count_ones() >= TRANSPOSE_MIN_RAYS {
+                        rays_by_lane(&lanes_of, mask)
+                    } else {
+                        rays_by_lane_one_by_one(&lanes_of, mask)
+                    };
                     let mut push = |lane: usize, top: &mut usize| {
                         if entered_by[lane] != 0 && node.child[lane] != EMPTY {
                             stack[*top] = MaybeUninit::new(MaskedEntry {
@@ -201,6 +206,55 @@ impl WideBvh {
     }
 }
 
+/// From this many rays in a node's mask on, [`rays_by_lane`] transposes their lane masks;
+/// fewer (scattered bounce rays) are taken one by one.
+const TRANSPOSE_MIN_RAYS: u32 = 8;
+
+/// [`rays_by_lane`] ray by ray, lane by lane.
+#[inline(always)]
+fn rays_by_lane_one_by_one(lanes_of: &[u8; PACKET], rays: u64) -> [u64; WIDTH] {
+    let mut by_lane = [0u64; WIDTH];
+    let mut bits = rays;
+    while bits != 0 {
+        let r = bits.trailing_zeros() as usize;
+        bits &= bits - 1;
+        let mut lanes = lanes_of[r];
+        while lanes != 0 {
+            by_lane[lanes.trailing_zeros() as usize] |= 1 << r;
+            lanes &= lanes - 1;
+        }
+    }
+    by_lane
+}
+
+/// Per lane, the mask of the rays that enter it, from each ray's mask of lanes
+/// (`lanes_of[r]`, zero for rays outside `rays`): a transpose of a 64 x 8 bit matrix, eight
+/// rays at a time as an 8 x 8 block in one `u64` (Hacker's Delight, `transpose8`), instead
+/// of a loop over each ray's lanes (a branch per lane entered).
+#[inline(always)]
+fn rays_by_lane(lanes_of: &[u8; PACKET], rays: u64) -> [u64; WIDTH] {
+    let mut by_lane = [0u64; WIDTH];
+    for group in 0..PACKET / 8 {
+        if (rays >> (8 * group)) & 0xff == 0 {
+            continue;
+        }
+        // Byte k, bit l: ray 8 * group + k enters lane l.
+        let block: [u8; 8] = lanes_of[8 * group..8 * group + 8].try_into().unwrap();
+        let mut x = u64::from_le_bytes(block);
+        let t = (x ^ (x >> 7)) & 0x00AA_00AA_00AA_00AA;
+        x ^= t ^ (t << 7);
+        let t = (x ^ (x >> 14)) & 0x0000_CCCC_0000_CCCC;
+        x ^= t ^ (t << 14);
+        let t = (x ^ (x >> 28)) & 0x0000_0000_F0F0_F0F0;
+        x ^= t ^ (t << 28);
+        // Now byte l, bit k: ray 8 * group + k enters lane l.
+        for (lane, by) in by_lane.iter_mut().enumerate() {
+            *by |= ((x >> (8 * lane)) & 0xff) << (8 * group);
+        }
+    }
+    by_lane
+}
+
 /// One masked walk as a [`simd::Kernel`] (see `walk::Walk`).
 struct MaskedWalk<'a, G, const ORDERED: bool> {
     bvh: &'a WideBvh,
@@ -223,5 +277,49 @@ impl<G: GatheredLeaf, const ORDERED: bool> simd::Kernel for MaskedWalk<'_, G, OR
             self.all,
             self.leaf,
         )
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn rays_by_lane_transposes_every_ray_s_lanes() {
+        // Deterministic pseudo-random masks, with whole groups of rays left out.
+        let mut state = 0x9E37_79B9_7F4A_7C15u64;
+        let mut next = || {
+            state ^= state << 13;
+            state ^= state >> 7;
+            state ^= state << 17;
+            state
+        };
+        for round in 0..200 {
+            let rays = match round % 4 {
+                0 => u64::MAX,
+                1 => next() & 0x00FF_FF00_0000_FFFF,
+                _ => next(),
+            };
+            let mut lanes_of = [0u8; PACKET];
+            for (r, lanes) in lanes_of.iter_mut().enumerate() {
+                if rays & (1 << r) != 0 {
+                    *lanes = next() as u8;
+                }
+            }
+            let mut expected = [0u64; WIDTH];
+            for (r, &lanes) in lanes_of.iter().enumerate() {
+                for (lane, e) in expected.iter_mut().enumerate() {
+                    if lanes & (1 << lane) != 0 {
+                        *e |= 1 << r;
+                    }
+                }
+            }
+            assert_eq!(rays_by_lane(&lanes_of, rays), expected, "round {round}");
+            assert_eq!(
+                rays_by_lane_one_by_one(&lanes_of, rays),
+                expected,
+                "round {round}"
+            );
+        }
     }
 }
