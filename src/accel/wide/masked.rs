@@ -31,8 +31,8 @@ struct MaskedEntry {
     rays: u64,
 }
 
-// Ray masks are one bit per ray.
-const _: () = assert!(PACKET <= 64);
+// Ray masks are one bit per ray; a ray's mask of lanes is one byte.
+const _: () = assert!(PACKET <= 64 && PACKET % 8 == 0 && WIDTH == 8);
 
 impl WideBvh {
     /// Walks the tree once for the rays `rays` (at most [`PACKET`]), ray `r` with limit
