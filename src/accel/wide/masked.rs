@@ -283,17 +283,12 @@ impl<G: GatheredLeaf, const ORDERED: bool> simd::Kernel for MaskedWalk<'_, G, OR
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::accel::wide::test_support::xorshift;
 
     #[test]
     fn rays_by_lane_transposes_every_ray_s_lanes() {
         // Deterministic pseudo-random masks, with whole groups of rays left out.
-        let mut state = 0x9E37_79B9_7F4A_7C15u64;
-        let mut next = || {
-            state ^= state << 13;
-            state ^= state >> 7;
-            state ^= state << 17;
-            state
-        };
+        let mut next = xorshift(0x9E37_79B9_7F4A_7C15);
         for round in 0..200 {
             let rays = match round % 4 {
                 0 => u64::MAX,

@@ -169,21 +169,9 @@ const PARALLEL_SAH_MIN_NODES: usize = 8 * SAH_CHUNK;
 
 impl WideNode {
     /// The sum over used lanes of the lane box's half area times its cost (`traversal` for
-    /// an inner child, `intersection` per triangle for a leaf). The areas are computed for
-    /// all eight lanes side by side (one vector per row), the same `f32` arithmetic as
-    /// `Aabb::half_area`.
+    /// an inner child, `intersection` per triangle for a leaf).
     #[inline]
     fn weighted_area(&self, traversal: f32, intersection: f32) -> f64 {
-        let b = &self.bounds;
-        let mut areas = [0f32; WIDTH];
-        for (lane, area) in areas.iter_mut().enumerate() {
-            let (dx, dy, dz) = (
-                b[3][lane] - b[0][lane],
-                b[4][lane] - b[1][lane],
-                b[5][lane] - b[2][lane],
-            );
-            *area = (dx + dy) * dz + dx * dy;
-        }
         let mut sum = 0.0f64;
         for lane in 0..WIDTH {
             let child = self.child[lane];
@@ -195,7 +183,7 @@ impl WideNode {
             } else {
                 traversal
             };
-            sum += f64::from(areas[lane]) * f64::from(step);
+            sum += f64::from(self.lane_box(lane).half_area()) * f64::from(step);
         }
         sum
     }
