@@ -142,14 +142,20 @@ impl PacketQuery {
     }
 
     /// Fills the query for the occlusion rays `rays` (at most [`PACKET`]), ray `r` searched
-    /// up to `t_max[r]`; rays from several origins get interval bounds too.
-    pub(super) fn fill_occlusion(&mut self, rays: &[(Vec3A, Vec3A)], t_max: &[f32]) {
+    /// up to `t_max[r]`: the packet with interval bounds when the rays converge on one
+    /// point, each ray's own slab constants (for the masked walk) when they do not. Returns
+    /// whether the packet has bounds.
+    pub(super) fn fill_occlusion(&mut self, rays: &[(Vec3A, Vec3A)], t_max: &[f32]) -> bool {
         let n = rays.len().min(PACKET).min(t_max.len());
+        let converging = self.packet.set_converging(&rays[..n], &t_max[..n]);
         for (k, &(origin, direction)) in rays[..n].iter().enumerate() {
             self.sheared[k] = ShearedRay::new(origin, direction);
-            self.boxes[k] = RayBoxes::new(origin, direction);
+            if !converging {
+                self.boxes[k] = RayBoxes::new(origin, direction);
+            }
         }
         self.limits[..n].copy_from_slice(&t_max[..n]);
+        converging
     }
 
     /// Fills the query for closest hits of `rays` (at most [`PACKET`]) from any origins,

@@ -6,7 +6,8 @@
 //! clock starts: primary rays through pixel centres, and from every primary hit the shadow
 //! ray toward every light exactly as the integrator spawns it (`render::shadow_ray_toward`).
 //! Primary rays are closest-hit queries; shadow rays are occlusion queries that stop at the
-//! first hit. Thread counts and repeats are interleaved as in the frame bench.
+//! first hit. Both are timed as the film traces them (packets: a tile's primary rays, and a
+//! tile's shadow rays toward one light) and one ray at a time. Thread counts and repeats are interleaved as in the frame bench.
 
 use std::fmt::Write;
 use std::time::Instant;
@@ -36,7 +37,7 @@ impl RayKinds {
             (self, kind),
             (RayKinds::All, _)
                 | (RayKinds::Primary, RayKind::Primary | RayKind::PrimarySingle)
-                | (RayKinds::Shadow, RayKind::Shadow)
+                | (RayKinds::Shadow, RayKind::Shadow | RayKind::ShadowSingle)
         )
     }
 }
@@ -48,7 +49,10 @@ pub enum RayKind {
     Primary,
     /// The same rays one at a time (what packets are measured against).
     PrimarySingle,
+    /// Shadow rays in packets, as the film traces them (a tile's rays toward one light).
     Shadow,
+    /// The same rays one at a time.
+    ShadowSingle,
 }
 
 impl std::fmt::Display for RayKind {
@@ -57,6 +61,7 @@ impl std::fmt::Display for RayKind {
             RayKind::Primary => "primary (packets)",
             RayKind::PrimarySingle => "primary (single)",
             RayKind::Shadow => "shadow",
+            RayKind::ShadowSingle => "shadow (single)",
         })
     }
 }
@@ -68,6 +73,9 @@ type TimedRay = (Vec3A, Vec3A, f32);
 struct FrameRays {
     primary: Vec<TimedRay>,
     shadow: Vec<TimedRay>,
+    /// The shadow rays the film traces together: per tile and light, up to [`PACKET`] at a
+    /// time, as ranges of `shadow`.
+    shadow_packets: Vec<std::ops::Range<usize>>,
 }
 
 /// Rate of one kind of ray at one thread count, over repeats.
@@ -97,7 +105,13 @@ pub fn run_ray_bench(
         .map(|&t| rayon::ThreadPoolBuilder::new().num_threads(t).build())
         .collect::<Result<Vec<_>, _>>()?;
     let mut rates = Vec::new();
-    for kind in [RayKind::Primary, RayKind::PrimarySingle, RayKind::Shadow] {
+    let all = [
+        RayKind::Primary,
+        RayKind::PrimarySingle,
+        RayKind::Shadow,
+        RayKind::ShadowSingle,
+    ];
+    for kind in all {
         if !kinds.includes(kind) {
             continue;
         }
@@ -107,17 +121,16 @@ pub fn run_ray_bench(
         for frame in frames.clone() {
             let prepared = renderer.prepare(frame, clock.time(frame))?;
             let generated = frame_rays(renderer, &prepared);
-            let list = match kind {
-                RayKind::Primary | RayKind::PrimarySingle => &generated.primary,
-                RayKind::Shadow => &generated.shadow,
+            rays += match kind {
+                RayKind::Primary | RayKind::PrimarySingle => generated.primary.len(),
+                RayKind::Shadow | RayKind::ShadowSingle => generated.shadow.len(),
             };
-            rays += list.len();
             let bvh = renderer.frame_scene(&prepared).bvh;
             for repeat in 0..repeats {
                 for k in 0..threads.len() {
                     let c = (k + repeat) % threads.len();
                     let start = Instant::now();
-                    let n = pools[c].install(|| trace_all(kind, &bvh, list));
+                    let n = pools[c].install(|| trace_all(kind, &bvh, &generated));
                     seconds[c][repeat] += start.elapsed().as_secs_f64();
                     if repeat == 0 && k == 0 {
                         hits += n;
@@ -158,48 +171,118 @@ fn frame_rays(renderer: &Renderer, prepared: &crate::frame::PreparedFrame) -> Fr
             (camera.eye, d, f32::INFINITY)
         })
         .collect();
-    let shadow = primary
+    // Per tile, per light, the shadow rays of the tile's hits in pixel order (the film's
+    // grouping: `render::tile` traces a tile's requests light by light).
+    let tiles: Vec<std::ops::Range<usize>> = (0..tiles_x * h.div_ceil(TILE))
+        .scan(0usize, |start, tile| {
+            let (x0, y0) = ((tile % tiles_x) * TILE, (tile / tiles_x) * TILE);
+            let pixels = ((x0 + TILE).min(w) - x0) * ((y0 + TILE).min(h) - y0);
+            let range = *start..*start + pixels as usize;
+            *start = range.end;
+            Some(range)
+        })
+        .collect();
+    let per_tile: Vec<Vec<Vec<TimedRay>>> = tiles
         .par_iter()
-        .flat_map_iter(|&(o, d, t_max)| {
-            let hit = scene.bvh.closest_hit(o, d, t_max);
-            let scene = &scene;
+        .map(|range| {
+            let tile = &primary[range.clone()];
+            let hits: Vec<_> = tile
+                .iter()
+                .map(|&(o, d, t_max)| (o, d, scene.bvh.closest_hit(o, d, t_max)))
+                .collect();
             prepared
                 .lights
                 .iter()
-                .filter_map(move |light| shadow_ray_toward(scene, hit?, o, d, light))
+                .map(|light| {
+                    hits.iter()
+                        .filter_map(|&(o, d, hit)| shadow_ray_toward(&scene, hit?, o, d, light))
+                        .collect()
+                })
+                .collect()
         })
         .collect();
-    FrameRays { primary, shadow }
+    let mut shadow = Vec::new();
+    let mut shadow_packets = Vec::new();
+    for group in per_tile.into_iter().flatten() {
+        let start = shadow.len();
+        shadow.extend(group);
+        for at in (start..shadow.len()).step_by(PACKET) {
+            shadow_packets.push(at..(at + PACKET).min(shadow.len()));
+        }
+    }
+    FrameRays {
+        primary,
+        shadow,
+        shadow_packets,
+    }
 }
 
-/// Traces `rays` on the current pool; returns how many hit (primary) or were blocked
-/// (shadow).
-fn trace_all(kind: RayKind, bvh: &SceneBvh, rays: &[TimedRay]) -> usize {
-    rays.par_chunks(1024)
-        .map(|chunk| match kind {
-            RayKind::Primary => chunk
-                .chunks(PACKET)
-                .map(|packet| {
-                    let mut pairs = [(Vec3A::ZERO, Vec3A::ZERO); PACKET];
-                    for (pair, &(o, d, _)) in pairs.iter_mut().zip(packet) {
-                        *pair = (o, d);
-                    }
-                    let mut hits = [None; PACKET];
-                    let n = packet.len();
-                    bvh.closest_hits(&pairs[..n], f32::INFINITY, &mut hits[..n]);
-                    hits[..n].iter().filter(|h| h.is_some()).count()
-                })
-                .sum(),
-            RayKind::PrimarySingle => chunk
-                .iter()
-                .filter(|&&(o, d, t_max)| bvh.closest_hit(o, d, t_max).is_some())
-                .count(),
-            RayKind::Shadow => chunk
-                .iter()
-                .filter(|&&(o, d, t_max)| !bvh.visit_hits(o, d, t_max, |_, _, _| false))
-                .count(),
-        })
-        .sum()
+/// Traces a frame's rays of kind `kind` on the current pool; returns how many hit
+/// (primary) or were blocked (shadow).
+fn trace_all(kind: RayKind, bvh: &SceneBvh, rays: &FrameRays) -> usize {
+    match kind {
+        RayKind::Primary => rays
+            .primary
+            .par_chunks(1024)
+            .map(|chunk| {
+                chunk
+                    .chunks(PACKET)
+                    .map(|packet| {
+                        let mut pairs = [(Vec3A::ZERO, Vec3A::ZERO); PACKET];
+                        for (pair, &(o, d, _)) in pairs.iter_mut().zip(packet) {
+                            *pair = (o, d);
+                        }
+                        let mut hits = [None; PACKET];
+                        let n = packet.len();
+                        bvh.closest_hits(&pairs[..n], f32::INFINITY, &mut hits[..n]);
+                        hits[..n].iter().filter(|h| h.is_some()).count()
+                    })
+                    .sum::<usize>()
+            })
+            .sum(),
+        RayKind::PrimarySingle => rays
+            .primary
+            .par_chunks(1024)
+            .map(|chunk| {
+                chunk
+                    .iter()
+                    .filter(|&&(o, d, t_max)| bvh.closest_hit(o, d, t_max).is_some())
+                    .count()
+            })
+            .sum(),
+        RayKind::Shadow => rays
+            .shadow_packets
+            .par_chunks(16)
+            .map(|packets| {
+                packets
+                    .iter()
+                    .map(|range| {
+                        let packet = &rays.shadow[range.clone()];
+                        let mut pairs = [(Vec3A::ZERO, Vec3A::ZERO); PACKET];
+                        let mut limits = [0.0f32; PACKET];
+                        for (k, &(o, d, t_max)) in packet.iter().enumerate() {
+                            pairs[k] = (o, d);
+                            limits[k] = t_max;
+                        }
+                        let n = packet.len();
+                        let stopped =
+                            bvh.visit_hits_packet(&pairs[..n], &limits[..n], |_, _, _, _| false);
+                        stopped.count_ones() as usize
+                    })
+                    .sum::<usize>()
+            })
+            .sum(),
+        RayKind::ShadowSingle => rays
+            .shadow
+            .par_chunks(1024)
+            .map(|chunk| {
+                chunk
+                    .iter()
+                    .filter(|&&(o, d, t_max)| !bvh.visit_hits(o, d, t_max, |_, _, _| false))
+                    .count()
+            })
+            .sum(),
+    }
 }
 
 /// Rate of one class of a ray file's rays at one thread count, and how many answers

@@ -210,6 +210,11 @@ impl Accel {
     /// tree, until `visit` returns false for that ray. Returns the mask of the rays stopped
     /// early. Each ray meets exactly the triangles [`Accel::visit_hits`] meets for it alone
     /// (the same watertight test per ray and triangle), in another order.
+    ///
+    /// Rays whose segments converge on one point (toward a point light) walk with interval
+    /// bounds over their segments taken backwards from it (one test per node for the whole
+    /// packet, each ray testing only the leaves' boxes); others walk masked (each ray tests
+    /// every node it reaches).
     pub fn visit_hits_packet(
         &self,
         rays: &[(Vec3A, Vec3A)],
@@ -221,8 +226,9 @@ impl Accel {
             return 0;
         }
         PacketQuery::with_filled(
-            |q| q.fill_occlusion(&rays[..n], &t_max[..n]),
+            |_| {},
             |q| {
+                let converging = q.fill_occlusion(&rays[..n], &t_max[..n]);
                 let mut ceilings = [0.0f32; PACKET];
                 ceilings[..n].copy_from_slice(&t_max[..n]);
                 let mut leaf = AnyHitPacketLeaf {
@@ -232,8 +238,13 @@ impl Accel {
                     visit,
                     stopped: 0,
                 };
-                self.wide
-                    .traverse_masked(&q.boxes[..n], &mut q.limits, &mut leaf);
+                if converging {
+                    self.wide
+                        .traverse_packet_gathered(&q.packet, &mut q.limits, &mut leaf);
+                } else {
+                    self.wide
+                        .traverse_masked(&q.boxes[..n], &mut q.limits, &mut leaf);
+                }
                 leaf.stopped
             },
         )

@@ -274,7 +274,8 @@ fn a_packet_finds_what_each_of_its_rays_finds_alone() {
 /// A packet of occlusion rays meets, for each ray, exactly the triangles the ray meets
 /// alone (every hit, with the same distance bits), and a visitor that stops a ray stops it
 /// as it would alone: rays from a tile's surface points converging on a light (several
-/// origins, interval bounds), scattered rays (no bounds), and rays whose search ends short.
+/// origins, bounds over their segments taken backwards from the light), scattered rays
+/// (the masked walk), and rays whose search ends short.
 #[test]
 fn an_occlusion_packet_meets_what_each_of_its_rays_meets_alone() {
     let mut rng = Rng(0x0dd_b1ade);
@@ -303,6 +304,9 @@ fn an_occlusion_packet_meets_what_each_of_its_rays_meets_alone() {
     for rays in [&converging[..], &scattered[..], &converging[..11]] {
         let pairs: Vec<(Vec3A, Vec3A)> = rays.iter().map(|&(o, d, _)| (o, d)).collect();
         let limits: Vec<f32> = rays.iter().map(|r| r.2).collect();
+        // The converging rays walk with bounds over their segments, the scattered masked.
+        let bounded = crate::accel::wide::RayPacket::new(&[]).set_converging(&pairs, &limits);
+        assert_eq!(bounded, std::ptr::eq(rays.as_ptr(), converging.as_ptr()));
         // Every hit.
         let mut seen = vec![Vec::new(); rays.len()];
         let stopped = accel.visit_hits_packet(&pairs, &limits, |r, slot, t| {

@@ -40,10 +40,19 @@ pub struct RayPacket {
     len: usize,
 }
 
-/// Bounds on the slab distances of every ray of a packet sharing one origin.
+/// Bounds on the slab distances of every ray of a packet sharing one origin (or of the
+/// reversed segments of occlusion rays converging on one point, with boxes grown by a
+/// margin: [`Frustum::converging`]).
 #[derive(Clone, Copy)]
 struct Frustum {
-    origin: [Lanes; 3],
+    /// Per axis, the origin the front planes and the back planes are measured from: both
+    /// the shared origin, or moved by the margin so that each box is tested grown by it
+    /// (the front plane moved back, the back plane moved out).
+    front_origin: [Lanes; 3],
+    back_origin: [Lanes; 3],
+    /// The limit the bounds are tested against when it is not the packet's own (the
+    /// reversed segments' end, 1).
+    fixed_limit: Option<f32>,
     /// Per axis, the smallest and largest inverse direction component over the packet.
     inverse_min: [Lanes; 3],
     inverse_max: [Lanes; 3],
@@ -72,6 +81,27 @@ impl RayPacket {
     /// Refills the packet with `rays` (at most [`PACKET`]; more are ignored).
     #[inline]
     pub fn set(&mut self, rays: &[(Vec3A, Vec3A)]) {
+        self.set_rays(rays);
+        self.frustum = Frustum::of(&self.origin, &self.inverse, self.len);
+    }
+
+    /// Refills the packet with the occlusion rays `rays` (at most [`PACKET`]), ray `r`
+    /// searched up to `t_max[r]`, and gives it interval bounds when their segments converge
+    /// on one point (a tile's shadow rays toward a point light): see
+    /// [`Frustum::converging`]. Returns whether it has them; without them the walk is the
+    /// ranged one (a packet from several origins), and the masked walk suits such rays
+    /// better.
+    #[inline]
+    pub fn set_converging(&mut self, rays: &[(Vec3A, Vec3A)], t_max: &[f32]) -> bool {
+        self.set_rays(rays);
+        let len = self.len.min(t_max.len());
+        self.frustum = Frustum::converging(&rays[..len], &t_max[..len]);
+        self.frustum.is_some()
+    }
+
+    /// The rays' slab constants, without interval bounds.
+    #[inline]
+    fn set_rays(&mut self, rays: &[(Vec3A, Vec3A)]) {
         let len = rays.len().min(PACKET);
         self.len = len;
         // Directions into `inverse`, inverted there four at a time (the same IEEE division
@@ -87,7 +117,6 @@ impl RayPacket {
                 safe_inverse4(Vec4::from_slice(group)).write_to_slice(group);
             }
         }
-        self.frustum = Frustum::of(&self.origin, &self.inverse, len);
     }
 
     /// Ray `r`'s slab constants.
@@ -168,8 +197,113 @@ impl Frustum {
         if len == 0 {
             return None;
         }
+        for row in origin {
+            let o = row[0].to_bits();
+            if row[..len].iter().any(|v| v.to_bits() != o) {
+                return None;
+            }
+        }
+        let shared = [0, 1, 2].map(|axis| Lanes::splat(origin[axis][0]));
+        Frustum::over_inverses(shared, shared, inverse, len)
+    }
+
+    /// Bounds over the segments of occlusion rays `rays` (`(origin, direction)`, ray `r`
+    /// searched for `t` in `[0, t_max[r]]`) walked backwards from one point, or `None` when
+    /// they do not converge closely enough for the bounds to prune.
+    ///
+    /// Why it is exact: the apex `a` is the middle of the segments' far ends, each within
+    /// `spread` of it per axis. Ray `r` backwards is `a + s (o_r - a)`, `s` in `[0, 1]`; at
+    /// `s = 1 - u` it is within `u * spread` of the forward ray's point at `u * t_max[r]`, so
+    /// every point of the forward segment lies within `spread` of the backward one. The
+    /// bounds test each box grown by a margin of `spread` plus `2^-16` of the largest
+    /// coordinate or length involved, which is more than 30 times what rounding can move a
+    /// box test (a few units in the last place of those values, and the robust far factor
+    /// of the forward ray's own test). So a box a ray's own slab test enters is entered by
+    /// the grown box's backward segment in real numbers, whose rounded slab distances lie
+    /// within the bounds (one shared origin, as in [`Frustum::of`]): the test never drops a
+    /// box a ray enters. The leaves' boxes are still tested by each ray forward, as alone.
+    fn converging(rays: &[(Vec3A, Vec3A)], t_max: &[f32]) -> Option<Frustum> {
+        let len = rays.len().min(t_max.len()).min(PACKET);
+        if len == 0 {
+            return None;
+        }
+        let (mut low, mut high) = (Vec3A::INFINITY, Vec3A::NEG_INFINITY);
+        let mut scale = 0.0f32;
+        for (&(origin, direction), &t) in rays[..len].iter().zip(t_max) {
+            let reach = direction * t;
+            let end = origin + reach;
+            low = low.min(end);
+            high = high.max(end);
+            scale = scale
+                .max(origin.abs().max_element())
+                .max(end.abs().max_element())
+                .max(reach.abs().max_element());
+        }
+        // Catches NaN and infinite ends (a directional light's rays have no end).
+        if !(scale < f32::MAX) {
+            return None;
+        }
+        let apex = (low + high) * 0.5;
+        let margin = (high - low).max_element() * 0.5 + scale * CONVERGING_SLACK;
+        let mut backwards = [[0.0f32; PACKET]; 3];
+        let (mut spread_low, mut spread_high) = (Vec3A::INFINITY, Vec3A::NEG_INFINITY);
+        let mut shortest = f32::INFINITY;
+        for (r, &(origin, _)) in rays[..len].iter().enumerate() {
+            let back = origin - apex;
+            let length = back.length();
+            shortest = shortest.min(length);
+            let unit = back / length;
+            spread_low = spread_low.min(unit);
+            spread_high = spread_high.max(unit);
+            for (row, value) in backwards.iter_mut().zip(back.to_array()) {
+                row[r] = value;
+            }
+        }
+        // Rays whose far ends scatter (directional lights, rays from several bounces) or
+        // whose directions fan out: their bounds would keep nearly every box.
+        let fans_out = (spread_high - spread_low).max_element() > CONVERGING_SPREAD_MAX;
+        if !(margin <= shortest * CONVERGING_MARGIN_MAX) || fans_out {
+            return None;
+        }
+        for row in &mut backwards {
+            for group in row[..len.next_multiple_of(4)].chunks_exact_mut(4) {
+                safe_inverse4(Vec4::from_slice(group)).write_to_slice(group);
+            }
+        }
+        let mut frustum = Frustum::over_inverses(
+            [0, 1, 2].map(|axis| Lanes::splat(apex[axis])),
+            [0, 1, 2].map(|axis| Lanes::splat(apex[axis])),
+            &backwards,
+            len,
+        )?;
+        for axis in 0..3 {
+            // Positive along the axis: the lower plane is the front one; grown, it moves
+            // down by the margin, which is measuring it from `apex + margin`.
+            let up = frustum.front[axis] == axis;
+            let (front, back) = if up {
+                (apex[axis] + margin, apex[axis] - margin)
+            } else {
+                (apex[axis] - margin, apex[axis] + margin)
+            };
+            frustum.front_origin[axis] = Lanes::splat(front);
+            frustum.back_origin[axis] = Lanes::splat(back);
+        }
+        frustum.fixed_limit = Some(1.0 + CONVERGING_SLACK);
+        Some(frustum)
+    }
+
+    /// The bounds of the first `len` inverse directions of `inverse[axis][ray]` from the
+    /// given front and back origins, or `None` when one is NaN.
+    fn over_inverses(
+        front_origin: [Lanes; 3],
+        back_origin: [Lanes; 3],
+        inverse: &[[f32; PACKET]; 3],
+        len: usize,
+    ) -> Option<Frustum> {
         let mut frustum = Frustum {
-            origin: [0, 1, 2].map(|axis| Lanes::splat(origin[axis][0])),
+            front_origin,
+            back_origin,
+            fixed_limit: None,
             inverse_min: [Lanes::splat(0.0); 3],
             inverse_max: [Lanes::splat(0.0); 3],
             front: [0; 3],
@@ -177,10 +311,6 @@ impl Frustum {
             agreeing: 0,
         };
         for axis in 0..3 {
-            let o = origin[axis][0].to_bits();
-            if origin[axis][..len].iter().any(|v| v.to_bits() != o) {
-                return None;
-            }
             // Four at a time; the slots of the last group past `len` repeat ray 0.
             let row = &inverse[axis];
             let first = Vec4::splat(row[0]);
@@ -221,18 +351,32 @@ impl Frustum {
             if self.agreeing & (1 << axis) == 0 {
                 continue;
             }
-            let front = Lanes(node.bounds[self.front[axis]]).sub::<AVX>(self.origin[axis]);
-            let back = Lanes(node.bounds[self.back[axis]]).sub::<AVX>(self.origin[axis]);
+            let front = Lanes(node.bounds[self.front[axis]]).sub::<AVX>(self.front_origin[axis]);
+            let back = Lanes(node.bounds[self.back[axis]]).sub::<AVX>(self.back_origin[axis]);
             let (low, high) = (self.inverse_min[axis], self.inverse_max[axis]);
             near = near.max::<AVX>(front.mul::<AVX>(low).min::<AVX>(front.mul::<AVX>(high)));
             far = far.min::<AVX>(back.mul::<AVX>(low).max::<AVX>(back.mul::<AVX>(high)));
         }
         let far = far
             .mul::<AVX>(Lanes::splat(ROBUST_FAR))
-            .min::<AVX>(Lanes::splat(t_max));
+            .min::<AVX>(Lanes::splat(self.fixed_limit.unwrap_or(t_max)));
         (near, near.le_mask::<AVX>(far))
     }
 }
+
+/// The margin of [`Frustum::converging`] beyond the spread of the segments' ends, as a
+/// fraction of the largest coordinate or length involved (2^-16).
+const CONVERGING_SLACK: f32 = 1.0 / 65536.0;
+
+/// Converging rays get bounds only when the margin is at most this fraction of the
+/// shortest segment: beyond it the grown boxes keep most of what a ray alone would skip.
+const CONVERGING_MARGIN_MAX: f32 = 1.0 / 16.0;
+
+/// Converging rays get bounds only when their unit directions differ by at most this much
+/// along every axis. Measured on BART Kitchen frame 400 (a tile's shadow rays toward its
+/// light): bounds from a spread of 0.05 to 0.15 traced the primary hits' shadow rays 1.7x
+/// faster than the masked walk, and wider spreads (shadow rays of mirrored hits) lost to it.
+const CONVERGING_SPREAD_MAX: f32 = 0.1;
 
 /// A pending subtree of a packet walk: the child (as in [`WideNode::child`]) with its leaf
 /// count, the first ray of the packet that enters it, and the node and lane holding its box
@@ -708,6 +852,134 @@ mod tests {
             dropped > 500 && kept > 100,
             "dropped {dropped}, kept {kept}"
         );
+    }
+
+    /// Shadow rays from surface points toward a point light, as the integrator makes them:
+    /// origin lifted off the surface along a normal, unit direction taken from the surface
+    /// point, search ending short of the light. `scale` moves the whole scene (huge
+    /// coordinates); `axis_aligned` puts the light straight above one of the points (a ray
+    /// with zero x and z components).
+    fn shadow_rays(
+        next: &mut impl FnMut() -> f32,
+        scale: f32,
+        axis_aligned: bool,
+    ) -> (Vec<(Vec3A, Vec3A)>, Vec<f32>) {
+        let offset = Vec3A::splat(scale);
+        let patch = offset + Vec3A::new(next(), next(), next());
+        let light = if axis_aligned {
+            patch + Vec3A::new(0.0, 6.0 + next().abs(), 0.0)
+        } else {
+            patch + Vec3A::new(next() * 2.0, 6.0 + next().abs(), next() * 2.0)
+        };
+        let normal = Vec3A::new(next(), 2.0, next()).normalize();
+        // The integrator's offset: 1e-5 plus 2^-17 of the coordinates' magnitude.
+        let epsilon = 1e-5 + (patch.abs().max_element()) * 2f32.powi(-17);
+        let count = 1 + (next().abs() * 31.5) as usize;
+        let (mut rays, mut limits) = (Vec::new(), Vec::new());
+        for i in 0..count {
+            let point = if i == 0 {
+                patch
+            } else {
+                patch + Vec3A::new(next(), next() * 0.1, next()) * 0.1
+            };
+            let offset = light - point;
+            let distance = offset.length();
+            rays.push((point + normal * epsilon, offset / distance));
+            limits.push(distance * (1.0 - 1e-4) - epsilon);
+        }
+        (rays, limits)
+    }
+
+    /// A node whose boxes lie on or against the rays' segments: around a point of a
+    /// segment, with a face through that point, through a ray's origin, or flat.
+    fn node_along(
+        next: &mut impl FnMut() -> f32,
+        rays: &[(Vec3A, Vec3A)],
+        limits: &[f32],
+    ) -> WideNode {
+        let mut node = WideNode::UNUSED;
+        for lane in 0..WIDTH {
+            let r = (next().abs() * 1000.0) as usize % rays.len();
+            let (origin, direction) = rays[r];
+            let u = [0.0, 1.0, next().abs() * 0.5][lane % 3];
+            let point = origin + direction * (limits[r] * u);
+            let size = Vec3A::new(next(), next(), next()).abs() * 0.05;
+            let (low, high) = match lane % 4 {
+                0 => (point - size, point + size),
+                1 => (point, point + size),
+                2 => (point - size, point),
+                _ => (point - size * Vec3A::X, point + size * Vec3A::X),
+            };
+            // Pushed off the segment by a sliver now and then: near misses.
+            let sliver = Vec3A::new(next(), next(), next()) * 1e-3 * (lane % 2) as f32;
+            node.set_box(lane, &Aabb::new(low + sliver, high + sliver));
+            node.child[lane] = lane as u32 + 1;
+        }
+        node
+    }
+
+    #[test]
+    fn converging_bounds_never_drop_a_box_a_ray_enters_and_drop_some() {
+        let mut next = stream(0x6a09e667f3bcc908);
+        let (mut dropped, mut kept, mut bounded) = (0, 0, 0);
+        for round in 0..2000 {
+            // Far from the origin: coordinates 1e4 times the packet's size (at 1e5 the
+            // margin's share of the coordinates outgrows a shadow ray of a few units, and
+            // such packets walk masked).
+            let scale = [0.0, 1e4, -8e3, 0.0][round % 4];
+            let (rays, limits) = shadow_rays(&mut next, scale, round % 5 == 0);
+            let mut packet = RayPacket::new(&[]);
+            if !packet.set_converging(&rays, &limits) {
+                continue;
+            }
+            bounded += 1;
+            let frustum = packet.frustum.as_ref().unwrap();
+            for _ in 0..4 {
+                let node = node_along(&mut next, &rays, &limits);
+                let (_, may) = frustum.may_enter::<false>(&node, 0.0);
+                let any = rays.iter().zip(&limits).fold(0, |m, (&(o, d), &t)| {
+                    m | RayBoxes::new(o, d).enter::<false>(&node, t).1
+                });
+                assert_eq!(
+                    any & !may,
+                    0,
+                    "round {round}: a lane some ray enters was dropped"
+                );
+                if crate::simd::Isa::cpu_has_avx2() {
+                    assert_eq!(frustum.may_enter::<true>(&node, 0.0).1, may);
+                }
+                dropped += (((1 << WIDTH) - 1) & !may).count_ones();
+                kept += may.count_ones();
+            }
+        }
+        assert!(
+            bounded > 1000 && dropped > 500 && kept > 5000,
+            "bounded {bounded}, dropped {dropped}, kept {kept}"
+        );
+    }
+
+    /// Rays that do not converge (scattered, or parallel toward a directional light with no
+    /// end) get no bounds, so they walk masked.
+    #[test]
+    fn only_converging_occlusion_rays_get_bounds() {
+        let mut next = stream(0xbb67ae8584caa73b);
+        let (rays, limits) = shadow_rays(&mut next, 0.0, false);
+        assert!(RayPacket::new(&[]).set_converging(&rays, &limits));
+        let infinite = vec![f32::INFINITY; rays.len()];
+        assert!(!RayPacket::new(&[]).set_converging(&rays, &infinite));
+        let scattered: Vec<(Vec3A, Vec3A)> = (0..40)
+            .map(|_| {
+                let o = Vec3A::new(next(), next(), next()) * 4.0;
+                (
+                    o,
+                    (Vec3A::new(next(), next(), next()) - o * 0.3).normalize(),
+                )
+            })
+            .collect();
+        assert!(!RayPacket::new(&[]).set_converging(&scattered, &[5.0; 40]));
+        let nan = vec![f32::NAN; rays.len()];
+        assert!(!RayPacket::new(&[]).set_converging(&rays, &nan));
+        assert!(!RayPacket::new(&[]).set_converging(&[], &[]));
     }
 
     /// The node tests are checked on every CPU: the baseline copy's slab test against the
