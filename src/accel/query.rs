@@ -159,15 +159,22 @@ impl PacketQuery {
     }
 
     /// Fills the query for closest hits of `rays` (at most [`PACKET`]) from any origins,
-    /// walked by the masked traversal (each ray's slab constants), with limit `t_max`.
-    pub(super) fn fill_masked(&mut self, rays: &[(Vec3A, Vec3A)], t_max: f32) {
+    /// with limit `t_max`: the packet with interval bounds when the rays' lines pass through
+    /// one point behind them (`extent`: the largest coordinate of the tree's boxes), each
+    /// ray's own slab constants (for the masked walk) when they do not. Returns whether the
+    /// packet has bounds.
+    pub(super) fn fill_masked(&mut self, rays: &[(Vec3A, Vec3A)], t_max: f32, extent: f32) -> bool {
         let n = rays.len().min(PACKET);
+        let bounded = self.packet.set_with_apex(&rays[..n], extent);
         for (k, &(origin, direction)) in rays[..n].iter().enumerate() {
             self.sheared[k] = ShearedRay::new(origin, direction);
-            self.boxes[k] = RayBoxes::new(origin, direction);
+            if !bounded {
+                self.boxes[k] = RayBoxes::new(origin, direction);
+            }
         }
         self.best[..n].fill(Closest::default());
         self.limits.fill(t_max);
+        bounded
     }
 
     /// Runs `query` on this thread's query filled for `rays` with limit `t_max` (a fresh

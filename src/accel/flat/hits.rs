@@ -64,8 +64,10 @@ impl Accel {
     }
 
     /// [`Accel::closest_hits`] for rays from any origins (a bounce's reflected or refracted
-    /// rays), walked together by the masked traversal: each ray tests every node alone, so
-    /// `hits[i]` is exactly what `closest_hit` returns for ray `i`.
+    /// rays), walked together: with interval bounds when their lines pass through one point
+    /// behind them (rays off a plane mirror), else by the masked traversal (each ray tests
+    /// every node alone). Either way `hits[i]` is exactly what `closest_hit` returns for
+    /// ray `i`.
     pub fn closest_hits_masked(
         &self,
         rays: &[(Vec3A, Vec3A)],
@@ -76,26 +78,33 @@ impl Accel {
         if n == 0 {
             return;
         }
+        let extent = self
+            .wide
+            .root_box()
+            .map_or(0.0, |b| b.min.abs().max(b.max.abs()).max_element());
         PacketQuery::with_filled(
-            |q| q.fill_masked(&rays[..n], t_max),
+            |_| {},
             |q| {
+                let bounded = q.fill_masked(&rays[..n], t_max, extent);
                 let PacketQuery {
+                    packet,
                     sheared,
                     best,
                     limits,
                     boxes,
                     ..
                 } = q;
-                self.wide.traverse_masked_ordered(
-                    &boxes[..n],
-                    limits,
-                    ClosestPacketLeaf {
-                        accel: self,
-                        within: &Within::world(),
-                        sheared,
-                        best,
-                    },
-                );
+                let leaf = ClosestPacketLeaf {
+                    accel: self,
+                    within: &Within::world(),
+                    sheared,
+                    best,
+                };
+                if bounded {
+                    self.wide.traverse_packet_gathered(packet, limits, leaf);
+                } else {
+                    self.wide.traverse_masked_ordered(&boxes[..n], limits, leaf);
+                }
                 for (hit, best) in hits.iter_mut().zip(&best[..n]) {
                     *hit = best.hit;
                 }

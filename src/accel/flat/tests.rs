@@ -248,11 +248,26 @@ fn a_packet_finds_what_each_of_its_rays_finds_alone() {
             (origin, (rng.point(2.0) - origin * 0.05).normalize())
         })
         .collect();
+    // The block reflected by a mirror at z = 35 facing the soup: rays from several
+    // origins on the mirror whose lines pass through the eye's image behind it (bounds
+    // from that apex), as the camera's rays the other way.
+    let image = Vec3A::new(0.0, 0.0, 30.0);
+    let mirrored: Vec<(Vec3A, Vec3A)> = coherent
+        .iter()
+        .map(|&(_, d)| {
+            let on_mirror = image + d * (5.0 / -d.z);
+            (on_mirror, d)
+        })
+        .collect();
+    assert!(crate::accel::wide::RayPacket::new(&[]).set_with_apex(&mirrored, 30.0));
+    assert!(!crate::accel::wide::RayPacket::new(&[]).set_with_apex(&scattered, 30.0));
     let mut found = 0;
     for (rays, t_max) in [
         (&coherent[..], f32::INFINITY),
         (&scattered[..], f32::INFINITY),
         (&scattered[..13], 25.0),
+        (&mirrored[..], f32::INFINITY),
+        (&mirrored[..23], 50.0),
     ] {
         let mut hits = vec![None; rays.len()];
         accel.closest_hits(rays, t_max, &mut hits);

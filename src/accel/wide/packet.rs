@@ -53,6 +53,12 @@ struct Frustum {
     /// The limit the bounds are tested against when it is not the packet's own (the
     /// reversed segments' end, 1).
     fixed_limit: Option<f32>,
+    /// Where the rays' searches start and what their limits are shifted by, in the bounds'
+    /// distances: 0 for rays from the bounds' origin; for rays that start ahead of an apex
+    /// behind them ([`Frustum::behind`]), the least and the largest distance from the apex
+    /// to a ray's origin.
+    start: f32,
+    limit_shift: f32,
     /// Per axis, the smallest and largest inverse direction component over the packet.
     inverse_min: [Lanes; 3],
     inverse_max: [Lanes; 3],
@@ -96,6 +102,19 @@ impl RayPacket {
         self.set_rays(rays);
         let len = self.len.min(t_max.len());
         self.frustum = Frustum::converging(&rays[..len], &t_max[..len]);
+        self.frustum.is_some()
+    }
+
+    /// Refills the packet with `rays` (at most [`PACKET`]) and gives it interval bounds when
+    /// they share one origin, or when their lines pass through one point behind their
+    /// origins (see [`Frustum::behind`]; `extent`: the largest coordinate of the tree's
+    /// boxes). Returns whether it has bounds.
+    #[inline]
+    pub fn set_with_apex(&mut self, rays: &[(Vec3A, Vec3A)], extent: f32) -> bool {
+        self.set(rays);
+        if self.frustum.is_none() {
+            self.frustum = Frustum::behind(&self.origin, &self.inverse, self.len, extent);
+        }
         self.frustum.is_some()
     }
 
@@ -270,26 +289,98 @@ impl Frustum {
                 safe_inverse4(Vec4::from_slice(group)).write_to_slice(group);
             }
         }
-        let mut frustum = Frustum::over_inverses(
-            [0, 1, 2].map(|axis| Lanes::splat(apex[axis])),
-            [0, 1, 2].map(|axis| Lanes::splat(apex[axis])),
-            &backwards,
-            len,
+        let splat = [0, 1, 2].map(|axis| Lanes::splat(apex[axis]));
+        let mut frustum = Frustum::over_inverses(splat, splat, &backwards, len)?;
+        frustum.grow(apex, margin);
+        frustum.fixed_limit = Some(1.0 + CONVERGING_SLACK);
+        Some(frustum)
+    }
+
+    /// Bounds for rays from several origins whose lines pass (nearly) through one point
+    /// behind them: a tile's rays reflected by a plane mirror, which leave it as if from the
+    /// camera's mirror image. `origin[axis][ray]` and `inverse[axis][ray]` are the packet's
+    /// own (forward) rays; `extent` is the largest coordinate of the scene's boxes. `None`
+    /// when there is no such point, it is not behind every origin, or the rays fan out.
+    ///
+    /// Why it is exact: with the apex `a` found where the first and last rays' lines pass
+    /// closest, ray `r` is `a + e_r + (c_r + t) d_r`, `c_r` the distance along `d_r` from
+    /// the apex to its origin and `e_r` the origin's offset from the line through the apex.
+    /// Per axis its slab distances are those of a ray from `a + e_r` shifted by `c_r`, the
+    /// same shift on every axis, so it enters a box for `t` in `[0, limit]` exactly when that
+    /// ray enters it for distances in `[c_r, c_r + limit]`; and that ray enters the box
+    /// only if the ray from `a` along `d_r` enters it grown by `|e_r|`. The bounds grow
+    /// every box by the largest offset plus `2^-16` of the largest coordinate involved (far
+    /// above rounding, as in [`Frustum::converging`]) and bound the distances from `a` by
+    /// the packet's inverse directions, starting at the least `c_r` and ending at the
+    /// largest `c_r` plus the packet's limit.
+    fn behind(
+        origin: &[[f32; PACKET]; 3],
+        inverse: &[[f32; PACKET]; 3],
+        len: usize,
+        extent: f32,
+    ) -> Option<Frustum> {
+        if len < 2 {
+            return None;
+        }
+        let at = |a: &[[f32; PACKET]; 3], r: usize| Vec3A::new(a[0][r], a[1][r], a[2][r]);
+        // Directions back from the inverses (a zero component stands as 1e30 there; its
+        // inverse 1e-30 is zero for every use below).
+        let direction = |r: usize| Vec3A::ONE / at(inverse, r);
+        let apex = closest_point_of_lines(
+            at(origin, 0),
+            direction(0),
+            at(origin, len - 1),
+            direction(len - 1),
         )?;
+        let mut offset = 0.0f32;
+        let (mut nearest, mut farthest) = (f32::INFINITY, 0.0f32);
+        let mut scale = extent.max(apex.abs().max_element());
+        let (mut spread_low, mut spread_high) = (Vec3A::INFINITY, Vec3A::NEG_INFINITY);
+        for r in 0..len {
+            let d = direction(r);
+            let from_apex = at(origin, r) - apex;
+            let along = from_apex.dot(d) / d.length_squared();
+            offset = offset.max((from_apex - d * along).abs().max_element());
+            nearest = nearest.min(along);
+            farthest = farthest.max(along);
+            scale = scale.max(at(origin, r).abs().max_element());
+            let unit = d.normalize_or_zero();
+            spread_low = spread_low.min(unit);
+            spread_high = spread_high.max(unit);
+        }
+        let margin = offset + scale * CONVERGING_SLACK;
+        let fans_out = (spread_high - spread_low).max_element() > CONVERGING_SPREAD_MAX;
+        // Behind every origin, and far enough behind that the grown boxes stay narrow.
+        if !(nearest > 0.0 && margin <= nearest * CONVERGING_MARGIN_MAX && scale < f32::MAX)
+            || fans_out
+        {
+            return None;
+        }
+        let splat = [0, 1, 2].map(|axis| Lanes::splat(apex[axis]));
+        let mut frustum = Frustum::over_inverses(splat, splat, inverse, len)?;
+        frustum.grow(apex, margin);
+        // Rounding of `along` is covered by the margin in space, not in distance: widen
+        // the distances by the same relative slack.
+        frustum.start = nearest * (1.0 - CONVERGING_SLACK) - margin;
+        frustum.limit_shift = farthest * (1.0 + CONVERGING_SLACK) + margin;
+        Some(frustum)
+    }
+
+    /// Measures the front and back planes from `apex` moved by `margin`, so that every box
+    /// is tested grown by it.
+    fn grow(&mut self, apex: Vec3A, margin: f32) {
         for axis in 0..3 {
             // Positive along the axis: the lower plane is the front one; grown, it moves
             // down by the margin, which is measuring it from `apex + margin`.
-            let up = frustum.front[axis] == axis;
+            let up = self.front[axis] == axis;
             let (front, back) = if up {
                 (apex[axis] + margin, apex[axis] - margin)
             } else {
                 (apex[axis] - margin, apex[axis] + margin)
             };
-            frustum.front_origin[axis] = Lanes::splat(front);
-            frustum.back_origin[axis] = Lanes::splat(back);
+            self.front_origin[axis] = Lanes::splat(front);
+            self.back_origin[axis] = Lanes::splat(back);
         }
-        frustum.fixed_limit = Some(1.0 + CONVERGING_SLACK);
-        Some(frustum)
     }
 
     /// The bounds of the first `len` inverse directions of `inverse[axis][ray]` from the
@@ -304,6 +395,8 @@ impl Frustum {
             front_origin,
             back_origin,
             fixed_limit: None,
+            start: 0.0,
+            limit_shift: 0.0,
             inverse_min: [Lanes::splat(0.0); 3],
             inverse_max: [Lanes::splat(0.0); 3],
             front: [0; 3],
@@ -345,7 +438,7 @@ impl Frustum {
     /// largest limit of the packet's rays). A lane left out is entered by no ray.
     #[inline(always)]
     fn may_enter<const AVX: bool>(&self, node: &WideNode, t_max: f32) -> (Lanes, u32) {
-        let mut near = Lanes::splat(0.0);
+        let mut near = Lanes::splat(self.start);
         let mut far = Lanes::splat(f32::INFINITY);
         for axis in 0..3 {
             if self.agreeing & (1 << axis) == 0 {
@@ -359,9 +452,27 @@ impl Frustum {
         }
         let far = far
             .mul::<AVX>(Lanes::splat(ROBUST_FAR))
-            .min::<AVX>(Lanes::splat(self.fixed_limit.unwrap_or(t_max)));
+            .min::<AVX>(Lanes::splat(
+                self.fixed_limit.unwrap_or(t_max + self.limit_shift),
+            ));
         (near, near.le_mask::<AVX>(far))
     }
+}
+
+/// The point halfway between the closest points of the lines `p + s u` and `q + t v`
+/// (`None` for lines too close to parallel to place it, or values that are not finite).
+fn closest_point_of_lines(p: Vec3A, u: Vec3A, q: Vec3A, v: Vec3A) -> Option<Vec3A> {
+    let w = p - q;
+    let (a, b, c) = (u.dot(u), u.dot(v), v.dot(v));
+    let (d, e) = (u.dot(w), v.dot(w));
+    let denominator = a * c - b * b;
+    if !(denominator > 1e-6 * a * c) {
+        return None;
+    }
+    let s = (b * e - c * d) / denominator;
+    let t = (a * e - b * d) / denominator;
+    let point = ((p + u * s) + (q + v * t)) * 0.5;
+    point.is_finite().then_some(point)
 }
 
 /// The margin of [`Frustum::converging`] beyond the spread of the segments' ends, as a
@@ -956,6 +1067,108 @@ mod tests {
             bounded > 1000 && dropped > 500 && kept > 5000,
             "bounded {bounded}, dropped {dropped}, kept {kept}"
         );
+    }
+
+    /// A tile's rays off a plane mirror: an eye's rays through a block of directions, cut
+    /// at a mirror plane through `patch` with normal `normal` and reflected, so that every
+    /// line passes through the eye's image behind the mirror. `scale` moves it all far
+    /// from the origin.
+    fn mirrored_rays(next: &mut impl FnMut() -> f32, scale: f32) -> Vec<(Vec3A, Vec3A)> {
+        let offset = Vec3A::splat(scale);
+        let eye = offset + Vec3A::new(next(), next(), next());
+        let normal = Vec3A::new(next() * 0.3, 1.0, next() * 0.3).normalize();
+        let patch = eye + Vec3A::new(next(), -3.0 - next().abs(), next());
+        let aim = Vec3A::new(next() * 0.3, -1.0, next() * 0.3);
+        let count = 2 + (next().abs() * 31.0) as usize;
+        (0..count)
+            .map(|i| {
+                let jitter = Vec3A::new((i % 8) as f32, 0.0, (i / 8) as f32) * 0.01;
+                let d = (aim + jitter).normalize();
+                let t = (patch - eye).dot(normal) / d.dot(normal);
+                let hit = eye + d * t;
+                (hit, d - normal * (2.0 * d.dot(normal)))
+            })
+            .collect()
+    }
+
+    #[test]
+    fn bounds_from_an_apex_behind_never_drop_a_box_a_ray_enters_and_drop_some() {
+        let mut next = stream(0x3c6ef372fe94f82b);
+        let (mut dropped, mut kept, mut bounded) = (0, 0, 0);
+        for round in 0..2000 {
+            let scale = [0.0, 1e4, -8e3, 0.0][round % 4];
+            let rays = mirrored_rays(&mut next, scale);
+            let extent = scale.abs() + 10.0;
+            let mut packet = RayPacket::new(&[]);
+            if !packet.set_with_apex(&rays, extent) {
+                continue;
+            }
+            bounded += 1;
+            let frustum = packet.frustum.as_ref().unwrap();
+            let limit = [f32::INFINITY, 4.0, next().abs() * 3.0][round % 3];
+            let limits = vec![limit.min(8.0); rays.len()];
+            for k in 0..4 {
+                let node = if k < 3 {
+                    node_along(&mut next, &rays, &limits)
+                } else {
+                    // Boxes all around the mirror, most of them off the rays.
+                    let mut node = random_node(&mut next);
+                    for lane in 0..WIDTH {
+                        let b = node.lane_box(lane);
+                        node.set_box(lane, &Aabb::new(b.min + rays[0].0, b.max + rays[0].0));
+                    }
+                    node
+                };
+                let (_, may) = frustum.may_enter::<false>(&node, limit);
+                let any = rays.iter().fold(0, |m, &(o, d)| {
+                    m | RayBoxes::new(o, d).enter::<false>(&node, limit).1
+                });
+                assert_eq!(
+                    any & !may,
+                    0,
+                    "round {round}: a lane some ray enters was dropped"
+                );
+                if crate::simd::Isa::cpu_has_avx2() {
+                    assert_eq!(frustum.may_enter::<true>(&node, limit).1, may);
+                }
+                dropped += (((1 << WIDTH) - 1) & !may).count_ones();
+                kept += may.count_ones();
+            }
+        }
+        assert!(
+            bounded > 1000 && dropped > 500 && kept > 5000,
+            "bounded {bounded}, dropped {dropped}, kept {kept}"
+        );
+    }
+
+    /// Rays whose lines meet ahead of them (toward a light), off a curved mirror, or
+    /// scattered get no bounds from an apex; one origin keeps its own bounds.
+    #[test]
+    fn only_rays_from_an_apex_behind_them_get_its_bounds() {
+        let mut next = stream(0x510e527fade682d1);
+        let mirrored = mirrored_rays(&mut next, 0.0);
+        assert!(RayPacket::new(&[]).set_with_apex(&mirrored, 10.0));
+        let ahead: Vec<(Vec3A, Vec3A)> = mirrored.iter().map(|&(o, d)| (o, -d)).collect();
+        assert!(!RayPacket::new(&[]).set_with_apex(&ahead, 10.0));
+        let centre = Vec3A::new(0.0, -5.0, 0.0);
+        let curved: Vec<(Vec3A, Vec3A)> = (0..40)
+            .map(|i| {
+                let d = Vec3A::new((i % 8) as f32 * 0.02 - 0.08, -1.0, (i / 8) as f32 * 0.02)
+                    .normalize();
+                let to_centre = centre;
+                let b = d.dot(to_centre);
+                let t = b - (b * b - to_centre.length_squared() + 4.0).sqrt();
+                let hit = d * t;
+                let n = (hit - centre).normalize();
+                (hit, d - n * (2.0 * d.dot(n)))
+            })
+            .collect();
+        assert!(!RayPacket::new(&[]).set_with_apex(&curved, 10.0));
+        let eye = [
+            (Vec3A::ZERO, Vec3A::X),
+            (Vec3A::ZERO, Vec3A::new(1.0, 0.1, 0.0)),
+        ];
+        assert!(RayPacket::new(&[]).set_with_apex(&eye, 10.0));
     }
 
     /// Rays that do not converge (scattered, or parallel toward a directional light with no
