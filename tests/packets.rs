@@ -17,8 +17,21 @@ use mipray::render::{TraceCounters, render_image};
 /// `L` is the per-ray state type of `lod`.
 fn packets_equal_single_rays<L: RayLod>(animation: &str, frame: u32, spp: u32, lod: LodMethod) {
     let path = Path::new(env!("CARGO_MANIFEST_DIR")).join(format!("animations/{animation}.gltf"));
-    let scene = mipray::scene::load(&path).unwrap();
-    let mut settings = common::scenes::settings(83, 37, lod); // not a multiple of the tile
+    // Not a multiple of the tile.
+    packets_equal_single_rays_at::<L>(&path, (83, 37), frame, spp, lod);
+}
+
+/// [`packets_equal_single_rays`] for the scene at `path` rendered at `size`.
+fn packets_equal_single_rays_at<L: RayLod>(
+    path: &Path,
+    size: (u32, u32),
+    frame: u32,
+    spp: u32,
+    lod: LodMethod,
+) {
+    let animation = path.display();
+    let scene = mipray::scene::load(path).unwrap();
+    let mut settings = common::scenes::settings(size.0, size.1, lod);
     settings.spp = spp;
     let mut renderer = Renderer::new(scene, settings);
     let prepared = renderer.prepare(frame, frame as f32 / 30.0).unwrap();
@@ -72,4 +85,16 @@ fn packets_equal_single_rays_on_every_animation() {
 fn packets_equal_single_rays_when_samples_split_packets() {
     packets_equal_single_rays::<RayCone>("default", 3, 3, LodMethod::Cones);
     packets_equal_single_rays::<RayDiffsAniso>("robots", 3, 5, LodMethod::DiffsAniso);
+}
+
+/// BART Kitchen, whose mirrors and glass send a tile's reflected rays off planes (packets
+/// walked with bounds from the camera's mirror image) and whose shadow rays converge on its
+/// light (bounds over their segments): at a size where a tile's rays are coherent enough
+/// for both.
+#[test]
+fn packets_equal_single_rays_on_bart_kitchen() {
+    let Some(kitchen) = common::shared_data::shared_path("bart/kitchen/aff/kitchen.aff") else {
+        return;
+    };
+    packets_equal_single_rays_at::<PathLength>(&kitchen, (400, 300), 400, 1, LodMethod::Paper);
 }
