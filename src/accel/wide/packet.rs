@@ -113,7 +113,7 @@ impl RayPacket {
     pub fn set_with_apex(&mut self, rays: &[(Vec3A, Vec3A)], extent: f32) -> bool {
         self.set(rays);
         if self.frustum.is_none() {
-            self.frustum = Frustum::behind(&self.origin, &self.inverse, self.len, extent);
+            self.frustum = Frustum::behind(&rays[..self.len], &self.inverse, extent);
         }
         self.frustum.is_some()
     }
@@ -298,8 +298,9 @@ impl Frustum {
 
     /// Bounds for rays from several origins whose lines pass (nearly) through one point
     /// behind them: a tile's rays reflected by a plane mirror, which leave it as if from the
-    /// camera's mirror image. `origin[axis][ray]` and `inverse[axis][ray]` are the packet's
-    /// own (forward) rays; `extent` is the largest coordinate of the scene's boxes. `None`
+    /// camera's mirror image. `rays` are the packet's own (forward) rays and
+    /// `inverse[axis][ray]` their inverse directions; `extent` is the largest coordinate of
+    /// the scene's boxes. `None`
     /// when there is no such point, it is not behind every origin, or the rays fan out.
     ///
     /// Why it is exact: with the apex `a` found where the first and last rays' lines pass
@@ -314,36 +315,42 @@ impl Frustum {
     /// the packet's inverse directions, starting at the least `c_r` and ending at the
     /// largest `c_r` plus the packet's limit.
     fn behind(
-        origin: &[[f32; PACKET]; 3],
+        rays: &[(Vec3A, Vec3A)],
         inverse: &[[f32; PACKET]; 3],
-        len: usize,
         extent: f32,
     ) -> Option<Frustum> {
+        let len = rays.len().min(PACKET);
         if len < 2 {
             return None;
         }
-        let at = |a: &[[f32; PACKET]; 3], r: usize| Vec3A::new(a[0][r], a[1][r], a[2][r]);
-        // Directions back from the inverses (a zero component stands as 1e30 there; its
-        // inverse 1e-30 is zero for every use below).
-        let direction = |r: usize| Vec3A::ONE / at(inverse, r);
-        let apex = closest_point_of_lines(
-            at(origin, 0),
-            direction(0),
-            at(origin, len - 1),
-            direction(len - 1),
-        )?;
+        let ((first, first_d), (last, last_d)) = (rays[0], rays[len - 1]);
+        let apex = closest_point_of_lines(first, first_d, last, last_d)?;
+        // Most bounce packets have no such point: three rays between the two reject them
+        // before the pass over every ray.
+        let near_the_apex = |r: usize| {
+            let (o, d) = rays[r];
+            let from_apex = o - apex;
+            let along = from_apex.dot(d) / d.length_squared();
+            let offset = (from_apex - d * along).abs().max_element();
+            along > 0.0 && offset <= along * d.length() * CONVERGING_MARGIN_MAX
+        };
+        if ![len / 4, len / 2, 3 * len / 4]
+            .into_iter()
+            .all(near_the_apex)
+        {
+            return None;
+        }
         let mut offset = 0.0f32;
         let (mut nearest, mut farthest) = (f32::INFINITY, 0.0f32);
         let mut scale = extent.max(apex.abs().max_element());
         let (mut spread_low, mut spread_high) = (Vec3A::INFINITY, Vec3A::NEG_INFINITY);
-        for r in 0..len {
-            let d = direction(r);
-            let from_apex = at(origin, r) - apex;
+        for &(o, d) in &rays[..len] {
+            let from_apex = o - apex;
             let along = from_apex.dot(d) / d.length_squared();
             offset = offset.max((from_apex - d * along).abs().max_element());
             nearest = nearest.min(along);
             farthest = farthest.max(along);
-            scale = scale.max(at(origin, r).abs().max_element());
+            scale = scale.max(o.abs().max_element());
             let unit = d.normalize_or_zero();
             spread_low = spread_low.min(unit);
             spread_high = spread_high.max(unit);
