@@ -1036,6 +1036,27 @@ mod tests {
         node
     }
 
+    /// The lanes `frustum` keeps of `node` for a packet limit `limit`, after checking that
+    /// they include every lane one of `rays` (ray `r` with limit `limits[r]`) enters by its
+    /// own slab test, and that the AVX2 copy keeps the same lanes.
+    fn assert_bounds_keep_entered_lanes(
+        frustum: &Frustum,
+        node: &WideNode,
+        rays: &[(Vec3A, Vec3A)],
+        limits: &[f32],
+        limit: f32,
+    ) -> u32 {
+        let (_, may) = frustum.may_enter::<false>(node, limit);
+        let any = rays.iter().zip(limits).fold(0, |m, (&(o, d), &t)| {
+            m | RayBoxes::new(o, d).enter::<false>(node, t).1
+        });
+        assert_eq!(any & !may, 0, "a lane some ray enters was dropped");
+        if crate::simd::Isa::cpu_has_avx2() {
+            assert_eq!(frustum.may_enter::<true>(node, limit).1, may);
+        }
+        may
+    }
+
     #[test]
     fn converging_bounds_never_drop_a_box_a_ray_enters_and_drop_some() {
         let mut next = stream(0x6a09e667f3bcc908);
@@ -1054,18 +1075,7 @@ mod tests {
             let frustum = packet.frustum.as_ref().unwrap();
             for _ in 0..4 {
                 let node = node_along(&mut next, &rays, &limits);
-                let (_, may) = frustum.may_enter::<false>(&node, 0.0);
-                let any = rays.iter().zip(&limits).fold(0, |m, (&(o, d), &t)| {
-                    m | RayBoxes::new(o, d).enter::<false>(&node, t).1
-                });
-                assert_eq!(
-                    any & !may,
-                    0,
-                    "round {round}: a lane some ray enters was dropped"
-                );
-                if crate::simd::Isa::cpu_has_avx2() {
-                    assert_eq!(frustum.may_enter::<true>(&node, 0.0).1, may);
-                }
+                let may = assert_bounds_keep_entered_lanes(frustum, &node, &rays, &limits, 0.0);
                 dropped += (((1 << WIDTH) - 1) & !may).count_ones();
                 kept += may.count_ones();
             }
@@ -1113,7 +1123,9 @@ mod tests {
             bounded += 1;
             let frustum = packet.frustum.as_ref().unwrap();
             let limit = [f32::INFINITY, 4.0, next().abs() * 3.0][round % 3];
+            // Boxes are placed along the first 8 units; the rays search as far as `limit`.
             let limits = vec![limit.min(8.0); rays.len()];
+            let searched = vec![limit; rays.len()];
             for k in 0..4 {
                 let node = if k < 3 {
                     node_along(&mut next, &rays, &limits)
@@ -1126,18 +1138,7 @@ mod tests {
                     }
                     node
                 };
-                let (_, may) = frustum.may_enter::<false>(&node, limit);
-                let any = rays.iter().fold(0, |m, &(o, d)| {
-                    m | RayBoxes::new(o, d).enter::<false>(&node, limit).1
-                });
-                assert_eq!(
-                    any & !may,
-                    0,
-                    "round {round}: a lane some ray enters was dropped"
-                );
-                if crate::simd::Isa::cpu_has_avx2() {
-                    assert_eq!(frustum.may_enter::<true>(&node, limit).1, may);
-                }
+                let may = assert_bounds_keep_entered_lanes(frustum, &node, &rays, &searched, limit);
                 dropped += (((1 << WIDTH) - 1) & !may).count_ones();
                 kept += may.count_ones();
             }
