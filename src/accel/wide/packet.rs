@@ -12,6 +12,11 @@
 //!   It is exact in floating point, not only in real numbers: with one shared origin every
 //!   ray computes the same `plane - origin`, and a product rounded to nearest is monotonic
 //!   in each factor, so each ray's rounded distance lies between the rounded bounds.
+//!   Two kinds of packet from several origins get such bounds from a point they nearly
+//!   share, with every box grown by a margin that covers how far they miss it and any
+//!   rounding: occlusion rays whose segments end near one point (a tile's shadow rays toward
+//!   a point light; [`RayPacket::set_converging`]) and rays whose lines pass through one
+//!   point behind them (a tile's rays off a plane mirror; [`RayPacket::set_with_apex`]).
 //! - **Eight rays per box at a leaf**: the rays of the packet are kept as structure of
 //!   arrays too, and a leaf's box is tested against eight rays per SIMD slab test. The
 //!   arithmetic is the scalar test's (the nearer of the two planes is the front one), so
