@@ -148,12 +148,7 @@ impl PacketQuery {
     pub(super) fn fill_occlusion(&mut self, rays: &[(Vec3A, Vec3A)], t_max: &[f32]) -> bool {
         let n = rays.len().min(PACKET).min(t_max.len());
         let converging = self.packet.set_converging(&rays[..n], &t_max[..n]);
-        for (k, &(origin, direction)) in rays[..n].iter().enumerate() {
-            self.sheared[k] = ShearedRay::new(origin, direction);
-            if !converging {
-                self.boxes[k] = RayBoxes::new(origin, direction);
-            }
-        }
+        self.fill_ray_constants(&rays[..n], !converging);
         self.limits[..n].copy_from_slice(&t_max[..n]);
         converging
     }
@@ -166,15 +161,20 @@ impl PacketQuery {
     pub(super) fn fill_masked(&mut self, rays: &[(Vec3A, Vec3A)], t_max: f32, extent: f32) -> bool {
         let n = rays.len().min(PACKET);
         let bounded = self.packet.set_with_apex(&rays[..n], extent);
-        for (k, &(origin, direction)) in rays[..n].iter().enumerate() {
-            self.sheared[k] = ShearedRay::new(origin, direction);
-            if !bounded {
-                self.boxes[k] = RayBoxes::new(origin, direction);
-            }
-        }
+        self.fill_ray_constants(&rays[..n], !bounded);
         self.best[..n].fill(Closest::default());
         self.limits.fill(t_max);
         bounded
+    }
+
+    /// Each ray's hit-test constants, and its own slab constants when it walks `masked`.
+    fn fill_ray_constants(&mut self, rays: &[(Vec3A, Vec3A)], masked: bool) {
+        for (k, &(origin, direction)) in rays.iter().enumerate() {
+            self.sheared[k] = ShearedRay::new(origin, direction);
+            if masked {
+                self.boxes[k] = RayBoxes::new(origin, direction);
+            }
+        }
     }
 
     /// Runs `query` on this thread's query filled for `rays` with limit `t_max` (a fresh

@@ -160,37 +160,24 @@ fn frame_rays(renderer: &Renderer, prepared: &crate::frame::PreparedFrame) -> Fr
     let scene = renderer.frame_scene(prepared);
     let (w, h) = (camera.width, camera.height);
     let tiles_x = w.div_ceil(TILE);
-    let primary: Vec<TimedRay> = (0..tiles_x * h.div_ceil(TILE))
-        .flat_map(|tile| {
+    // Per tile, its primary rays in pixel order and, per light, the shadow rays of their
+    // hits (the film's grouping: `render::tile` traces a tile's requests light by light).
+    let per_tile: Vec<(Vec<TimedRay>, Vec<Vec<TimedRay>>)> = (0..tiles_x * h.div_ceil(TILE))
+        .into_par_iter()
+        .map(|tile| {
             let (x0, y0) = ((tile % tiles_x) * TILE, (tile / tiles_x) * TILE);
-            (y0..(y0 + TILE).min(h))
-                .flat_map(move |y| (x0..(x0 + TILE).min(w)).map(move |x| (x, y)))
-        })
-        .map(|(x, y)| {
-            let d = camera.primary_direction(x as f32 + 0.5, y as f32 + 0.5);
-            (camera.eye, d, f32::INFINITY)
-        })
-        .collect();
-    // Per tile, per light, the shadow rays of the tile's hits in pixel order (the film's
-    // grouping: `render::tile` traces a tile's requests light by light).
-    let tiles: Vec<std::ops::Range<usize>> = (0..tiles_x * h.div_ceil(TILE))
-        .scan(0usize, |start, tile| {
-            let (x0, y0) = ((tile % tiles_x) * TILE, (tile / tiles_x) * TILE);
-            let pixels = ((x0 + TILE).min(w) - x0) * ((y0 + TILE).min(h) - y0);
-            let range = *start..*start + pixels as usize;
-            *start = range.end;
-            Some(range)
-        })
-        .collect();
-    let per_tile: Vec<Vec<Vec<TimedRay>>> = tiles
-        .par_iter()
-        .map(|range| {
-            let tile = &primary[range.clone()];
-            let hits: Vec<_> = tile
+            let primary: Vec<TimedRay> = (y0..(y0 + TILE).min(h))
+                .flat_map(|y| (x0..(x0 + TILE).min(w)).map(move |x| (x, y)))
+                .map(|(x, y)| {
+                    let d = camera.primary_direction(x as f32 + 0.5, y as f32 + 0.5);
+                    (camera.eye, d, f32::INFINITY)
+                })
+                .collect();
+            let hits: Vec<_> = primary
                 .iter()
                 .map(|&(o, d, t_max)| (o, d, scene.bvh.closest_hit(o, d, t_max)))
                 .collect();
-            prepared
+            let shadow = prepared
                 .lights
                 .iter()
                 .map(|light| {
@@ -198,16 +185,21 @@ fn frame_rays(renderer: &Renderer, prepared: &crate::frame::PreparedFrame) -> Fr
                         .filter_map(|&(o, d, hit)| shadow_ray_toward(&scene, hit?, o, d, light))
                         .collect()
                 })
-                .collect()
+                .collect();
+            (primary, shadow)
         })
         .collect();
+    let mut primary = Vec::new();
     let mut shadow = Vec::new();
     let mut shadow_packets = Vec::new();
-    for group in per_tile.into_iter().flatten() {
-        let start = shadow.len();
-        shadow.extend(group);
-        for at in (start..shadow.len()).step_by(PACKET) {
-            shadow_packets.push(at..(at + PACKET).min(shadow.len()));
+    for (tile_primary, tile_shadow) in per_tile {
+        primary.extend(tile_primary);
+        for group in tile_shadow {
+            let start = shadow.len();
+            shadow.extend(group);
+            for at in (start..shadow.len()).step_by(PACKET) {
+                shadow_packets.push(at..(at + PACKET).min(shadow.len()));
+            }
         }
     }
     FrameRays {

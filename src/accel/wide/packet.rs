@@ -60,8 +60,8 @@ struct Frustum {
     fixed_limit: Option<f32>,
     /// Where the rays' searches start and what their limits are shifted by, in the bounds'
     /// distances: 0 for rays from the bounds' origin; for rays that start ahead of an apex
-    /// behind them ([`Frustum::behind`]), the least and the largest distance from the apex
-    /// to a ray's origin.
+    /// behind them, the least and the largest distance from the apex
+    /// to a ray's origin (see [`ApexBounds`]).
     start: f32,
     limit_shift: f32,
     /// Per axis, the smallest and largest inverse direction component over the packet.
@@ -104,21 +104,43 @@ impl RayPacket {
     /// better.
     #[inline]
     pub fn set_converging(&mut self, rays: &[(Vec3A, Vec3A)], t_max: &[f32]) -> bool {
-        self.set_rays(rays);
-        let len = self.len.min(t_max.len());
+        let len = rays.len().min(t_max.len()).min(PACKET);
         self.frustum = Frustum::converging(&rays[..len], &t_max[..len]);
-        self.frustum.is_some()
+        self.set_rays_if_bounded(&rays[..len])
     }
 
     /// Refills the packet with `rays` (at most [`PACKET`]) and gives it interval bounds when
     /// they share one origin, or when their lines pass through one point behind their
-    /// origins (see [`Frustum::behind`]; `extent`: the largest coordinate of the tree's
+    /// origins (see [`ApexBounds::behind`]; `extent`: the largest coordinate of the tree's
     /// boxes). Returns whether it has bounds.
     #[inline]
     pub fn set_with_apex(&mut self, rays: &[(Vec3A, Vec3A)], extent: f32) -> bool {
-        self.set(rays);
-        if self.frustum.is_none() {
-            self.frustum = Frustum::behind(&rays[..self.len], &self.inverse, extent);
+        let rays = &rays[..rays.len().min(PACKET)];
+        let bits = |o: Vec3A| o.to_array().map(f32::to_bits);
+        let one_origin = rays
+            .first()
+            .is_some_and(|&(first, _)| rays.iter().all(|&(o, _)| bits(o) == bits(first)));
+        if one_origin {
+            self.set(rays);
+            return self.frustum.is_some();
+        }
+        let Some(apex) = ApexBounds::behind(rays, extent) else {
+            self.frustum = None;
+            return self.set_rays_if_bounded(rays);
+        };
+        self.set_rays(rays);
+        self.frustum = apex.frustum(&self.inverse, self.len);
+        self.frustum.is_some()
+    }
+
+    /// Makes the rays' slab constants when the packet has bounds; else empties it (a packet
+    /// without bounds walks masked, which never reads them). Returns whether it has bounds.
+    #[inline]
+    fn set_rays_if_bounded(&mut self, rays: &[(Vec3A, Vec3A)]) -> bool {
+        if self.frustum.is_some() {
+            self.set_rays(rays);
+        } else {
+            self.len = 0;
         }
         self.frustum.is_some()
     }
@@ -301,83 +323,6 @@ impl Frustum {
         Some(frustum)
     }
 
-    /// Bounds for rays from several origins whose lines pass (nearly) through one point
-    /// behind them: a tile's rays reflected by a plane mirror, which leave it as if from the
-    /// camera's mirror image. `rays` are the packet's own (forward) rays and
-    /// `inverse[axis][ray]` their inverse directions; `extent` is the largest coordinate of
-    /// the scene's boxes. `None`
-    /// when there is no such point, it is not behind every origin, or the rays fan out.
-    ///
-    /// Why it is exact: with the apex `a` found where the first and last rays' lines pass
-    /// closest, ray `r` is `a + e_r + (c_r + t) d_r`, `c_r` the distance along `d_r` from
-    /// the apex to its origin and `e_r` the origin's offset from the line through the apex.
-    /// Per axis its slab distances are those of a ray from `a + e_r` shifted by `c_r`, the
-    /// same shift on every axis, so it enters a box for `t` in `[0, limit]` exactly when that
-    /// ray enters it for distances in `[c_r, c_r + limit]`; and that ray enters the box
-    /// only if the ray from `a` along `d_r` enters it grown by `|e_r|`. The bounds grow
-    /// every box by the largest offset plus `2^-16` of the largest coordinate involved (far
-    /// above rounding, as in [`Frustum::converging`]) and bound the distances from `a` by
-    /// the packet's inverse directions, starting at the least `c_r` and ending at the
-    /// largest `c_r` plus the packet's limit.
-    fn behind(
-        rays: &[(Vec3A, Vec3A)],
-        inverse: &[[f32; PACKET]; 3],
-        extent: f32,
-    ) -> Option<Frustum> {
-        let len = rays.len().min(PACKET);
-        if len < 2 {
-            return None;
-        }
-        let ((first, first_d), (last, last_d)) = (rays[0], rays[len - 1]);
-        let apex = closest_point_of_lines(first, first_d, last, last_d)?;
-        // Most bounce packets have no such point: three rays between the two reject them
-        // before the pass over every ray.
-        let near_the_apex = |r: usize| {
-            let (o, d) = rays[r];
-            let from_apex = o - apex;
-            let along = from_apex.dot(d) / d.length_squared();
-            let offset = (from_apex - d * along).abs().max_element();
-            along > 0.0 && offset <= along * d.length() * CONVERGING_MARGIN_MAX
-        };
-        if ![len / 4, len / 2, 3 * len / 4]
-            .into_iter()
-            .all(near_the_apex)
-        {
-            return None;
-        }
-        let mut offset = 0.0f32;
-        let (mut nearest, mut farthest) = (f32::INFINITY, 0.0f32);
-        let mut scale = extent.max(apex.abs().max_element());
-        let (mut spread_low, mut spread_high) = (Vec3A::INFINITY, Vec3A::NEG_INFINITY);
-        for &(o, d) in &rays[..len] {
-            let from_apex = o - apex;
-            let along = from_apex.dot(d) / d.length_squared();
-            offset = offset.max((from_apex - d * along).abs().max_element());
-            nearest = nearest.min(along);
-            farthest = farthest.max(along);
-            scale = scale.max(o.abs().max_element());
-            let unit = d.normalize_or_zero();
-            spread_low = spread_low.min(unit);
-            spread_high = spread_high.max(unit);
-        }
-        let margin = offset + scale * CONVERGING_SLACK;
-        let fans_out = (spread_high - spread_low).max_element() > CONVERGING_SPREAD_MAX;
-        // Behind every origin, and far enough behind that the grown boxes stay narrow.
-        if !(nearest > 0.0 && margin <= nearest * CONVERGING_MARGIN_MAX && scale < f32::MAX)
-            || fans_out
-        {
-            return None;
-        }
-        let splat = [0, 1, 2].map(|axis| Lanes::splat(apex[axis]));
-        let mut frustum = Frustum::over_inverses(splat, splat, inverse, len)?;
-        frustum.grow(apex, margin);
-        // Rounding of `along` is covered by the margin in space, not in distance: widen
-        // the distances by the same relative slack.
-        frustum.start = nearest * (1.0 - CONVERGING_SLACK) - margin;
-        frustum.limit_shift = farthest * (1.0 + CONVERGING_SLACK) + margin;
-        Some(frustum)
-    }
-
     /// Measures the front and back planes from `apex` moved by `margin`, so that every box
     /// is tested grown by it.
     fn grow(&mut self, apex: Vec3A, margin: f32) {
@@ -468,6 +413,103 @@ impl Frustum {
                 self.fixed_limit.unwrap_or(t_max + self.limit_shift),
             ));
         (near, near.le_mask::<AVX>(far))
+    }
+}
+
+/// Where the lines of a packet's rays meet behind their origins, and how far the bounds
+/// from there must reach ([`ApexBounds::behind`]): decided from the rays alone, so a packet
+/// without such a point makes none of its slab constants.
+struct ApexBounds {
+    apex: Vec3A,
+    /// How much every box is grown.
+    margin: f32,
+    /// The bounds' distances start here, and the packet's limit is shifted by `limit_shift`.
+    start: f32,
+    limit_shift: f32,
+}
+
+impl ApexBounds {
+    /// Bounds for rays from several origins whose lines pass (nearly) through one point
+    /// behind them: a tile's rays reflected by a plane mirror, which leave it as if from the
+    /// camera's mirror image, decided from the packet's own (forward) rays `rays`; `extent`
+    /// is the largest coordinate of the scene's boxes. `None` when there is no such point,
+    /// it is not behind every origin, or the rays fan out.
+    ///
+    /// Why it is exact: with the apex `a` found where the first and last rays' lines pass
+    /// closest, ray `r` is `a + e_r + (c_r + t) d_r`, `c_r` the distance along `d_r` from
+    /// the apex to its origin and `e_r` the origin's offset from the line through the apex.
+    /// Per axis its slab distances are those of a ray from `a + e_r` shifted by `c_r`, the
+    /// same shift on every axis, so it enters a box for `t` in `[0, limit]` exactly when that
+    /// ray enters it for distances in `[c_r, c_r + limit]`; and that ray enters the box
+    /// only if the ray from `a` along `d_r` enters it grown by `|e_r|`. The bounds grow
+    /// every box by the largest offset plus `2^-16` of the largest coordinate involved (far
+    /// above rounding, as in [`Frustum::converging`]) and bound the distances from `a` by
+    /// the packet's inverse directions, starting at the least `c_r` and ending at the
+    /// largest `c_r` plus the packet's limit.
+    fn behind(rays: &[(Vec3A, Vec3A)], extent: f32) -> Option<ApexBounds> {
+        let len = rays.len().min(PACKET);
+        if len < 2 {
+            return None;
+        }
+        let ((first, first_d), (last, last_d)) = (rays[0], rays[len - 1]);
+        let apex = closest_point_of_lines(first, first_d, last, last_d)?;
+        // Most bounce packets have no such point: three rays between the two reject them
+        // before the pass over every ray.
+        let near_the_apex = |r: usize| {
+            let (o, d) = rays[r];
+            let from_apex = o - apex;
+            let along = from_apex.dot(d) / d.length_squared();
+            let offset = (from_apex - d * along).abs().max_element();
+            along > 0.0 && offset <= along * d.length() * CONVERGING_MARGIN_MAX
+        };
+        if ![len / 4, len / 2, 3 * len / 4]
+            .into_iter()
+            .all(near_the_apex)
+        {
+            return None;
+        }
+        let mut offset = 0.0f32;
+        let (mut nearest, mut farthest) = (f32::INFINITY, 0.0f32);
+        let mut scale = extent.max(apex.abs().max_element());
+        let (mut spread_low, mut spread_high) = (Vec3A::INFINITY, Vec3A::NEG_INFINITY);
+        for &(o, d) in &rays[..len] {
+            let from_apex = o - apex;
+            let along = from_apex.dot(d) / d.length_squared();
+            offset = offset.max((from_apex - d * along).abs().max_element());
+            nearest = nearest.min(along);
+            farthest = farthest.max(along);
+            scale = scale.max(o.abs().max_element());
+            let unit = d.normalize_or_zero();
+            spread_low = spread_low.min(unit);
+            spread_high = spread_high.max(unit);
+        }
+        let margin = offset + scale * CONVERGING_SLACK;
+        let fans_out = (spread_high - spread_low).max_element() > CONVERGING_SPREAD_MAX;
+        // Behind every origin, and far enough behind that the grown boxes stay narrow.
+        if !(nearest > 0.0 && margin <= nearest * CONVERGING_MARGIN_MAX && scale < f32::MAX)
+            || fans_out
+        {
+            return None;
+        }
+        // Rounding of `along` is covered by the margin in space, not in distance: widen
+        // the distances by the same relative slack.
+        Some(ApexBounds {
+            apex,
+            margin,
+            start: nearest * (1.0 - CONVERGING_SLACK) - margin,
+            limit_shift: farthest * (1.0 + CONVERGING_SLACK) + margin,
+        })
+    }
+
+    /// The bounds over the first `len` of the packet's inverse directions
+    /// (`inverse[axis][ray]`), or `None` when one is NaN.
+    fn frustum(&self, inverse: &[[f32; PACKET]; 3], len: usize) -> Option<Frustum> {
+        let splat = [0, 1, 2].map(|axis| Lanes::splat(self.apex[axis]));
+        let mut frustum = Frustum::over_inverses(splat, splat, inverse, len)?;
+        frustum.grow(self.apex, self.margin);
+        frustum.start = self.start;
+        frustum.limit_shift = self.limit_shift;
+        Some(frustum)
     }
 }
 
