@@ -8,6 +8,7 @@ mod common;
 use std::path::Path;
 
 use glam::{Vec3, Vec3A};
+use mipray::accel::BvhLayout;
 use mipray::frame::Renderer;
 use mipray::lod::{LodMethod, PathLength, RayCone, RayDiffsAniso, RayLod};
 use mipray::render::film::sample_offset;
@@ -18,7 +19,7 @@ use mipray::render::{TraceCounters, render_image};
 fn packets_equal_single_rays<L: RayLod>(animation: &str, frame: u32, spp: u32, lod: LodMethod) {
     let path = Path::new(env!("CARGO_MANIFEST_DIR")).join(format!("animations/{animation}.gltf"));
     // Not a multiple of the tile.
-    packets_equal_single_rays_at::<L>(&path, (83, 37), frame, spp, lod);
+    packets_equal_single_rays_at::<L>(&path, (83, 37), frame, spp, lod, BvhLayout::Auto);
 }
 
 /// [`packets_equal_single_rays`] for the scene at `path` rendered at `size`.
@@ -28,11 +29,13 @@ fn packets_equal_single_rays_at<L: RayLod>(
     frame: u32,
     spp: u32,
     lod: LodMethod,
+    layout: BvhLayout,
 ) {
     let animation = path.display();
     let scene = mipray::scene::load(path).unwrap();
     let mut settings = common::scenes::settings(size.0, size.1, lod);
     settings.spp = spp;
+    settings.layout = layout;
     let mut renderer = Renderer::new(scene, settings);
     let prepared = renderer.prepare(frame, frame as f32 / 30.0).unwrap();
     let scene = renderer.frame_scene(&prepared);
@@ -96,5 +99,44 @@ fn packets_equal_single_rays_on_bart_kitchen() {
     let Some(kitchen) = common::shared_data::shared_path("bart/kitchen/aff/kitchen.aff") else {
         return;
     };
-    packets_equal_single_rays_at::<PathLength>(&kitchen, (400, 300), 400, 1, LodMethod::Paper);
+    packets_equal_single_rays_at::<PathLength>(
+        &kitchen,
+        (400, 300),
+        400,
+        1,
+        LodMethod::Paper,
+        BvhLayout::Flat,
+    );
+}
+
+/// Under the two-level structure shadow and bounce packets walk the world tree, the
+/// top-level trees and the instances together: every animation with each mesh instanced,
+/// and BART Robots (whose default layout instances its larger parts) at a size where a
+/// tile's shadow rays converge on a light.
+#[test]
+fn two_level_packets_equal_single_rays() {
+    for animation in ["default", "kitchen", "robots", "museum"] {
+        let path =
+            Path::new(env!("CARGO_MANIFEST_DIR")).join(format!("animations/{animation}.gltf"));
+        let two_level = BvhLayout::TwoLevel;
+        packets_equal_single_rays_at::<PathLength>(
+            &path,
+            (83, 37),
+            7,
+            1,
+            LodMethod::Paper,
+            two_level,
+        );
+    }
+    let Some(robots) = common::shared_data::shared_path("bart/robots/aff/Robot.aff") else {
+        return;
+    };
+    packets_equal_single_rays_at::<PathLength>(
+        &robots,
+        (200, 150),
+        100,
+        1,
+        LodMethod::Paper,
+        BvhLayout::Auto,
+    );
 }

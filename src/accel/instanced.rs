@@ -403,37 +403,16 @@ impl TwoLevelAccel {
                     packet,
                     limits,
                     |entering: &[u8], first: u32, _: u32, limits: &mut [f32; PACKET]| {
-                        let mut inside = [0u8; PACKET];
-                        let mut k = 0;
-                        for &r in entering {
-                            if top.reaches(&packet.ray(r as usize), limits[r as usize]) {
-                                inside[k] = r;
-                                k += 1;
-                            }
-                        }
-                        let placed = &top.placed[first as usize];
-                        if k >= INSTANCE_PACKET {
-                            self.closest_in_instance_packet(
-                                placed,
-                                rays,
-                                &inside[..k],
-                                limits,
-                                best,
-                                object,
-                            );
-                            return;
-                        }
-                        for &r in &inside[..k] {
-                            let r = r as usize;
-                            let (origin, direction) = rays[r];
-                            limits[r] = self.closest_in_instance(
-                                placed,
-                                origin,
-                                direction,
-                                limits[r],
-                                &mut best[r],
-                            );
-                        }
+                        self.closest_in_entered_instance(
+                            top,
+                            first,
+                            rays,
+                            entering,
+                            |r| packet.ray(r),
+                            limits,
+                            best,
+                            object,
+                        );
                     },
                 );
             }
@@ -453,6 +432,115 @@ impl TwoLevelAccel {
                 *hit = best.hit;
             }
         });
+    }
+
+    /// [`TwoLevelAccel::closest_hits`] for rays from any origins (a bounce's reflected and
+    /// refracted rays): each tree is walked once for the packet, with interval bounds when
+    /// the rays' lines pass through one point behind them, else by the masked walk (as
+    /// [`Accel::closest_hits_masked`]); the rays that enter an instance together walk it as
+    /// a packet of their own. `hits[i]` is exactly what `closest_hit` returns for ray `i`.
+    pub fn closest_hits_scattered(
+        &self,
+        world: &Accel,
+        rays: &[(Vec3A, Vec3A)],
+        t_max: f32,
+        hits: &mut [Option<Hit>],
+    ) {
+        let n = rays.len().min(hits.len()).min(PACKET);
+        if n == 0 {
+            return;
+        }
+        let extent = self
+            .levels
+            .iter()
+            .filter_map(|top| top.tlas.root_box().or(top.single))
+            .map(|b| b.min.abs().max(b.max.abs()).max_element())
+            .fold(world.extent(), f32::max);
+        PacketQuery::with_filled(
+            |_| {},
+            |q| {
+                let bounded = q.fill_masked(&rays[..n], t_max, extent);
+                {
+                    let PacketQuery {
+                        packet,
+                        best,
+                        limits,
+                        boxes,
+                        object,
+                        ..
+                    } = &mut *q;
+                    let boxes = &*boxes;
+                    for top in &self.levels {
+                        let leaf =
+                            |entering: &[u8], first: u32, _: u32, limits: &mut [f32; PACKET]| {
+                                let ray = |r: usize| if bounded { packet.ray(r) } else { boxes[r] };
+                                self.closest_in_entered_instance(
+                                    top, first, rays, entering, ray, limits, best, object,
+                                );
+                            };
+                        if bounded {
+                            top.tlas.traverse_packet_gathered(packet, limits, leaf);
+                        } else {
+                            top.tlas.traverse_masked_ordered(&boxes[..n], limits, leaf);
+                        }
+                    }
+                }
+                for c in self.levels.iter().flat_map(|l| &l.collapsed) {
+                    for r in 0..n {
+                        let ray = if bounded { q.packet.ray(r) } else { q.boxes[r] };
+                        q.limits[r] = c.accel.closest_within(
+                            &c.within(),
+                            &ray,
+                            &q.sheared[r],
+                            q.limits[r],
+                            &mut q.best[r],
+                        );
+                    }
+                }
+                world.closest_hits_scattered_within(&Within::world(), q, bounded, n);
+                for (hit, best) in hits.iter_mut().zip(&q.best[..n]) {
+                    *hit = best.hit;
+                }
+            },
+        )
+    }
+
+    /// Continues the closest-hit queries of the packet rays `entering` (indices into `rays`,
+    /// `limits` and `best`; `ray(r)`: ray `r`'s slab constants) in the instance at leaf
+    /// `first` of `top`: the rays that reach it together walk it as a packet of their own
+    /// (at least [`INSTANCE_PACKET`]), fewer one by one.
+    #[allow(clippy::too_many_arguments)]
+    #[inline(always)]
+    fn closest_in_entered_instance(
+        &self,
+        top: &TopLevel,
+        first: u32,
+        rays: &[(Vec3A, Vec3A)],
+        entering: &[u8],
+        ray: impl Fn(usize) -> RayBoxes,
+        limits: &mut [f32; PACKET],
+        best: &mut [Closest; PACKET],
+        object: &mut ObjectPacket,
+    ) {
+        let mut inside = [0u8; PACKET];
+        let mut k = 0;
+        for &r in entering {
+            if top.reaches(&ray(r as usize), limits[r as usize]) {
+                inside[k] = r;
+                k += 1;
+            }
+        }
+        let placed = &top.placed[first as usize];
+        if k >= INSTANCE_PACKET {
+            self.closest_in_instance_packet(placed, rays, &inside[..k], limits, best, object);
+            return;
+        }
+        for &r in &inside[..k] {
+            let r = r as usize;
+            let (origin, direction) = rays[r];
+            limits[r] =
+                self.closest_in_instance(placed, origin, direction, limits[r], &mut best[r]);
+        }
     }
 
     /// Continues a closest-hit query in one instance's tree; returns the new limit.
@@ -502,12 +590,12 @@ impl TwoLevelAccel {
             object.sheared[s] = ShearedRay::new(o, d);
             object.limits[s] = limits[r as usize];
         }
-        object.packet.set(&object.object_rays[..inside.len()]);
         let within = Within {
             source_base: placed.source_base,
             instance: placed.index,
             reported: None,
         };
+        object.packet.set(&object.object_rays[..inside.len()]);
         let ObjectPacket {
             packet,
             sheared,
@@ -546,6 +634,122 @@ impl TwoLevelAccel {
         ) {
             return false;
         }
+        self.visit_hits_in_instances(&ray, origin, direction, t_max, visit)
+    }
+
+    /// [`TwoLevelAccel::visit_hits`] for a packet of up to [`PACKET`] rays (a tile's shadow
+    /// rays toward one light): ray `r`'s hits with `t` in `[0, t_max[r])` are visited as
+    /// `visit(r, instance, slot, t)` until `visit` returns false for that ray; returns the
+    /// mask of the rays stopped early. The world tree is walked by the packet
+    /// ([`Accel::visit_hits_packet`]), then each ray it did not stop walks the instances
+    /// alone, as [`TwoLevelAccel::visit_hits`] does after the world tree: each ray meets
+    /// exactly the triangles it meets alone.
+    pub fn visit_hits_packet(
+        &self,
+        world: &Accel,
+        rays: &[(Vec3A, Vec3A)],
+        t_max: &[f32],
+        mut visit: impl FnMut(usize, u32, u32, f32) -> bool,
+    ) -> u64 {
+        let n = rays.len().min(t_max.len()).min(PACKET);
+        let mut stopped = world.visit_hits_packet(&rays[..n], &t_max[..n], |r, slot, t| {
+            visit(r, Hit::WORLD, slot, t)
+        });
+        let all = if n == PACKET { u64::MAX } else { (1 << n) - 1 };
+        if stopped == all {
+            return stopped;
+        }
+        // The rays the world tree did not stop walk the top-level trees masked (a stopped
+        // ray's limit is negative: no walk takes it further).
+        let mut boxes = [RayBoxes::default(); PACKET];
+        let mut limits = [-1.0f32; PACKET];
+        for r in 0..n {
+            if stopped & (1 << r) == 0 {
+                let (origin, direction) = rays[r];
+                boxes[r] = RayBoxes::new(origin, direction);
+                limits[r] = t_max[r];
+            }
+        }
+        for top in &self.levels {
+            let leaf = |entering: &[u8], first: u32, _: u32, limits: &mut [f32; PACKET]| {
+                let placed = &top.placed[first as usize];
+                let mesh = &self.meshes[placed.mesh as usize];
+                let mut inside = [0u8; PACKET];
+                let mut object_rays = [(Vec3A::ZERO, Vec3A::ZERO); PACKET];
+                let mut object_limits = [0.0f32; PACKET];
+                let mut k = 0;
+                for &r in entering {
+                    let r = r as usize;
+                    // A one-leaf tree hands over every ray, the stopped ones too.
+                    if limits[r] < 0.0 || !top.reaches(&boxes[r], t_max[r]) {
+                        continue;
+                    }
+                    let (origin, direction) = rays[r];
+                    inside[k] = r as u8;
+                    object_rays[k] = object_ray(&placed.object_from_world, origin, direction);
+                    object_limits[k] = t_max[r];
+                    k += 1;
+                }
+                // Rays entering together walk the instance as a packet of their own (toward
+                // a point light they converge in object space too), fewer one by one.
+                let object_stopped = if k >= INSTANCE_PACKET {
+                    mesh.accel.visit_hits_packet(
+                        &object_rays[..k],
+                        &object_limits[..k],
+                        |s, slot, t| visit(inside[s] as usize, placed.index, slot, t),
+                    )
+                } else {
+                    let mut object_stopped = 0u64;
+                    for s in 0..k {
+                        let (o, d) = object_rays[s];
+                        let r = inside[s] as usize;
+                        let clear = mesh.accel.visit_hits(o, d, object_limits[s], |slot, t| {
+                            visit(r, placed.index, slot, t)
+                        });
+                        if !clear {
+                            object_stopped |= 1 << s;
+                        }
+                    }
+                    object_stopped
+                };
+                let mut bits = object_stopped;
+                while bits != 0 {
+                    let r = inside[bits.trailing_zeros() as usize] as usize;
+                    bits &= bits - 1;
+                    stopped |= 1 << r;
+                    limits[r] = -1.0;
+                }
+            };
+            top.tlas.traverse_masked(&boxes[..n], &mut limits, leaf);
+        }
+        for c in self.levels.iter().flat_map(|l| &l.collapsed) {
+            for r in 0..n {
+                if stopped & (1 << r) != 0 {
+                    continue;
+                }
+                let (origin, direction) = rays[r];
+                let clear = c.accel.visit_hits(origin, direction, t_max[r], |slot, t| {
+                    visit(r, c.index, c.mesh_slot[slot as usize], t)
+                });
+                if !clear {
+                    stopped |= 1 << r;
+                }
+            }
+        }
+        stopped
+    }
+
+    /// The instances' part of [`TwoLevelAccel::visit_hits`] (`ray`: the ray's slab
+    /// constants).
+    fn visit_hits_in_instances(
+        &self,
+        ray: &RayBoxes,
+        origin: Vec3A,
+        direction: Vec3A,
+        t_max: f32,
+        mut visit: impl FnMut(u32, u32, f32) -> bool,
+    ) -> bool {
+        let ray = *ray;
         for top in &self.levels {
             let go_on =
                 top.tlas
@@ -776,6 +980,155 @@ mod tests {
             }
         }
         assert!(compared > 300, "only {compared} rays hit an instance");
+    }
+
+    /// Bounce packets (scattered origins; a plane mirror's rays through one apex) and shadow
+    /// packets (scattered origins toward a point light, a patch of origins toward a light
+    /// behind an instance, a directional light) over one fixed instance (no top-level
+    /// boxes), five moving ones (one mirrored) and a collapsed one: each ray finds the same
+    /// closest hit as alone, and meets the same triangles (or is stopped, as alone).
+    #[test]
+    fn scattered_and_shadow_packets_find_what_each_ray_finds_alone() {
+        let mut rng = Rng(23);
+        let meshes = [random_mesh(&mut rng, 50), random_mesh(&mut rng, 30)];
+        let mut two = TwoLevelAccel::new(meshes.iter().map(|m| soup(m)).collect()).unwrap();
+        let mut world_tris = soup(&random_mesh(&mut rng, 40));
+        for s in world_tris.source.iter_mut() {
+            *s += 1000;
+        }
+        let world = Accel::build(&mut world_tris).unwrap();
+        let place = |k: u32, world_from_object| TlasInstance {
+            index: k,
+            mesh: k % 2,
+            world_from_object,
+            source_base: 100 * k,
+        };
+        let moving: Vec<TlasInstance> = (1..6u32)
+            .map(|k| {
+                place(
+                    k,
+                    Mat4::from_scale_rotation_translation(
+                        Vec3::splat(0.5 + 0.25 * k as f32) * if k == 3 { -1.0 } else { 1.0 },
+                        Quat::from_rotation_y(0.9 * k as f32) * Quat::from_rotation_x(0.2),
+                        Vec3::from(rng.point(7.0)),
+                    ),
+                )
+            })
+            .chain([place(6, Mat4::from_scale(Vec3::new(1.0, 1.0, 0.0)))])
+            .collect();
+        let fixed = [place(0, Mat4::from_translation(Vec3::new(2.0, -1.0, 1.0)))];
+        two.set_fixed_instances(&fixed).unwrap();
+        two.set_instances(&moving).unwrap();
+        let centres: Vec<Vec3A> = fixed
+            .iter()
+            .chain(&moving)
+            .map(|i| Vec3A::from(i.world_from_object.w_axis.truncate()))
+            .collect();
+
+        // Closest hits.
+        let mut bounce_sets: Vec<Vec<(Vec3A, Vec3A)>> = Vec::new();
+        for round in 0..12 {
+            let scattered = (0..PACKET - round)
+                .map(|i| {
+                    let origin = rng.point(12.0);
+                    let aim = centres[i % centres.len()] + rng.point(2.0);
+                    (origin, (aim - origin).normalize())
+                })
+                .collect();
+            bounce_sets.push(scattered);
+            // A plane mirror's rays: lines through an apex behind the plane y = -8.
+            let apex = Vec3A::new(0.0, -14.0, 0.0) + rng.point(2.0);
+            let aim = centres[round % centres.len()];
+            let mirrored = (0..PACKET)
+                .map(|i| {
+                    let (x, z) = ((i % 8) as f32 / 7.0 - 0.5, (i / 8) as f32 / 7.0 - 0.5);
+                    let through = aim + Vec3A::new(x, 0.0, z) * (1.0 + round as f32);
+                    let d = (through - apex).normalize();
+                    (apex + d * ((-8.0 - apex.y) / d.y), d)
+                })
+                .collect();
+            bounce_sets.push(mirrored);
+        }
+        let (mut compared, mut on_instances) = (0, 0);
+        for rays in &bounce_sets {
+            let mut hits = vec![None; rays.len()];
+            two.closest_hits_scattered(&world, rays, f32::INFINITY, &mut hits);
+            for (i, (&(o, d), hit)) in rays.iter().zip(&hits).enumerate() {
+                assert_eq!(
+                    *hit,
+                    two.closest_hit(&world, o, d, f32::INFINITY),
+                    "ray {i}"
+                );
+                compared += hit.is_some() as usize;
+                on_instances += hit.is_some_and(|h| h.instance != Hit::WORLD) as usize;
+            }
+        }
+        assert!(
+            compared > 600 && on_instances > 300,
+            "{compared} hits, {on_instances} on instances"
+        );
+
+        // Any hits: a triangle whose slot is even stops the ray (opaque), the
+        // others are let through (glass) and listed.
+        let opaque = |slot: u32| slot.is_multiple_of(2);
+        let alone = |o: Vec3A, d: Vec3A, t_max: f32| {
+            let mut met = Vec::new();
+            let clear = two.visit_hits(&world, o, d, t_max, |instance, slot, _| {
+                met.push((instance, slot));
+                !opaque(slot)
+            });
+            met.sort_unstable();
+            (clear, met)
+        };
+        // Each set: its rays and their limits.
+        type ShadowSet = (Vec<(Vec3A, Vec3A)>, Vec<f32>);
+        let mut shadow_sets: Vec<ShadowSet> = Vec::new();
+        for round in 0..12 {
+            let light = centres[round % centres.len()] + Vec3A::new(0.5, 6.0, -0.5);
+            let towards = |o: Vec3A| {
+                let to = light - o;
+                ((o, to.normalize()), to.length() * 0.999)
+            };
+            // Scattered origins, and a small patch of origins below the instance.
+            let scattered: (Vec<_>, Vec<_>) = (0..PACKET).map(|_| towards(rng.point(12.0))).unzip();
+            let below = centres[round % centres.len()] - Vec3A::new(0.0, 5.0, 0.0);
+            let patch: (Vec<_>, Vec<_>) = (0..PACKET)
+                .map(|i| {
+                    let (x, z) = ((i % 8) as f32 / 7.0 - 0.5, (i / 8) as f32 / 7.0 - 0.5);
+                    towards(below + Vec3A::new(x, 0.0, z) * 0.8)
+                })
+                .unzip();
+            let sun = Vec3A::new(0.2, 1.0, -0.1).normalize();
+            let directional = (
+                (0..PACKET / 2).map(|_| (rng.point(10.0), sun)).collect(),
+                vec![f32::INFINITY; PACKET / 2],
+            );
+            shadow_sets.extend([scattered, patch, directional]);
+        }
+        let (mut stopped_rays, mut clear_rays, mut met_instances) = (0, 0, 0);
+        for (rays, t_max) in &shadow_sets {
+            let mut met = vec![Vec::new(); rays.len()];
+            let stopped = two.visit_hits_packet(&world, rays, t_max, |r, instance, slot, _| {
+                met[r].push((instance, slot));
+                !opaque(slot)
+            });
+            for (r, (&(o, d), &limit)) in rays.iter().zip(t_max).enumerate() {
+                let (clear, expected) = alone(o, d, limit);
+                assert_eq!(stopped & (1 << r) == 0, clear, "ray {r}: {o} {d}");
+                met_instances += expected.iter().filter(|m| m.0 != Hit::WORLD).count();
+                if clear {
+                    clear_rays += 1;
+                    met[r].sort_unstable();
+                    assert_eq!(met[r], expected, "ray {r}: {o} {d}");
+                } else {
+                    stopped_rays += 1;
+                }
+            }
+        }
+        assert!(
+            stopped_rays > 300 && clear_rays > 300 && met_instances > 300,
+            "{stopped_rays} stopped, {clear_rays} clear, {met_instances} instance hits met"
+        );
     }
 
     #[test]

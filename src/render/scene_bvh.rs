@@ -71,6 +71,22 @@ pub enum PbRule {
     World,
 }
 
+impl Instanced<'_> {
+    /// The material and source triangle of a hit's `slot` in `instance` ([`Hit::WORLD`]:
+    /// the world tree).
+    #[inline(always)]
+    fn material_and_source(&self, instance: u32, slot: u32) -> (u32, u32) {
+        let s = slot as usize;
+        if instance == Hit::WORLD {
+            let w = self.world_triangles;
+            return (w.material[s], w.source[s]);
+        }
+        let shading = &self.instances[instance as usize];
+        let mesh = self.accel.mesh_triangles(shading.mesh);
+        (mesh.material[s], shading.source_base + mesh.source[s])
+    }
+}
+
 impl SceneBvh<'_> {
     /// The closest hit with `t` in `[0, t_max)` (ties to the lowest source triangle).
     #[inline]
@@ -90,8 +106,8 @@ impl SceneBvh<'_> {
     }
 
     /// [`SceneBvh::closest_hit`] for a packet of rays from any origins (a bounce's reflected
-    /// and refracted rays): the flat tree walks them together (masked traversal), the
-    /// two-level structure one at a time.
+    /// and refracted rays), walked together through every tree (masked, or with bounds from
+    /// an apex behind them); each ray finds what it finds alone.
     pub fn closest_hits_scattered(
         &self,
         rays: &[(Vec3A, Vec3A)],
@@ -100,11 +116,7 @@ impl SceneBvh<'_> {
     ) {
         match self {
             SceneBvh::Flat { accel, .. } => accel.closest_hits_masked(rays, t_max, hits),
-            SceneBvh::TwoLevel(_) => {
-                for (hit, &(origin, direction)) in hits.iter_mut().zip(rays) {
-                    *hit = self.closest_hit(origin, direction, t_max);
-                }
-            }
+            SceneBvh::TwoLevel(i) => i.accel.closest_hits_scattered(i.world, rays, t_max, hits),
         }
     }
 
@@ -129,14 +141,8 @@ impl SceneBvh<'_> {
             SceneBvh::TwoLevel(i) => {
                 i.accel
                     .visit_hits(i.world, origin, direction, t_max, |instance, slot, t| {
-                        let s = slot as usize;
-                        if instance == Hit::WORLD {
-                            let w = i.world_triangles;
-                            return visit(t, w.material[s], w.source[s]);
-                        }
-                        let shading = &i.instances[instance as usize];
-                        let mesh = i.accel.mesh_triangles(shading.mesh);
-                        visit(t, mesh.material[s], shading.source_base + mesh.source[s])
+                        let (material, source) = i.material_and_source(instance, slot);
+                        visit(t, material, source)
                     })
             }
         }
@@ -144,8 +150,9 @@ impl SceneBvh<'_> {
 
     /// [`SceneBvh::visit_hits`] for a packet of rays `(origin, direction)`, ray `r`
     /// searched up to `t_max[r]`: visits ray `r`'s hits as `visit(r, t, material, source)`
-    /// until `visit` returns false for it; returns the mask of rays stopped early. The flat
-    /// tree walks the rays together; the two-level structure one at a time.
+    /// until `visit` returns false for it; returns the mask of rays stopped early. The rays
+    /// walk each tree together (the world tree, then the top-level trees, then each instance
+    /// that enough of them enter); each meets the triangles it meets alone.
     pub fn visit_hits_packet(
         &self,
         rays: &[(Vec3A, Vec3A)],
@@ -159,17 +166,12 @@ impl SceneBvh<'_> {
                     visit(r, t, triangles.material[s], triangles.source[s])
                 })
             }
-            SceneBvh::TwoLevel(_) => {
-                let mut stopped = 0;
-                for (r, (&(origin, direction), &limit)) in rays.iter().zip(t_max).enumerate() {
-                    let clear = self.visit_hits(origin, direction, limit, |t, m, source| {
-                        visit(r, t, m, source)
-                    });
-                    if !clear {
-                        stopped |= 1 << r;
-                    }
-                }
-                stopped
+            SceneBvh::TwoLevel(i) => {
+                i.accel
+                    .visit_hits_packet(i.world, rays, t_max, |r, instance, slot, t| {
+                        let (material, source) = i.material_and_source(instance, slot);
+                        visit(r, t, material, source)
+                    })
             }
         }
     }

@@ -78,38 +78,55 @@ impl Accel {
         if n == 0 {
             return;
         }
-        let extent = self
-            .wide
-            .root_box()
-            .map_or(0.0, |b| b.min.abs().max(b.max.abs()).max_element());
         PacketQuery::with_filled(
             |_| {},
             |q| {
-                let bounded = q.fill_masked(&rays[..n], t_max, extent);
-                let PacketQuery {
-                    packet,
-                    sheared,
-                    best,
-                    limits,
-                    boxes,
-                    ..
-                } = q;
-                let leaf = ClosestPacketLeaf {
-                    accel: self,
-                    within: &Within::world(),
-                    sheared,
-                    best,
-                };
-                if bounded {
-                    self.wide.traverse_packet_gathered(packet, limits, leaf);
-                } else {
-                    self.wide.traverse_masked_ordered(&boxes[..n], limits, leaf);
-                }
-                for (hit, best) in hits.iter_mut().zip(&best[..n]) {
+                let bounded = q.fill_masked(&rays[..n], t_max, self.extent());
+                self.closest_hits_scattered_within(&Within::world(), q, bounded, n);
+                for (hit, best) in hits.iter_mut().zip(&q.best[..n]) {
                     *hit = best.hit;
                 }
             },
         )
+    }
+
+    /// The largest coordinate of the tree's boxes (0 for an empty tree): what
+    /// [`PacketQuery::fill_masked`] needs to bound rays from an apex behind them.
+    pub(in crate::accel) fn extent(&self) -> f32 {
+        self.wide
+            .root_box()
+            .map_or(0.0, |b| b.min.abs().max(b.max.abs()).max_element())
+    }
+
+    /// Continues the closest-hit queries of the first `n` rays of a packet filled by
+    /// [`PacketQuery::fill_masked`] in this tree: with the packet's interval bounds when it
+    /// has them (`bounded`), else by the masked walk.
+    pub(in crate::accel) fn closest_hits_scattered_within(
+        &self,
+        within: &Within,
+        query: &mut PacketQuery,
+        bounded: bool,
+        n: usize,
+    ) {
+        let PacketQuery {
+            packet,
+            sheared,
+            best,
+            limits,
+            boxes,
+            ..
+        } = query;
+        let leaf = ClosestPacketLeaf {
+            accel: self,
+            within,
+            sheared,
+            best,
+        };
+        if bounded {
+            self.wide.traverse_packet_gathered(packet, limits, leaf);
+        } else {
+            self.wide.traverse_masked_ordered(&boxes[..n], limits, leaf);
+        }
     }
 
     /// Continues the closest-hit queries `best` of a packet (limits `limits`) in this tree.

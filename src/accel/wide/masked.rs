@@ -75,8 +75,8 @@ impl WideBvh {
         let all = if n == 64 { u64::MAX } else { (1u64 << n) - 1 };
         let mut leaf = leaf;
         if let Some((first, count)) = self.root_leaf {
-            let entering: Vec<u8> = (0..n as u8).collect();
-            leaf.visit::<false>(&entering, first, count, limits);
+            let entering: [u8; PACKET] = std::array::from_fn(|r| r as u8);
+            leaf.visit::<false>(&entering[..n], first, count, limits);
             return;
         }
         if self.nodes.is_empty() {
