@@ -43,34 +43,39 @@ use crate::accel::BvhLayout;
 use crate::anim::{AnimationSelection, NodeShape, Pose, moving_nodes};
 use crate::scene::{ChannelTarget, SceneDesc};
 
-// The three time constants were measured together, from one set of runs alternated on a
-// shared 2-core machine (load average 6-8 from other sessions compiling):
-//   mipray render Robot.aff --frames 100..105 --size 800x600 --lod paper --threads 2
-//     --bvh flat | --bvh two-level, three runs each, alternated (BART Robots: 1,340 moving
-//     parts of ~28 triangles, 62,490 moving triangles), medians of frames 101..105.
-// The load slows every figure alike (the quiet machine was ~4x faster); the decision
-// compares sums of them, so only their ratios matter.
+// The three time constants were measured together, from one set of runs alternated on the
+// 2-core Intel Xeon VM, quiet (2026-11-26), with two-level shadow and bounce rays walked as
+// packets (when they were traced one ray at a time, `two-level` cost 102-108 ms a frame
+// more than `flat` in the same runs, against 14-19 ms now; the constants were then 173 ns
+// per entry, 1,600 per instance and 110 per merged triangle, taken on a loaded machine):
+//   mipray bench Robot.aff --frames 100..105 --size 800x600 --methods paper --threads 2
+//     --bvh flat,two-level (two runs: render times), and mipray render with the same
+//     arguments, --bvh flat | --bvh two-level, two runs each, alternated (update times,
+//     medians of frames 101..106; BART Robots: 1,340 moving parts of ~28 triangles, 62,490
+//     moving triangles).
+// Only their ratios matter: the decision compares sums of them.
 
 /// How many times over the animation (its start and end included) the model looks at the
 /// scene through its camera to estimate the rays entering each copy.
 pub const VIEW_SAMPLES: usize = 9;
 
 /// Per-ray cost of entering an instance, in ns per entry the model predicts: the extra
-/// render time of `two-level` over `flat` on Robots (median 2,104 against 1,853 ms a frame)
-/// over the 1,451,000 entries this model predicts for its 1,340 parts at 800x600
-/// (`mipray info` lists 696,600 at 640x360).
-pub const ENTRY_NS_PER_RAY: f64 = 173.0;
+/// render time of `two-level` over `flat` on Robots (647-655 against 666-668 ms a frame:
+/// 13.8-18.7 ms) over the 1,451,000 entries this model predicts for its 1,340 parts at
+/// 800x600 (`mipray info` lists 696,600 at 640x360).
+pub const ENTRY_NS_PER_RAY: f64 = 11.0;
 
 /// Per-frame cost of a moving instance beyond its entries, in ns: its placement (inverse
 /// transform, hull boxes) and its share of the top-level rebuild: the `two-level` update
-/// on Robots (median 2.15 ms a frame, no world triangle moving) over its 1,340 instances.
-pub const PLACE_NS_PER_INSTANCE: f64 = 1_600.0;
+/// on Robots (median 1.47-1.53 ms a frame, no world triangle moving) over its 1,340
+/// instances.
+pub const PLACE_NS_PER_INSTANCE: f64 = 1_120.0;
 
 /// Per-frame cost of a moving triangle merged into the world tree, in ns: writing it,
 /// listing it as dirty, refitting its leaf and shifting its `log2 P_b` (and its part's
-/// share of the per-instance work): the `flat` update on Robots (median 6.86 ms a frame)
-/// over its 62,490 moving triangles.
-pub const REFIT_NS_PER_TRIANGLE: f64 = 110.0;
+/// share of the per-instance work): the `flat` update on Robots (median 3.90-3.99 ms a
+/// frame) over its 62,490 moving triangles.
+pub const REFIT_NS_PER_TRIANGLE: f64 = 63.0;
 
 /// Resident bytes of a triangle merged into the world tree (positions, normals, uvs,
 /// material, `log2 P_b`, source, packs, its share of the tree and the build's peak).
@@ -792,8 +797,8 @@ mod tests {
             c.similarity,
             Some(Choice::instanced(Reason::UpdateCostsMore))
         );
-        // Filling the film, it costs more in entries than merged.
-        let c = decide_auto(&mesh(200_000, &[(CopyMotion::Similarity, 1.0)]), RAYS);
+        // A quarter of its size filling the film costs more in entries than merged.
+        let c = decide_auto(&mesh(50_000, &[(CopyMotion::Similarity, 1.0)]), RAYS);
         assert_eq!(c.similarity, Some(Choice::merged(Reason::EntriesCostMore)));
     }
 
