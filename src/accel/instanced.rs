@@ -389,45 +389,7 @@ impl TwoLevelAccel {
     ) {
         let n = rays.len().min(hits.len()).min(PACKET);
         PacketQuery::with(&rays[..n], t_max, |q| {
-            // Instances first, then the world tree, as `closest_hit`.
-            let PacketQuery {
-                packet,
-                sheared,
-                best,
-                limits,
-                object,
-                ..
-            } = q;
-            for top in &self.levels {
-                top.tlas.traverse_packet_gathered(
-                    packet,
-                    limits,
-                    |entering: &[u8], first: u32, _: u32, limits: &mut [f32; PACKET]| {
-                        self.closest_in_entered_instance(
-                            top,
-                            first,
-                            rays,
-                            entering,
-                            |r| packet.ray(r),
-                            limits,
-                            best,
-                            object,
-                        );
-                    },
-                );
-            }
-            for c in self.levels.iter().flat_map(|l| &l.collapsed) {
-                for r in 0..n {
-                    limits[r] = c.accel.closest_within(
-                        &c.within(),
-                        &packet.ray(r),
-                        &sheared[r],
-                        limits[r],
-                        &mut best[r],
-                    );
-                }
-            }
-            world.closest_hits_within(&Within::world(), q);
+            self.closest_hits_filled(world, rays, q, true, n);
             for (hit, best) in hits.iter_mut().zip(&q.best[..n]) {
                 *hit = best.hit;
             }
@@ -460,49 +422,62 @@ impl TwoLevelAccel {
             |_| {},
             |q| {
                 let bounded = q.fill_masked(&rays[..n], t_max, extent);
-                {
-                    let PacketQuery {
-                        packet,
-                        best,
-                        limits,
-                        boxes,
-                        object,
-                        ..
-                    } = &mut *q;
-                    let boxes = &*boxes;
-                    for top in &self.levels {
-                        let leaf =
-                            |entering: &[u8], first: u32, _: u32, limits: &mut [f32; PACKET]| {
-                                let ray = |r: usize| if bounded { packet.ray(r) } else { boxes[r] };
-                                self.closest_in_entered_instance(
-                                    top, first, rays, entering, ray, limits, best, object,
-                                );
-                            };
-                        if bounded {
-                            top.tlas.traverse_packet_gathered(packet, limits, leaf);
-                        } else {
-                            top.tlas.traverse_masked_ordered(&boxes[..n], limits, leaf);
-                        }
-                    }
-                }
-                for c in self.levels.iter().flat_map(|l| &l.collapsed) {
-                    for r in 0..n {
-                        let ray = if bounded { q.packet.ray(r) } else { q.boxes[r] };
-                        q.limits[r] = c.accel.closest_within(
-                            &c.within(),
-                            &ray,
-                            &q.sheared[r],
-                            q.limits[r],
-                            &mut q.best[r],
-                        );
-                    }
-                }
-                world.closest_hits_scattered_within(&Within::world(), q, bounded, n);
+                self.closest_hits_filled(world, rays, q, bounded, n);
                 for (hit, best) in hits.iter_mut().zip(&q.best[..n]) {
                     *hit = best.hit;
                 }
             },
         )
+    }
+
+    /// Continues the closest-hit queries of the first `n` rays of `query` (the packet
+    /// `rays`) through the instances, then the world tree, as `closest_hit` does: each tree
+    /// walked as the query's packet when `packet` (filled by `fill`, or by `fill_masked`
+    /// with bounds), else masked (each ray's own slab constants).
+    fn closest_hits_filled(
+        &self,
+        world: &Accel,
+        rays: &[(Vec3A, Vec3A)],
+        query: &mut PacketQuery,
+        packet: bool,
+        n: usize,
+    ) {
+        {
+            let PacketQuery {
+                packet: rays_packet,
+                sheared,
+                best,
+                limits,
+                boxes,
+                object,
+            } = &mut *query;
+            let (rays_packet, boxes) = (&*rays_packet, &*boxes);
+            let ray = |r: usize| if packet { rays_packet.ray(r) } else { boxes[r] };
+            for top in &self.levels {
+                let leaf = |entering: &[u8], first: u32, _: u32, limits: &mut [f32; PACKET]| {
+                    self.closest_in_entered_instance(
+                        top, first, rays, entering, ray, limits, best, object,
+                    );
+                };
+                if packet {
+                    top.tlas.traverse_packet_gathered(rays_packet, limits, leaf);
+                } else {
+                    top.tlas.traverse_masked_ordered(&boxes[..n], limits, leaf);
+                }
+            }
+            for c in self.levels.iter().flat_map(|l| &l.collapsed) {
+                for r in 0..n {
+                    limits[r] = c.accel.closest_within(
+                        &c.within(),
+                        &ray(r),
+                        &sheared[r],
+                        limits[r],
+                        &mut best[r],
+                    );
+                }
+            }
+        }
+        world.closest_hits_within(&Within::world(), query, packet, n);
     }
 
     /// Continues the closest-hit queries of the packet rays `entering` (indices into `rays`,
@@ -634,16 +609,38 @@ impl TwoLevelAccel {
         ) {
             return false;
         }
-        self.visit_hits_in_instances(&ray, origin, direction, t_max, visit)
+        for top in &self.levels {
+            let go_on =
+                top.tlas
+                    .traverse_unordered(&ray, t_max, |first: u32, _: u32, _: &mut f32| {
+                        if !top.reaches(&ray, t_max) {
+                            return true;
+                        }
+                        let placed = &top.placed[first as usize];
+                        let (o, d) = object_ray(&placed.object_from_world, origin, direction);
+                        self.meshes[placed.mesh as usize].accel.visit_hits(
+                            o,
+                            d,
+                            t_max,
+                            |slot, t| visit(placed.index, slot, t),
+                        )
+                    });
+            if !go_on {
+                return false;
+            }
+        }
+        self.visit_hits_in_collapsed(origin, direction, t_max, visit)
     }
 
     /// [`TwoLevelAccel::visit_hits`] for a packet of up to [`PACKET`] rays (a tile's shadow
     /// rays toward one light): ray `r`'s hits with `t` in `[0, t_max[r])` are visited as
     /// `visit(r, instance, slot, t)` until `visit` returns false for that ray; returns the
-    /// mask of the rays stopped early. The world tree is walked by the packet
-    /// ([`Accel::visit_hits_packet`]), then each ray it did not stop walks the instances
-    /// alone, as [`TwoLevelAccel::visit_hits`] does after the world tree: each ray meets
-    /// exactly the triangles it meets alone.
+    /// mask of the rays stopped early. In the order of [`TwoLevelAccel::visit_hits`]: the
+    /// world tree walked by the packet ([`Accel::visit_hits_packet`]), then the top-level
+    /// trees walked masked by the rays it did not stop, each instance entered by at least
+    /// [`INSTANCE_PACKET`] of them as an object-space packet of its own (fewer one by one),
+    /// then the collapsed instances ray by ray: each ray meets exactly the triangles it meets
+    /// alone (or is stopped, as alone).
     pub fn visit_hits_packet(
         &self,
         world: &Accel,
@@ -722,54 +719,28 @@ impl TwoLevelAccel {
             };
             top.tlas.traverse_masked(&boxes[..n], &mut limits, leaf);
         }
-        for c in self.levels.iter().flat_map(|l| &l.collapsed) {
-            for r in 0..n {
-                if stopped & (1 << r) != 0 {
-                    continue;
-                }
-                let (origin, direction) = rays[r];
-                let clear = c.accel.visit_hits(origin, direction, t_max[r], |slot, t| {
-                    visit(r, c.index, c.mesh_slot[slot as usize], t)
-                });
-                if !clear {
-                    stopped |= 1 << r;
-                }
+        for r in 0..n {
+            if stopped & (1 << r) != 0 {
+                continue;
+            }
+            let (origin, direction) = rays[r];
+            if !self.visit_hits_in_collapsed(origin, direction, t_max[r], |i, slot, t| {
+                visit(r, i, slot, t)
+            }) {
+                stopped |= 1 << r;
             }
         }
         stopped
     }
 
-    /// The instances' part of [`TwoLevelAccel::visit_hits`] (`ray`: the ray's slab
-    /// constants).
-    fn visit_hits_in_instances(
+    /// The collapsed instances' part of [`TwoLevelAccel::visit_hits`] (walked last).
+    fn visit_hits_in_collapsed(
         &self,
-        ray: &RayBoxes,
         origin: Vec3A,
         direction: Vec3A,
         t_max: f32,
         mut visit: impl FnMut(u32, u32, f32) -> bool,
     ) -> bool {
-        let ray = *ray;
-        for top in &self.levels {
-            let go_on =
-                top.tlas
-                    .traverse_unordered(&ray, t_max, |first: u32, _: u32, _: &mut f32| {
-                        if !top.reaches(&ray, t_max) {
-                            return true;
-                        }
-                        let placed = &top.placed[first as usize];
-                        let (o, d) = object_ray(&placed.object_from_world, origin, direction);
-                        self.meshes[placed.mesh as usize].accel.visit_hits(
-                            o,
-                            d,
-                            t_max,
-                            |slot, t| visit(placed.index, slot, t),
-                        )
-                    });
-            if !go_on {
-                return false;
-            }
-        }
         self.levels.iter().flat_map(|l| &l.collapsed).all(|c| {
             c.accel.visit_hits(origin, direction, t_max, |slot, t| {
                 visit(c.index, c.mesh_slot[slot as usize], t)
@@ -825,20 +796,30 @@ mod tests {
             .collect()
     }
 
+    /// Two random meshes of `sizes` triangles for instances to place, and a world tree over
+    /// `world` random triangles whose source ids come after the instances' (1000 on).
+    fn random_two_level(
+        rng: &mut Rng,
+        sizes: [usize; 2],
+        world: usize,
+    ) -> (TwoLevelAccel, FrameTriangles, Accel) {
+        let meshes = sizes.map(|n| soup(&random_mesh(rng, n)));
+        let two = TwoLevelAccel::new(meshes.into()).unwrap();
+        let mut world_tris = soup(&random_mesh(rng, world));
+        for s in world_tris.source.iter_mut() {
+            *s += 1000;
+        }
+        let accel = Accel::build(&mut world_tris).unwrap();
+        (two, world_tris, accel)
+    }
+
     /// Two meshes placed five times each (rotated, scaled, mirrored) plus a world tree:
     /// every ray finds what testing every placed triangle in world space finds (the same
     /// triangle and instance; `t` within rounding of the transform).
     #[test]
     fn instances_find_what_their_world_space_triangles_find() {
         let mut rng = Rng(7);
-        let meshes = [random_mesh(&mut rng, 40), random_mesh(&mut rng, 25)];
-        let mut two = TwoLevelAccel::new(meshes.iter().map(|m| soup(m)).collect()).unwrap();
-        let mut world_tris = soup(&random_mesh(&mut rng, 30));
-        // World triangles take source ids after the instances'.
-        for s in world_tris.source.iter_mut() {
-            *s += 1000;
-        }
-        let world = Accel::build(&mut world_tris).unwrap();
+        let (mut two, world_tris, world) = random_two_level(&mut rng, [40, 25], 30);
         let mut instances = Vec::new();
         for k in 0..10u32 {
             let m = k % 2;
@@ -932,13 +913,7 @@ mod tests {
     #[test]
     fn rays_entering_an_instance_together_find_what_each_finds_alone() {
         let mut rng = Rng(11);
-        let meshes = [random_mesh(&mut rng, 60), random_mesh(&mut rng, 35)];
-        let mut two = TwoLevelAccel::new(meshes.iter().map(|m| soup(m)).collect()).unwrap();
-        let mut world_tris = soup(&random_mesh(&mut rng, 30));
-        for s in world_tris.source.iter_mut() {
-            *s += 1000;
-        }
-        let world = Accel::build(&mut world_tris).unwrap();
+        let (mut two, _, world) = random_two_level(&mut rng, [60, 35], 30);
         let instances: Vec<TlasInstance> = (0..6u32)
             .map(|k| TlasInstance {
                 index: k,
@@ -990,13 +965,7 @@ mod tests {
     #[test]
     fn scattered_and_shadow_packets_find_what_each_ray_finds_alone() {
         let mut rng = Rng(23);
-        let meshes = [random_mesh(&mut rng, 50), random_mesh(&mut rng, 30)];
-        let mut two = TwoLevelAccel::new(meshes.iter().map(|m| soup(m)).collect()).unwrap();
-        let mut world_tris = soup(&random_mesh(&mut rng, 40));
-        for s in world_tris.source.iter_mut() {
-            *s += 1000;
-        }
-        let world = Accel::build(&mut world_tris).unwrap();
+        let (mut two, _, world) = random_two_level(&mut rng, [50, 30], 40);
         let place = |k: u32, world_from_object| TlasInstance {
             index: k,
             mesh: k % 2,

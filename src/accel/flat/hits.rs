@@ -56,7 +56,7 @@ impl Accel {
     pub fn closest_hits(&self, rays: &[(Vec3A, Vec3A)], t_max: f32, hits: &mut [Option<Hit>]) {
         let n = rays.len().min(hits.len()).min(PACKET);
         PacketQuery::with(&rays[..n], t_max, |q| {
-            self.closest_hits_within(&Within::world(), q);
+            self.closest_hits_within(&Within::world(), q, true, n);
             for (hit, best) in hits.iter_mut().zip(&q.best[..n]) {
                 *hit = best.hit;
             }
@@ -82,7 +82,7 @@ impl Accel {
             |_| {},
             |q| {
                 let bounded = q.fill_masked(&rays[..n], t_max, self.extent());
-                self.closest_hits_scattered_within(&Within::world(), q, bounded, n);
+                self.closest_hits_within(&Within::world(), q, bounded, n);
                 for (hit, best) in hits.iter_mut().zip(&q.best[..n]) {
                     *hit = best.hit;
                 }
@@ -98,56 +98,29 @@ impl Accel {
             .map_or(0.0, |b| b.min.abs().max(b.max.abs()).max_element())
     }
 
-    /// Continues the closest-hit queries of the first `n` rays of a packet filled by
-    /// [`PacketQuery::fill_masked`] in this tree: with the packet's interval bounds when it
-    /// has them (`bounded`), else by the masked walk.
-    pub(in crate::accel) fn closest_hits_scattered_within(
+    /// Continues the closest-hit queries of the first `n` rays of `query` in this tree:
+    /// walked as its packet when `packet` (filled by `fill`, or by `fill_masked` with
+    /// bounds), else masked (each ray's own slab constants, from `fill_masked`).
+    pub(in crate::accel) fn closest_hits_within(
         &self,
         within: &Within,
         query: &mut PacketQuery,
-        bounded: bool,
+        packet: bool,
         n: usize,
     ) {
-        let PacketQuery {
-            packet,
-            sheared,
-            best,
-            limits,
-            boxes,
-            ..
-        } = query;
         let leaf = ClosestPacketLeaf {
             accel: self,
             within,
-            sheared,
-            best,
+            sheared: &query.sheared,
+            best: &mut query.best,
         };
-        if bounded {
-            self.wide.traverse_packet_gathered(packet, limits, leaf);
+        if packet {
+            self.wide
+                .traverse_packet_gathered(&query.packet, &mut query.limits, leaf);
         } else {
-            self.wide.traverse_masked_ordered(&boxes[..n], limits, leaf);
+            self.wide
+                .traverse_masked_ordered(&query.boxes[..n], &mut query.limits, leaf);
         }
-    }
-
-    /// Continues the closest-hit queries `best` of a packet (limits `limits`) in this tree.
-    pub(in crate::accel) fn closest_hits_within(&self, within: &Within, query: &mut PacketQuery) {
-        let PacketQuery {
-            packet,
-            sheared,
-            best,
-            limits,
-            ..
-        } = query;
-        self.wide.traverse_packet_gathered(
-            packet,
-            limits,
-            ClosestPacketLeaf {
-                accel: self,
-                within,
-                sheared,
-                best,
-            },
-        );
     }
 
     /// Tests a leaf for the closest-hit queries of the packet rays `rays` (indices into
