@@ -1,7 +1,8 @@
 //! Acceleration structures: what rays are traced against, arranged by algorithm.
 //!
 //! - [`flat`]: one tree over the frame's world-space triangles. obvhs builds a binary tree
-//!   (without spatial splits, so it can be refitted), which is collapsed into the 8-wide
+//!   (without spatial splits, so it can be refitted; past [`BUILD_CHUNK_TRIANGLES`] a chunk
+//!   at a time under median splits, which bounds the builder's memory), which is collapsed into the 8-wide
 //!   tree rays walk and refits update ([`wide`]); the triangle arrays are permuted into the
 //!   tree's slot order after a build, so a leaf's slot range indexes them directly.
 //! - [`query`]: the answers (`Hit`, `TriangleRef`) and the per-query state every tree shares
@@ -26,7 +27,7 @@ mod query;
 mod triangles;
 mod wide;
 
-pub use flat::{Accel, AccelError, RefitKind, padded_box};
+pub use flat::{Accel, AccelError, BUILD_CHUNK_TRIANGLES, RefitKind, padded_box};
 pub use instanced::{TlasInstance, TwoLevelAccel};
 pub use policy::{BvhLayout, BvhPolicy, TreeStep};
 pub use query::{Hit, TriangleRef};

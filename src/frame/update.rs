@@ -524,6 +524,9 @@ impl TreeState {
             .zip(&dirty.motions)
             .map(|(&slot, &m)| (self.triangles.source[slot as usize], m))
             .collect();
+        // The old tree goes first: kept until the new one is built, its 110 bytes or so per
+        // triangle would sit under the builder's peak.
+        self.accel = Accel::default();
         self.accel = Accel::build(&mut self.triangles)?;
         self.index_slots(setup);
         dirty.reset(self.triangles.len());

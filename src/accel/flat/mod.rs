@@ -1,6 +1,7 @@
 //! The flat tree: one 8-wide tree over the frame's world-space triangles ([`Accel`]).
 //!
-//! Built without spatial splits so it can be refitted later. After a build the triangle
+//! Built without spatial splits so it can be refitted later, by obvhs's PLOC builder (in
+//! chunks past 131,072 triangles, which bounds the builder's memory: [`binary`]). After a build the triangle
 //! arrays are permuted into BVH order (`FrameTriangles::permute`), so a leaf's primitive
 //! range indexes the triangle arrays directly: no indirection on the hot path. The hit test
 //! reads the triangles from their own copy laid out four to a pack in slot order
@@ -8,11 +9,8 @@
 //! Leaf boxes are padded (see [`padded_box`]) because a flat triangle's box has zero
 //! thickness and an axis-aligned ray can slip through it by rounding.
 
-use std::time::Duration;
-
-use bytemuck::TransparentWrapper;
 use glam::Vec3A;
-use obvhs::{BvhBuildParams, aabb::Aabb, bvh2::builder::build_bvh2};
+use obvhs::aabb::Aabb;
 
 use super::triangles::PackedTriangles;
 use super::wide::WideBvh;
@@ -68,17 +66,21 @@ impl Accel {
     /// # Errors
     /// A non-finite vertex (obvhs would panic on it).
     pub fn build(triangles: &mut FrameTriangles) -> Result<Accel, AccelError> {
+        Accel::build_in_chunks(triangles, binary::CHUNK_TRIANGLES)
+    }
+
+    /// [`Accel::build`] with obvhs's builder taking at most `chunk` triangles at once.
+    pub(in crate::accel) fn build_in_chunks(
+        triangles: &mut FrameTriangles,
+        chunk: usize,
+    ) -> Result<Accel, AccelError> {
         check_finite(triangles)?;
         if triangles.is_empty() {
             return Ok(Accel::default());
         }
         // The builder reads each primitive's box once: computed on the fly from the
         // positions, not held in a second array (32 bytes per triangle at the build's peak).
-        let bvh = build_bvh2(
-            PaddedTriangle::wrap_slice(&triangles.positions),
-            BvhBuildParams::medium_build(),
-            &mut Duration::default(),
-        );
+        let bvh = binary::binary_tree(&triangles.positions, chunk);
         triangles.permute(&bvh.primitive_indices);
         let mut leaves = Vec::new();
         let mut wide = WideBvh::collapse(&bvh, |first, count| {
@@ -92,6 +94,9 @@ impl Accel {
         for (leaf, &lane) in leaves.iter_mut().zip(wide.leaf_lanes()) {
             leaf.lane = lane;
         }
+        // The binary tree is not needed past here: freed before the packs are allocated
+        // (48 bytes per node would otherwise sit under them at the build's peak).
+        drop(bvh);
         // Packs and leaves in slot order; each leaf then refers to its first pack.
         leaves.sort_unstable_by_key(|l| l.first);
         leaves.shrink_to_fit();
@@ -204,9 +209,11 @@ pub(in crate::accel) fn leaf_box(positions: &[[Vec3A; 3]], first: u32, count: u3
         .fold(Aabb::empty(), |a, tri| a.union(&padded_box(tri)))
 }
 
+mod binary;
 mod hits;
 mod refit;
 #[cfg(test)]
 pub(crate) mod tests;
 
+pub use binary::CHUNK_TRIANGLES as BUILD_CHUNK_TRIANGLES;
 pub use refit::RefitKind;
