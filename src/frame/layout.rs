@@ -78,14 +78,15 @@ pub const PLACE_NS_PER_INSTANCE: f64 = 1_120.0;
 pub const REFIT_NS_PER_TRIANGLE: f64 = 63.0;
 
 /// Resident bytes of a triangle merged into the world tree (positions, normals, uvs,
-/// material, `log2 P_b`, source, packs, its share of the tree and the build's peak).
-/// Measured as the peak resident memory of the crowd under `--bvh flat` less that under
-/// `--bvh two-level` (374 MB against 59 MB, `cargo bench --bench frame_loop -- rigid 1M`),
-/// over the 995,000 triangles instancing stores once.
-pub const BYTES_PER_TRIANGLE: f64 = 317.0;
+/// material, `log2 P_b`, source, packs and its share of the tree; since the flat build
+/// takes large inputs a chunk at a time, the peak is what a frame keeps). Measured as the
+/// peak resident memory of the crowd under `--bvh flat` less that under `--bvh two-level`
+/// (274 MB against 59 MB, `cargo bench --bench frame_loop -- rigid 1M`, 2026-11-26; 374
+/// against 59 before the chunked build), over the 995,000 triangles instancing stores once.
+pub const BYTES_PER_TRIANGLE: f64 = 216.0;
 
 /// Most extra world-space triangles the copies of one mesh of one class may add (beyond the
-/// first copy) and still be merged: 65,536 triangles are ~21 MB at [`BYTES_PER_TRIANGLE`].
+/// first copy) and still be merged: 65,536 triangles are ~14 MB at [`BYTES_PER_TRIANGLE`].
 pub const MERGE_BUDGET_TRIANGLES: usize = 65_536;
 
 /// How one drawn copy (instance) of a mesh primitive moves over the selected animation.
