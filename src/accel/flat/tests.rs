@@ -598,3 +598,83 @@ fn a_built_tree_keeps_no_spare_capacity_in_its_packs() {
     assert!(packs.pack_count() * crate::accel::triangles::LANES >= tris.len());
     assert_eq!(accel.leaves.capacity(), accel.leaves.len());
 }
+
+mod chunked {
+    //! Chunked builds against the single build on hard inputs: stacked copies of one
+    //! triangle (every centre equal), zero-area slivers and points, coordinates from 1e-3
+    //! to 1e30, and chunks from one triangle up.
+    use proptest::prelude::*;
+
+    use super::*;
+
+    /// A triangle of one of the hard kinds, around a centre whose magnitude spans 33
+    /// orders.
+    fn hard_triangle() -> impl Strategy<Value = [Vec3A; 3]> {
+        let centre = (-1.0f32..1.0, -1.0f32..1.0, -1.0f32..1.0, -3i32..30)
+            .prop_map(|(x, y, z, e)| Vec3A::new(x, y, z) * 10f32.powi(e));
+        let corner =
+            (-1.0f32..1.0, -1.0f32..1.0, -1.0f32..1.0).prop_map(|(x, y, z)| Vec3A::new(x, y, z));
+        (centre, corner.clone(), corner, 0u8..4).prop_map(|(c, a, b, kind)| {
+            let size = c.abs().max_element().max(1.0) * 0.01;
+            match kind {
+                0 => [c, c + a * size, c + b * size],            // ordinary
+                1 => [c, c + a * size, c + a * (2.0 * size)],    // collinear: zero area
+                2 => [c, c, c],                                  // a point
+                _ => [c, c + a * size, c + a * size + b * 1e-6], // a sliver
+            }
+        })
+    }
+
+    type Answer = (Option<(u32, u32, [u32; 2])>, bool, Vec<u32>);
+
+    fn answer(accel: &Accel, tris: &FrameTriangles, origin: Vec3A, direction: Vec3A) -> Answer {
+        let hit = accel
+            .closest_hit(origin, direction, f32::INFINITY)
+            .map(|h| {
+                (
+                    tris.source[h.triangle as usize],
+                    h.t.to_bits(),
+                    h.bary.to_array().map(f32::to_bits),
+                )
+            });
+        let mut met = Vec::new();
+        let clear = accel.visit_hits(origin, direction, f32::INFINITY, |slot, _| {
+            met.push(tris.source[slot as usize]);
+            true
+        });
+        met.sort_unstable();
+        (hit, clear, met)
+    }
+
+    proptest! {
+        #![proptest_config(ProptestConfig::with_cases(48))]
+
+        #[test]
+        fn a_chunked_build_answers_every_ray_as_the_single_build(
+            mut tris in prop::collection::vec(hard_triangle(), 1..300),
+            copies in 0usize..40,
+            chunk in 1usize..40,
+            aims in prop::collection::vec((0usize..1000, (-1.0f32..1.0, -1.0f32..1.0, -1.0f32..1.0)), 48),
+        ) {
+            // A stack of copies of the first triangle: equal centres, exact ties.
+            let first = tris[0];
+            tris.extend(std::iter::repeat_n(first, copies));
+            let mut single = soup(&tris);
+            let mut chunked = soup(&tris);
+            let one = Accel::build(&mut single).unwrap();
+            let parts = Accel::build_in_chunks(&mut chunked, chunk).unwrap();
+            for (pick, (x, y, z)) in aims {
+                // From off a triangle's centre, aimed at it: most rays hit something.
+                let target = tris[pick % tris.len()];
+                let centre = (target[0] + target[1] + target[2]) / 3.0;
+                let reach = centre.abs().max_element().max(1.0);
+                let origin = centre + Vec3A::new(x, y, z + 2.0) * reach;
+                let Some(direction) = (centre - origin).try_normalize() else { continue };
+                prop_assert_eq!(
+                    answer(&parts, &chunked, origin, direction),
+                    answer(&one, &single, origin, direction)
+                );
+            }
+        }
+    }
+}
