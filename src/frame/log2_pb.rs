@@ -343,7 +343,9 @@ impl Pass<'_> {
             .world_positions(source as u32, placement, &primitive.positions);
         log2_pb(
             p,
-            setup.geometry.oriented_uvs(source as u32, placement),
+            setup
+                .geometry
+                .oriented_uvs(&setup.scene, source as u32, placement),
             stretch.texture_size,
             setup.footprint,
         )
@@ -391,7 +393,7 @@ fn object_space_log2_pb(
             let (p, _) = geometry.world_triangle(source, &identity, &primitive.positions, None);
             out[source as usize] = log2_pb(
                 p,
-                geometry.oriented_uvs(source, &identity),
+                geometry.oriented_uvs(scene, source, &identity),
                 texture.pyramid.base_size(),
                 footprint,
             );
@@ -432,7 +434,7 @@ impl DeformingTexelTerms {
             let size = setup.texture_size(source as usize).unwrap_or((1, 1));
             // The source's uvs: a slot may hold them in the other winding, the same area.
             texel_term(texel_area(
-                uv_area(geometry.triangle_uvs[source as usize]),
+                uv_area(geometry.triangle_uvs(&setup.scene, source)),
                 size,
             ))
         };

@@ -258,6 +258,7 @@ pub enum Rewrite {
 /// What writing one triangle reads: shared, read-only, so slots can be written from any
 /// thread in any order with the same result.
 pub struct TriangleWriter<'a> {
+    pub scene: &'a SceneDesc,
     pub geometry: &'a SceneGeometry,
     pub posed: &'a PosedVertices,
     /// Per instance.
@@ -300,7 +301,7 @@ impl TriangleWriter<'_> {
         }
         *position = p;
         if self.uv_flips.get(i) != Some(&Some(placement.flips_winding)) {
-            *uv = self.geometry.oriented_uvs(source, placement);
+            *uv = self.geometry.oriented_uvs(self.scene, source, placement);
         }
         Some(motion)
     }
@@ -400,6 +401,7 @@ pub fn write_all_triangles(
             .map(|&s| geometry.instances[geometry.triangle_instance[s as usize] as usize].material),
     );
     let writer = TriangleWriter {
+        scene,
         geometry,
         posed,
         plan,

@@ -1,6 +1,7 @@
 //! The load-time flattening of a scene's drawn triangles (`SceneGeometry`), built once per
 //! scene by the frame setup: every (node, mesh primitive) pair becomes an instance and
-//! every triangle a source record, with texture coordinates rebased per triangle; the
+//! every triangle a source record (its instance and vertex indices; its texture
+//! coordinates are rebased from the primitive's when asked, [`SceneGeometry::triangle_uvs`]); the
 //! renderer's materials and lights are converted alongside (`appearance`).
 //!
 //! It lives in the frame loop, above both the scene description and the renderer, because
@@ -28,6 +29,8 @@ pub struct Instance {
     pub primitive: u32,
     /// Index into `SceneGeometry::materials`.
     pub material: u32,
+    /// Wrap modes (s, t) of its material's base-colour texture, which rebase its uvs.
+    pub wrap: [WrapMode; 2],
 }
 
 /// Load-time flattening of the scene's drawn triangles.
@@ -40,9 +43,6 @@ pub struct SceneGeometry {
     pub instance_triangles: Vec<std::ops::Range<u32>>,
     /// Per source triangle: vertex indices into the instance's primitive.
     pub triangle_vertices: Vec<[u32; 3]>,
-    /// Per source triangle: texture coordinates, rebased by whole periods of the texture's
-    /// wrap mode so they stay near [0, 1] (f32 precision of `u * width` for large u).
-    pub triangle_uvs: Vec<[Vec2; 3]>,
     /// The scene's materials plus a default one at the end (for primitives without one),
     /// in the renderer's terms.
     pub materials: Vec<Material>,
@@ -73,18 +73,12 @@ impl SceneGeometry {
                     mesh: mesh as u32,
                     primitive: p as u32,
                     material,
+                    wrap: wrap_modes(scene, &geometry.materials[material as usize]),
                 });
-                let wrap = wrap_modes(scene, &geometry.materials[material as usize]);
                 let first = geometry.triangle_vertices.len() as u32;
                 for tri in primitive.indices.chunks_exact(3) {
-                    let vertices = [tri[0], tri[1], tri[2]];
-                    let uvs = match &primitive.uvs {
-                        Some(uv) => rebase_uvs(vertices.map(|v| uv[v as usize]), wrap),
-                        None => [Vec2::ZERO; 3],
-                    };
                     geometry.triangle_instance.push(instance);
-                    geometry.triangle_vertices.push(vertices);
-                    geometry.triangle_uvs.push(uvs);
+                    geometry.triangle_vertices.push([tri[0], tri[1], tri[2]]);
                 }
                 let end = geometry.triangle_vertices.len() as u32;
                 geometry.instance_triangles.push(first..end);
@@ -189,10 +183,27 @@ impl SceneGeometry {
         (p, normals)
     }
 
-    /// Source triangle UVs in the vertex order [`Self::world_triangle`] uses.
+    /// Source triangle `source`'s texture coordinates, rebased by whole periods of its
+    /// texture's wrap modes so they stay near [0, 1] (f32 precision of `u * width` for large
+    /// u); zero where its primitive has none. Taken from the primitive's vertex uvs when
+    /// asked (a write under a new winding, a `log2 P_b` under a stretch, a build), not kept
+    /// per triangle: that array was 24 bytes a triangle for a few reads a frame.
+    pub fn triangle_uvs(&self, scene: &SceneDesc, source: u32) -> [Vec2; 3] {
+        let i = self.triangle_instance[source as usize] as usize;
+        match &self.primitive(scene, i).uvs {
+            Some(uv) => rebase_uvs(
+                self.triangle_vertices[source as usize].map(|v| uv[v as usize]),
+                self.instances[i].wrap,
+            ),
+            None => [Vec2::ZERO; 3],
+        }
+    }
+
+    /// Source triangle UVs ([`Self::triangle_uvs`]) in the vertex order
+    /// [`Self::world_triangle`] uses.
     #[inline]
-    pub fn oriented_uvs(&self, source: u32, placement: &Placement) -> [Vec2; 3] {
-        let mut uv = self.triangle_uvs[source as usize];
+    pub fn oriented_uvs(&self, scene: &SceneDesc, source: u32, placement: &Placement) -> [Vec2; 3] {
+        let mut uv = self.triangle_uvs(scene, source);
         if placement.flips_winding {
             uv.swap(1, 2);
         }
@@ -248,7 +259,6 @@ mod tests {
     fn placed_triangle_equals_world_triangle_bit_for_bit() {
         let geometry = SceneGeometry {
             triangle_vertices: vec![[0, 1, 2], [2, 1, 3]],
-            triangle_uvs: vec![[Vec2::ZERO; 3]; 2],
             ..Default::default()
         };
         let positions = [
@@ -313,6 +323,48 @@ mod tests {
                 }
             }
         }
+    }
+
+    /// A source triangle's uvs, asked for, are its primitive's vertex uvs through its
+    /// indices (rebased by its instance's wrap modes: clamped here, so as they are), zero
+    /// for a primitive without uvs, and swapped into the mirrored winding on request.
+    #[test]
+    fn triangle_uvs_come_from_the_primitive_through_the_indices() {
+        use crate::scene::{MeshDesc, NodeDesc, PrimitiveDesc};
+        let uvs = vec![
+            Vec2::new(0.25, 0.5),
+            Vec2::new(1e5, -3.0),
+            Vec2::new(-0.5, 7.25),
+            Vec2::new(2.0, 2.5),
+        ];
+        let primitive = |uvs: Option<Vec<Vec2>>| PrimitiveDesc {
+            positions: vec![Vec3::ZERO, Vec3::X, Vec3::Y, Vec3::ONE],
+            uvs,
+            indices: vec![0, 1, 2, 3, 2, 1],
+            ..Default::default()
+        };
+        let scene = SceneDesc {
+            meshes: vec![MeshDesc {
+                primitives: vec![primitive(Some(uvs.clone())), primitive(None)],
+                ..Default::default()
+            }],
+            nodes: vec![NodeDesc {
+                mesh: Some(0),
+                ..Default::default()
+            }],
+            roots: vec![0],
+            ..Default::default()
+        };
+        let geometry = SceneGeometry::new(&scene);
+        assert_eq!(geometry.triangle_count(), 4);
+        assert_eq!(geometry.triangle_uvs(&scene, 0), [uvs[0], uvs[1], uvs[2]]);
+        assert_eq!(geometry.triangle_uvs(&scene, 1), [uvs[3], uvs[2], uvs[1]]);
+        assert_eq!(geometry.triangle_uvs(&scene, 3), [Vec2::ZERO; 3]);
+        let mirrored = Placement::new(Mat4::from_scale(Vec3::new(-1.0, 1.0, 1.0)));
+        assert_eq!(
+            geometry.oriented_uvs(&scene, 1, &mirrored),
+            [uvs[3], uvs[1], uvs[2]]
+        );
     }
 
     #[test]

@@ -252,7 +252,7 @@ fn object_triangles(setup: &FrameSetup, object_log2_pb: &[f32], i: usize) -> Fra
             Some(n) => n[k as usize],
             None => Vec3::ZERO,
         }));
-        t.uvs.push(geometry.triangle_uvs[source as usize]);
+        t.uvs.push(geometry.triangle_uvs(&setup.scene, source));
         t.material.push(material);
         t.log2_pb.push(object_log2_pb[source as usize]);
         t.source.push(local as u32);

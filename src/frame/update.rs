@@ -337,6 +337,7 @@ impl TreeState {
         let geometry = &setup.geometry;
         source_motion.resize(geometry.triangle_count(), None);
         let writer = TriangleWriter {
+            scene: &setup.scene,
             geometry,
             posed,
             plan,
