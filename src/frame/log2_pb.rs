@@ -338,9 +338,12 @@ impl Pass<'_> {
         let instance = setup.geometry.triangle_instance[source] as usize;
         let primitive = setup.geometry.primitive(&setup.scene, instance);
         let placement = &stretch.placement;
-        let p = setup
-            .geometry
-            .world_positions(source as u32, placement, &primitive.positions);
+        let p = setup.geometry.world_positions(
+            &setup.scene,
+            source as u32,
+            placement,
+            &primitive.positions,
+        );
         log2_pb(
             p,
             setup
@@ -390,7 +393,8 @@ fn object_space_log2_pb(
         };
         let primitive = geometry.primitive(scene, i);
         for source in geometry.instance_triangles[i].clone() {
-            let (p, _) = geometry.world_triangle(source, &identity, &primitive.positions, None);
+            let (p, _) =
+                geometry.world_triangle(scene, source, &identity, &primitive.positions, None);
             out[source as usize] = log2_pb(
                 p,
                 geometry.oriented_uvs(scene, source, &identity),

@@ -270,9 +270,36 @@ pub struct TriangleWriter<'a> {
     /// Set when a triangle written with new vertices has a non-finite one (so the ordered
     /// search for the first such triangle runs only then).
     pub moved_nonfinite: AtomicBool,
+    /// Per instance: its first source triangle and its primitive's index buffer (looked up
+    /// once a frame, not once a triangle).
+    indices: Vec<(u32, &'a [u32])>,
 }
 
-impl TriangleWriter<'_> {
+impl<'a> TriangleWriter<'a> {
+    pub fn new(
+        scene: &'a SceneDesc,
+        geometry: &'a SceneGeometry,
+        posed: &'a PosedVertices,
+        plan: &'a [Rewrite],
+        uv_flips: &'a [Option<bool>],
+    ) -> Self {
+        let indices = (0..geometry.instances.len())
+            .map(|i| {
+                let first = geometry.instance_triangles[i].start;
+                (first, &geometry.primitive(scene, i).indices[..])
+            })
+            .collect();
+        TriangleWriter {
+            scene,
+            geometry,
+            posed,
+            plan,
+            uv_flips,
+            moved_nonfinite: AtomicBool::new(false),
+            indices,
+        }
+    }
+
     /// Writes source triangle `source` into its slot's `position`, `normal` and `uv` as its
     /// instance's [`Rewrite`] says; returns the slot's motion (`None`: unmoved).
     #[inline]
@@ -291,9 +318,12 @@ impl TriangleWriter<'_> {
         };
         let placement = self.posed.placement(i);
         let (positions, normals) = self.posed.world_arrays(i);
+        let (first, indices) = self.indices[i];
+        let at = (source - first) as usize * 3;
+        let vertices = [indices[at], indices[at + 1], indices[at + 2]];
         let (p, n) =
             self.geometry
-                .placed_triangle(source, placement.flips_winding, positions, normals);
+                .placed_triangle(vertices, placement.flips_winding, positions, normals);
         *normal = n;
         let motion = all.or_else(|| (!same_bits(&p, position)).then_some(Motion::Deformed))?;
         if !p.iter().all(|v| v.is_finite()) {
@@ -330,12 +360,16 @@ pub fn posed_bounds(
             &mut placement,
             false,
         );
-        for source in geometry.instance_triangles[i].clone() {
-            for v in geometry.triangle_vertices[source as usize] {
-                let p = vertices.positions[v as usize];
-                if p.is_finite() {
-                    (min, max) = (min.min(p), max.max(p));
-                }
+        // Every vertex the instance's triangles use: its primitive's index buffer.
+        for &v in geometry
+            .primitive(scene, i)
+            .indices
+            .chunks_exact(3)
+            .flatten()
+        {
+            let p = vertices.positions[v as usize];
+            if p.is_finite() {
+                (min, max) = (min.min(p), max.max(p));
             }
         }
     }
@@ -400,14 +434,7 @@ pub fn write_all_triangles(
             .iter()
             .map(|&s| geometry.instances[geometry.triangle_instance[s as usize] as usize].material),
     );
-    let writer = TriangleWriter {
-        scene,
-        geometry,
-        posed,
-        plan,
-        uv_flips: &[],
-        moved_nonfinite: AtomicBool::new(false),
-    };
+    let writer = TriangleWriter::new(scene, geometry, posed, plan, &[]);
     let write = |(position, normal, uv, &source): (_, _, _, &u32)| {
         writer.write(source, position, normal, uv);
     };

@@ -41,8 +41,6 @@ pub struct SceneGeometry {
     pub triangle_instance: Vec<u32>,
     /// Per instance: its source triangles (consecutive).
     pub instance_triangles: Vec<std::ops::Range<u32>>,
-    /// Per source triangle: vertex indices into the instance's primitive.
-    pub triangle_vertices: Vec<[u32; 3]>,
     /// The scene's materials plus a default one at the end (for primitives without one),
     /// in the renderer's terms.
     pub materials: Vec<Material>,
@@ -75,12 +73,12 @@ impl SceneGeometry {
                     material,
                     wrap: wrap_modes(scene, &geometry.materials[material as usize]),
                 });
-                let first = geometry.triangle_vertices.len() as u32;
-                for tri in primitive.indices.chunks_exact(3) {
-                    geometry.triangle_instance.push(instance);
-                    geometry.triangle_vertices.push([tri[0], tri[1], tri[2]]);
-                }
-                let end = geometry.triangle_vertices.len() as u32;
+                let first = geometry.triangle_instance.len() as u32;
+                let triangles = primitive.indices.len() / 3;
+                geometry
+                    .triangle_instance
+                    .extend(std::iter::repeat_n(instance, triangles));
+                let end = geometry.triangle_instance.len() as u32;
                 geometry.instance_triangles.push(first..end);
             }
         }
@@ -88,7 +86,18 @@ impl SceneGeometry {
     }
 
     pub fn triangle_count(&self) -> usize {
-        self.triangle_vertices.len()
+        self.triangle_instance.len()
+    }
+
+    /// Source triangle `source`'s vertex indices into its instance's primitive: read from
+    /// the primitive's index buffer (a copy per drawn triangle was 12 bytes a triangle, and
+    /// one per copy of a mesh drawn many times).
+    #[inline]
+    pub fn triangle_vertices(&self, scene: &SceneDesc, source: u32) -> [u32; 3] {
+        let i = self.triangle_instance[source as usize] as usize;
+        let first = (source - self.instance_triangles[i].start) as usize * 3;
+        let v = &self.primitive(scene, i).indices[first..first + 3];
+        [v[0], v[1], v[2]]
     }
 
     /// The mesh primitive instance `i` draws.
@@ -103,13 +112,14 @@ impl SceneGeometry {
     #[inline]
     pub fn world_triangle(
         &self,
+        scene: &SceneDesc,
         source: u32,
         placement: &Placement,
         positions: &[Vec3],
         normals: Option<&[Vec3]>,
     ) -> ([Vec3A; 3], [Vec3; 3]) {
         self.assemble_triangle(
-            source,
+            self.triangle_vertices(scene, source),
             placement.flips_winding,
             |i| placement.place_point(positions[i as usize]),
             normals.map(|n| move |i: u32| placement.place_normal(n[i as usize])),
@@ -121,38 +131,36 @@ impl SceneGeometry {
     #[inline]
     pub fn world_positions(
         &self,
+        scene: &SceneDesc,
         source: u32,
         placement: &Placement,
         positions: &[Vec3],
     ) -> [Vec3A; 3] {
-        self.oriented_vertices(source, placement.flips_winding)
+        self.oriented_vertices(scene, source, placement.flips_winding)
             .map(|i| Vec3A::from(placement.place_point(positions[i as usize])))
     }
 
     /// Source triangle `source`'s vertex indices in the order the flat arrays use (the
     /// last two swapped under a mirroring placement, so the winding stays front-facing).
     #[inline]
-    fn oriented_vertices(&self, source: u32, flips_winding: bool) -> [u32; 3] {
-        let mut v = self.triangle_vertices[source as usize];
-        if flips_winding {
-            v.swap(1, 2);
-        }
-        v
+    fn oriented_vertices(&self, scene: &SceneDesc, source: u32, flips_winding: bool) -> [u32; 3] {
+        oriented(self.triangle_vertices(scene, source), flips_winding)
     }
 
-    /// [`Self::world_triangle`] from vertices already placed one by one (`positions` by
+    /// [`Self::world_triangle`] of the triangle of `vertices` (its
+    /// [`Self::triangle_vertices`]) from vertices already placed one by one (`positions` by
     /// [`Placement::place_point`], `normals` by [`Placement::place_normal`]): the same bits,
     /// with each shared vertex transformed once instead of once per triangle.
     #[inline]
     pub fn placed_triangle(
         &self,
-        source: u32,
+        vertices: [u32; 3],
         flips_winding: bool,
         positions: &[Vec3],
         normals: Option<&[Vec3]>,
     ) -> ([Vec3A; 3], [Vec3; 3]) {
         self.assemble_triangle(
-            source,
+            vertices,
             flips_winding,
             |i| positions[i as usize],
             normals.map(|n| move |i: u32| n[i as usize]),
@@ -163,12 +171,12 @@ impl SceneGeometry {
     #[inline]
     fn assemble_triangle(
         &self,
-        source: u32,
+        vertices: [u32; 3],
         flips_winding: bool,
         position: impl Fn(u32) -> Vec3,
         normal: Option<impl Fn(u32) -> Vec3>,
     ) -> ([Vec3A; 3], [Vec3; 3]) {
-        let v = self.oriented_vertices(source, flips_winding);
+        let v = oriented(vertices, flips_winding);
         let p = v.map(|i| Vec3A::from(position(i)));
         // Computed only when a vertex needs it (a sqrt and a division: most of the cost of
         // writing a deformed triangle that has its own normals).
@@ -192,7 +200,8 @@ impl SceneGeometry {
         let i = self.triangle_instance[source as usize] as usize;
         match &self.primitive(scene, i).uvs {
             Some(uv) => rebase_uvs(
-                self.triangle_vertices[source as usize].map(|v| uv[v as usize]),
+                self.triangle_vertices(scene, source)
+                    .map(|v| uv[v as usize]),
                 self.instances[i].wrap,
             ),
             None => [Vec2::ZERO; 3],
@@ -209,6 +218,16 @@ impl SceneGeometry {
         }
         uv
     }
+}
+
+/// A triangle's vertex indices in the order the flat arrays use (the last two swapped
+/// under a mirroring placement, so the winding stays front-facing).
+#[inline]
+fn oriented(mut vertices: [u32; 3], flips_winding: bool) -> [u32; 3] {
+    if flips_winding {
+        vertices.swap(1, 2);
+    }
+    vertices
 }
 
 fn wrap_modes(scene: &SceneDesc, material: &Material) -> [WrapMode; 2] {
@@ -257,16 +276,31 @@ mod tests {
     /// each triangle's vertices itself (mirrored placement and a zero normal included).
     #[test]
     fn placed_triangle_equals_world_triangle_bit_for_bit() {
-        let geometry = SceneGeometry {
-            triangle_vertices: vec![[0, 1, 2], [2, 1, 3]],
-            ..Default::default()
-        };
+        use crate::scene::{MeshDesc, NodeDesc, PrimitiveDesc};
         let positions = [
             Vec3::new(0.1, -0.3, 0.7),
             Vec3::new(1.3, 0.2, -0.1),
             Vec3::new(-0.4, 1.1, 0.25),
             Vec3::new(0.9, 0.8, -1.7),
         ];
+        let scene = SceneDesc {
+            meshes: vec![MeshDesc {
+                primitives: vec![PrimitiveDesc {
+                    positions: positions.to_vec(),
+                    indices: vec![0, 1, 2, 2, 1, 3],
+                    ..Default::default()
+                }],
+                ..Default::default()
+            }],
+            nodes: vec![NodeDesc {
+                mesh: Some(0),
+                ..Default::default()
+            }],
+            roots: vec![0],
+            ..Default::default()
+        };
+        let geometry = SceneGeometry::new(&scene);
+        assert_eq!(geometry.triangle_vertices(&scene, 1), [2, 1, 3]);
         let normals = [Vec3::Z, Vec3::ZERO, Vec3::new(0.3, 0.4, 0.5), Vec3::X];
         let mirrored = Mat4::from_scale_rotation_translation(
             Vec3::new(-1.5, 0.5, 2.0),
@@ -287,9 +321,13 @@ mod tests {
                         with_normals.then_some(&normals[..]),
                         with_normals.then_some(&placed_normals[..]),
                     );
-                    let direct = geometry.world_triangle(source, &placement, &positions, n);
-                    let once =
-                        geometry.placed_triangle(source, placement.flips_winding, &placed, pn);
+                    let direct = geometry.world_triangle(&scene, source, &placement, &positions, n);
+                    let once = geometry.placed_triangle(
+                        geometry.triangle_vertices(&scene, source),
+                        placement.flips_winding,
+                        &placed,
+                        pn,
+                    );
                     let bits = |(p, n): ([Vec3A; 3], [Vec3; 3])| {
                         (
                             p.map(|v| v.to_array().map(f32::to_bits)),
@@ -302,14 +340,14 @@ mod tests {
                         "triangle {source}, normals {with_normals}"
                     );
                     // The vertices alone (the stretch rule of the `log2 P_b` update).
-                    let alone = geometry.world_positions(source, &placement, &positions);
+                    let alone = geometry.world_positions(&scene, source, &placement, &positions);
                     assert_eq!(
                         bits((alone, [Vec3::ZERO; 3])).0,
                         bits(direct).0,
                         "triangle {source}: world_positions"
                     );
                     // The two-level path: the object-space triangle placed at a hit.
-                    let v = geometry.triangle_vertices[source as usize];
+                    let v = geometry.triangle_vertices(&scene, source);
                     let object_normals = v.map(|i| match n {
                         Some(n) => n[i as usize],
                         None => Vec3::ZERO,

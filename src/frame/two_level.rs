@@ -181,10 +181,13 @@ impl TwoLevel {
         let placement = Placement::new(states[i].world_from_object);
         let primitive = setup.geometry.primitive(&setup.scene, i);
         for source in setup.geometry.instance_triangles[i].clone() {
-            let (p, _) =
-                setup
-                    .geometry
-                    .world_triangle(source, &placement, &primitive.positions, None);
+            let (p, _) = setup.geometry.world_triangle(
+                &setup.scene,
+                source,
+                &placement,
+                &primitive.positions,
+                None,
+            );
             if let Some(v) = p.iter().find(|v| !v.is_finite()) {
                 return Err(AccelError::NonFiniteVertex {
                     triangle: source as usize,
@@ -245,7 +248,7 @@ fn object_triangles(setup: &FrameSetup, object_log2_pb: &[f32], i: usize) -> Fra
     let material = geometry.instances[i].material;
     let mut t = FrameTriangles::default();
     for (local, source) in range.enumerate() {
-        let v = geometry.triangle_vertices[source as usize];
+        let v = geometry.triangle_vertices(&setup.scene, source);
         t.positions
             .push(v.map(|k| Vec3A::from(primitive.positions[k as usize])));
         t.normals.push(v.map(|k| match &primitive.normals {

@@ -16,7 +16,6 @@
 //! and listing the dirty set count as `dirty_ms`; posing and writing (including the
 //! per-triangle "did its vertices change" test, fused with the write) as `animate_ms`.
 
-use std::sync::atomic::AtomicBool;
 use std::time::Instant;
 
 use rayon::prelude::*;
@@ -336,14 +335,7 @@ impl TreeState {
         } = &mut self.scratch;
         let geometry = &setup.geometry;
         source_motion.resize(geometry.triangle_count(), None);
-        let writer = TriangleWriter {
-            scene: &setup.scene,
-            geometry,
-            posed,
-            plan,
-            uv_flips,
-            moved_nonfinite: AtomicBool::new(false),
-        };
+        let writer = TriangleWriter::new(&setup.scene, geometry, posed, plan, uv_flips);
         let ranges = &geometry.instance_triangles;
         let slot_of_source = &self.slot_of_source;
         if setup.parallelism.splits(visited) {
