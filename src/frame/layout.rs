@@ -81,9 +81,9 @@ pub const REFIT_NS_PER_TRIANGLE: f64 = 63.0;
 /// material, `log2 P_b`, source, packs and its share of the tree; since the flat build
 /// takes large inputs a chunk at a time, the peak is what a frame keeps). Measured as the
 /// peak resident memory of the crowd under `--bvh flat` less that under `--bvh two-level`
-/// (250 MB against 36 MB, `cargo bench --bench frame_loop -- rigid 1M`, 2026-11-26; 374
-/// against 59 before the chunked build and the per-source uvs taken from the primitive),
-/// over the 995,000 triangles instancing stores once.
+/// (239 MB against 25 MB, `cargo bench --bench frame_loop -- rigid 1M`, 2026-11-26; 374
+/// against 59 before the chunked build and the per-source uvs and indices read from the
+/// primitive), over the 995,000 triangles instancing stores once.
 pub const BYTES_PER_TRIANGLE: f64 = 215.0;
 
 /// Most extra world-space triangles the copies of one mesh of one class may add (beyond the
