@@ -136,15 +136,11 @@ impl SceneGeometry {
         placement: &Placement,
         positions: &[Vec3],
     ) -> [Vec3A; 3] {
-        self.oriented_vertices(scene, source, placement.flips_winding)
-            .map(|i| Vec3A::from(placement.place_point(positions[i as usize])))
-    }
-
-    /// Source triangle `source`'s vertex indices in the order the flat arrays use (the
-    /// last two swapped under a mirroring placement, so the winding stays front-facing).
-    #[inline]
-    fn oriented_vertices(&self, scene: &SceneDesc, source: u32, flips_winding: bool) -> [u32; 3] {
-        oriented(self.triangle_vertices(scene, source), flips_winding)
+        oriented(
+            self.triangle_vertices(scene, source),
+            placement.flips_winding,
+        )
+        .map(|i| Vec3A::from(placement.place_point(positions[i as usize])))
     }
 
     /// [`Self::world_triangle`] of the triangle of `vertices` (its
@@ -271,25 +267,13 @@ mod tests {
     use glam::Mat4;
 
     use super::*;
+    use crate::scene::{MeshDesc, NodeDesc, PrimitiveDesc};
 
-    /// Placing vertices once and assembling triangles from them gives the bits of placing
-    /// each triangle's vertices itself (mirrored placement and a zero normal included).
-    #[test]
-    fn placed_triangle_equals_world_triangle_bit_for_bit() {
-        use crate::scene::{MeshDesc, NodeDesc, PrimitiveDesc};
-        let positions = [
-            Vec3::new(0.1, -0.3, 0.7),
-            Vec3::new(1.3, 0.2, -0.1),
-            Vec3::new(-0.4, 1.1, 0.25),
-            Vec3::new(0.9, 0.8, -1.7),
-        ];
-        let scene = SceneDesc {
+    /// A scene of one root node drawing one mesh of `primitives`.
+    fn one_node_scene(primitives: Vec<PrimitiveDesc>) -> SceneDesc {
+        SceneDesc {
             meshes: vec![MeshDesc {
-                primitives: vec![PrimitiveDesc {
-                    positions: positions.to_vec(),
-                    indices: vec![0, 1, 2, 2, 1, 3],
-                    ..Default::default()
-                }],
+                primitives,
                 ..Default::default()
             }],
             nodes: vec![NodeDesc {
@@ -298,7 +282,24 @@ mod tests {
             }],
             roots: vec![0],
             ..Default::default()
-        };
+        }
+    }
+
+    /// Placing vertices once and assembling triangles from them gives the bits of placing
+    /// each triangle's vertices itself (mirrored placement and a zero normal included).
+    #[test]
+    fn placed_triangle_equals_world_triangle_bit_for_bit() {
+        let positions = [
+            Vec3::new(0.1, -0.3, 0.7),
+            Vec3::new(1.3, 0.2, -0.1),
+            Vec3::new(-0.4, 1.1, 0.25),
+            Vec3::new(0.9, 0.8, -1.7),
+        ];
+        let scene = one_node_scene(vec![PrimitiveDesc {
+            positions: positions.to_vec(),
+            indices: vec![0, 1, 2, 2, 1, 3],
+            ..Default::default()
+        }]);
         let geometry = SceneGeometry::new(&scene);
         assert_eq!(geometry.triangle_vertices(&scene, 1), [2, 1, 3]);
         let normals = [Vec3::Z, Vec3::ZERO, Vec3::new(0.3, 0.4, 0.5), Vec3::X];
@@ -368,7 +369,6 @@ mod tests {
     /// for a primitive without uvs, and swapped into the mirrored winding on request.
     #[test]
     fn triangle_uvs_come_from_the_primitive_through_the_indices() {
-        use crate::scene::{MeshDesc, NodeDesc, PrimitiveDesc};
         let uvs = vec![
             Vec2::new(0.25, 0.5),
             Vec2::new(1e5, -3.0),
@@ -381,18 +381,7 @@ mod tests {
             indices: vec![0, 1, 2, 3, 2, 1],
             ..Default::default()
         };
-        let scene = SceneDesc {
-            meshes: vec![MeshDesc {
-                primitives: vec![primitive(Some(uvs.clone())), primitive(None)],
-                ..Default::default()
-            }],
-            nodes: vec![NodeDesc {
-                mesh: Some(0),
-                ..Default::default()
-            }],
-            roots: vec![0],
-            ..Default::default()
-        };
+        let scene = one_node_scene(vec![primitive(Some(uvs.clone())), primitive(None)]);
         let geometry = SceneGeometry::new(&scene);
         assert_eq!(geometry.triangle_count(), 4);
         assert_eq!(geometry.triangle_uvs(&scene, 0), [uvs[0], uvs[1], uvs[2]]);
