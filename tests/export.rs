@@ -283,14 +283,9 @@ fn reloaded_obj_frame_renders_like_the_animation_at_that_frame() {
         frame..frame + 1,
     );
     let exported: HashMap<TriangleKey, ([Vec3; 3], [Vec2; 3], u32)> = {
-        let t = exporter.triangles();
+        let (t, positions) = (exporter.triangles(), exporter.world_positions());
         (0..t.len())
-            .map(|s| {
-                (
-                    key(&t.positions[s]),
-                    (t.normals[s], t.uvs[s], t.material[s]),
-                )
-            })
+            .map(|s| (key(&positions[s]), (t.normals[s], t.uvs[s], t.material[s])))
             .collect()
     };
     assert_eq!(
@@ -331,11 +326,11 @@ fn reloaded_obj_frame_renders_like_the_animation_at_that_frame() {
     let (image, _) = reloaded.render_frame(0, 0.0).unwrap();
 
     // Positions, UVs and materials come back bit for bit, normals to rounding.
-    let t = reloaded.triangles();
+    let (t, positions) = (reloaded.triangles(), reloaded.world_positions());
     assert_eq!(t.len(), exported.len());
     for s in 0..t.len() {
         let (normals, uvs, material) = exported
-            .get(&key(&t.positions[s]))
+            .get(&key(&positions[s]))
             .expect("every re-loaded triangle is an exported one");
         assert_eq!(t.uvs[s], *uvs);
         assert_eq!(t.material[s], *material);
@@ -491,7 +486,7 @@ fn ply_parses_from_its_header_with_exact_log2_pb_and_deformed_flags() {
             (vertex.name.as_str(), face.name.as_str()),
             ("vertex", "face")
         );
-        let t = check.triangles();
+        let (t, positions) = (check.triangles(), check.world_positions());
         assert_eq!(t.len(), 4);
         assert_eq!(face.count, t.len());
         assert_eq!(vertex.count, 3 * t.len());
@@ -511,7 +506,7 @@ fn ply_parses_from_its_header_with_exact_log2_pb_and_deformed_flags() {
             assert_eq!(corners.len(), 3);
             for (k, &c) in corners.iter().enumerate() {
                 let v = &vertices[c as usize];
-                let p = t.positions[slot][k];
+                let p = positions[slot][k];
                 assert_eq!([f(v, "x"), f(v, "y"), f(v, "z")], p.to_array());
                 let n = t.normals[slot][k];
                 assert_eq!([f(v, "nx"), f(v, "ny"), f(v, "nz")], n.to_array());

@@ -61,12 +61,13 @@ fn dirty_only_update_equals_a_full_recompute_bit_for_bit() {
         let mut fresh = Renderer::new(skinned_dynamic_scene(), settings(policy));
         fresh.prepare(frame, time).unwrap();
         let (ts, tf) = (sequential.triangles(), fresh.triangles());
+        let (ps, pf) = (sequential.world_positions(), fresh.world_positions());
         for (slot, &source) in ts.source.iter().enumerate() {
             let other = tf.source.iter().position(|&s| s == source).unwrap();
             let bits = |p: [Vec3A; 3]| p.map(|v| v.to_array().map(f32::to_bits));
             assert_eq!(
-                bits(ts.positions[slot]),
-                bits(tf.positions[other]),
+                bits(ps[slot]),
+                bits(pf[other]),
                 "frame {frame}, triangle {source} vertices"
             );
         }
@@ -103,11 +104,11 @@ fn parallel_log2_pb_update_equals_the_constant_computed_one_by_one() {
     for frame in [0, 3, 9] {
         let update = r.prepare(frame, frame as f32 / FPS).unwrap().update;
         assert_eq!(update.lod_recomputed, triangles, "frame {frame}");
-        let t = r.triangles();
+        let (t, positions) = (r.triangles(), r.world_positions());
         for slot in 0..t.len() {
             let term = texel_term(texel_area(uv_area(t.uvs[slot]), (64, 64)));
-            let expected = log2_pb_with_texel_term(t.positions[slot], term, footprint);
-            let plain = log2_pb(t.positions[slot], t.uvs[slot], (64, 64), footprint);
+            let expected = log2_pb_with_texel_term(positions[slot], term, footprint);
+            let plain = log2_pb(positions[slot], t.uvs[slot], (64, 64), footprint);
             assert!(
                 (expected.to_bits() as i64 - plain.to_bits() as i64).abs() <= 1,
                 "frame {frame}, slot {slot}: {expected} vs {plain}"
@@ -152,7 +153,7 @@ fn frame_bits(r: &Renderer) -> Vec<u32> {
     let t = r.triangles();
     let mut out: Vec<u32> = t.source.clone();
     out.extend(
-        t.positions
+        r.world_positions()
             .iter()
             .flatten()
             .flat_map(|v| v.to_array())
@@ -344,10 +345,10 @@ fn uniform_scale_shifts_log2_pb_by_log2_s() {
     r.prepare(0, 0.0).unwrap();
     let grow_slots = |r: &Renderer| -> Vec<usize> {
         // The growing card's triangles are those whose world centre is nearest its node.
-        let t = r.triangles();
-        (0..t.len())
+        let positions = r.world_positions();
+        (0..positions.len())
             .filter(|&s| {
-                let c = (t.positions[s][0] + t.positions[s][1] + t.positions[s][2]) / 3.0;
+                let c = (positions[s][0] + positions[s][1] + positions[s][2]) / 3.0;
                 (c - Vec3A::new(1.5, 0.5, -6.0)).length() < 0.8
             })
             .collect()
@@ -368,7 +369,12 @@ fn uniform_scale_shifts_log2_pb_by_log2_s() {
             (shifted - old - 1.5f32.log2()).abs() < 1e-6,
             "{old} -> {shifted}"
         );
-        let full = log2_pb(t.positions[slot], t.uvs[slot], (128, 128), footprint);
+        let full = log2_pb(
+            r.accel().triangle(slot as u32),
+            t.uvs[slot],
+            (128, 128),
+            footprint,
+        );
         assert!(
             (shifted - full).abs() < 1e-6,
             "shifted {shifted} vs recomputed {full}"
@@ -438,6 +444,7 @@ fn refitted_tree_finds_the_same_hits_as_a_fresh_build() {
         let u = r.prepare(frame, frame as f32 / FPS).unwrap().update;
         assert_eq!(u.rebuild, frame == 0, "frame {frame}");
         let mut fresh_triangles = r.triangles().clone();
+        fresh_triangles.positions = r.world_positions();
         let fresh = Accel::build(&mut fresh_triangles).unwrap();
         let mut hits = 0;
         for (i, &(o, d)) in rays.iter().enumerate() {
@@ -488,9 +495,9 @@ fn morph_recomputes_exactly_the_triangles_touching_moved_vertices() {
     assert_eq!(expected.len(), 2 + 6 + 6);
     for frame in 1..10 {
         let u = r.prepare(frame, frame as f32 / 10.0).unwrap().update;
-        let t = r.triangles();
+        let (t, positions) = (r.triangles(), r.world_positions());
         let mut recomputed: Vec<u32> = (0..t.len())
-            .filter(|&s| t.positions[s].iter().any(|p| p.z > -2.0 + 1e-6))
+            .filter(|&s| positions[s].iter().any(|p| p.z > -2.0 + 1e-6))
             .map(|s| t.source[s])
             .collect();
         recomputed.sort();

@@ -123,13 +123,22 @@ proptest! {
         let mut triangles = frame_triangles(before);
         let mut accel = Accel::build(&mut triangles).unwrap();
         // Move every triangle by its own offset (in BVH slot order), then refit all.
-        for (slot, tri) in triangles.positions.iter_mut().enumerate() {
-            let offset = Vec3A::from(offsets[slot % offsets.len()]);
-            *tri = tri.map(|v| v + offset);
+        let moved: Vec<[Vec3A; 3]> = accel
+            .triangles_in_slot_order()
+            .iter()
+            .enumerate()
+            .map(|(slot, tri)| {
+                let offset = Vec3A::from(offsets[slot % offsets.len()]);
+                tri.map(|v| v + offset)
+            })
+            .collect();
+        for (slot, tri) in moved.iter().enumerate() {
+            accel.set_triangle(slot as u32, tri);
         }
         let slots: Vec<u32> = (0..triangles.len() as u32).collect();
-        accel.refit(&triangles, &slots);
+        accel.refit(&slots);
         let mut fresh_triangles = triangles.clone();
+        fresh_triangles.positions = moved;
         let fresh = Accel::build(&mut fresh_triangles).unwrap();
         for (origin, dir) in rays {
             let Some(dir) = dir.try_normalize() else { continue };

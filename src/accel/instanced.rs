@@ -149,7 +149,7 @@ impl TwoLevelAccel {
             .into_iter()
             .map(|mut triangles| {
                 let accel = Accel::build(&mut triangles)?;
-                let bounds = accel.bounds(&triangles);
+                let bounds = accel.bounds();
                 let mut hull = accel.wide.boxes_at_depth(HULL_LEVELS);
                 if hull.is_empty() {
                     hull.extend(bounds);
@@ -167,9 +167,16 @@ impl TwoLevelAccel {
         })
     }
 
-    /// Mesh `i`'s triangles in its tree's slot order (object space).
+    /// Mesh `i`'s triangles in its tree's slot order (object space; their vertices are
+    /// in the mesh's tree, [`TwoLevelAccel::mesh_triangle`]).
     pub fn mesh_triangles(&self, i: u32) -> &FrameTriangles {
         &self.meshes[i as usize].triangles
+    }
+
+    /// The object-space vertices of mesh `i`'s slot `slot`.
+    #[inline]
+    pub fn mesh_triangle(&self, i: u32, slot: u32) -> [Vec3A; 3] {
+        self.meshes[i as usize].accel.triangle(slot)
     }
 
     /// Object-space triangles across all meshes (each stored once, however many instances).
@@ -291,14 +298,19 @@ impl TwoLevelAccel {
     /// A collapsed instance's triangles placed in world space, as the flat path places them
     /// (`None` if a vertex overflows).
     fn collapse(&self, instance: &TlasInstance) -> Option<Collapsed> {
-        let mesh = &self.meshes[instance.mesh as usize].triangles;
+        let MeshBlas {
+            triangles: mesh,
+            accel: mesh_accel,
+            ..
+        } = &self.meshes[instance.mesh as usize];
         let placement = Placement::new(instance.world_from_object);
         let n = mesh.len();
         let mut triangles = FrameTriangles {
             positions: (0..n)
                 .map(|k| {
+                    let object = mesh_accel.triangle(k as u32);
                     placement
-                        .place_triangle(mesh.positions[k], mesh.normals[k], mesh.uvs[k])
+                        .place_triangle(object, mesh.normals[k], mesh.uvs[k])
                         .0
                 })
                 .collect(),
@@ -855,15 +867,14 @@ mod tests {
             // Brute force: every instance's triangles placed in world space.
             let mut expected: Option<(u32, u32, f32)> = None;
             let world_part = (
-                world_tris.positions.clone(),
+                world.triangles_in_slot_order(),
                 world_tris.source.clone(),
                 Hit::WORLD,
             );
             let placed_parts = instances.iter().enumerate().map(|(index, inst)| {
                 let mesh = two.mesh_triangles(inst.mesh);
-                let placed: Vec<[Vec3A; 3]> = mesh
-                    .positions
-                    .iter()
+                let placed: Vec<[Vec3A; 3]> = (0..mesh.len() as u32)
+                    .map(|k| two.mesh_triangle(inst.mesh, k))
                     .map(|t| t.map(|p| inst.world_from_object.transform_point3a(p)))
                     .collect();
                 let ids: Vec<u32> = mesh.source.iter().map(|s| s + inst.source_base).collect();

@@ -2,9 +2,10 @@
 //!
 //! - [`flat`]: one tree over the frame's world-space triangles. obvhs builds a binary tree
 //!   (without spatial splits, so it can be refitted; past [`BUILD_CHUNK_TRIANGLES`] a chunk
-//!   at a time under median splits, which bounds the builder's memory), which is collapsed into the 8-wide
-//!   tree rays walk and refits update ([`wide`]); the triangle arrays are permuted into the
-//!   tree's slot order after a build, so a leaf's slot range indexes them directly.
+//!   at a time under median splits, which bounds the builder's memory), which is collapsed
+//!   into the 8-wide tree rays walk and refits update ([`wide`]); the triangle arrays are
+//!   permuted into the tree's slot order after a build, so a leaf's slot range indexes them
+//!   directly, and the positions move into the tree's packs, their only copy from then on.
 //! - [`query`]: the answers (`Hit`, `TriangleRef`) and the per-query state every tree shares
 //!   (the best hit so far and its tie rule, a packet's reusable buffers).
 //! - [`instanced`]: the two-level structure: object-space trees of shared meshes placed by
@@ -31,7 +32,7 @@ pub use flat::{Accel, AccelError, BUILD_CHUNK_TRIANGLES, RefitKind, padded_box};
 pub use instanced::{TlasInstance, TwoLevelAccel};
 pub use policy::{BvhLayout, BvhPolicy, TreeStep};
 pub use query::{Hit, TriangleRef};
-pub use triangles::intersect;
+pub use triangles::{SlotLanes, intersect};
 pub use wide::PACKET;
 
 #[cfg(test)]

@@ -8,7 +8,6 @@
 use std::time::Instant;
 
 use super::{Accel, RefitKind};
-use crate::geometry::FrameTriangles;
 
 /// What rays are traced against.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
@@ -97,12 +96,7 @@ impl Accel {
     /// The refit-or-rebuild decision for a frame in which `moved_slots` changed: nothing
     /// moved -> unchanged; `Rebuild` policy -> rebuild; otherwise refit, then rebuild when
     /// the refitted tree's SAH ratio passes the policy's threshold.
-    pub fn refit_or_rebuild(
-        &mut self,
-        triangles: &FrameTriangles,
-        moved_slots: &[u32],
-        policy: BvhPolicy,
-    ) -> TreeStep {
+    pub fn refit_or_rebuild(&mut self, moved_slots: &[u32], policy: BvhPolicy) -> TreeStep {
         if moved_slots.is_empty() {
             return TreeStep::Unchanged;
         }
@@ -112,7 +106,7 @@ impl Accel {
         // Timed with the tree's new SAH ratio, which the refit computes (a walk over every
         // node: part of deciding whether to rebuild).
         let t = Instant::now();
-        let kind = self.refit(triangles, moved_slots);
+        let kind = self.refit(moved_slots);
         let refit_ms = t.elapsed().as_secs_f64() * 1e3;
         debug_assert_ne!(kind, RefitKind::None);
         if policy.wants_rebuild(self.sah_ratio()) {
@@ -151,26 +145,21 @@ mod tests {
     #[test]
     fn nothing_moved_keeps_the_tree_under_either_policy() {
         let mut accel = Accel::default();
-        let triangles = FrameTriangles::default();
         for policy in [
             BvhPolicy::Rebuild,
             BvhPolicy::Refit {
                 rebuild_threshold: 1.5,
             },
         ] {
-            assert_eq!(
-                accel.refit_or_rebuild(&triangles, &[], policy),
-                TreeStep::Unchanged
-            );
+            assert_eq!(accel.refit_or_rebuild(&[], policy), TreeStep::Unchanged);
         }
     }
 
     #[test]
     fn rebuild_policy_asks_for_a_rebuild_without_refitting() {
         let mut accel = Accel::default();
-        let triangles = FrameTriangles::default();
         assert_eq!(
-            accel.refit_or_rebuild(&triangles, &[0], BvhPolicy::Rebuild),
+            accel.refit_or_rebuild(&[0], BvhPolicy::Rebuild),
             TreeStep::Rebuild { refit_ms: 0.0 }
         );
     }

@@ -273,7 +273,7 @@ pub(crate) fn write_obj(
                 current = Some(m);
             }
             let slot = slot as usize;
-            for p in &t.positions[slot] {
+            for p in &renderer.accel().triangle(slot as u32) {
                 writeln!(w, "v {} {} {}", p.x, p.y, p.z)?;
             }
             for uv in &t.uvs[slot] {

@@ -17,9 +17,9 @@ use super::Motion;
 use super::animation::InstanceState;
 use super::dirty::FrameChanges;
 use super::posed::VertexSource;
-use super::prefetch::prefetch;
 use super::scene_geometry::SceneGeometry;
 use super::setup::FrameSetup;
+use crate::accel::Accel;
 use crate::anim::NodeShape;
 use crate::geometry::{FrameTriangles, Placement};
 use crate::lod::log2::log2_in_place;
@@ -28,6 +28,7 @@ use crate::lod::{
     shift_log2_pb, texel_area, texel_term, uv_area,
 };
 use crate::scene::SceneDesc;
+use crate::simd::prefetch;
 
 /// How many entries ahead the `log2 P_b` pass prefetches its slots.
 const PREFETCH_AHEAD: usize = 16;
@@ -77,16 +78,19 @@ impl Log2PbState {
         };
     }
 
-    /// `log2 P_b` of every triangle (the first frame); returns how many are textured.
+    /// `log2 P_b` of every triangle (the first frame; vertices read from `accel`, the tree
+    /// over `triangles`); returns how many are textured.
     pub fn recompute_all(
         &mut self,
         setup: &FrameSetup,
         states: &[InstanceState],
         triangles: &mut FrameTriangles,
+        accel: &Accel,
     ) -> usize {
         let pass = Pass {
             setup,
             triangles,
+            accel,
             object: &self.object,
             texel_terms: &self.texel_terms,
             states,
@@ -114,11 +118,12 @@ impl Log2PbState {
         states: &[InstanceState],
         changes: &FrameChanges,
         triangles: &mut FrameTriangles,
+        accel: &Accel,
     ) -> Log2PbCounts {
         let mut counts = Log2PbCounts::default();
         let walked = !self.texel_terms.is_empty();
         if walked {
-            counts.recomputed += self.update_deforming(setup, changes, triangles);
+            counts.recomputed += self.update_deforming(setup, changes, triangles, accel);
         }
         // The entries visited one by one, gathered from their runs so the pass is set up
         // once and splits across threads by their total (a scene that interleaves reshaped
@@ -139,6 +144,7 @@ impl Log2PbState {
         let pass = Pass {
             setup,
             triangles,
+            accel,
             object: &self.object,
             texel_terms: &self.texel_terms,
             states,
@@ -176,9 +182,9 @@ impl Log2PbState {
         setup: &FrameSetup,
         changes: &FrameChanges,
         triangles: &mut FrameTriangles,
+        accel: &Accel,
     ) -> usize {
         let (table, footprint) = (&self.texel_terms, setup.footprint);
-        let positions = &triangles.positions;
         // Per bitset word: the squared cross products of its slots, then their logarithms in
         // one batch (vectorised: `lod::log2`), then the constants; the same bits as
         // `log2_pb_with_texel_term` one slot at a time.
@@ -198,7 +204,7 @@ impl Log2PbState {
                     let Some(term) = table.of(s) else { continue };
                     slots[n] = s;
                     terms[n] = term;
-                    cc[n] = cross_squared(positions[s]);
+                    cc[n] = cross_squared(accel.triangle(s as u32));
                     n += 1;
                 }
                 logs[..n].copy_from_slice(&cc[..n]);
@@ -231,6 +237,8 @@ impl Log2PbState {
 struct Pass<'a> {
     setup: &'a FrameSetup,
     triangles: &'a FrameTriangles,
+    /// The tree over `triangles`: their vertices.
+    accel: &'a Accel,
     /// Per source triangle: the object-space constant.
     object: &'a [f32],
     texel_terms: &'a DeformingTexelTerms,
@@ -287,7 +295,7 @@ impl Pass<'_> {
         let t = self.triangles;
         prefetch(&t.source, s);
         if self.reads_vertices {
-            prefetch(&t.positions, s);
+            self.accel.prefetch_slot(s as u32);
         }
     }
 
@@ -315,13 +323,15 @@ impl Pass<'_> {
                 // the same area); a sheared one takes the plain form from its slot's uvs. Each
                 // triangle always gets the same form.
                 (None, None) => match self.texel_terms.of(s) {
-                    Some(term) => {
-                        log2_pb_with_texel_term(triangles.positions[s], term, self.setup.footprint)
-                    }
+                    Some(term) => log2_pb_with_texel_term(
+                        self.accel.triangle(slot),
+                        term,
+                        self.setup.footprint,
+                    ),
                     None => {
                         let size = self.setup.texture_size(source).unwrap_or((1, 1));
                         log2_pb(
-                            triangles.positions[s],
+                            self.accel.triangle(slot),
                             triangles.uvs[s],
                             size,
                             self.setup.footprint,

@@ -17,7 +17,6 @@ mod dirty;
 mod layout;
 mod log2_pb;
 mod posed;
-mod prefetch;
 mod scatter;
 mod scene_geometry;
 mod settings;
@@ -137,9 +136,15 @@ impl Renderer {
     /// The frame's world-space triangles in BVH order (valid after `prepare`): every
     /// triangle under the flat BVH; under the two-level one only the world tree's (skinned,
     /// morphed and static instances: the shared meshes' instances keep theirs in object
-    /// space).
+    /// space). Their vertices are in the tree: [`Renderer::accel`]`.triangle(slot)`, or all
+    /// of them copied by [`Renderer::world_positions`].
     pub fn triangles(&self) -> &FrameTriangles {
         &self.tree.triangles
+    }
+
+    /// The vertices of [`Renderer::triangles`], slot by slot (a copy, read from the tree).
+    pub fn world_positions(&self) -> Vec<[Vec3A; 3]> {
+        self.tree.accel.triangles_in_slot_order()
     }
 
     /// Which meshes are placed as instances and which merged into the world tree, and why
@@ -275,9 +280,9 @@ impl Renderer {
         if self.setup.needs_log2_pb() {
             let states = self.animation.instances();
             let tree = &mut self.tree;
-            let computed = self
-                .log2_pb
-                .recompute_all(&self.setup, states, &mut tree.triangles);
+            let computed =
+                self.log2_pb
+                    .recompute_all(&self.setup, states, &mut tree.triangles, &tree.accel);
             stats.lod_recomputed = computed + tree.placed_textured();
         }
         stats.lod_update_ms = ms_since(t);
@@ -307,6 +312,7 @@ impl Renderer {
                 self.animation.instances(),
                 &self.changes,
                 &mut self.tree.triangles,
+                &self.tree.accel,
             );
             stats.lod_recomputed += counts.recomputed;
             stats.lod_shifted += counts.shifted;

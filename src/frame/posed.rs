@@ -300,6 +300,26 @@ impl<'a> TriangleWriter<'a> {
         }
     }
 
+    /// Source triangle `source`'s world-space vertices under its instance's pose (the
+    /// bits [`TriangleWriter::write`] writes).
+    #[inline]
+    pub fn position(&self, source: u32) -> [Vec3A; 3] {
+        self.placed(source).0
+    }
+
+    /// Source triangle `source` placed: world-space vertices and normals.
+    #[inline]
+    fn placed(&self, source: u32) -> ([Vec3A; 3], [Vec3; 3]) {
+        let i = self.geometry.triangle_instance[source as usize] as usize;
+        let placement = self.posed.placement(i);
+        let (positions, normals) = self.posed.world_arrays(i);
+        let (first, indices) = self.indices[i];
+        let at = (source - first) as usize * 3;
+        let vertices = [indices[at], indices[at + 1], indices[at + 2]];
+        self.geometry
+            .placed_triangle(vertices, placement.flips_winding, positions, normals)
+    }
+
     /// Writes source triangle `source` into its slot's `position`, `normal` and `uv` as its
     /// instance's [`Rewrite`] says; returns the slot's motion (`None`: unmoved).
     #[inline]
@@ -317,13 +337,7 @@ impl<'a> TriangleWriter<'a> {
             Rewrite::Changed => None,
         };
         let placement = self.posed.placement(i);
-        let (positions, normals) = self.posed.world_arrays(i);
-        let (first, indices) = self.indices[i];
-        let at = (source - first) as usize * 3;
-        let vertices = [indices[at], indices[at + 1], indices[at + 2]];
-        let (p, n) =
-            self.geometry
-                .placed_triangle(vertices, placement.flips_winding, positions, normals);
+        let (p, n) = self.placed(source);
         *normal = n;
         let motion = all.or_else(|| (!same_bits(&p, position)).then_some(Motion::Deformed))?;
         if !p.iter().all(|v| v.is_finite()) {
@@ -386,10 +400,13 @@ fn same_bits(a: &[Vec3A; 3], b: &[Vec3A; 3]) -> bool {
     })
 }
 
-/// Fills `out` (source order) with every triangle of the instances `include` accepts, posed
-/// by `pose`, on rayon's threads when `parallel`.
+/// Poses every instance `include` accepts by `pose` (its vertices into `posed`, its plan a
+/// full write) and returns their triangles' vertices and source triangles, in source
+/// order: what the first frame builds its tree over. [`write_slot_attributes`] then writes
+/// the rest of each triangle, once the tree has given the slots their order. On rayon's
+/// threads when `parallel`.
 #[allow(clippy::too_many_arguments)]
-pub fn write_all_triangles(
+pub fn pose_all_triangles(
     scene: &SceneDesc,
     geometry: &SceneGeometry,
     pose: &Pose,
@@ -398,8 +415,7 @@ pub fn write_all_triangles(
     plan: &mut Vec<Rewrite>,
     parallel: bool,
     include: impl Fn(usize) -> bool + Sync,
-    out: &mut FrameTriangles,
-) {
+) -> (Vec<[Vec3A; 3]>, Vec<u32>) {
     posed.resize(geometry.instances.len());
     plan.clear();
     plan.extend((0..geometry.instances.len()).map(|i| {
@@ -413,15 +429,39 @@ pub fn write_all_triangles(
         posed.place(i, pose.world_from_node[instance.node as usize]);
     }
     posed.pose(scene, geometry, pose, deforms, &include, parallel);
-    out.source.clear();
+    let mut sources = Vec::new();
     for (i, range) in geometry.instance_triangles.iter().enumerate() {
         if include(i) {
-            out.source.extend(range.clone());
+            sources.extend(range.clone());
         }
     }
+    let writer = TriangleWriter::new(scene, geometry, posed, plan, &[]);
+    let position = |&source: &u32| writer.position(source);
+    let positions = if parallel {
+        sources
+            .par_iter()
+            .with_min_len(WRITE_CHUNK)
+            .map(position)
+            .collect()
+    } else {
+        sources.iter().map(position).collect()
+    };
+    (positions, sources)
+}
+
+/// Fills `out`'s normals, uvs, materials and (zeroed) `log2 P_b` for the slots its `source`
+/// lists (tree order), from the pose [`pose_all_triangles`] left in `posed` and `plan`: the
+/// same values a write in source order gives, written in slot order, on rayon's threads
+/// when `parallel`. The positions are the tree's (built from the same pose).
+pub fn write_slot_attributes(
+    scene: &SceneDesc,
+    geometry: &SceneGeometry,
+    posed: &PosedVertices,
+    plan: &[Rewrite],
+    parallel: bool,
+    out: &mut FrameTriangles,
+) {
     let n = out.source.len();
-    out.positions.clear();
-    out.positions.resize(n, [Vec3A::ZERO; 3]);
     out.normals.clear();
     out.normals.resize(n, [Vec3::ZERO; 3]);
     out.uvs.clear();
@@ -435,27 +475,21 @@ pub fn write_all_triangles(
             .map(|&s| geometry.instances[geometry.triangle_instance[s as usize] as usize].material),
     );
     let writer = TriangleWriter::new(scene, geometry, posed, plan, &[]);
-    let write = |(position, normal, uv, &source): (_, _, _, &u32)| {
-        writer.write(source, position, normal, uv);
+    let write = |(normal, uv, &source): (_, _, &u32)| {
+        writer.write(source, &mut [Vec3A::ZERO; 3], normal, uv);
     };
-    let slots = (
-        &mut out.positions,
-        &mut out.normals,
-        &mut out.uvs,
-        &out.source,
-    );
+    let slots = (&mut out.normals, &mut out.uvs, &out.source);
     if parallel {
         slots
             .into_par_iter()
             .with_min_len(WRITE_CHUNK)
             .for_each(write);
     } else {
-        let (p, n, uv, s) = slots;
-        p.iter_mut()
-            .zip(n.iter_mut())
+        let (n, uv, s) = slots;
+        n.iter_mut()
             .zip(uv.iter_mut())
             .zip(s.iter())
-            .for_each(|(((p, n), uv), s)| write((p, n, uv, s)));
+            .for_each(|((n, uv), s)| write((n, uv, s)));
     }
 }
 

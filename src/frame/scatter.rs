@@ -3,8 +3,9 @@
 //! The update visits moved triangles in source order (instance by instance: reads of
 //! vertices, indices and uvs stay sequential) but writes them to their BVH slots, which the
 //! tree scatters. Slices cannot be split by such a permutation, so the parallel write goes
-//! through raw pointers. Invariant that makes it sound: `Renderer::slot_of_source` maps the
-//! sources that have a slot one-to-one onto the slots (`index_slots` inverts
+//! through raw pointers (the positions through the tree's `SlotLanes`: the packs hold the
+//! only copy). Invariant that makes it sound: `Renderer::slot_of_source` maps the sources
+//! that have a slot one-to-one onto the slots (`index_slots` inverts
 //! `FrameTriangles::source`, itself a permutation of those sources after every build; under
 //! the two-level BVH only the world tree's triangles have slots, and only they are
 //! written), and each source triangle is visited by exactly one task, so no two tasks ever
@@ -13,12 +14,14 @@
 use glam::{Vec2, Vec3, Vec3A};
 
 use super::Motion;
-use super::prefetch::prefetch_ptr;
+use crate::accel::SlotLanes;
 use crate::geometry::FrameTriangles;
+use crate::simd::prefetch_ptr;
 
-/// Mutable access to one slot of each per-slot array, handed to concurrent tasks.
+/// Mutable access to one slot of each per-slot array and of the tree's packs (which hold
+/// the positions), handed to concurrent tasks.
 pub struct SlotScatter<'a> {
-    positions: *mut [Vec3A; 3],
+    positions: SlotLanes<'a>,
     normals: *mut [Vec3; 3],
     uvs: *mut [Vec2; 3],
     /// By source triangle.
@@ -28,21 +31,29 @@ pub struct SlotScatter<'a> {
     _arrays: std::marker::PhantomData<&'a mut FrameTriangles>,
 }
 
-// SAFETY: the pointers come from exclusive borrows held for 'a; `with_slot`'s contract keeps
-// every slot to one task at a time.
+// SAFETY: the pointers come from exclusive borrows held for 'a (`SlotLanes` is `Sync` on
+// the same contract); `with_slot`'s contract keeps every slot to one task at a time.
 unsafe impl Sync for SlotScatter<'_> {}
 
 impl<'a> SlotScatter<'a> {
-    /// Borrows the triangles' positions, normals and uvs (by slot) and a motion array (by
-    /// source triangle).
+    /// Borrows the triangles' normals and uvs and the tree's packs (by slot) and a motion
+    /// array (by source triangle).
     ///
     /// # Panics
-    /// If the triangles' arrays differ in length.
-    pub fn new(triangles: &'a mut FrameTriangles, motions: &'a mut [Option<Motion>]) -> Self {
+    /// If the triangles' arrays and the packs differ in length.
+    pub fn new(
+        triangles: &'a mut FrameTriangles,
+        positions: SlotLanes<'a>,
+        motions: &'a mut [Option<Motion>],
+    ) -> Self {
         let len = triangles.len();
-        assert!(triangles.normals.len() == len && triangles.uvs.len() == len);
+        assert!(
+            triangles.normals.len() == len
+                && triangles.uvs.len() == len
+                && positions.slots() == len
+        );
         SlotScatter {
-            positions: triangles.positions.as_mut_ptr(),
+            positions,
             normals: triangles.normals.as_mut_ptr(),
             uvs: triangles.uvs.as_mut_ptr(),
             sources: motions.len(),
@@ -52,8 +63,9 @@ impl<'a> SlotScatter<'a> {
         }
     }
 
-    /// Runs `write` on slot `slot`'s position, normal and uvs and stores its motion as
-    /// source triangle `source`'s.
+    /// Runs `write` on slot `slot`'s position, normal and uvs, stores the position back
+    /// into its lane when `write` reports a motion, and stores the motion as source
+    /// triangle `source`'s.
     ///
     /// # Safety
     /// No other call for the same `slot` or the same `source` may run at the same time
@@ -77,11 +89,16 @@ impl<'a> SlotScatter<'a> {
         );
         // SAFETY: in bounds (checked), and exclusive for this call by the caller's contract.
         unsafe {
-            *self.motions.add(t) = write(
-                &mut *self.positions.add(s),
+            let mut position = self.positions.get(slot);
+            let motion = write(
+                &mut position,
                 &mut *self.normals.add(s),
                 &mut *self.uvs.add(s),
             );
+            if motion.is_some() {
+                self.positions.set(slot, &position);
+            }
+            *self.motions.add(t) = motion;
         }
     }
 
@@ -92,9 +109,9 @@ impl<'a> SlotScatter<'a> {
     pub fn prefetch(&self, slot: u32) {
         let s = slot as usize;
         if s < self.slots {
+            self.positions.prefetch(slot);
             // SAFETY: in bounds; a prefetch reads nothing and writes nothing.
             unsafe {
-                prefetch_ptr(self.positions.add(s));
                 prefetch_ptr(self.normals.add(s));
                 prefetch_ptr(self.uvs.add(s));
             }

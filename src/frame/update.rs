@@ -26,8 +26,8 @@ use super::dirty::FrameChanges;
 use super::layout::UsedLayout;
 use super::ms_since;
 use super::posed::{
-    PosedVertices, Rewrite, TriangleWriter, VertexSource, WRITE_CHUNK, same_deformation,
-    write_all_triangles,
+    PosedVertices, Rewrite, TriangleWriter, VertexSource, WRITE_CHUNK, pose_all_triangles,
+    same_deformation, write_slot_attributes,
 };
 use super::scatter::SlotScatter;
 use super::setup::FrameSetup;
@@ -160,42 +160,65 @@ impl TreeState {
         };
         let two_level_ms = ms_since(t);
         let t = Instant::now();
-        // Under the two-level BVH only what is not an instance of a shared mesh.
+        // The previous state (a frame that failed half way) goes first, not under the build.
+        (self.triangles, self.accel) = Default::default();
+        // Under the two-level BVH only what is not an instance of a shared mesh. The
+        // vertices alone first: the tree is built over them and packs them (their only
+        // copy), and the rest of each triangle is written afterwards, straight into its slot,
+        // so the build's peak never holds normals and uvs beside two copies of the positions.
         let two_level = self.two_level.as_ref();
-        write_all_triangles(
+        let parallel = setup.parallelism.splits(setup.geometry.triangle_count());
+        let (positions, sources) = pose_all_triangles(
             &setup.scene,
             &setup.geometry,
             animation.pose(),
             &setup.deforms,
             &mut self.scratch.posed,
             &mut self.scratch.plan,
-            setup.parallelism.splits(setup.geometry.triangle_count()),
+            parallel,
             |i| two_level.is_none_or(|two| two.mesh_of[i].is_none()),
-            &mut self.triangles,
         );
+        let mut write_ms = ms_since(t);
+
+        let t = Instant::now();
+        let (accel, order) = Accel::build_from_positions(positions, &sources)?;
+        self.accel = accel;
+        let mut build_ms = ms_since(t);
+
+        let t = Instant::now();
+        self.triangles.source = order.iter().map(|&i| sources[i as usize]).collect();
+        drop((order, sources));
         let UpdateScratch {
             posed,
             plan,
             uv_flips,
             ..
         } = &mut self.scratch;
+        write_slot_attributes(
+            &setup.scene,
+            &setup.geometry,
+            posed,
+            plan,
+            parallel,
+            &mut self.triangles,
+        );
         uv_flips.clear();
         uv_flips.extend(
             plan.iter()
                 .enumerate()
                 .map(|(i, r)| (*r != Rewrite::Keep).then(|| posed.placement(i).flips_winding)),
         );
-        let write_ms = ms_since(t);
+        write_ms += ms_since(t);
 
         let t = Instant::now();
-        self.accel = Accel::build(&mut self.triangles)?;
         self.index_slots(setup);
         self.place_instances(setup, animation.instances(), Which::All)?;
         changes.dirty.reset(self.triangles.len());
         self.carried = true;
+        build_ms += ms_since(t);
         Ok(BuildTimes {
             write_ms,
-            build_ms: two_level_ms + ms_since(t),
+            build_ms: two_level_ms + build_ms,
         })
     }
 
@@ -339,7 +362,8 @@ impl TreeState {
         let ranges = &geometry.instance_triangles;
         let slot_of_source = &self.slot_of_source;
         if setup.parallelism.splits(visited) {
-            let slots = SlotScatter::new(&mut self.triangles, source_motion);
+            let slots =
+                SlotScatter::new(&mut self.triangles, self.accel.slot_lanes(), source_motion);
             plan.par_iter()
                 .enumerate()
                 .filter(|(_, r)| **r != Rewrite::Keep)
@@ -366,20 +390,26 @@ impl TreeState {
                         });
                 });
         } else {
-            let triangles = &mut self.triangles;
+            let (triangles, accel) = (&mut self.triangles, &mut self.accel);
             let visited_instances = plan
                 .iter()
                 .enumerate()
                 .filter(|(_, r)| **r != Rewrite::Keep);
             for (i, _) in visited_instances {
                 for source in ranges[i].clone() {
-                    let s = slot_of_source[source as usize] as usize;
-                    source_motion[source as usize] = writer.write(
+                    let slot = slot_of_source[source as usize];
+                    let s = slot as usize;
+                    let mut position = accel.triangle(slot);
+                    let motion = writer.write(
                         source,
-                        &mut triangles.positions[s],
+                        &mut position,
                         &mut triangles.normals[s],
                         &mut triangles.uvs[s],
                     );
+                    if motion.is_some() {
+                        accel.set_triangle(slot, &position);
+                    }
+                    source_motion[source as usize] = motion;
                 }
             }
         }
@@ -460,7 +490,7 @@ impl TreeState {
             return Ok(()); // the write saw none: skip the scan
         }
         for &slot in &changes.dirty.slots {
-            let tri = self.triangles.positions[slot as usize];
+            let tri = self.accel.triangle(slot);
             if let Some(v) = tri.iter().find(|v| !v.is_finite()) {
                 return Err(AccelError::NonFiniteVertex {
                     triangle: self.triangles.source[slot as usize] as usize,
@@ -482,9 +512,9 @@ impl TreeState {
         changes: &mut FrameChanges,
     ) -> Result<TreeUpdate, AccelError> {
         let mut update = TreeUpdate::default();
-        let step =
-            self.accel
-                .refit_or_rebuild(&self.triangles, &changes.dirty.slots, setup.settings.bvh);
+        let step = self
+            .accel
+            .refit_or_rebuild(&changes.dirty.slots, setup.settings.bvh);
         match step {
             TreeStep::Unchanged => {}
             TreeStep::Refitted { refit_ms } => update.refit_ms = refit_ms,
@@ -517,8 +547,10 @@ impl TreeState {
             .zip(&dirty.motions)
             .map(|(&slot, &m)| (self.triangles.source[slot as usize], m))
             .collect();
-        // The old tree goes first: kept until the new one is built, its 110 bytes or so per
-        // triangle would sit under the builder's peak.
+        // The positions come out of the old tree's packs, and the old tree goes before the
+        // build: kept until the new one is built, its 110 bytes or so per triangle would sit
+        // under the builder's peak.
+        self.triangles.positions = self.accel.triangles_in_slot_order();
         self.accel = Accel::default();
         self.accel = Accel::build(&mut self.triangles)?;
         self.index_slots(setup);

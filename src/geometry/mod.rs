@@ -8,7 +8,10 @@
 //! materials and lights, are built above, where the scene description and the renderer's
 //! types are both known (`frame::SceneGeometry`, `frame::appearance`).
 //!
-//! Invariants: all arrays of a `FrameTriangles` have the same length; triangles are wound
+//! Invariants: all arrays of a `FrameTriangles` have the same length, except `positions`,
+//! which is either as long (before a tree is built) or empty (once a tree is built over
+//! them: its packs hold the only copy, read by slot through `Accel::triangle`); triangles
+//! are wound
 //! counter-clockwise about their geometric normal in world space (a node with a negative
 //! determinant has its winding flipped, as glTF requires). This module imports nothing
 //! else from the crate, so `accel` and `lod`, which stand on it, reach neither the
@@ -19,6 +22,9 @@ use glam::{Mat3, Mat4, Vec2, Vec3, Vec3A};
 /// One frame's world-space triangles, in BVH order once `accel` has permuted them.
 #[derive(Debug, Default, Clone)]
 pub struct FrameTriangles {
+    /// The vertices, until a tree is built over them: `Accel::build` moves them into the
+    /// tree's packs (the hit test's layout) and leaves this empty, so a frame keeps one copy
+    /// of each position, not two (48 bytes a triangle).
     pub positions: Vec<[Vec3A; 3]>,
     /// World-space shading normals (unit length; the geometric normal where the mesh has none).
     pub normals: Vec<[Vec3; 3]>,
@@ -43,11 +49,11 @@ pub struct HitTriangle {
 }
 
 impl FrameTriangles {
-    /// Slot `slot` as shading reads it.
+    /// Slot `slot` as shading reads it, with its vertices (`positions`, read from the tree).
     #[inline]
-    pub fn hit_triangle(&self, slot: usize) -> HitTriangle {
+    pub fn hit_triangle(&self, slot: usize, positions: [Vec3A; 3]) -> HitTriangle {
         HitTriangle {
-            positions: self.positions[slot],
+            positions,
             normals: self.normals[slot],
             uvs: self.uvs[slot],
             material: self.material[slot],
@@ -56,17 +62,22 @@ impl FrameTriangles {
         }
     }
 
+    /// How many triangles (slots) there are.
     pub fn len(&self) -> usize {
-        self.positions.len()
+        self.source.len()
     }
 
     pub fn is_empty(&self) -> bool {
-        self.positions.is_empty()
+        self.source.is_empty()
     }
 
-    /// Reorders every per-triangle array so slot `i` holds what slot `order[i]` held.
+    /// Reorders every per-triangle array so slot `i` holds what slot `order[i]` held
+    /// (`positions` too unless a tree already holds them).
     pub fn permute(&mut self, order: &[u32]) {
         fn apply<T: Copy>(v: &mut Vec<T>, order: &[u32]) {
+            if v.is_empty() {
+                return;
+            }
             let permuted: Vec<T> = order.iter().map(|&i| v[i as usize]).collect();
             *v = permuted;
         }

@@ -202,15 +202,23 @@ impl SceneBvh<'_> {
     pub fn triangle(&self, at: TriangleRef) -> HitTriangle {
         let slot = at.slot as usize;
         let i = match self {
-            SceneBvh::Flat { triangles, .. } => return triangles.hit_triangle(slot),
+            SceneBvh::Flat { triangles, accel } => {
+                return triangles.hit_triangle(slot, accel.triangle(at.slot));
+            }
             SceneBvh::TwoLevel(i) if at.instance == Hit::WORLD => {
-                return i.world_triangles.hit_triangle(slot);
+                return i
+                    .world_triangles
+                    .hit_triangle(slot, i.world.triangle(at.slot));
             }
             SceneBvh::TwoLevel(i) => i,
         };
         let shading = &i.instances[at.instance as usize];
         let mesh = i.accel.mesh_triangles(shading.mesh);
-        let object = (mesh.positions[slot], mesh.normals[slot], mesh.uvs[slot]);
+        let object = (
+            i.accel.mesh_triangle(shading.mesh, at.slot),
+            mesh.normals[slot],
+            mesh.uvs[slot],
+        );
         let (positions, normals, uvs) = shading
             .placement
             .place_triangle(object.0, object.1, object.2);

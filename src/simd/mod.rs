@@ -16,8 +16,10 @@
 use std::sync::OnceLock;
 
 mod f32x8;
+mod prefetch;
 
 pub use f32x8::F32x8;
+pub use prefetch::{prefetch, prefetch_ptr};
 
 /// The instruction sets a kernel is compiled for.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]

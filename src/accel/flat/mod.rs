@@ -12,7 +12,7 @@
 use glam::Vec3A;
 use obvhs::aabb::Aabb;
 
-use super::triangles::PackedTriangles;
+use super::triangles::{PackedTriangles, SlotLanes};
 use super::wide::WideBvh;
 use crate::geometry::FrameTriangles;
 
@@ -61,10 +61,12 @@ pub enum AccelError {
 }
 
 impl Accel {
-    /// Builds a BVH over `triangles` (in any order) and permutes them into BVH order.
+    /// Builds a BVH over `triangles` (in any order) and permutes them into BVH order. The
+    /// positions move into the tree's packs ([`Accel::triangle`] reads them back), leaving
+    /// `triangles.positions` empty.
     ///
     /// # Errors
-    /// A non-finite vertex (obvhs would panic on it).
+    /// A non-finite vertex (obvhs would panic on it); `triangles` is then left as it was.
     pub fn build(triangles: &mut FrameTriangles) -> Result<Accel, AccelError> {
         Accel::build_in_chunks(triangles, binary::CHUNK_TRIANGLES)
     }
@@ -74,14 +76,46 @@ impl Accel {
         triangles: &mut FrameTriangles,
         chunk: usize,
     ) -> Result<Accel, AccelError> {
-        check_finite(triangles)?;
-        if triangles.is_empty() {
-            return Ok(Accel::default());
+        check_finite(&triangles.positions, &triangles.source)?;
+        let positions = std::mem::take(&mut triangles.positions);
+        let (accel, order) = Accel::build_ordered(positions, &triangles.source, chunk);
+        triangles.permute(&order);
+        Ok(accel)
+    }
+
+    /// Builds a BVH over `positions` (triangle `i` named `source[i]` in hits); returns it
+    /// with the slot order (slot `s` holds input triangle `order[s]`), which the caller
+    /// applies to its own per-triangle arrays. The positions are freed once packed: a caller
+    /// that writes its other per-slot arrays only afterwards never holds them beside the
+    /// packs (the first frame's build does, see `frame/update.rs`).
+    ///
+    /// # Errors
+    /// A non-finite vertex.
+    pub fn build_from_positions(
+        positions: Vec<[Vec3A; 3]>,
+        source: &[u32],
+    ) -> Result<(Accel, Vec<u32>), AccelError> {
+        check_finite(&positions, source)?;
+        Ok(Accel::build_ordered(
+            positions,
+            source,
+            binary::CHUNK_TRIANGLES,
+        ))
+    }
+
+    /// The build of checked positions.
+    fn build_ordered(
+        positions: Vec<[Vec3A; 3]>,
+        source: &[u32],
+        chunk: usize,
+    ) -> (Accel, Vec<u32>) {
+        if positions.is_empty() {
+            return (Accel::default(), Vec::new());
         }
         // The builder reads each primitive's box once: computed on the fly from the
         // positions, not held in a second array (32 bytes per triangle at the build's peak).
-        let bvh = binary::binary_tree(&triangles.positions, chunk);
-        triangles.permute(&bvh.primitive_indices);
+        let mut bvh = binary::binary_tree(&positions, chunk);
+        let order = std::mem::take(&mut bvh.primitive_indices);
         let mut leaves = Vec::new();
         let mut wide = WideBvh::collapse(&bvh, |first, count| {
             leaves.push(Leaf {
@@ -100,19 +134,23 @@ impl Accel {
         // Packs and leaves in slot order; each leaf then refers to its first pack.
         leaves.sort_unstable_by_key(|l| l.first);
         leaves.shrink_to_fit();
-        let mut packed = PackedTriangles::with_pack_capacity(leaves.iter().map(|l| l.count));
-        let mut leaf_of_slot = vec![0; triangles.len()];
+        let mut packed =
+            PackedTriangles::with_pack_capacity(leaves.iter().map(|l| l.count), positions.len());
+        let mut leaf_of_slot = vec![0; positions.len()];
         for (i, leaf) in leaves.iter().enumerate() {
             let (first, count) = (leaf.first as usize, leaf.count as usize);
             leaf_of_slot[first..first + count].fill(i as u32);
             let first_pack = packed.push_leaf(
-                &triangles.positions,
-                &triangles.source,
+                |slot| {
+                    let input = order[slot as usize] as usize;
+                    (positions[input], source[input])
+                },
                 leaf.first,
                 leaf.count,
             );
             wide.set_leaf_ref(leaf.lane, first_pack);
         }
+        drop(positions);
         let mut accel = Accel {
             wide,
             triangles: packed,
@@ -123,7 +161,40 @@ impl Accel {
         };
         accel.build_cost = accel.sah_cost();
         accel.cost = accel.build_cost;
-        Ok(accel)
+        (accel, order)
+    }
+
+    /// The triangle in slot `slot` (world space for the frame's tree, object space for a
+    /// shared mesh's): the bits last built or written.
+    #[inline]
+    pub fn triangle(&self, slot: u32) -> [Vec3A; 3] {
+        self.triangles.triangle(slot)
+    }
+
+    /// Every slot's triangle, in slot order (a copy: for exports, rebuilds and tests).
+    pub fn triangles_in_slot_order(&self) -> Vec<[Vec3A; 3]> {
+        self.triangles.triangles_in_slot_order()
+    }
+
+    /// Writes a moved triangle into slot `slot`; [`Accel::refit`] then takes the boxes.
+    pub fn set_triangle(&mut self, slot: u32, tri: &[Vec3A; 3]) {
+        self.triangles.set_triangle(slot, tri);
+    }
+
+    /// Slot access for concurrent writers of moved triangles ([`SlotLanes`]).
+    pub fn slot_lanes(&mut self) -> SlotLanes<'_> {
+        self.triangles.slot_lanes()
+    }
+
+    /// Hints the cache to load slot `slot`'s triangle (no effect when out of range).
+    #[inline]
+    pub fn prefetch_slot(&self, slot: u32) {
+        self.triangles.prefetch_slot(slot);
+    }
+
+    /// How many triangle slots the tree holds.
+    pub fn slots(&self) -> usize {
+        self.triangles.slots()
     }
 
     /// Surface-area-heuristic cost of the tree, relative to its root box: the expected cost
@@ -143,15 +214,23 @@ impl Accel {
     }
 
     /// The box of every triangle in the tree (`None` when empty).
-    pub fn bounds(&self, triangles: &FrameTriangles) -> Option<Aabb> {
+    pub fn bounds(&self) -> Option<Aabb> {
         if self.leaves.is_empty() {
             return None;
         }
         Some(self.wide.root_box().unwrap_or_else(|| {
-            self.leaves.iter().fold(Aabb::empty(), |a, l| {
-                a.union(&leaf_box(&triangles.positions, l.first, l.count))
-            })
+            self.leaves
+                .iter()
+                .fold(Aabb::empty(), |a, l| a.union(&self.leaf_box(l)))
         }))
+    }
+
+    /// The union of the padded boxes of a leaf's triangles, read from its packs.
+    pub(in crate::accel) fn leaf_box(&self, leaf: &Leaf) -> Aabb {
+        self.triangles
+            .leaf_packs(leaf.first, leaf.count)
+            .iter()
+            .fold(Aabb::empty(), |a, p| a.union(&p.live_box()))
     }
 
     /// `sah_cost() / cost right after the last build` (1 for an empty tree), as of the last
@@ -165,11 +244,15 @@ impl Accel {
     }
 }
 
-pub(in crate::accel) fn check_finite(triangles: &FrameTriangles) -> Result<(), AccelError> {
-    for (i, tri) in triangles.positions.iter().enumerate() {
+/// The first non-finite vertex of `positions`, as an error naming its source triangle.
+pub(in crate::accel) fn check_finite(
+    positions: &[[Vec3A; 3]],
+    source: &[u32],
+) -> Result<(), AccelError> {
+    for (i, tri) in positions.iter().enumerate() {
         if let Some(v) = tri.iter().find(|v| !v.is_finite()) {
             return Err(AccelError::NonFiniteVertex {
-                triangle: triangles.source[i] as usize,
+                triangle: source[i] as usize,
                 vertex: v.to_array(),
             });
         }
@@ -200,13 +283,6 @@ impl obvhs::Boundable for PaddedTriangle {
     fn aabb(&self) -> Aabb {
         padded_box(&self.0)
     }
-}
-
-/// The union of the padded boxes of the `count` triangles from slot `first` (a leaf).
-pub(in crate::accel) fn leaf_box(positions: &[[Vec3A; 3]], first: u32, count: u32) -> Aabb {
-    positions[first as usize..(first + count) as usize]
-        .iter()
-        .fold(Aabb::empty(), |a, tri| a.union(&padded_box(tri)))
 }
 
 mod binary;

@@ -1,18 +1,14 @@
-//! Refitting the flat tree to moved triangles: the packs and leaf boxes of what moved, then
-//! the inner boxes (a partial refit walks up from each moved leaf; past a share of the
-//! leaves a full sweep, on all threads for large trees, is cheaper). The topology is kept;
+//! Refitting the flat tree to moved triangles (already written into its packs): the leaf
+//! boxes of what moved, then the inner boxes (a partial refit walks up from each moved
+//! leaf; past a share of the leaves a full sweep, on all threads for large trees, is
+//! cheaper). The topology is kept;
 //! whether to rebuild instead is `accel::policy`'s decision.
 
 use rayon::prelude::*;
 
 use obvhs::aabb::Aabb;
 
-use super::{
-    Accel, Leaf, PARALLEL_REFIT_MIN, SAH_INTERSECTION_COST, SAH_TRAVERSAL_COST, leaf_box,
-    padded_box,
-};
-use crate::accel::triangles::{LANES, TrianglePack};
-use crate::geometry::FrameTriangles;
+use super::{Accel, Leaf, PARALLEL_REFIT_MIN, SAH_INTERSECTION_COST, SAH_TRAVERSAL_COST};
 
 /// Leaves per parallel task of a full refit (a leaf takes ~20 ns).
 const REFIT_CHUNK_LEAVES: usize = 1024;
@@ -33,19 +29,20 @@ pub enum RefitKind {
 const PARTIAL_REFIT_MAX_SHARE: f64 = 0.1;
 
 impl Accel {
-    /// Refits the boxes to the moved triangles `moved_slots` (BVH order) after their
-    /// positions changed in `triangles`. The tree's topology is kept.
-    pub fn refit(&mut self, triangles: &FrameTriangles, moved_slots: &[u32]) -> RefitKind {
+    /// Refits the boxes to the moved triangles `moved_slots` (BVH order) after their new
+    /// vertices were written ([`Accel::set_triangle`], [`Accel::slot_lanes`]). The tree's
+    /// topology is kept.
+    pub fn refit(&mut self, moved_slots: &[u32]) -> RefitKind {
         if moved_slots.is_empty() || self.leaves.is_empty() {
             return RefitKind::None;
         }
         let kind = if moved_slots.len() as f64 > PARTIAL_REFIT_MAX_SHARE * self.leaves.len() as f64
         {
             // The full refit takes the cost on its way up.
-            self.cost = self.refit_full(triangles, triangles.len() >= PARALLEL_REFIT_MIN);
+            self.cost = self.refit_full(self.slots() >= PARALLEL_REFIT_MIN);
             RefitKind::Full
         } else {
-            self.refit_partial(triangles, moved_slots);
+            self.refit_partial(moved_slots);
             self.cost = self.sah_cost();
             RefitKind::Partial
         };
@@ -56,45 +53,34 @@ impl Accel {
     /// pure function of its triangles, so the split changes no bit); returns the refitted
     /// tree's SAH cost ([`Accel::sah_cost`]).
     ///
-    /// Leaves in slot order, each in one go: its packs copied from the positions and its
-    /// box taken from the values just copied (one read of each position, not one for the
-    /// packs and one for the boxes), written straight into its lane (a list of boxes then
-    /// a serial pass of scattered lane writes cost as much again). Then the inner lanes,
-    /// which take the SAH cost on the way (a second walk over the nodes was ~2 ms of a
-    /// million triangles' refit).
-    pub(in crate::accel) fn refit_full(
-        &mut self,
-        triangles: &FrameTriangles,
-        parallel: bool,
-    ) -> f32 {
-        let positions = &triangles.positions;
+    /// Leaves in slot order, each box taken from its packs (which the update wrote: the
+    /// packs are the only copy of the positions) and written straight into its lane (a list
+    /// of boxes then a serial pass of scattered lane writes cost as much again). Then the
+    /// inner lanes, which take the SAH cost on the way (a second walk over the nodes was
+    /// ~2 ms of a million triangles' refit).
+    pub(in crate::accel) fn refit_full(&mut self, parallel: bool) -> f32 {
         let chunk = if parallel {
             REFIT_CHUNK_LEAVES
         } else {
             self.leaves.len().max(1)
         };
-        let cuts = self.leaves.chunks(chunk).skip(1).map(|c| c[0].first);
-        let runs = self.triangles.runs_mut(cuts);
         let lanes = self.wide.leaf_lanes_writer();
-        let refresh = |(leaves, packs): (&[Leaf], &mut [TrianglePack])| {
-            let mut packs = packs.iter_mut();
+        let (leaves, packs) = (&self.leaves, &self.triangles);
+        let refresh = |leaves: &[Leaf]| {
             for leaf in leaves {
-                let mut aabb = Aabb::empty();
-                for pack in packs
-                    .by_ref()
-                    .take(leaf.count.div_ceil(LANES as u32) as usize)
-                {
-                    pack.refresh(positions, |tri| aabb = aabb.union(&padded_box(tri)));
-                }
+                let aabb = packs
+                    .leaf_packs(leaf.first, leaf.count)
+                    .iter()
+                    .fold(Aabb::empty(), |a, p| a.union(&p.live_box()));
                 // SAFETY: every leaf has its own lane (`Leaf::lane` is one-to-one), and each
                 // leaf is in one chunk.
                 unsafe { lanes.set_leaf_box(leaf.lane, &aabb) };
             }
         };
         if parallel {
-            self.leaves.par_chunks(chunk).zip(runs).for_each(refresh);
+            leaves.par_chunks(chunk).for_each(refresh);
         } else {
-            self.leaves.chunks(chunk).zip(runs).for_each(refresh);
+            leaves.chunks(chunk).for_each(refresh);
         }
         let cost = self
             .wide
@@ -102,18 +88,12 @@ impl Accel {
         cost.unwrap_or_else(|| self.one_leaf_cost())
     }
 
-    /// Updates each moved triangle's pack lane and leaf box, then the leaf's ancestors up to
-    /// the first whose box comes out unchanged.
-    pub(in crate::accel) fn refit_partial(
-        &mut self,
-        triangles: &FrameTriangles,
-        moved_slots: &[u32],
-    ) {
+    /// Updates each moved triangle's leaf box, then the leaf's ancestors up to the first
+    /// whose box comes out unchanged.
+    pub(in crate::accel) fn refit_partial(&mut self, moved_slots: &[u32]) {
         for &slot in moved_slots {
-            let positions = &triangles.positions;
-            self.triangles.update(slot, &positions[slot as usize]);
             let leaf = self.leaves[self.leaf_of_slot[slot as usize] as usize];
-            let aabb = leaf_box(positions, leaf.first, leaf.count);
+            let aabb = self.leaf_box(&leaf);
             self.wide.refit_leaf(leaf.lane, &aabb);
         }
     }

@@ -109,14 +109,15 @@ impl Rng {
     }
 }
 
-/// Closest hit by testing every triangle (same test, same tie rule).
-fn brute_force(tris: &FrameTriangles, origin: Vec3A, direction: Vec3A) -> Option<(u32, f32)> {
+/// Closest hit by testing every triangle of `by_source` (triangle `i` is source `i`, as in
+/// [`soup`]; same test, same tie rule).
+fn brute_force(by_source: &[[Vec3A; 3]], origin: Vec3A, direction: Vec3A) -> Option<(u32, f32)> {
     let mut best: Option<(u32, f32)> = None;
-    for (slot, p) in tris.positions.iter().enumerate() {
+    for (source, p) in by_source.iter().enumerate() {
         let Some((t, _)) = intersect(p, origin, direction) else {
             continue;
         };
-        let source = tris.source[slot];
+        let source = source as u32;
         if t >= 0.0 && best.is_none_or(|(s, b)| t < b || (t == b && source < s)) {
             best = Some((source, t));
         }
@@ -149,7 +150,8 @@ fn exact_ties_far_from_the_origin_go_to_the_lowest_source() {
         let j = (rng.next() * (i + 1) as f32) as usize % (i + 1);
         tris.swap(i, j);
     }
-    let mut tris = soup(&tris);
+    let by_source = tris;
+    let mut tris = soup(&by_source);
     let accel = Accel::build(&mut tris).unwrap();
     let mut checked = 0;
     for distance in [30.0f32, 1e3, 1e4, 1e5, 3e5, 1e6, 1e6, 1e6] {
@@ -166,7 +168,11 @@ fn exact_ties_far_from_the_origin_go_to_the_lowest_source() {
             for (&(o, d), hit) in rays.iter().zip(&hits) {
                 let single = accel.closest_hit(o, d, f32::INFINITY);
                 let found = single.map(|h| (tris.source[h.triangle as usize], h.t));
-                assert_eq!(found, brute_force(&tris, o, d), "eye {o} direction {d}");
+                assert_eq!(
+                    found,
+                    brute_force(&by_source, o, d),
+                    "eye {o} direction {d}"
+                );
                 assert_eq!(*hit, single, "packet and single ray, eye {o}");
                 checked += found.is_some() as usize;
             }
@@ -175,17 +181,42 @@ fn exact_ties_far_from_the_origin_go_to_the_lowest_source() {
     assert!(checked > 8000, "only {checked} rays hit the grid");
 }
 
-fn random_soup(rng: &mut Rng, n: usize) -> FrameTriangles {
+/// `n` random triangles: by source, and as a soup to build over.
+fn random_soup(rng: &mut Rng, n: usize) -> (Vec<[Vec3A; 3]>, FrameTriangles) {
     let tris: Vec<[Vec3A; 3]> = (0..n)
         .map(|_| {
             let c = rng.point(20.0);
             [c + rng.point(2.0), c + rng.point(2.0), c + rng.point(2.0)]
         })
         .collect();
-    soup(&tris)
+    let soup = soup(&tris);
+    (tris, soup)
 }
 
-fn assert_matches_brute_force(accel: &Accel, tris: &FrameTriangles, rng: &mut Rng) {
+/// Moves the triangles in `slots` by `f`, in the tree (its packs, then a refit) and in
+/// `by_source` (the brute force's copy, by source); returns the refit's kind.
+fn move_triangles(
+    accel: &mut Accel,
+    tris: &FrameTriangles,
+    by_source: &mut [[Vec3A; 3]],
+    slots: &[u32],
+    mut f: impl FnMut(&[Vec3A; 3]) -> [Vec3A; 3],
+) -> RefitKind {
+    for &slot in slots {
+        let source = tris.source[slot as usize] as usize;
+        by_source[source] = f(&by_source[source]);
+        accel.set_triangle(slot, &by_source[source]);
+    }
+    accel.refit(slots)
+}
+
+/// The tree's answers against brute force over `by_source`, the same triangles by source.
+fn assert_matches_brute_force(
+    accel: &Accel,
+    tris: &FrameTriangles,
+    by_source: &[[Vec3A; 3]],
+    rng: &mut Rng,
+) {
     let mut hits = 0;
     for _ in 0..2000 {
         let origin = rng.point(30.0);
@@ -193,7 +224,7 @@ fn assert_matches_brute_force(accel: &Accel, tris: &FrameTriangles, rng: &mut Rn
         let wide = accel
             .closest_hit(origin, direction, f32::INFINITY)
             .map(|h| (tris.source[h.triangle as usize], h.t));
-        assert_eq!(wide, brute_force(tris, origin, direction));
+        assert_eq!(wide, brute_force(by_source, origin, direction));
         hits += wide.is_some() as usize;
         // The shadow walk sees a hit exactly when the closest-hit walk does.
         let blocked = !accel.visit_hits(origin, direction, f32::INFINITY, |_, _| false);
@@ -208,27 +239,29 @@ fn assert_matches_brute_force(accel: &Accel, tris: &FrameTriangles, rng: &mut Rn
 #[test]
 fn wide_walk_finds_what_testing_every_triangle_finds_before_and_after_refits() {
     let mut rng = Rng(0x9e3779b97f4a7c15);
-    let mut tris = random_soup(&mut rng, 3000);
+    let (mut by_source, mut tris) = random_soup(&mut rng, 3000);
     let mut accel = Accel::build(&mut tris).unwrap();
-    assert_matches_brute_force(&accel, &tris, &mut rng);
+    assert_matches_brute_force(&accel, &tris, &by_source, &mut rng);
     // A few triangles jump (partial refit), then all of them move (full refit).
     let moved: Vec<u32> = (0..3000).step_by(97).collect();
-    for &slot in &moved {
-        let shift = rng.point(10.0);
-        tris.positions[slot as usize] = tris.positions[slot as usize].map(|v| v + shift);
-    }
     assert_eq!(accel.sah_ratio(), 1.0);
-    assert_eq!(accel.refit(&tris, &moved), RefitKind::Partial);
-    assert_matches_brute_force(&accel, &tris, &mut rng);
+    let shifts: Vec<Vec3A> = moved.iter().map(|_| rng.point(10.0)).collect();
+    let mut shift = shifts.iter();
+    let kind = move_triangles(&mut accel, &tris, &mut by_source, &moved, |t| {
+        let s = *shift.next().unwrap();
+        t.map(|v| v + s)
+    });
+    assert_eq!(kind, RefitKind::Partial);
+    assert_matches_brute_force(&accel, &tris, &by_source, &mut rng);
     // The kept SAH ratio is the refitted tree's (the jumps changed its boxes).
     assert!(accel.sah_ratio() != 1.0, "{}", accel.sah_ratio());
     assert_eq!(accel.sah_ratio(), accel.sah_cost() / accel.build_cost);
     let all: Vec<u32> = (0..3000).collect();
-    for p in &mut tris.positions {
-        *p = p.map(|v| v * 1.5 + Vec3A::new(1.0, 0.0, 0.0));
-    }
-    assert_eq!(accel.refit(&tris, &all), RefitKind::Full);
-    assert_matches_brute_force(&accel, &tris, &mut rng);
+    let kind = move_triangles(&mut accel, &tris, &mut by_source, &all, |t| {
+        t.map(|v| v * 1.5 + Vec3A::new(1.0, 0.0, 0.0))
+    });
+    assert_eq!(kind, RefitKind::Full);
+    assert_matches_brute_force(&accel, &tris, &by_source, &mut rng);
 }
 #[test]
 fn a_tree_built_in_chunks_finds_what_testing_every_triangle_finds() {
@@ -237,34 +270,34 @@ fn a_tree_built_in_chunks_finds_what_testing_every_triangle_finds() {
     // of splits), through the walks, packets, refits and the SAH ratio the rebuild policy
     // reads.
     let mut rng = Rng(0x51ab);
-    let mut tris = random_soup(&mut rng, 3000);
+    let (mut by_source, mut tris) = random_soup(&mut rng, 3000);
     let mut accel = Accel::build_in_chunks(&mut tris, 100).unwrap();
     assert_eq!(accel.sah_ratio(), 1.0);
-    assert_matches_brute_force(&accel, &tris, &mut rng);
+    assert_matches_brute_force(&accel, &tris, &by_source, &mut rng);
     let slots: u32 = accel.leaves.iter().map(|l| l.count).sum();
     assert_eq!(slots, 3000);
     let mut sources = tris.source.clone();
     sources.sort_unstable();
     assert!(sources.iter().copied().eq(0..3000));
     // Within a chunk the tree is obvhs's; the splits above cost little against one build.
-    let whole = Accel::build(&mut tris.clone()).unwrap();
+    let whole = Accel::build(&mut soup(&by_source)).unwrap();
     let (chunked, one) = (accel.sah_cost(), whole.sah_cost());
     assert!(
         chunked < one * 1.25,
         "SAH cost {chunked} against {one} in one build"
     );
-    for p in &mut tris.positions {
-        *p = p.map(|v| v * 0.5 - Vec3A::new(0.0, 3.0, 0.0));
-    }
     let all: Vec<u32> = (0..3000).collect();
-    assert_eq!(accel.refit(&tris, &all), RefitKind::Full);
-    assert_matches_brute_force(&accel, &tris, &mut rng);
+    let kind = move_triangles(&mut accel, &tris, &mut by_source, &all, |t| {
+        t.map(|v| v * 0.5 - Vec3A::new(0.0, 3.0, 0.0))
+    });
+    assert_eq!(kind, RefitKind::Full);
+    assert_matches_brute_force(&accel, &tris, &by_source, &mut rng);
 }
 
 #[test]
 fn a_packet_finds_what_each_of_its_rays_finds_alone() {
     let mut rng = Rng(0x2545f4914f6cdd1d);
-    let mut tris = random_soup(&mut rng, 4000);
+    let (_, mut tris) = random_soup(&mut rng, 4000);
     // A coherent packet (a camera's 8 x 8 block), an incoherent one, and a short one.
     let accel = Accel::build(&mut tris).unwrap();
     let eye = Vec3A::new(0.0, 0.0, 40.0);
@@ -329,7 +362,7 @@ fn a_packet_finds_what_each_of_its_rays_finds_alone() {
 #[test]
 fn an_occlusion_packet_meets_what_each_of_its_rays_meets_alone() {
     let mut rng = Rng(0x0dd_b1ade);
-    let mut tris = random_soup(&mut rng, 4000);
+    let (_, mut tris) = random_soup(&mut rng, 4000);
     let accel = Accel::build(&mut tris).unwrap();
     let light = Vec3A::new(3.0, 30.0, -2.0);
     let converging: Vec<(Vec3A, Vec3A, f32)> = (0..64)
@@ -398,29 +431,36 @@ fn an_occlusion_packet_meets_what_each_of_its_rays_meets_alone() {
 #[test]
 fn parallel_full_refit_equals_sequential() {
     let mut rng = Rng(0x51f15eed);
-    let mut tris = random_soup(&mut rng, 5000);
+    let (_, mut tris) = random_soup(&mut rng, 5000);
     let mut accel = Accel::build(&mut tris).unwrap();
-    let original = tris.clone();
-    for tri in &mut tris.positions {
-        let shift = rng.point(3.0);
-        for v in tri.iter_mut() {
-            *v = *v * 1.5 + shift;
+    let original = accel.triangles_in_slot_order();
+    let moved: Vec<[Vec3A; 3]> = original
+        .iter()
+        .map(|tri| {
+            let shift = rng.point(3.0);
+            tri.map(|v| v * 1.5 + shift)
+        })
+        .collect();
+    let write = |accel: &mut Accel, tris: &[[Vec3A; 3]]| {
+        for (slot, tri) in tris.iter().enumerate() {
+            accel.set_triangle(slot as u32, tri);
         }
-    }
-    accel.refit_full(&tris, false);
+    };
+    write(&mut accel, &moved);
+    accel.refit_full(false);
     let sequential = accel.wide.bounds_bits();
     // Back to the original boxes, sequentially (so a lane the parallel refit skipped
     // would keep one and show), then the moved triangles again, in parallel.
-    accel.refit_full(&original, false);
+    write(&mut accel, &original);
+    accel.refit_full(false);
     assert_ne!(accel.wide.bounds_bits(), sequential);
-    accel.refit_full(&tris, true);
+    write(&mut accel, &moved);
+    accel.refit_full(true);
     assert_eq!(accel.wide.bounds_bits(), sequential);
-    // Every pack lane holds its slot's moved triangle.
-    for (slot, tri) in tris.positions.iter().enumerate() {
-        assert_eq!(accel.triangles.triangle(slot as u32), *tri, "slot {slot}");
-    }
     // And the refitted tree finds what a fresh build over the moved triangles finds.
-    let fresh = Accel::build(&mut tris.clone()).unwrap();
+    let mut fresh = tris.clone();
+    fresh.positions = moved;
+    let fresh = Accel::build(&mut fresh).unwrap();
     for _ in 0..300 {
         let (o, d) = (rng.point(40.0), rng.point(2.0).normalize_or_zero());
         let hit = |a: &Accel| a.closest_hit(o, d, f32::INFINITY).map(|h| h.t.to_bits());
@@ -448,10 +488,11 @@ fn tiny_and_empty_trees_answer_packets_and_refits() {
     accel.closest_hits(&rays, f32::INFINITY, &mut hits);
     assert_eq!(hits[0].map(|h| h.t), Some(2.0));
     assert!(hits[1].is_none());
-    // Move the near one behind the far one: the refit must move the packed copy too.
-    tris.positions[tris.source.iter().position(|&s| s == 1).unwrap()] = tri(-7.0);
+    // Move the near one behind the far one.
+    let near = tris.source.iter().position(|&s| s == 1).unwrap();
+    accel.set_triangle(near as u32, &tri(-7.0));
     let moved: Vec<u32> = (0..2).collect();
-    accel.refit(&tris, &moved);
+    accel.refit(&moved);
     assert_eq!(
         accel
             .closest_hit(Vec3A::ZERO, Vec3A::NEG_Z, f32::INFINITY)
@@ -462,8 +503,8 @@ fn tiny_and_empty_trees_answer_packets_and_refits() {
     // One triangle: certainly a tree of one leaf; a full refit moves it.
     let mut one = soup(&[tri(-3.0)]);
     let mut accel = Accel::build(&mut one).unwrap();
-    one.positions[0] = tri(-4.0);
-    assert_eq!(accel.refit(&one, &[0]), RefitKind::Full);
+    accel.set_triangle(0, &tri(-4.0));
+    assert_eq!(accel.refit(&[0]), RefitKind::Full);
     assert_eq!(
         accel
             .closest_hit(Vec3A::ZERO, Vec3A::NEG_Z, f32::INFINITY)
@@ -480,7 +521,7 @@ fn tiny_and_empty_trees_answer_packets_and_refits() {
 #[test]
 fn packets_of_axis_parallel_and_repeated_rays_match_single_rays() {
     let mut rng = Rng(99);
-    let mut tris = random_soup(&mut rng, 2000);
+    let (_, mut tris) = random_soup(&mut rng, 2000);
     let accel = Accel::build(&mut tris).unwrap();
     // Directions with zero components, both signs of zero, and the same ray many times.
     let mut rays = Vec::new();
@@ -566,11 +607,11 @@ fn the_builder_reads_the_same_boxes_from_the_positions_as_from_a_box_array() {
     // The build hands obvhs the positions themselves (`PaddedTriangle`); the tree must be
     // the one a separate array of padded boxes gives, node for node.
     let mut rng = Rng(0xb0c5);
-    let tris = random_soup(&mut rng, 3000);
+    let (tris, _) = random_soup(&mut rng, 3000);
     let params = BvhBuildParams::medium_build();
-    let boxes: Vec<Aabb> = tris.positions.iter().map(padded_box).collect();
+    let boxes: Vec<Aabb> = tris.iter().map(padded_box).collect();
     let from_boxes = build_bvh2(&boxes, params, &mut Duration::default());
-    let wrapped = PaddedTriangle::wrap_slice(&tris.positions);
+    let wrapped = PaddedTriangle::wrap_slice(&tris);
     let from_positions = build_bvh2(wrapped, params, &mut Duration::default());
     assert_eq!(
         from_positions.primitive_indices,
@@ -587,11 +628,62 @@ fn the_builder_reads_the_same_boxes_from_the_positions_as_from_a_box_array() {
 }
 
 #[test]
+fn a_build_moves_the_positions_into_the_packs_slot_by_slot() {
+    // The packs are the only copy of the positions once a tree is built: the build leaves
+    // `positions` empty, and each slot reads back the bits of the triangle its source names,
+    // in chunked builds too; `build_from_positions` gives the same tree and slot order.
+    let mut rng = Rng(0x90d5);
+    let (by_source, tris) = random_soup(&mut rng, 2000);
+    for chunk in [BUILD_CHUNK_TRIANGLES, 300] {
+        let mut built = tris.clone();
+        let accel = Accel::build_in_chunks(&mut built, chunk).unwrap();
+        assert!(built.positions.is_empty());
+        assert_eq!(accel.slots(), built.len());
+        for (slot, &source) in built.source.iter().enumerate() {
+            let bits = |t: [Vec3A; 3]| t.map(|v| v.to_array().map(f32::to_bits));
+            assert_eq!(
+                bits(accel.triangle(slot as u32)),
+                bits(by_source[source as usize]),
+                "slot {slot}"
+            );
+        }
+        let all = accel.triangles_in_slot_order();
+        assert!((0..all.len()).all(|s| all[s] == accel.triangle(s as u32)));
+    }
+    let mut built = tris.clone();
+    let accel = Accel::build(&mut built).unwrap();
+    let (other, order) = Accel::build_from_positions(by_source.clone(), &tris.source).unwrap();
+    assert_eq!(
+        order
+            .iter()
+            .map(|&i| tris.source[i as usize])
+            .collect::<Vec<_>>(),
+        built.source
+    );
+    assert_eq!(
+        other.triangles_in_slot_order(),
+        accel.triangles_in_slot_order()
+    );
+    assert_eq!(other.wide.bounds_bits(), accel.wide.bounds_bits());
+    // A non-finite vertex stops the build and names its source; the triangles stay as they
+    // were.
+    let mut bad = tris.clone();
+    bad.positions[7][1].y = f32::NAN;
+    bad.source[7] = 4242;
+    let kept = bad.positions.clone();
+    assert!(matches!(
+        Accel::build(&mut bad),
+        Err(AccelError::NonFiniteVertex { triangle: 4242, .. })
+    ));
+    assert_eq!(bad.positions.len(), kept.len());
+}
+
+#[test]
 fn a_built_tree_keeps_no_spare_capacity_in_its_packs() {
     // Packs are reserved exactly from the leaves' sizes; before, they grew by doubling and a
     // million-triangle grid kept 30% of its pack array unused.
     let mut rng = Rng(0xcafe);
-    let mut tris = random_soup(&mut rng, 5000);
+    let (_, mut tris) = random_soup(&mut rng, 5000);
     let accel = Accel::build(&mut tris).unwrap();
     let packs = &accel.triangles;
     assert_eq!(packs.pack_capacity(), packs.pack_count());

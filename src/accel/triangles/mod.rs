@@ -15,6 +15,9 @@
 //! live lane), so a leaf is a run of packs and no pack straddles two leaves.
 
 use glam::{Vec2, Vec3A, Vec4};
+use obvhs::aabb::Aabb;
+
+use super::flat::padded_box;
 
 mod across_rays;
 
@@ -45,22 +48,15 @@ impl TrianglePack {
         }
     }
 
-    /// Copies its live lanes' triangles from `positions` (by slot) and calls `each` on each
-    /// one copied, in lane order (a refit takes the leaf box from the values it has just
-    /// loaded instead of reading the positions a second time).
+    /// The union of its live lanes' padded boxes (a leaf's box is the union over its packs).
     #[inline]
-    pub fn refresh(&mut self, positions: &[[Vec3A; 3]], mut each: impl FnMut(&[Vec3A; 3])) {
-        let first = self.first_slot as usize;
-        for (lane, tri) in positions[first..first + self.live as usize]
-            .iter()
-            .enumerate()
-        {
-            self.set(lane, tri);
-            each(tri);
-        }
+    pub fn live_box(&self) -> Aabb {
+        (0..self.live as usize).fold(Aabb::empty(), |a, lane| {
+            a.union(&padded_box(&self.get(lane)))
+        })
     }
 
-    #[cfg(test)]
+    #[inline]
     fn get(&self, lane: usize) -> [Vec3A; 3] {
         std::array::from_fn(|vertex| {
             Vec3A::new(
@@ -89,21 +85,20 @@ impl PackedTriangles {
             lane_of_slot: vec![0; positions.len()],
             ..Default::default()
         };
-        let source: Vec<u32> = (0..positions.len() as u32).collect();
         for (first, count) in leaves {
-            packed.push_leaf(positions, &source, first, count);
+            packed.push_leaf(|slot| (positions[slot as usize], slot), first, count);
         }
         packed
     }
 
-    /// No packs yet, with room for exactly the packs of leaves of `counts` triangles (each
-    /// leaf fills whole packs): pushing them never reallocates, and the array keeps no spare
-    /// capacity (growing by doubling left up to half of it unused).
-    pub fn with_pack_capacity(counts: impl Iterator<Item = u32>) -> Self {
+    /// No packs yet for `slots` slots, with room for exactly the packs of leaves of `counts`
+    /// triangles (each leaf fills whole packs): pushing them never reallocates, and the
+    /// array keeps no spare capacity (growing by doubling left up to half of it unused).
+    pub fn with_pack_capacity(counts: impl Iterator<Item = u32>, slots: usize) -> Self {
         let packs: usize = counts.map(|c| (c as usize).div_ceil(LANES)).sum();
         PackedTriangles {
             packs: Vec::with_capacity(packs),
-            lane_of_slot: Vec::new(),
+            lane_of_slot: vec![0; slots],
         }
     }
 
@@ -119,69 +114,82 @@ impl PackedTriangles {
         self.packs.capacity()
     }
 
-    /// Appends the packs of the leaf of `count` slots from `first` (`source[slot]`: the
-    /// slot's source triangle, which hits report for the tie rule); returns its first pack
-    /// (what the tree stores for the leaf).
+    /// Appends the packs of the leaf of `count` slots from `first` (`triangle(slot)`: the
+    /// slot's vertices and its source triangle, which hits report for the tie rule);
+    /// returns its first pack (what the tree stores for the leaf).
     pub fn push_leaf(
         &mut self,
-        positions: &[[Vec3A; 3]],
-        source: &[u32],
+        triangle: impl Fn(u32) -> ([Vec3A; 3], u32),
         first: u32,
         count: u32,
     ) -> u32 {
-        if self.lane_of_slot.len() < positions.len() {
-            self.lane_of_slot.resize(positions.len(), 0);
-        }
         let first_pack = self.packs.len() as u32;
-        let packed = self;
-        {
-            for start in (first..first + count).step_by(LANES) {
-                let live = (first + count - start).min(LANES as u32);
-                let pack = packed.packs.len() as u32;
-                let mut p = TrianglePack {
-                    first_slot: start,
-                    live,
-                    ..Default::default()
-                };
-                for lane in 0..live {
-                    let slot = start + lane;
-                    p.set(lane as usize, &positions[slot as usize]);
-                    p.source[lane as usize] = source[slot as usize];
-                    packed.lane_of_slot[slot as usize] = pack * LANES as u32 + lane;
-                }
-                packed.packs.push(p);
+        for start in (first..first + count).step_by(LANES) {
+            let live = (first + count - start).min(LANES as u32);
+            let pack = self.packs.len() as u32;
+            let mut p = TrianglePack {
+                first_slot: start,
+                live,
+                ..Default::default()
+            };
+            for lane in 0..live {
+                let slot = start + lane;
+                let (tri, source) = triangle(slot);
+                p.set(lane as usize, &tri);
+                p.source[lane as usize] = source;
+                self.lane_of_slot[slot as usize] = pack * LANES as u32 + lane;
             }
+            self.packs.push(p);
         }
         first_pack
     }
 
-    /// The packs in runs cut before the pack of each slot of `cuts` (increasing; each the
-    /// first slot of a leaf, so no cut splits a leaf's packs): disjoint mutable runs, in
-    /// slot order, for tasks that refresh separate runs of leaves.
-    pub fn runs_mut(&mut self, cuts: impl Iterator<Item = u32>) -> Vec<&mut [TrianglePack]> {
-        let mut runs = Vec::new();
-        let (mut rest, mut consumed) = (&mut self.packs[..], 0);
-        for slot in cuts {
-            let pack = self.lane_of_slot[slot as usize] as usize / LANES;
-            let (run, tail) = std::mem::take(&mut rest).split_at_mut(pack - consumed);
-            runs.push(run);
-            (rest, consumed) = (tail, pack);
-        }
-        runs.push(rest);
-        runs
+    /// The packs of the leaf of `count` slots from slot `first` (a leaf's first slot is
+    /// lane 0 of its first pack).
+    #[inline]
+    pub fn leaf_packs(&self, first: u32, count: u32) -> &[TrianglePack] {
+        let pack = self.lane_of_slot[first as usize] as usize / LANES;
+        &self.packs[pack..pack + (count as usize).div_ceil(LANES)]
     }
 
-    /// Copies slot `slot`'s moved triangle into its lane.
-    pub fn update(&mut self, slot: u32, tri: &[Vec3A; 3]) {
+    /// How many slots the packs hold.
+    pub fn slots(&self) -> usize {
+        self.lane_of_slot.len()
+    }
+
+    /// Writes `tri` into slot `slot`'s lane.
+    pub fn set_triangle(&mut self, slot: u32, tri: &[Vec3A; 3]) {
         let at = self.lane_of_slot[slot as usize] as usize;
         self.packs[at / LANES].set(at % LANES, tri);
     }
 
-    /// The stored triangle of `slot`.
-    #[cfg(test)]
+    /// The stored triangle of `slot` (the bits that were written).
+    #[inline]
     pub fn triangle(&self, slot: u32) -> [Vec3A; 3] {
         let at = self.lane_of_slot[slot as usize] as usize;
         self.packs[at / LANES].get(at % LANES)
+    }
+
+    /// Hints the cache to load slot `slot`'s pack (no effect when out of range).
+    #[inline]
+    pub fn prefetch_slot(&self, slot: u32) {
+        if let Some(&at) = self.lane_of_slot.get(slot as usize) {
+            crate::simd::prefetch(&self.packs, at as usize / LANES);
+        }
+    }
+
+    /// Every slot's triangle, in slot order.
+    pub fn triangles_in_slot_order(&self) -> Vec<[Vec3A; 3]> {
+        (0..self.slots() as u32).map(|s| self.triangle(s)).collect()
+    }
+
+    /// Access to single slots from concurrent tasks (see [`SlotLanes`]).
+    pub fn slot_lanes(&mut self) -> SlotLanes<'_> {
+        SlotLanes {
+            packs: self.packs.as_mut_ptr(),
+            lane_of_slot: &self.lane_of_slot,
+            _packs: std::marker::PhantomData,
+        }
     }
 
     /// Tests the `count` triangles of the leaf whose packs start at `first_pack` and calls
@@ -210,6 +218,79 @@ impl PackedTriangles {
             }
         }
         true
+    }
+}
+
+/// Reads and writes of single slots' lanes from concurrent tasks (the frame update writes
+/// moved triangles straight into the packs, on several threads, in source order: slots
+/// scattered over the packs, two tasks possibly in two lanes of one pack).
+///
+/// Sound because every access goes through the raw pointer to one `f32` of a lane (no
+/// reference to a whole pack is formed), lanes of distinct slots are distinct memory
+/// (`lane_of_slot` is one-to-one), and the caller keeps each slot to one task at a time.
+pub struct SlotLanes<'a> {
+    packs: *mut TrianglePack,
+    lane_of_slot: &'a [u32],
+    _packs: std::marker::PhantomData<&'a mut [TrianglePack]>,
+}
+
+// SAFETY: the pointer comes from an exclusive borrow held for 'a; the contract of `get` and
+// `set` keeps every slot to one task at a time, and distinct slots never share a float.
+unsafe impl Sync for SlotLanes<'_> {}
+
+impl SlotLanes<'_> {
+    /// How many slots there are.
+    pub fn slots(&self) -> usize {
+        self.lane_of_slot.len()
+    }
+
+    /// The pack and lane of `slot` (panics when out of range).
+    #[inline]
+    fn lane(&self, slot: u32) -> (*mut TrianglePack, usize) {
+        let at = self.lane_of_slot[slot as usize] as usize;
+        // SAFETY: `lane_of_slot` holds only lanes of packs that exist (`push_leaf`).
+        (unsafe { self.packs.add(at / LANES) }, at % LANES)
+    }
+
+    /// Slot `slot`'s triangle.
+    ///
+    /// # Safety
+    /// No task may write `slot` at the same time.
+    #[inline]
+    pub unsafe fn get(&self, slot: u32) -> [Vec3A; 3] {
+        let (pack, lane) = self.lane(slot);
+        // SAFETY: in bounds; element reads through the pointer, no reference to the pack.
+        std::array::from_fn(|vertex| unsafe {
+            Vec3A::new(
+                (*pack).v[vertex][0][lane],
+                (*pack).v[vertex][1][lane],
+                (*pack).v[vertex][2][lane],
+            )
+        })
+    }
+
+    /// Writes `tri` into slot `slot`'s lane.
+    ///
+    /// # Safety
+    /// No other task may read or write `slot` at the same time.
+    #[inline]
+    pub unsafe fn set(&self, slot: u32, tri: &[Vec3A; 3]) {
+        let (pack, lane) = self.lane(slot);
+        for (vertex, p) in tri.iter().enumerate() {
+            for axis in 0..3 {
+                // SAFETY: in bounds; this lane's floats belong to this slot alone.
+                unsafe { (*pack).v[vertex][axis][lane] = p[axis] };
+            }
+        }
+    }
+
+    /// Hints the cache to load slot `slot`'s pack (no effect when out of range).
+    #[inline]
+    pub fn prefetch(&self, slot: u32) {
+        if let Some(&at) = self.lane_of_slot.get(slot as usize) {
+            // SAFETY: in bounds (`lane`); only the address is formed, nothing is read.
+            crate::simd::prefetch_ptr(unsafe { self.packs.add(at as usize / LANES) });
+        }
     }
 }
 
@@ -499,25 +580,39 @@ mod tests {
             assert_eq!(packed.triangle(slot as u32), *p);
         }
         positions[7] = tri([9.0; 3], [8.0; 3], [7.0; 3]);
-        packed.update(7, &positions[7]);
+        packed.set_triangle(7, &positions[7]);
         assert_eq!(packed.triangle(7), positions[7]);
+        // Through the concurrent access, every slot at once (two tasks share pack 1).
         for p in &mut positions {
             *p = p.map(|v| v * 2.0);
         }
-        // Refreshed in runs cut at the second leaf (slot 5, pack 2): each lane is copied
-        // once and handed over in slot order.
-        let mut seen = Vec::new();
-        let runs = packed.runs_mut([5].into_iter());
-        assert_eq!(runs.iter().map(|r| r.len()).collect::<Vec<_>>(), [2, 2]);
-        for run in runs {
-            for pack in run {
-                pack.refresh(&positions, |t| seen.push(*t));
+        let lanes = packed.slot_lanes();
+        assert_eq!(lanes.slots(), 11);
+        std::thread::scope(|scope| {
+            for half in [0..5u32, 5..11] {
+                let (lanes, positions) = (&lanes, &positions);
+                scope.spawn(move || {
+                    for slot in half {
+                        // SAFETY: each slot is in one half only.
+                        unsafe { lanes.set(slot, &positions[slot as usize]) };
+                        assert_eq!(unsafe { lanes.get(slot) }, positions[slot as usize]);
+                    }
+                });
             }
-        }
-        assert_eq!(seen, positions);
-        for (slot, p) in positions.iter().enumerate() {
-            assert_eq!(packed.triangle(slot as u32), *p);
-        }
-        assert_eq!(packed.runs_mut(std::iter::empty()).len(), 1);
+        });
+        assert_eq!(packed.triangles_in_slot_order(), positions);
+        // A leaf's box is the union of its packs' live lanes (dead lanes left out).
+        let leaf_box = |first, count, slots: std::ops::Range<usize>| {
+            let from_packs = packed
+                .leaf_packs(first, count)
+                .iter()
+                .fold(Aabb::empty(), |a, p| a.union(&p.live_box()));
+            let direct = positions[slots]
+                .iter()
+                .fold(Aabb::empty(), |a, t| a.union(&padded_box(t)));
+            assert_eq!((from_packs.min, from_packs.max), (direct.min, direct.max));
+        };
+        leaf_box(0, 5, 0..5);
+        leaf_box(5, 6, 5..11);
     }
 }

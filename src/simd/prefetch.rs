@@ -1,7 +1,7 @@
-//! Cache hints for the update's scattered accesses: its passes walk one order (source
-//! triangles, or the dirty list) while reading or writing per-slot arrays in another (the
-//! BVH's), so each access would be a cache miss; the index a few steps ahead is known, and
-//! a hint issued that far ahead hides most of the miss.
+//! Cache hints for the frame update's scattered accesses: its passes walk one order (source
+//! triangles, or the dirty list) while reading or writing per-slot arrays and packs in
+//! another (the BVH's), so each access would be a cache miss; the index a few steps ahead
+//! is known, and a hint issued that far ahead hides most of the miss.
 
 /// Hints the cache to load the line holding `p`. Never faults (a prefetch reads and writes
 /// nothing), so any address is fine; a no-op on targets without a hint.
