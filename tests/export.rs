@@ -328,9 +328,9 @@ fn reloaded_obj_frame_renders_like_the_animation_at_that_frame() {
     // Positions, UVs and materials come back bit for bit, normals to rounding.
     let (t, positions) = (reloaded.triangles(), reloaded.world_positions());
     assert_eq!(t.len(), exported.len());
-    for s in 0..t.len() {
+    for (s, p) in positions.iter().enumerate() {
         let (normals, uvs, material) = exported
-            .get(&key(&positions[s]))
+            .get(&key(p))
             .expect("every re-loaded triangle is an exported one");
         assert_eq!(t.uvs[s], *uvs);
         assert_eq!(t.material[s], *material);

@@ -105,10 +105,10 @@ fn parallel_log2_pb_update_equals_the_constant_computed_one_by_one() {
         let update = r.prepare(frame, frame as f32 / FPS).unwrap().update;
         assert_eq!(update.lod_recomputed, triangles, "frame {frame}");
         let (t, positions) = (r.triangles(), r.world_positions());
-        for slot in 0..t.len() {
+        for (slot, &p) in positions.iter().enumerate() {
             let term = texel_term(texel_area(uv_area(t.uvs[slot]), (64, 64)));
-            let expected = log2_pb_with_texel_term(positions[slot], term, footprint);
-            let plain = log2_pb(positions[slot], t.uvs[slot], (64, 64), footprint);
+            let expected = log2_pb_with_texel_term(p, term, footprint);
+            let plain = log2_pb(p, t.uvs[slot], (64, 64), footprint);
             assert!(
                 (expected.to_bits() as i64 - plain.to_bits() as i64).abs() <= 1,
                 "frame {frame}, slot {slot}: {expected} vs {plain}"

@@ -53,8 +53,7 @@ pub(crate) fn write_ply(
         let mut vertex = [0u8; 32];
         for slot in 0..n {
             let positions = renderer.accel().triangle(slot as u32);
-            for k in 0..3 {
-                let p = positions[k];
+            for (k, p) in positions.iter().enumerate() {
                 let nn = t.normals[slot][k];
                 let uv = t.uvs[slot][k];
                 let values = [p.x, p.y, p.z, nn.x, nn.y, nn.z, uv.x, uv.y];

@@ -77,17 +77,18 @@ pub const PLACE_NS_PER_INSTANCE: f64 = 1_120.0;
 /// frame) over its 62,490 moving triangles.
 pub const REFIT_NS_PER_TRIANGLE: f64 = 63.0;
 
-/// Resident bytes of a triangle merged into the world tree (positions, normals, uvs,
-/// material, `log2 P_b`, source, packs and its share of the tree; since the flat build
-/// takes large inputs a chunk at a time, the peak is what a frame keeps). Measured as the
-/// peak resident memory of the crowd under `--bvh flat` less that under `--bvh two-level`
-/// (239 MB against 25 MB, `cargo bench --bench frame_loop -- rigid 1M`, 2026-11-26; 374
-/// against 59 before the chunked build and the per-source uvs and indices read from the
-/// primitive), over the 995,000 triangles instancing stores once.
-pub const BYTES_PER_TRIANGLE: f64 = 215.0;
+/// Resident bytes of a triangle merged into the world tree (normals, uvs, material,
+/// `log2 P_b`, source, the packs that hold its positions, and its share of the tree; since
+/// the flat build takes large inputs a chunk at a time, the peak is what a frame keeps).
+/// Measured as the peak resident memory of the crowd under `--bvh flat` less that under
+/// `--bvh two-level` (192 MB against 24 MB, `cargo bench --bench frame_loop -- rigid 1M`,
+/// 2026-11-26; 374 against 59 before the chunked build, the per-source uvs and indices read
+/// from the primitive and the positions kept only in the packs), over the 995,000
+/// triangles instancing stores once.
+pub const BYTES_PER_TRIANGLE: f64 = 169.0;
 
 /// Most extra world-space triangles the copies of one mesh of one class may add (beyond the
-/// first copy) and still be merged: 65,536 triangles are ~14 MB at [`BYTES_PER_TRIANGLE`].
+/// first copy) and still be merged: 65,536 triangles are ~11 MB at [`BYTES_PER_TRIANGLE`].
 pub const MERGE_BUDGET_TRIANGLES: usize = 65_536;
 
 /// How one drawn copy (instance) of a mesh primitive moves over the selected animation.
