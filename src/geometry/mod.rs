@@ -75,13 +75,12 @@ impl FrameTriangles {
     /// (`positions` too unless a tree already holds them).
     pub fn permute(&mut self, order: &[u32]) {
         fn apply<T: Copy>(v: &mut Vec<T>, order: &[u32]) {
-            if v.is_empty() {
-                return;
-            }
             let permuted: Vec<T> = order.iter().map(|&i| v[i as usize]).collect();
             *v = permuted;
         }
-        apply(&mut self.positions, order);
+        if !self.positions.is_empty() {
+            apply(&mut self.positions, order);
+        }
         apply(&mut self.normals, order);
         apply(&mut self.uvs, order);
         apply(&mut self.material, order);
