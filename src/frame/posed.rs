@@ -304,13 +304,13 @@ impl<'a> TriangleWriter<'a> {
     /// bits [`TriangleWriter::write`] writes).
     #[inline]
     pub fn position(&self, source: u32) -> [Vec3A; 3] {
-        self.placed(source).0
+        let i = self.geometry.triangle_instance[source as usize] as usize;
+        self.placed(i, source).0
     }
 
-    /// Source triangle `source` placed: world-space vertices and normals.
+    /// Source triangle `source` of instance `i` placed: world-space vertices and normals.
     #[inline]
-    fn placed(&self, source: u32) -> ([Vec3A; 3], [Vec3; 3]) {
-        let i = self.geometry.triangle_instance[source as usize] as usize;
+    fn placed(&self, i: usize, source: u32) -> ([Vec3A; 3], [Vec3; 3]) {
         let placement = self.posed.placement(i);
         let (positions, normals) = self.posed.world_arrays(i);
         let (first, indices) = self.indices[i];
@@ -337,7 +337,7 @@ impl<'a> TriangleWriter<'a> {
             Rewrite::Changed => None,
         };
         let placement = self.posed.placement(i);
-        let (p, n) = self.placed(source);
+        let (p, n) = self.placed(i, source);
         *normal = n;
         let motion = all.or_else(|| (!same_bits(&p, position)).then_some(Motion::Deformed))?;
         if !p.iter().all(|v| v.is_finite()) {

@@ -227,10 +227,7 @@ impl Accel {
 
     /// The union of the padded boxes of a leaf's triangles, read from its packs.
     pub(in crate::accel) fn leaf_box(&self, leaf: &Leaf) -> Aabb {
-        self.triangles
-            .leaf_packs(leaf.first, leaf.count)
-            .iter()
-            .fold(Aabb::empty(), |a, p| a.union(&p.live_box()))
+        self.triangles.leaf_box(leaf.first, leaf.count)
     }
 
     /// `sah_cost() / cost right after the last build` (1 for an empty tree), as of the last

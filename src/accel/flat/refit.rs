@@ -6,8 +6,6 @@
 
 use rayon::prelude::*;
 
-use obvhs::aabb::Aabb;
-
 use super::{Accel, Leaf, PARALLEL_REFIT_MIN, SAH_INTERSECTION_COST, SAH_TRAVERSAL_COST};
 
 /// Leaves per parallel task of a full refit (a leaf takes ~20 ns).
@@ -68,10 +66,7 @@ impl Accel {
         let (leaves, packs) = (&self.leaves, &self.triangles);
         let refresh = |leaves: &[Leaf]| {
             for leaf in leaves {
-                let aabb = packs
-                    .leaf_packs(leaf.first, leaf.count)
-                    .iter()
-                    .fold(Aabb::empty(), |a, p| a.union(&p.live_box()));
+                let aabb = packs.leaf_box(leaf.first, leaf.count);
                 // SAFETY: every leaf has its own lane (`Leaf::lane` is one-to-one), and each
                 // leaf is in one chunk.
                 unsafe { lanes.set_leaf_box(leaf.lane, &aabb) };

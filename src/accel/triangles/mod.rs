@@ -152,6 +152,14 @@ impl PackedTriangles {
         &self.packs[pack..pack + (count as usize).div_ceil(LANES)]
     }
 
+    /// The union of the padded boxes of the leaf of `count` slots from slot `first`.
+    #[inline]
+    pub fn leaf_box(&self, first: u32, count: u32) -> Aabb {
+        self.leaf_packs(first, count)
+            .iter()
+            .fold(Aabb::empty(), |a, p| a.union(&p.live_box()))
+    }
+
     /// How many slots the packs hold.
     pub fn slots(&self) -> usize {
         self.lane_of_slot.len()
