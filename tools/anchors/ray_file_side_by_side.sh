@@ -14,6 +14,11 @@
 # API (single, or 4/8/16-wide packets of the class's rays grouped by pixel block and bounce),
 # each the best of its two builds (refittable, static high quality); figures are the median
 # of a run's repetitions, then the median over rounds; the ratio is mipray / Embree best.
+# Each round also renders the frame whole (`mipray bench --methods paper --threads 1
+# --max-depth 5 --repeats 3`: shaded, textured, the same rays) and the script prints its
+# render time against the time the file's rays take on Embree's best API per class and on
+# mipray's kernels (rays / Mrays/s, summed over the classes, medians over rounds): the whole
+# frame's cost against tracing alone at Embree's best.
 set -euo pipefail
 [ $# -ge 3 ] || { sed -n '4,6p' "$0" >&2; exit 2; }
 scene=$1; frame=$2; size=$3; lights=${4:-1}; rounds=${5:-3}
@@ -33,6 +38,8 @@ for round in $(seq "$rounds"); do
   "$bin" bench "$scene" --frames "$frame" --size "$size" --lights "$lights" --rays "$rays" \
     --threads 1 --repeats 3 2>/dev/null > "$ex/mipray_$round.txt"
   "$work/embree_ray_file" "$obj" "$rays" "$width" 3 > "$ex/embree_$round.txt"
+  "$bin" bench "$scene" --frames "$frame" --size "$size" --lights "$lights" --max-depth 5 \
+    --methods paper --threads 1 --repeats 3 2>/dev/null > "$ex/frame_$round.txt"
 done
 python3 - "$ex" "$scene" "$frame" "$size" "$lights" "$rounds" <<'PY'
 import statistics as st, sys
@@ -73,4 +80,32 @@ for cls in ("primary", "shadow", "reflection", "refraction"):
         if (b, cls, "1") in e:
             print(f"  {cls:10s} {b:5s} " + "  ".join(f"{a:>2s} {med(e[(b, cls, a)]['med']):7.3f}" for a in ("1", "4", "8", "16")))
 print("\nmipray per round:", {f"{c} {a}": d["med"] for (c, a), d in m.items()})
+
+# The whole frame against tracing its rays: per round, the shaded frame's render time, and the
+# file's rays at that round's Embree best API per class and at mipray's best way per class.
+frames, embree_ms, mipray_ms = [], [], []
+for r in range(1, rounds + 1):
+    for line in open(f"{ex}/frame_{r}.txt"):
+        f = [x.strip() for x in line.split("|")[1:-1]]
+        if len(f) == 8 and f[0] == "paper":
+            frames.append(float(f[3]))
+    best_e, best_m = {}, {}
+    for line in open(f"{ex}/embree_{r}.txt"):
+        w = line.split()
+        if w and w[0] == "ray":
+            best_e[w[2]] = max(best_e.get(w[2], 0.0), float(w[7]))
+    for line in open(f"{ex}/mipray_{r}.txt"):
+        f = [x.strip() for x in line.split("|")[1:-1]]
+        if len(f) == 8 and f[0] in ("primary", "shadow", "reflection", "refraction"):
+            best_m[f[0]] = max(best_m.get(f[0], 0.0), float(f[5]))
+    counts = {c: d["count"] for (c, _), d in m.items()}
+    embree_ms.append(sum(counts[c] / (best_e[c] * 1e3) for c in counts if best_e.get(c)))
+    mipray_ms.append(sum(counts[c] / (best_m[c] * 1e3) for c in counts if best_m.get(c)))
+if frames:
+    fm, em, mm = med(frames), med(embree_ms), med(mipray_ms)
+    print(f"\nwhole frame, shaded (mipray bench --methods paper, 1 thread): {fm:.1f} ms render "
+          f"(rounds {', '.join(f'{x:.1f}' for x in frames)})")
+    print(f"the file's rays at Embree's best API per class: {em:.1f} ms; on mipray's kernels: {mm:.1f} ms")
+    print(f"frame / Embree's tracing: {fm / em:.2f} (target <= 1.5); mipray's tracing / Embree's: {mm / em:.2f}; "
+          f"frame time outside tracing (frame - mipray's tracing): {fm - mm:.1f} ms")
 PY
