@@ -16,7 +16,7 @@
 //! (`color += weight * child`, the glass terms summed from zero before they are added), so
 //! the image does not depend on the order in which rays are traced.
 
-use glam::Vec3A;
+use glam::{Vec2, Vec3A};
 
 use crate::accel::Hit;
 use crate::geometry::HitTriangle;
@@ -26,7 +26,7 @@ use crate::render::material::{Material, ShadingModel};
 use crate::render::ray_log::{RayClass, RayLog};
 use crate::render::scene_bvh::SceneBvh;
 use crate::render::surface::{SurfacePoint, dielectric_fresnel, interpolate_uv, reflect};
-use crate::texture::{MipPyramid, Texture};
+use crate::texture::{MipPyramid, PlannedLookup, Texture};
 
 /// Histogram bins for texture lookups per integer MIP level (textures up to 32768^2).
 pub const MIP_LEVELS: usize = 16;
@@ -114,7 +114,36 @@ pub(super) struct Spawned<L> {
     pub(super) lod: L,
 }
 
-/// A hit whose surface is made and texture looked up, waiting for its shadow rays.
+/// A hit's base-colour lookup, decided on arrival (see `FrameScene::texel_lookup`) and
+/// filtered when the hit is finished.
+#[derive(Clone, Copy)]
+enum TexelLookup {
+    /// No texture: white.
+    Untextured,
+    /// A bilinear or trilinear lookup in texture `texture`, its taps computed (`none`,
+    /// `paper` and every method that picks one level).
+    Planned { texture: u32, plan: PlannedLookup },
+    /// An anisotropic lookup (`Footprint::Anisotropic` at the biased, clamped `level`),
+    /// made in full when filtered.
+    Anisotropic {
+        texture: u32,
+        uv: Vec2,
+        level: f32,
+        axis: Vec2,
+        taps: u32,
+    },
+    /// An EWA lookup (`Footprint::Elliptical` at the biased, clamped `level`), made in full
+    /// when filtered.
+    Elliptical {
+        texture: u32,
+        uv: Vec2,
+        level: f32,
+        major: Vec2,
+        minor: Vec2,
+    },
+}
+
+/// A hit whose surface is made and texture lookup planned, waiting for its shadow rays.
 pub(super) struct Arrival<L> {
     hit: Hit,
     triangle: HitTriangle,
@@ -124,9 +153,8 @@ pub(super) struct Arrival<L> {
     /// The ray's LOD state after `arrive`.
     lod: L,
     material: u32,
-    /// Energy-weighted model: the base colour times the texel (the albedo). Additive:
-    /// the texel.
-    texel: Vec3A,
+    /// The hit's base-colour lookup, decided on arrival and filtered in `finish`.
+    lookup: TexelLookup,
     /// Bounces before this hit.
     depth: u32,
 }
@@ -315,7 +343,7 @@ impl FrameScene<'_> {
         let lod_hit = surface.lod_hit(&triangle, &hit, direction);
         lod.arrive(&lod_hit);
         let material = &self.materials[triangle.material as usize];
-        let texel = self.texel(&lod_hit, material, &lod, counters);
+        let lookup = self.texel_lookup(&lod_hit, material, &lod, counters);
         let lit = match material.model {
             // The energy-weighted model lights only what is not fully transmissive.
             ShadingModel::EnergyWeighted => 1.0 - material.transmission > 0.0,
@@ -324,10 +352,6 @@ impl FrameScene<'_> {
         if lit {
             self.request_shadows(&surface, requests, counters);
         }
-        let texel = match material.model {
-            ShadingModel::EnergyWeighted => Vec3A::from(material.base_color) * texel,
-            ShadingModel::Additive { .. } => texel,
-        };
         Arrival {
             material: triangle.material,
             hit,
@@ -335,7 +359,7 @@ impl FrameScene<'_> {
             surface,
             direction,
             lod,
-            texel,
+            lookup,
             depth,
         }
     }
@@ -386,7 +410,7 @@ impl FrameScene<'_> {
         };
         match material.model {
             ShadingModel::EnergyWeighted => {
-                let albedo = arrival.texel;
+                let albedo = Vec3A::from(material.base_color) * self.texel(&arrival.lookup);
                 let opaque = 1.0 - material.transmission;
                 let mut color = Vec3A::ZERO;
                 if opaque > 0.0 {
@@ -418,7 +442,7 @@ impl FrameScene<'_> {
                 combine
             }
             ShadingModel::Additive { ambient } => {
-                let texel = arrival.texel;
+                let texel = self.texel(&arrival.lookup);
                 let diffuse = Vec3A::from(material.base_color) * texel;
                 let ambient = Vec3A::from(ambient) * texel;
                 let mut color = self.additive_ambient * ambient;
@@ -491,35 +515,91 @@ impl FrameScene<'_> {
         }
     }
 
-    /// The filtered base-colour texel at a hit (white when untextured).
+    /// Decides the base-colour lookup at a hit (its texture, coordinates and level; none
+    /// when untextured) and hints the cache to load the texels it will read.
+    ///
+    /// Why the lookup is split from its filtering: a hit's texel is needed only when the
+    /// hit is finished, after the tile's shadow rays are traced, and its texels are
+    /// scattered over textures of megabytes, so reading them on arrival stalled on cache
+    /// misses (the texel loads were the hottest lines of a BART Kitchen frame). Decided
+    /// here and filtered in `finish`, with the same inputs and the same function, the
+    /// result is the same bits and the misses overlap the shadow rays.
     #[inline]
-    fn texel<L: RayLod>(
+    fn texel_lookup<L: RayLod>(
         &self,
         lod_hit: &SurfaceHit,
         material: &Material,
         lod: &L,
         counters: &mut TraceCounters,
-    ) -> Vec3A {
-        let Some(texture) = material
+    ) -> TexelLookup {
+        let Some((t, texture)) = material
             .base_color_texture
-            .and_then(|t| self.textures.get(t))
+            .and_then(|t| Some((t as u32, self.textures.get(t)?)))
         else {
-            return Vec3A::ONE;
+            return TexelLookup::Untextured;
         };
         let uv = interpolate_uv(lod_hit.triangle.uvs, lod_hit.bary);
         let pyramid = &texture.pyramid;
         let footprint = lod.footprint(lod_hit, &self.lod_camera, pyramid.base_size());
         let (_, level) = self.biased_level(&footprint, pyramid);
         counters.mip_histogram[(level as usize).min(MIP_LEVELS - 1)] += 1;
-        let texel = match footprint {
-            Footprint::Base => pyramid.sample_bilinear(0, uv, texture.sampler),
-            Footprint::Level(_) => pyramid.sample_trilinear(uv, level, texture.sampler),
-            Footprint::Anisotropic { axis, taps, .. } => {
+        let sampler = texture.sampler;
+        match footprint {
+            Footprint::Base => TexelLookup::Planned {
+                texture: t,
+                plan: pyramid.plan_bilinear(0, uv, sampler),
+            },
+            Footprint::Level(_) => TexelLookup::Planned {
+                texture: t,
+                plan: pyramid.plan_trilinear(uv, level, sampler),
+            },
+            Footprint::Anisotropic { axis, taps, .. } => TexelLookup::Anisotropic {
+                texture: t,
+                uv,
+                level,
+                axis,
+                taps,
+            },
+            Footprint::Elliptical { major, minor, .. } => TexelLookup::Elliptical {
+                texture: t,
+                uv,
+                level,
+                major,
+                minor,
+            },
+        }
+    }
+
+    /// The filtered base-colour texel of a lookup (white when untextured).
+    #[inline]
+    fn texel(&self, lookup: &TexelLookup) -> Vec3A {
+        let texel = match *lookup {
+            TexelLookup::Untextured => return Vec3A::ONE,
+            TexelLookup::Planned { texture, plan } => self.textures[texture as usize]
+                .pyramid
+                .sample_planned(&plan),
+            TexelLookup::Anisotropic {
+                texture,
+                uv,
+                level,
+                axis,
+                taps,
+            } => {
+                let texture = &self.textures[texture as usize];
+                let pyramid = &texture.pyramid;
                 pyramid.sample_anisotropic(uv, level, axis, taps, texture.sampler)
             }
-            // The bias scales the ellipse, so its minor axis fits the biased level.
-            Footprint::Elliptical { major, minor, .. } => {
+            TexelLookup::Elliptical {
+                texture,
+                uv,
+                level,
+                major,
+                minor,
+            } => {
+                let texture = &self.textures[texture as usize];
+                // The bias scales the ellipse, so its minor axis fits the biased level.
                 let scale = self.lod_bias.exp2();
+                let pyramid = &texture.pyramid;
                 pyramid.sample_ewa(uv, level, (major, minor), scale, texture.sampler)
             }
         };

@@ -23,6 +23,7 @@ mod fetch;
 mod taps;
 
 pub use decode::{ColorEncoding, decode_texels, srgb_to_linear};
+pub use sample::PlannedLookup;
 
 use glam::Vec4;
 
@@ -94,6 +95,15 @@ impl MipLevel {
         match &self.texels {
             Texels::Linear(t) => t[i],
             Texels::Srgb8 { codes, tables } => tables.texel(codes[i]),
+        }
+    }
+
+    /// Hints the cache to load texel `i` (`y * width + x`; nothing when out of range).
+    #[inline(always)]
+    fn prefetch(&self, i: usize) {
+        match &self.texels {
+            Texels::Linear(t) => crate::simd::prefetch(t, i),
+            Texels::Srgb8 { codes, .. } => crate::simd::prefetch(codes, i),
         }
     }
 

@@ -107,15 +107,41 @@ pub(super) fn wrap(i: i64, n: i64, mode: WrapMode) -> usize {
     }) as usize
 }
 
-/// Bilinear lookup in one level (any storage, any coordinate).
-#[inline(always)]
-fn bilinear<const AVX2: bool>(level: &MipLevel, uv: Vec2, sampler: Sampler) -> Vec4 {
-    fetch::bilinear::<AVX2>(level, &BilinearTaps::new(level, uv, sampler))
-}
-
 /// Trilinear lookup at `lod` (see [`MipPyramid::sample_trilinear`]).
 #[inline(always)]
 fn trilinear<const AVX2: bool>(pyramid: &MipPyramid, uv: Vec2, lod: f32, sampler: Sampler) -> Vec4 {
+    filter_planned::<AVX2>(pyramid, &plan_trilinear(pyramid, uv, lod, sampler))
+}
+
+/// Where a bilinear or trilinear lookup reads: its level (or two levels, blended by
+/// `frac`) and the taps in each, computed by [`MipPyramid::plan_bilinear`] or
+/// [`MipPyramid::plan_trilinear`] and filtered by [`MipPyramid::sample_planned`] with the
+/// pyramid it was planned on.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PlannedLookup {
+    /// The (lower) level.
+    level: u32,
+    /// Whether the next level is blended in (by `frac`).
+    blend: bool,
+    frac: f32,
+    taps: [BilinearTaps; 2],
+}
+
+/// The plan of a bilinear lookup in level `k` (in range).
+#[inline(always)]
+fn plan_bilinear(pyramid: &MipPyramid, k: usize, uv: Vec2, sampler: Sampler) -> PlannedLookup {
+    let taps = BilinearTaps::new(&pyramid.levels[k], uv, sampler);
+    PlannedLookup {
+        level: k as u32,
+        blend: false,
+        frac: 0.0,
+        taps: [taps; 2],
+    }
+}
+
+/// The plan of a trilinear lookup at `lod`.
+#[inline(always)]
+fn plan_trilinear(pyramid: &MipPyramid, uv: Vec2, lod: f32, sampler: Sampler) -> PlannedLookup {
     let lod = pyramid.clamp_level(lod);
     // `lod` is in [0, last], where truncation is the floor (without a libm call).
     let k = lod as usize;
@@ -124,14 +150,42 @@ fn trilinear<const AVX2: bool>(pyramid: &MipPyramid, uv: Vec2, lod: f32, sampler
     if frac == 0.0 || k + 1 >= levels.len() {
         // Integer level (including 0, magnification, and the last level): no blend, so
         // integer LODs agree exactly with `sample_bilinear`.
-        return bilinear::<AVX2>(&levels[k], uv, sampler);
+        return plan_bilinear(pyramid, k, uv, sampler);
     }
-    let (lower, upper) = (&levels[k], &levels[k + 1]);
-    let taps = [
-        BilinearTaps::new(lower, uv, sampler),
-        BilinearTaps::new(upper, uv, sampler),
-    ];
-    fetch::trilinear::<AVX2>([lower, upper], &taps, frac)
+    PlannedLookup {
+        level: k as u32,
+        blend: true,
+        frac,
+        taps: [
+            BilinearTaps::new(&levels[k], uv, sampler),
+            BilinearTaps::new(&levels[k + 1], uv, sampler),
+        ],
+    }
+}
+
+/// The lookup `plan` describes.
+#[inline(always)]
+fn filter_planned<const AVX2: bool>(pyramid: &MipPyramid, plan: &PlannedLookup) -> Vec4 {
+    let k = plan.level as usize;
+    if !plan.blend {
+        return fetch::bilinear::<AVX2>(&pyramid.levels[k], &plan.taps[0]);
+    }
+    let (lower, upper) = (&pyramid.levels[k], &pyramid.levels[k + 1]);
+    fetch::trilinear::<AVX2>([lower, upper], &plan.taps, plan.frac)
+}
+
+/// Hints the cache to load the texels `plan` reads.
+#[inline(always)]
+fn prefetch_planned(pyramid: &MipPyramid, plan: &PlannedLookup) {
+    let k = plan.level as usize;
+    for (level, taps) in pyramid.levels[k..=k + usize::from(plan.blend)]
+        .iter()
+        .zip(&plan.taps)
+    {
+        for i in taps.texels {
+            level.prefetch(i);
+        }
+    }
 }
 
 /// [`MipPyramid::sample_bilinear`] as a kernel.
@@ -145,7 +199,22 @@ impl Kernel for Bilinear<'_> {
     type Output = Vec4;
     #[inline(always)]
     fn run<const AVX2: bool>(self) -> Vec4 {
-        bilinear::<AVX2>(self.level, self.uv, self.sampler)
+        let taps = BilinearTaps::new(self.level, self.uv, self.sampler);
+        fetch::bilinear::<AVX2>(self.level, &taps)
+    }
+}
+
+/// [`MipPyramid::sample_planned`] as a kernel.
+struct Planned<'a> {
+    pyramid: &'a MipPyramid,
+    plan: &'a PlannedLookup,
+}
+
+impl Kernel for Planned<'_> {
+    type Output = Vec4;
+    #[inline(always)]
+    fn run<const AVX2: bool>(self) -> Vec4 {
+        filter_planned::<AVX2>(self.pyramid, self.plan)
     }
 }
 
@@ -208,6 +277,40 @@ impl MipPyramid {
             uv,
             lod,
             sampler,
+        })
+    }
+
+    /// Where [`Self::sample_bilinear`] with the same arguments reads, planned now and
+    /// filtered later by [`Self::sample_planned`] (the same bits), with a hint to the cache
+    /// to start loading those texels.
+    ///
+    /// Why: a renderer that knows a lookup long before it needs the result (a hit's texture,
+    /// needed only once the hit's shadow rays are traced) plans it first, so the texels'
+    /// cache misses overlap the work in between instead of stalling the lookup, and the
+    /// coordinates are computed once.
+    pub fn plan_bilinear(&self, level: usize, uv: Vec2, sampler: Sampler) -> PlannedLookup {
+        let plan = plan_bilinear(self, level.min(self.levels.len() - 1), uv, sampler);
+        prefetch_planned(self, &plan);
+        plan
+    }
+
+    /// [`Self::plan_bilinear`] for [`Self::sample_trilinear`] (one level or two, chosen as
+    /// the lookup chooses them).
+    pub fn plan_trilinear(&self, uv: Vec2, lod: f32, sampler: Sampler) -> PlannedLookup {
+        let plan = plan_trilinear(self, uv, lod, sampler);
+        prefetch_planned(self, &plan);
+        plan
+    }
+
+    /// The lookup `plan` describes (planned on this pyramid): bit for bit what the
+    /// `sample_*` call it was planned for returns.
+    ///
+    /// # Panics
+    /// If `plan` names a level this pyramid does not have (planned on another pyramid).
+    pub fn sample_planned(&self, plan: &PlannedLookup) -> Vec4 {
+        dispatch(Planned {
+            pyramid: self,
+            plan,
         })
     }
 
@@ -730,6 +833,28 @@ mod tests {
                 let want_aniso = (0..taps).fold(Vec4::ZERO, |sum, t| {
                     sum + reference_trilinear(p, first + step * t as f32, lod, s)
                 }) / taps as f32;
+                let clamped = level.min(p.level_count() - 1);
+                // Planned and filtered later: the public plans (which also prefetch) are
+                // the kernels' plans.
+                let plans = (p.plan_trilinear(uv, lod, s), p.plan_bilinear(level, uv, s));
+                assert_eq!(plans.0, plan_trilinear(p, uv, lod, s));
+                assert_eq!(plans.1, plan_bilinear(p, clamped, uv, s));
+                let planned = || {
+                    (
+                        Planned {
+                            pyramid: p,
+                            plan: &plans.0,
+                        },
+                        Planned {
+                            pyramid: p,
+                            plan: &plans.1,
+                        },
+                    )
+                };
+                let (pt, pb) = planned();
+                let planned_baseline = (run_baseline(pt), run_baseline(pb));
+                let (pt, pb) = planned();
+                let planned_avx2 = [run_avx2_if_available(pt), run_avx2_if_available(pb)];
                 let kernels = || {
                     (
                         Trilinear {
@@ -768,6 +893,10 @@ mod tests {
                     (avx2[0], want, "trilinear (AVX2)"),
                     (avx2[1], want_bilinear, "bilinear (AVX2)"),
                     (avx2[2], want_aniso, "anisotropic (AVX2)"),
+                    (Some(planned_baseline.0), want, "planned trilinear"),
+                    (Some(planned_baseline.1), want_bilinear, "planned bilinear"),
+                    (planned_avx2[0], want, "planned trilinear (AVX2)"),
+                    (planned_avx2[1], want_bilinear, "planned bilinear (AVX2)"),
                 ] {
                     let Some(got) = got else { continue };
                     assert!(
@@ -779,12 +908,17 @@ mod tests {
                 }
             }
         }
-        assert!(compared >= 6 * 3006 * 3, "{compared}");
+        assert!(compared >= 6 * 3006 * 5, "{compared}");
         // The public lookups run one of the two copies.
         let p = &pyramids[0];
         let uv = Vec2::new(0.3, 0.7);
         assert!(same_bits(
             p.sample_trilinear(uv, 1.25, Sampler::default()),
+            reference_trilinear(p, uv, 1.25, Sampler::default())
+        ));
+        let plan = p.plan_trilinear(uv, 1.25, Sampler::default());
+        assert!(same_bits(
+            p.sample_planned(&plan),
             reference_trilinear(p, uv, 1.25, Sampler::default())
         ));
     }
