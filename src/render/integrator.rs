@@ -571,14 +571,14 @@ impl FrameScene<'_> {
     }
 
     /// The filtered base-colour texel of a lookup (white when untextured).
-    #[inline]
+    #[inline(always)]
     fn texel(&self, lookup: &TexelLookup) -> Vec3A {
-        let texel = match *lookup {
+        let texel = match lookup {
             TexelLookup::Untextured => return Vec3A::ONE,
-            TexelLookup::Planned { texture, plan } => self.textures[texture as usize]
+            TexelLookup::Planned { texture, plan } => self.textures[*texture as usize]
                 .pyramid
-                .sample_planned(&plan),
-            TexelLookup::Anisotropic {
+                .sample_planned(plan),
+            &TexelLookup::Anisotropic {
                 texture,
                 uv,
                 level,
@@ -589,7 +589,7 @@ impl FrameScene<'_> {
                 let pyramid = &texture.pyramid;
                 pyramid.sample_anisotropic(uv, level, axis, taps, texture.sampler)
             }
-            TexelLookup::Elliptical {
+            &TexelLookup::Elliptical {
                 texture,
                 uv,
                 level,

@@ -31,7 +31,7 @@ pub(super) fn level_blend(lower: Vec4, upper: Vec4, frac: f32) -> Vec4 {
 /// The four texels of `taps`, decoded.
 #[inline(always)]
 fn texels(level: &MipLevel, taps: &BilinearTaps) -> [Vec4; 4] {
-    let [i00, i10, i01, i11] = taps.texels;
+    let [i00, i10, i01, i11] = taps.texels.map(|i| i as usize);
     // The storage is matched once per lookup, not once per texel.
     match &level.texels {
         Texels::Linear(t) => [t[i00], t[i10], t[i01], t[i11]],
@@ -48,7 +48,7 @@ fn texels(level: &MipLevel, taps: &BilinearTaps) -> [Vec4; 4] {
 #[cfg(target_arch = "x86_64")]
 #[inline(always)]
 fn codes(codes: &[[u8; 4]], taps: &BilinearTaps) -> [[u8; 4]; 4] {
-    let [i00, i10, i01, i11] = taps.texels;
+    let [i00, i10, i01, i11] = taps.texels.map(|i| i as usize);
     [codes[i00], codes[i10], codes[i01], codes[i11]]
 }
 

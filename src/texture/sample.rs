@@ -15,6 +15,13 @@
 //!
 //! Each public lookup is one `simd::Kernel`: the coordinates, the texel reads and the blends
 //! are compiled into a baseline and an AVX2 copy (`fetch.rs`), which compute the same bits.
+//!
+//! A bilinear or trilinear lookup can also be made in two steps: planned (its levels and
+//! taps computed, and the cache asked for its texels) and, later, filtered
+//! ([`MipPyramid::sample_planned`]). The renderer plans a hit's lookup when it makes the hit
+//! and filters it after the hit's shadow rays are traced, so the texels' cache misses
+//! overlap that work; the two steps compute exactly what the one-step lookup computes (it
+//! is written as them).
 
 use glam::{Vec2, Vec4};
 
@@ -183,7 +190,7 @@ fn prefetch_planned(pyramid: &MipPyramid, plan: &PlannedLookup) {
         .zip(&plan.taps)
     {
         for i in taps.texels {
-            level.prefetch(i);
+            level.prefetch(i as usize);
         }
     }
 }

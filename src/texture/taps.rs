@@ -27,8 +27,10 @@ use super::{MipLevel, Sampler, WrapMode};
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub(super) struct BilinearTaps {
     /// Indices (`y * width + x`) of the texels `(x0, y0)`, `(x1, y0)`, `(x0, y1)`,
-    /// `(x1, y1)`, already wrapped into the level.
-    pub texels: [usize; 4],
+    /// `(x1, y1)`, already wrapped into the level. `u32`: a level has at most
+    /// `MAX_SIZE^2 = 2^28` texels, and a planned lookup keeps two sets of taps until it is
+    /// filtered, so they are kept small.
+    pub texels: [u32; 4],
     /// Weight of the `x1` column (`x0` has `1 - fx`).
     pub fx: f32,
     /// Weight of the `y1` row (`y0` has `1 - fy`).
@@ -46,7 +48,7 @@ impl BilinearTaps {
         let (y0, y1, fy) = axis_taps(uv.y, level.height, sampler.wrap_t);
         let w = level.width as usize;
         BilinearTaps {
-            texels: [y0 * w + x0, y0 * w + x1, y1 * w + x0, y1 * w + x1],
+            texels: [y0 * w + x0, y0 * w + x1, y1 * w + x0, y1 * w + x1].map(|i| i as u32),
             fx,
             fy,
         }
