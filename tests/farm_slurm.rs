@@ -445,7 +445,12 @@ fn example_slurm_jobs_render_resume_and_fail_visibly() {
     };
     println!("cluster up in {:.1} s", started.elapsed().as_secs_f64());
     let frames = 0..20;
-    let (size, shards, cancelled) = ("320x180", 4, 2);
+    // Frames large enough that the cancel (a poll of up to 100 ms, then `scancel`) lands
+    // while the shard still has frames to render: at 320x180 a frame of the default
+    // animation takes under 20 ms on a fast CPU, and a shard's last four frames could finish
+    // before the cancel arrived. At 1280x720 a frame takes 16 times as long (about 0.3 s on
+    // one core, more with the four shards sharing the machine's cores).
+    let (size, shards, cancelled) = ("1280x720", 4, 2);
     let reference = cluster.path("reference");
     render_reference(&frames, size, &reference);
 
