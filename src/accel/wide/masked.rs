@@ -37,8 +37,10 @@ const _: () = assert!(PACKET <= 64 && PACKET % 8 == 0 && WIDTH == 8);
 impl WideBvh {
     /// Walks the tree once for the rays `rays` (at most [`PACKET`]), ray `r` with limit
     /// `limits[r]`: each leaf is handed, once, the rays that entered it (in ray order) as
-    /// `leaf.visit(rays, leaf_ref, count, limits)`. A leaf stops a ray by setting its limit
-    /// below 0; stopped rays enter nothing more, and the walk returns when all have stopped.
+    /// `leaf.visit(rays, leaf_ref, count, limits)`. A leaf stops a ray it is handed by
+    /// setting its limit below 0; stopped rays enter nothing more, and the walk returns when
+    /// all have stopped. (A leaf changes only the limits of the rays it is handed: after a
+    /// leaf, only they are checked for a stop.)
     ///
     /// Each ray reaches exactly the leaves [`WideBvh::traverse_unordered`] reaches for it
     /// alone (with the same limit), and no other.
@@ -110,17 +112,21 @@ impl WideBvh {
         all: u64,
         leaf: &mut impl GatheredLeaf,
     ) {
-        // Eight rays per step (one vector compare and mask where the compiler vectorises
-        // it); rays past `rays.len()` are dropped by `all`.
-        let live = |limits: &[f32; PACKET]| {
+        // Of the rays in `rays`, those not stopped: eight rays per step (one vector compare
+        // and mask where the compiler vectorises it), skipping groups of eight with no ray
+        // in `rays` (a leaf's rays are often one or two groups of the packet).
+        let live = |limits: &[f32; PACKET], rays: u64| {
             let mut live = 0u64;
             for (group, eight) in limits.chunks_exact(8).enumerate() {
+                if (rays >> (8 * group)) & 0xff == 0 {
+                    continue;
+                }
                 let bits = (0..8).fold(0u64, |m, k| m | (u64::from(eight[k] >= 0.0) << k));
                 live |= bits << (8 * group);
             }
-            live & all
+            live & rays
         };
-        let mut alive = all & live(limits);
+        let mut alive = live(limits, all);
         stack[0] = MaybeUninit::new(MaskedEntry {
             child: 0,
             count: 0,
@@ -146,7 +152,8 @@ impl WideBvh {
                         k += 1;
                     }
                     leaf.visit::<AVX>(&entering[..k], first, count, limits);
-                    alive &= live(limits);
+                    // Only the rays just handed to the leaf can have stopped.
+                    alive &= !mask | live(limits, mask);
                     if alive == 0 {
                         return;
                     }
