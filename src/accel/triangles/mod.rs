@@ -611,10 +611,7 @@ mod tests {
         assert_eq!(packed.triangles_in_slot_order(), positions);
         // A leaf's box is the union of its packs' live lanes (dead lanes left out).
         let leaf_box = |first, count, slots: std::ops::Range<usize>| {
-            let from_packs = packed
-                .leaf_packs(first, count)
-                .iter()
-                .fold(Aabb::empty(), |a, p| a.union(&p.live_box()));
+            let from_packs = packed.leaf_box(first, count);
             let direct = positions[slots]
                 .iter()
                 .fold(Aabb::empty(), |a, t| a.union(&padded_box(t)));
