@@ -173,15 +173,25 @@ impl SceneGeometry {
         normal: Option<impl Fn(u32) -> Vec3>,
     ) -> ([Vec3A; 3], [Vec3; 3]) {
         let v = oriented(vertices, flips_winding);
-        let p = v.map(|i| Vec3A::from(position(i)));
+        // Written out, not `v.map(..)`: the array map's closure was left out of line, a
+        // call and a spill per vertex in the update's hottest loop.
+        let p = [
+            Vec3A::from(position(v[0])),
+            Vec3A::from(position(v[1])),
+            Vec3A::from(position(v[2])),
+        ];
         // Computed only when a vertex needs it (a sqrt and a division: most of the cost of
         // writing a deformed triangle that has its own normals).
         let geometric = || Vec3::from((p[1] - p[0]).cross(p[2] - p[0]).normalize_or_zero());
         let normals = match normal {
-            Some(normal) => v.map(|i| {
-                let n = normal(i);
-                if n == Vec3::ZERO { geometric() } else { n }
-            }),
+            Some(normal) => {
+                let n = [normal(v[0]), normal(v[1]), normal(v[2])];
+                if n.contains(&Vec3::ZERO) {
+                    n.map(|n| if n == Vec3::ZERO { geometric() } else { n })
+                } else {
+                    n
+                }
+            }
             None => [geometric(); 3],
         };
         (p, normals)
