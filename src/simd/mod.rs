@@ -11,7 +11,8 @@
 //! the tests of every such kernel check against the baseline copy or a scalar reference.
 //!
 //! `MIPRAY_SIMD=baseline` forces the baseline copy on any CPU, for comparisons and for
-//! testing the baseline path on a machine that has AVX2.
+//! testing the baseline path on a machine that has AVX2; `MIPRAY_SIMD=avx2` keeps the AVX2
+//! copies from calling the AVX-512 routines ([`avx512`]).
 
 use std::sync::OnceLock;
 
@@ -59,6 +60,27 @@ impl Isa {
 #[inline]
 pub fn avx2() -> bool {
     Isa::current() == Isa::Avx2
+}
+
+/// Whether the AVX2 copies may also call the few AVX-512 routines written for 16 lanes (the
+/// masked walk's node test across rays): the process runs the AVX2 copies and the CPU has
+/// AVX-512F, unless `MIPRAY_SIMD=avx2` (or `baseline`) says otherwise. Those routines
+/// compute the same bits as the 8-lane code they stand in for. Decided once.
+#[inline]
+pub fn avx512() -> bool {
+    static CHOICE: OnceLock<bool> = OnceLock::new();
+    *CHOICE.get_or_init(|| {
+        let forced_off = std::env::var("MIPRAY_SIMD").is_ok_and(|v| v == "avx2");
+        avx2() && cpu_has_avx512() && !forced_off
+    })
+}
+
+/// Whether the CPU has AVX-512F (whatever `MIPRAY_SIMD` says).
+pub fn cpu_has_avx512() -> bool {
+    #[cfg(target_arch = "x86_64")]
+    return std::arch::is_x86_feature_detected!("avx512f");
+    #[cfg(not(target_arch = "x86_64"))]
+    return false;
 }
 
 /// A computation compiled twice, once per [`Isa`].

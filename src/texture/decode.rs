@@ -73,7 +73,7 @@ impl CodeIndex {
     #[inline]
     fn first_not_below(&self, value: f32) -> usize {
         // -0, negatives and NaN: no table value is below them (the table starts at 0).
-        if !(value > 0.0) {
+        if value.is_nan() || value <= 0.0 {
             return 0;
         }
         let bucket = (value.to_bits() >> 16) as usize;

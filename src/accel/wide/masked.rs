@@ -14,6 +14,12 @@
 //! answer does not depend on the order of visits. Closest-hit walks take them nearest first
 //! as the first ray of the mask sees them (its limit shrinks early; the other rays follow
 //! its order, which in a coherent packet is nearly theirs).
+//!
+//! Where the CPU has AVX-512, a node in the mask of at least 16 rays is tested the other way
+//! round: per child, sixteen rays per instruction (`across_rays`), with each ray's own
+//! arithmetic, so the masks are the same bits. On BART Kitchen's recorded rays that made
+//! shadow packets about 5% faster and mirror packets about 3%: the walk waits on node
+//! fetches more than on the test.
 
 use std::mem::MaybeUninit;
 
@@ -126,6 +132,10 @@ impl WideBvh {
             }
             live & rays
         };
+        // With AVX-512, a node visited by many rays tests them sixteen at a time per child
+        // (`across_rays`) instead of one ray at a time over the eight children.
+        let across = (AVX && rays.len() >= ACROSS_MIN_RAYS as usize && simd::avx512())
+            .then(|| RayColumns::of(rays));
         let mut alive = live(limits, all);
         stack[0] = MaybeUninit::new(MaskedEntry {
             child: 0,
@@ -160,24 +170,33 @@ impl WideBvh {
                 }
                 ChildRef::Node(index) => {
                     let node = &self.nodes[index as usize];
-                    // Per ray, the lanes it enters (zero for the rays not in the mask).
-                    let mut lanes_of = [0u8; PACKET];
-                    let mut bits = mask;
                     let (first_near, first_lanes) = {
-                        let r = bits.trailing_zeros() as usize;
+                        let r = mask.trailing_zeros() as usize;
                         rays[r].enter::<AVX>(node, limits[r])
                     };
-                    lanes_of[bits.trailing_zeros() as usize] = first_lanes as u8;
-                    bits &= bits - 1;
-                    while bits != 0 {
-                        let r = bits.trailing_zeros() as usize;
-                        bits &= bits - 1;
-                        lanes_of[r] = rays[r].enter::<AVX>(node, limits[r]).1 as u8;
-                    }
-                    let entered_by = if mask.count_ones() >= TRANSPOSE_MIN_RAYS {
-                        rays_by_lane(&lanes_of, mask)
-                    } else {
-                        rays_by_lane_one_by_one(&lanes_of, mask)
+                    let entered_by = match &across {
+                        #[cfg(target_arch = "x86_64")]
+                        Some(columns) if mask.count_ones() >= ACROSS_MIN_RAYS => {
+                            // SAFETY: `across` is made only where `simd::avx512()`, which
+                            // holds only where the CPU has AVX-512F.
+                            unsafe { across_rays::rays_by_lane(node, columns, limits, mask) }
+                        }
+                        _ => {
+                            // Per ray, the lanes it enters (zero for the rays not in the mask).
+                            let mut lanes_of = [0u8; PACKET];
+                            lanes_of[mask.trailing_zeros() as usize] = first_lanes as u8;
+                            let mut bits = mask & (mask - 1);
+                            while bits != 0 {
+                                let r = bits.trailing_zeros() as usize;
+                                bits &= bits - 1;
+                                lanes_of[r] = rays[r].enter::<AVX>(node, limits[r]).1 as u8;
+                            }
+                            if mask.count_ones() >= TRANSPOSE_MIN_RAYS {
+                                rays_by_lane(&lanes_of, mask)
+                            } else {
+                                rays_by_lane_one_by_one(&lanes_of, mask)
+                            }
+                        }
                     };
                     let mut push = |lane: usize, top: &mut usize| {
                         if entered_by[lane] != 0 && node.child[lane] != EMPTY {
@@ -210,6 +229,101 @@ impl WideBvh {
                 }
             }
         }
+    }
+}
+
+/// From this many rays in a node's mask on (and in the packet), the node is tested sixteen
+/// rays at a time where the CPU has AVX-512 ([`across_rays::rays_by_lane`]).
+const ACROSS_MIN_RAYS: u32 = 16;
+
+/// The packet's ray constants as columns (ray `r` at index `r`), for the node test across
+/// rays: origins, inverse directions, and per axis the mask of rays whose inverse is
+/// negative (those meet the upper plane first; `RayBoxes::front`).
+#[derive(Clone, Copy)]
+#[repr(C, align(64))]
+struct RayColumns {
+    origin: [[f32; PACKET]; 3],
+    inverse: [[f32; PACKET]; 3],
+    negative: [u64; 3],
+}
+
+impl RayColumns {
+    fn of(rays: &[RayBoxes]) -> RayColumns {
+        let mut columns = RayColumns {
+            origin: [[0.0; PACKET]; 3],
+            inverse: [[0.0; PACKET]; 3],
+            negative: [0; 3],
+        };
+        for (r, ray) in rays.iter().enumerate().take(PACKET) {
+            let (origin, inverse, negative) = ray.constants();
+            for axis in 0..3 {
+                columns.origin[axis][r] = origin[axis];
+                columns.inverse[axis][r] = inverse[axis];
+                columns.negative[axis] |= u64::from(negative[axis]) << r;
+            }
+        }
+        columns
+    }
+}
+
+/// The node test across rays: for each child, sixteen rays per AVX-512 instruction.
+#[cfg(target_arch = "x86_64")]
+mod across_rays {
+    use std::arch::x86_64::*;
+
+    use super::{PACKET, RayColumns, WIDTH};
+    use crate::accel::wide::{EMPTY, ROBUST_FAR, WideNode};
+
+    /// Per lane of `node`, the mask of the rays of `rays` that enter it: what
+    /// [`super::rays_by_lane`] makes from each ray's `RayBoxes::enter`, bit for bit (the same
+    /// operations in the same order on the same operands, sixteen rays per instruction).
+    /// Lanes without a child get no rays (the walk skips them either way).
+    ///
+    /// # Safety
+    /// The CPU must have AVX-512F.
+    #[target_feature(enable = "avx512f")]
+    pub(super) unsafe fn rays_by_lane(
+        node: &WideNode,
+        columns: &RayColumns,
+        limits: &[f32; PACKET],
+        rays: u64,
+    ) -> [u64; WIDTH] {
+        let mut by_lane = [0u64; WIDTH];
+        for group in 0..PACKET / 16 {
+            let in_group = (rays >> (16 * group)) as u16;
+            if in_group == 0 {
+                continue;
+            }
+            let at = 16 * group;
+            // SAFETY (loads): `at + 16 <= PACKET`, within each column.
+            let column = |c: &[f32; PACKET]| unsafe { _mm512_loadu_ps(c[at..].as_ptr()) };
+            let origin = [0, 1, 2].map(|axis| column(&columns.origin[axis]));
+            let inverse = [0, 1, 2].map(|axis| column(&columns.inverse[axis]));
+            let negative = columns.negative.map(|n| (n >> at) as u16);
+            let limit = column(limits);
+            for (lane, by) in by_lane.iter_mut().enumerate() {
+                if node.child[lane] == EMPTY {
+                    continue;
+                }
+                let mut near = _mm512_set1_ps(0.0);
+                let mut far = _mm512_set1_ps(f32::INFINITY);
+                for axis in 0..3 {
+                    let lower = _mm512_set1_ps(node.bounds[axis][lane]);
+                    let upper = _mm512_set1_ps(node.bounds[axis + 3][lane]);
+                    // A ray whose inverse is negative meets the upper plane first.
+                    let front = _mm512_mask_blend_ps(negative[axis], lower, upper);
+                    let back = _mm512_mask_blend_ps(negative[axis], upper, lower);
+                    let t_front = _mm512_mul_ps(_mm512_sub_ps(front, origin[axis]), inverse[axis]);
+                    let t_back = _mm512_mul_ps(_mm512_sub_ps(back, origin[axis]), inverse[axis]);
+                    near = _mm512_max_ps(near, t_front);
+                    far = _mm512_min_ps(far, t_back);
+                }
+                let far = _mm512_min_ps(_mm512_mul_ps(far, _mm512_set1_ps(ROBUST_FAR)), limit);
+                let entered = _mm512_mask_cmp_ps_mask::<_CMP_LE_OQ>(in_group, near, far);
+                *by |= u64::from(entered) << at;
+            }
+        }
+        by_lane
     }
 }
 
@@ -290,7 +404,132 @@ impl<G: GatheredLeaf, const ORDERED: bool> simd::Kernel for MaskedWalk<'_, G, OR
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::accel::wide::WideNode;
     use crate::accel::wide::test_support::xorshift;
+    use glam::Vec3A;
+
+    /// The AVX-512 node test across rays gives each lane exactly the rays that
+    /// `RayBoxes::enter` (in the AVX2 copy and the baseline) lets in, over random nodes
+    /// (with unused lanes, flat and point boxes) and rays (axis-parallel ones, origins on a
+    /// box's planes, huge coordinates, limits negative, zero and infinite).
+    #[test]
+    fn the_node_test_across_rays_is_each_ray_s_own() {
+        if !crate::simd::cpu_has_avx512() || !crate::simd::Isa::cpu_has_avx2() {
+            eprintln!("skipped: this CPU has no AVX-512F");
+            return;
+        }
+        let mut next = xorshift(0x0123_4567_89AB_CDEF);
+        let mut unit = crate::accel::wide::test_support::uniform(7, -1.0, 2.0);
+        let mut checked = 0usize;
+        for round in 0..1000 {
+            let scale = [1.0f32, 1e3, 1e-3, 3e7][round % 4];
+            let mut node = WideNode::UNUSED;
+            for lane in 0..WIDTH {
+                if next().is_multiple_of(5) {
+                    continue; // unused: EMPTY child, inverted box
+                }
+                let a = Vec3A::new(unit(), unit(), unit()) * scale;
+                let mut b = Vec3A::new(unit(), unit(), unit()) * scale;
+                match next() % 6 {
+                    0 => b = a,     // a point
+                    1 => b.x = a.x, // flat
+                    _ => {}
+                }
+                let (lo, hi) = (a.min(b), a.max(b));
+                for axis in 0..3 {
+                    node.bounds[axis][lane] = lo[axis];
+                    node.bounds[axis + 3][lane] = hi[axis];
+                }
+                node.child[lane] = lane as u32;
+            }
+            let rays: Vec<RayBoxes> = (0..PACKET)
+                .map(|r| {
+                    let mut origin = Vec3A::new(unit(), unit(), unit()) * scale * 2.0;
+                    if r % 7 == 0 {
+                        // On the planes of some used lane's box.
+                        let lane = (next() % WIDTH as u64) as usize;
+                        origin.x = node.bounds[0][lane];
+                        origin.y = node.bounds[4][lane];
+                    }
+                    // Mostly aimed near some lane's box, so that many rays enter lanes.
+                    let lane = (next() % WIDTH as u64) as usize;
+                    let centre = Vec3A::new(
+                        node.bounds[0][lane] + node.bounds[3][lane],
+                        node.bounds[1][lane] + node.bounds[4][lane],
+                        node.bounds[2][lane] + node.bounds[5][lane],
+                    ) * 0.5;
+                    let jitter = Vec3A::new(unit(), unit(), unit()) * 0.1;
+                    let mut direction = if centre.is_finite() && r % 3 != 0 {
+                        (centre - origin).normalize_or_zero() + jitter
+                    } else {
+                        Vec3A::new(unit(), unit(), unit())
+                    };
+                    match r % 5 {
+                        0 => direction.y = 0.0,
+                        1 => (direction.x, direction.z) = (0.0, -0.0),
+                        _ => {}
+                    }
+                    RayBoxes::new(origin, direction)
+                })
+                .collect();
+            let mut limits = [0f32; PACKET];
+            for (r, limit) in limits.iter_mut().enumerate() {
+                *limit = match r % 6 {
+                    0 => f32::INFINITY,
+                    1 => -1.0,
+                    2 => 0.0,
+                    _ => unit().abs() * scale * 3.0,
+                };
+            }
+            let mask = match round % 3 {
+                0 => u64::MAX,
+                1 => next() | 1,
+                _ => next() & 0xFFFF_0000_FFFF_0000 | 1 << 16,
+            };
+            let columns = RayColumns::of(&rays);
+            // SAFETY: the CPU has AVX-512F (checked above).
+            let across = unsafe { across_rays::rays_by_lane(&node, &columns, &limits, mask) };
+            for avx in [false, true] {
+                let mut lanes_of = [0u8; PACKET];
+                for r in 0..PACKET {
+                    if mask & (1 << r) != 0 {
+                        lanes_of[r] = if avx {
+                            crate::simd::run_avx2_if_available(EnterKernel(
+                                &rays[r], &node, limits[r],
+                            ))
+                            .unwrap()
+                        } else {
+                            rays[r].enter::<false>(&node, limits[r]).1 as u8
+                        };
+                    }
+                }
+                let mut expected = rays_by_lane(&lanes_of, mask);
+                for (lane, e) in expected.iter_mut().enumerate() {
+                    if node.child[lane] == EMPTY {
+                        *e = 0;
+                    }
+                }
+                assert_eq!(across, expected, "round {round}, avx {avx}");
+            }
+            checked += across
+                .iter()
+                .map(|m| m.count_ones() as usize)
+                .sum::<usize>();
+        }
+        // Not a vacuous comparison: many rays entered many lanes.
+        assert!(checked > 5_000, "{checked}");
+    }
+
+    /// One ray's `enter` in the AVX2 copy.
+    struct EnterKernel<'a>(&'a RayBoxes, &'a WideNode, f32);
+
+    impl crate::simd::Kernel for EnterKernel<'_> {
+        type Output = u8;
+        #[inline(always)]
+        fn run<const AVX2: bool>(self) -> u8 {
+            self.0.enter::<AVX2>(self.1, self.2).1 as u8
+        }
+    }
 
     #[test]
     fn rays_by_lane_transposes_every_ray_s_lanes() {
