@@ -292,12 +292,25 @@ impl SlotLanes<'_> {
         }
     }
 
-    /// Hints the cache to load slot `slot`'s pack (no effect when out of range).
+    /// Hints the cache to load the lines of slot `slot`'s lane (no effect when out of range).
     #[inline]
     pub fn prefetch(&self, slot: u32) {
         if let Some(&at) = self.lane_of_slot.get(slot as usize) {
             // SAFETY: in bounds (`lane`); only the address is formed, nothing is read.
-            crate::simd::prefetch_ptr(unsafe { self.packs.add(at as usize / LANES) });
+            let (pack, lane) = (
+                unsafe { self.packs.add(at as usize / LANES) },
+                at as usize % LANES,
+            );
+            // The lane's nine floats lie on three or four of the pack's lines: per vertex,
+            // its x and z (y lies between them). Hinting only the pack's first line left the
+            // others to miss when the write read the lane (a million skinned triangles'
+            // posing and writing ~5% faster with all of them hinted, AMD EPYC VM).
+            for vertex in 0..3 {
+                for axis in [0, 2] {
+                    // SAFETY: in bounds; only the address is formed, nothing is read.
+                    crate::simd::prefetch_ptr(unsafe { &raw const (*pack).v[vertex][axis][lane] });
+                }
+            }
         }
     }
 }
