@@ -54,6 +54,15 @@ impl Isa {
         #[cfg(not(target_arch = "x86_64"))]
         return false;
     }
+
+    /// Whether the CPU has AVX-512F, for the routines [`avx512`] lets the AVX2 copies call
+    /// (whatever `MIPRAY_SIMD` says).
+    pub fn cpu_has_avx512() -> bool {
+        #[cfg(target_arch = "x86_64")]
+        return std::arch::is_x86_feature_detected!("avx512f");
+        #[cfg(not(target_arch = "x86_64"))]
+        return false;
+    }
 }
 
 /// Whether [`dispatch`] runs AVX2 copies in this process.
@@ -71,16 +80,8 @@ pub fn avx512() -> bool {
     static CHOICE: OnceLock<bool> = OnceLock::new();
     *CHOICE.get_or_init(|| {
         let forced_off = std::env::var("MIPRAY_SIMD").is_ok_and(|v| v == "avx2");
-        avx2() && cpu_has_avx512() && !forced_off
+        avx2() && Isa::cpu_has_avx512() && !forced_off
     })
-}
-
-/// Whether the CPU has AVX-512F (whatever `MIPRAY_SIMD` says).
-pub fn cpu_has_avx512() -> bool {
-    #[cfg(target_arch = "x86_64")]
-    return std::arch::is_x86_feature_detected!("avx512f");
-    #[cfg(not(target_arch = "x86_64"))]
-    return false;
 }
 
 /// A computation compiled twice, once per [`Isa`].

@@ -237,14 +237,13 @@ impl WideBvh {
 const ACROSS_MIN_RAYS: u32 = 16;
 
 /// The packet's ray constants as columns (ray `r` at index `r`), for the node test across
-/// rays: origins, inverse directions, and per axis the mask of rays whose inverse is
-/// negative (those meet the upper plane first; `RayBoxes::front`).
+/// rays: origins and inverse directions (the layout of `RayPacket`'s, taken here from the
+/// masked walk's `RayBoxes`).
 #[derive(Clone, Copy)]
 #[repr(C, align(64))]
 struct RayColumns {
     origin: [[f32; PACKET]; 3],
     inverse: [[f32; PACKET]; 3],
-    negative: [u64; 3],
 }
 
 impl RayColumns {
@@ -252,14 +251,12 @@ impl RayColumns {
         let mut columns = RayColumns {
             origin: [[0.0; PACKET]; 3],
             inverse: [[0.0; PACKET]; 3],
-            negative: [0; 3],
         };
         for (r, ray) in rays.iter().enumerate().take(PACKET) {
-            let (origin, inverse, negative) = ray.constants();
+            let (origin, inverse) = ray.constants();
             for axis in 0..3 {
                 columns.origin[axis][r] = origin[axis];
                 columns.inverse[axis][r] = inverse[axis];
-                columns.negative[axis] |= u64::from(negative[axis]) << r;
             }
         }
         columns
@@ -299,7 +296,10 @@ mod across_rays {
             let column = |c: &[f32; PACKET]| unsafe { _mm512_loadu_ps(c[at..].as_ptr()) };
             let origin = [0, 1, 2].map(|axis| column(&columns.origin[axis]));
             let inverse = [0, 1, 2].map(|axis| column(&columns.inverse[axis]));
-            let negative = columns.negative.map(|n| (n >> at) as u16);
+            // A ray whose inverse is negative meets the upper plane first (`RayBoxes::new`
+            // decides `front` by the same compare).
+            let negative =
+                inverse.map(|i| _mm512_cmp_ps_mask::<_CMP_LT_OQ>(i, _mm512_setzero_ps()));
             let limit = column(limits);
             for (lane, by) in by_lane.iter_mut().enumerate() {
                 if node.child[lane] == EMPTY {
@@ -310,7 +310,6 @@ mod across_rays {
                 for axis in 0..3 {
                     let lower = _mm512_set1_ps(node.bounds[axis][lane]);
                     let upper = _mm512_set1_ps(node.bounds[axis + 3][lane]);
-                    // A ray whose inverse is negative meets the upper plane first.
                     let front = _mm512_mask_blend_ps(negative[axis], lower, upper);
                     let back = _mm512_mask_blend_ps(negative[axis], upper, lower);
                     let t_front = _mm512_mul_ps(_mm512_sub_ps(front, origin[axis]), inverse[axis]);
@@ -414,7 +413,7 @@ mod tests {
     /// box's planes, huge coordinates, limits negative, zero and infinite).
     #[test]
     fn the_node_test_across_rays_is_each_ray_s_own() {
-        if !crate::simd::cpu_has_avx512() || !crate::simd::Isa::cpu_has_avx2() {
+        if !crate::simd::Isa::cpu_has_avx512() || !crate::simd::Isa::cpu_has_avx2() {
             eprintln!("skipped: this CPU has no AVX-512F");
             return;
         }

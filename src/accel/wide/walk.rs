@@ -75,15 +75,10 @@ impl RayBoxes {
         }
     }
 
-    /// The ray's origin, inverse direction and, per axis, whether the inverse is negative
-    /// (the upper plane is met first): what the node test reads.
+    /// The ray's origin and (safe) inverse direction, as made by [`RayBoxes::from_inverse`].
     #[inline(always)]
-    pub(super) fn constants(&self) -> ([f32; 3], [f32; 3], [bool; 3]) {
-        (
-            self.origin.map(|o| o.0[0]),
-            self.inverse.map(|i| i.0[0]),
-            self.front.map(|f| f >= 3),
-        )
+    pub(super) fn constants(&self) -> ([f32; 3], [f32; 3]) {
+        (self.origin.map(|o| o.0[0]), self.inverse.map(|i| i.0[0]))
     }
 
     /// Entry distances of the node's children and the mask of those the ray enters before
