@@ -12,6 +12,7 @@ use crate::colour::encode_srgb8;
 use crate::lod::{RayLod, with_lod_state};
 use crate::render::camera::Camera;
 use crate::render::integrator::{FrameScene, TraceCounters};
+use crate::render::tile::{TileBuffers, trace_tile};
 
 pub const TILE: u32 = 16;
 
@@ -56,20 +57,7 @@ fn render_image_with(
 ) -> (LinearImage, TraceCounters) {
     let (width, height) = (camera.width, camera.height);
     let tiles_x = width.div_ceil(TILE);
-    let tiles_y = height.div_ceil(TILE);
-    let tiles: Vec<(Vec<Vec3>, TraceCounters)> = (0..tiles_x * tiles_y)
-        .into_par_iter()
-        .map(|tile| {
-            render_tile(
-                scene,
-                camera,
-                spp,
-                (tile % tiles_x) * TILE,
-                (tile / tiles_x) * TILE,
-                record,
-            )
-        })
-        .collect();
+    let tiles = with_lod_state!(scene.lod, L => render_tiles::<L>(scene, camera, spp, record));
     let mut image = LinearImage {
         width,
         height,
@@ -95,35 +83,30 @@ fn render_image_with(
     (image, counters)
 }
 
-/// One tile, with the LOD state type of `scene.lod` (chosen once here, so the per-ray code
-/// is monomorphised per method).
-fn render_tile(
+/// Every tile's pixels (row by row) and counters, in tile order, with the LOD state type
+/// of `scene.lod` (chosen once here, so the per-ray code is monomorphised per method). Each
+/// worker keeps one set of working lists for all the tiles it renders (`map_init`).
+fn render_tiles<L: RayLod>(
     scene: &FrameScene,
     camera: &Camera,
     spp: u32,
-    x0: u32,
-    y0: u32,
     record: bool,
-) -> (Vec<Vec3>, TraceCounters) {
-    with_lod_state!(scene.lod, L => render_tile_with::<L>(scene, camera, spp, x0, y0, record))
-}
-
-/// One tile's pixels, row by row, traced breadth first (`render::tile`).
-fn render_tile_with<L: RayLod>(
-    scene: &FrameScene,
-    camera: &Camera,
-    spp: u32,
-    x0: u32,
-    y0: u32,
-    record: bool,
-) -> (Vec<Vec3>, TraceCounters) {
-    let mut counters = if record {
-        TraceCounters::recording()
-    } else {
-        TraceCounters::default()
-    };
-    let pixels = crate::render::tile::trace_tile::<L>(scene, camera, spp, (x0, y0), &mut counters);
-    (pixels, counters)
+) -> Vec<(Vec<Vec3>, TraceCounters)> {
+    let tiles_x = camera.width.div_ceil(TILE);
+    let tiles_y = camera.height.div_ceil(TILE);
+    (0..tiles_x * tiles_y)
+        .into_par_iter()
+        .map_init(TileBuffers::<L>::default, |buffers, tile| {
+            let mut counters = if record {
+                TraceCounters::recording()
+            } else {
+                TraceCounters::default()
+            };
+            let origin = ((tile % tiles_x) * TILE, (tile / tiles_x) * TILE);
+            let pixels = trace_tile::<L>(scene, camera, spp, origin, &mut counters, buffers);
+            (pixels, counters)
+        })
+        .collect()
 }
 
 /// Sub-pixel position of sample `i` of `spp`: the pixel centre for one sample, otherwise a

@@ -51,26 +51,70 @@ struct Waiting<L> {
     end: usize,
 }
 
-/// The tile's pixels, row by row, with the LOD state `L`.
+/// A tile's working lists, kept by a worker from one tile to the next: a tile fills them
+/// to a few hundred entries (an `Arrival` is a few hundred bytes), and growing them afresh
+/// for every tile copied them over and over (3% of a BART Kitchen frame in `memmove`).
+/// Every list is cleared before use, so what a tile computes does not depend on the tile
+/// before it.
+pub(super) struct TileBuffers<L> {
+    samples: Vec<(u32, u32, u32)>,
+    vertices: Vec<Combine>,
+    bounce: Vec<(Pending<L>, Option<Hit>)>,
+    waiting: Vec<Waiting<L>>,
+    requests: Vec<ShadowRequest>,
+    spawned: Vec<Spawned<L>>,
+    next: Vec<Pending<L>>,
+    of_light: Vec<usize>,
+    pixel_of: Vec<u32>,
+}
+
+impl<L> Default for TileBuffers<L> {
+    fn default() -> Self {
+        TileBuffers {
+            samples: Vec::new(),
+            vertices: Vec::new(),
+            bounce: Vec::new(),
+            waiting: Vec::new(),
+            requests: Vec::new(),
+            spawned: Vec::new(),
+            next: Vec::new(),
+            of_light: Vec::new(),
+            pixel_of: Vec::new(),
+        }
+    }
+}
+
+/// The tile's pixels, row by row, with the LOD state `L`, using `buffers` for its lists.
 pub(super) fn trace_tile<L: RayLod>(
     scene: &FrameScene,
     camera: &Camera,
     spp: u32,
     (x0, y0): (u32, u32),
     counters: &mut TraceCounters,
+    buffers: &mut TileBuffers<L>,
 ) -> Vec<Vec3> {
+    let TileBuffers {
+        samples,
+        vertices,
+        bounce,
+        waiting,
+        requests,
+        spawned,
+        next,
+        of_light,
+        pixel_of,
+    } = buffers;
     let x1 = (x0 + TILE).min(camera.width);
     let y1 = (y0 + TILE).min(camera.height);
-    let samples: Vec<(u32, u32, u32)> = (y0..y1)
-        .flat_map(|y| (x0..x1).map(move |x| (x, y)))
-        .flat_map(|(x, y)| (0..spp).map(move |i| (x, y, i)))
-        .collect();
-    let mut vertices: Vec<Combine> = vec![Combine::leaf(Vec3A::ZERO); samples.len()];
-    let mut bounce = primary_bounce::<L>(scene, camera, spp, &samples, counters);
-    let mut waiting: Vec<Waiting<L>> = Vec::new();
-    let mut requests: Vec<ShadowRequest> = Vec::new();
-    let mut spawned: Vec<Spawned<L>> = Vec::new();
-    let mut next: Vec<Pending<L>> = Vec::new();
+    samples.clear();
+    samples.extend(
+        (y0..y1)
+            .flat_map(|y| (x0..x1).map(move |x| (x, y)))
+            .flat_map(|(x, y)| (0..spp).map(move |i| (x, y, i))),
+    );
+    vertices.clear();
+    vertices.resize(samples.len(), Combine::leaf(Vec3A::ZERO));
+    primary_bounce::<L>(scene, camera, spp, samples, counters, bounce);
     while !bounce.is_empty() {
         // Arrive at every hit; a miss is the background.
         waiting.clear();
@@ -88,7 +132,7 @@ pub(super) fn trace_tile<L: RayLod>(
                 ray.direction,
                 ray.lod,
                 pending.depth,
-                &mut requests,
+                requests,
                 counters,
             );
             waiting.push(Waiting {
@@ -99,17 +143,17 @@ pub(super) fn trace_tile<L: RayLod>(
                 end: requests.len(),
             });
         }
-        trace_shadows(scene, &waiting, &mut requests, counters);
+        trace_shadows(scene, waiting, requests, counters, of_light, pixel_of);
         // Finish every hit and spawn the next bounce.
         next.clear();
-        for w in &waiting {
+        for w in waiting.iter() {
             spawned.clear();
             let first_child = vertices.len() as u32;
             let combine = scene.finish(
                 &w.arrival,
                 &requests[w.first..w.end],
                 first_child,
-                &mut spawned,
+                spawned,
             );
             vertices[w.vertex as usize] = combine;
             for (k, ray) in spawned.iter().enumerate() {
@@ -122,7 +166,7 @@ pub(super) fn trace_tile<L: RayLod>(
                 });
             }
         }
-        bounce = trace_bounce(scene, &next, counters);
+        trace_bounce(scene, next, counters, bounce);
     }
     // Last vertex first: children are numbered after their parents.
     for v in (0..vertices.len()).rev() {
@@ -147,15 +191,17 @@ pub(super) fn trace_tile<L: RayLod>(
 }
 
 /// The samples' primary rays traced as packets of up to [`PACKET`] (pixel by pixel, each
-/// pixel's samples in order: a 16 x 4 block at one sample per pixel), each with its hit.
+/// pixel's samples in order: a 16 x 4 block at one sample per pixel), each with its hit,
+/// into `bounce` (cleared first).
 fn primary_bounce<L: RayLod>(
     scene: &FrameScene,
     camera: &Camera,
     spp: u32,
     samples: &[(u32, u32, u32)],
     counters: &mut TraceCounters,
-) -> Vec<(Pending<L>, Option<Hit>)> {
-    let mut bounce = Vec::with_capacity(samples.len());
+    bounce: &mut Vec<(Pending<L>, Option<Hit>)>,
+) {
+    bounce.clear();
     let mut rays = [(Vec3A::ZERO, Vec3A::ZERO); PACKET];
     let mut hits = [None; PACKET];
     for (chunk_index, chunk) in samples.chunks(PACKET).enumerate() {
@@ -202,18 +248,18 @@ fn primary_bounce<L: RayLod>(
             ));
         }
     }
-    bounce
 }
 
-/// A bounce's reflected and refracted rays, each with its hit: traced as packets of up to
-/// [`PACKET`] in the order they were spawned (`SceneBvh::closest_hits_scattered`: each ray
-/// finds exactly what it finds alone).
+/// A bounce's reflected and refracted rays, each with its hit, into `bounce` (cleared
+/// first): traced as packets of up to [`PACKET`] in the order they were spawned
+/// (`SceneBvh::closest_hits_scattered`: each ray finds exactly what it finds alone).
 fn trace_bounce<L: RayLod>(
     scene: &FrameScene,
     pending: &[Pending<L>],
     counters: &mut TraceCounters,
-) -> Vec<(Pending<L>, Option<Hit>)> {
-    let mut bounce = Vec::with_capacity(pending.len());
+    bounce: &mut Vec<(Pending<L>, Option<Hit>)>,
+) {
+    bounce.clear();
     let mut rays = [(Vec3A::ZERO, Vec3A::ZERO); PACKET];
     let mut hits = [None; PACKET];
     for packet in pending.chunks(PACKET) {
@@ -240,21 +286,23 @@ fn trace_bounce<L: RayLod>(
             bounce.push((*p, hit));
         }
     }
-    bounce
 }
 
 /// Traces every request's shadow ray and fills in its transmittance: per light, the
-/// requests in the order they were made, as packets of up to [`PACKET`].
+/// requests in the order they were made, as packets of up to [`PACKET`]. `of_light` and
+/// `pixel_of` are working lists (their contents on entry do not matter).
 fn trace_shadows<L>(
     scene: &FrameScene,
     waiting: &[Waiting<L>],
     requests: &mut [ShadowRequest],
     counters: &mut TraceCounters,
+    of_light: &mut Vec<usize>,
+    pixel_of: &mut Vec<u32>,
 ) {
     // The pixel each request serves (for the ray log).
-    let mut pixel_of = Vec::new();
+    pixel_of.clear();
     if counters.log.is_some() {
-        pixel_of = vec![0; requests.len()];
+        pixel_of.resize(requests.len(), 0);
         for w in waiting {
             pixel_of[w.first..w.end].fill(w.pixel);
         }
@@ -263,7 +311,6 @@ fn trace_shadows<L>(
     let mut rays = [(Vec3A::ZERO, Vec3A::ZERO); PACKET];
     let mut t_max = [0.0f32; PACKET];
     let mut glass = [[(0.0f32, 0u32, 0u32); MAX_SHADOW_GLASS]; PACKET];
-    let mut of_light = Vec::with_capacity(requests.len());
     for light in 0..scene.lights.len() as u32 {
         of_light.clear();
         of_light.extend(
