@@ -45,17 +45,25 @@ pub(super) type StackEntry = (u32, u32, f32);
 /// Stack entries a traversal keeps on the machine stack; deeper trees use a heap stack.
 pub(super) const INLINE_STACK: usize = 128;
 
-/// The ray constants of the slab test, splatted across the lanes once per ray
-/// (`Default`: an all-zero placeholder for unused packet slots, never walked).
+/// The ray constants of the slab test (`Default`: an all-zero placeholder for unused
+/// packet slots, never walked).
+///
+/// Kept as scalars, half a cache line per ray, and splatted across the lanes where they
+/// are used (a broadcast load costs what a vector load does): a masked packet makes 64 of
+/// them per walk, and splatted ahead (240 bytes each) they filled a quarter of L1 with
+/// stores before the walk began.
 #[derive(Clone, Copy, Default)]
+#[repr(C, align(32))]
 pub struct RayBoxes {
-    origin: [Lanes; 3],
-    inverse: [Lanes; 3],
+    origin: [f32; 3],
+    inverse: [f32; 3],
     /// Per axis, the plane the ray meets first and last (`bounds` rows): lower then upper
     /// when it runs toward higher coordinates. Indices, not branches, in the node test.
-    front: [usize; 3],
-    back: [usize; 3],
+    front: [u8; 3],
+    back: [u8; 3],
 }
+
+const _: () = assert!(std::mem::size_of::<RayBoxes>() == 32);
 
 impl RayBoxes {
     #[inline(always)]
@@ -68,17 +76,17 @@ impl RayBoxes {
     pub(super) fn from_inverse(origin: [f32; 3], inverse: [f32; 3]) -> RayBoxes {
         let negative = inverse.map(|v| (v < 0.0) as usize);
         RayBoxes {
-            origin: origin.map(Lanes::splat),
-            inverse: inverse.map(Lanes::splat),
-            front: [0, 1, 2].map(|axis| axis + 3 * negative[axis]),
-            back: [0, 1, 2].map(|axis| axis + 3 * (1 - negative[axis])),
+            origin,
+            inverse,
+            front: [0, 1, 2].map(|axis| (axis + 3 * negative[axis]) as u8),
+            back: [0, 1, 2].map(|axis| (axis + 3 * (1 - negative[axis])) as u8),
         }
     }
 
     /// The ray's origin and (safe) inverse direction, as made by [`RayBoxes::from_inverse`].
     #[inline(always)]
     pub(super) fn constants(&self) -> ([f32; 3], [f32; 3]) {
-        (self.origin.map(|o| o.0[0]), self.inverse.map(|i| i.0[0]))
+        (self.origin, self.inverse)
     }
 
     /// Entry distances of the node's children and the mask of those the ray enters before
@@ -88,14 +96,12 @@ impl RayBoxes {
         let mut near = Lanes::splat(0.0);
         let mut far = Lanes::splat(f32::INFINITY);
         for axis in 0..3 {
-            let front = Lanes(node.bounds[self.front[axis]]);
-            let back = Lanes(node.bounds[self.back[axis]]);
-            let t_front = front
-                .sub::<AVX>(self.origin[axis])
-                .mul::<AVX>(self.inverse[axis]);
-            let t_back = back
-                .sub::<AVX>(self.origin[axis])
-                .mul::<AVX>(self.inverse[axis]);
+            let front = Lanes(node.bounds[usize::from(self.front[axis])]);
+            let back = Lanes(node.bounds[usize::from(self.back[axis])]);
+            let origin = Lanes::splat(self.origin[axis]);
+            let inverse = Lanes::splat(self.inverse[axis]);
+            let t_front = front.sub::<AVX>(origin).mul::<AVX>(inverse);
+            let t_back = back.sub::<AVX>(origin).mul::<AVX>(inverse);
             near = near.max::<AVX>(t_front);
             far = far.min::<AVX>(t_back);
         }
@@ -115,9 +121,9 @@ impl RayBoxes {
         let mut far = f32::INFINITY;
         let bounds = [aabb.min, aabb.max];
         for axis in 0..3 {
-            let (origin, inverse) = (self.origin[axis].0[0], self.inverse[axis].0[0]);
-            let front = bounds[self.front[axis] / 3][axis];
-            let back = bounds[self.back[axis] / 3][axis];
+            let (origin, inverse) = (self.origin[axis], self.inverse[axis]);
+            let front = bounds[usize::from(self.front[axis] / 3)][axis];
+            let back = bounds[usize::from(self.back[axis] / 3)][axis];
             near = near.max((front - origin) * inverse);
             far = far.min((back - origin) * inverse);
         }
