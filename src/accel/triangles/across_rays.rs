@@ -55,7 +55,7 @@ impl ShearedLanes {
         let n = rays.len();
         assert!((1..=RAYS).contains(&n), "{n} rays in a lane group");
         let mut first = rays.clone();
-        let k = first.next().expect("at least one ray").k;
+        let k = first.next().expect("at least one ray").k.map(usize::from);
         let mut group = ShearedLanes {
             k,
             origin: [F32x8::splat(0.0); 3],
@@ -65,7 +65,7 @@ impl ShearedLanes {
         let mut lane = 0;
         let mut last = None;
         for ray in rays {
-            debug_assert_eq!(ray.k, k, "rays of a lane group share their permutation");
+            debug_assert_eq!(ray.k.map(usize::from), k, "rays of a lane group share their permutation");
             group.fill_lane(lane, ray);
             last = Some(ray);
             lane += 1;
@@ -80,8 +80,8 @@ impl ShearedLanes {
     #[inline(always)]
     fn fill_lane(&mut self, lane: usize, ray: &ShearedRay) {
         for axis in 0..3 {
-            self.origin[axis].0[lane] = ray.origin[axis].x;
-            self.shear[axis].0[lane] = ray.shear[axis].x;
+            self.origin[axis].0[lane] = ray.origin[axis];
+            self.shear[axis].0[lane] = ray.shear[axis];
         }
     }
 

@@ -349,16 +349,22 @@ impl PackedTriangles {
 /// A ray in the frame of Woop et al.: the axis where the direction is largest becomes z, and
 /// a shear maps the direction to (0, 0, 1). (`Default`: an all-zero placeholder for unused
 /// packet slots, never tested.)
+///
+/// Kept as scalars (32 bytes) and splatted where a pack test uses them, for the reason
+/// `RayBoxes` is: packets make 64 of them at a time.
 #[derive(Clone, Copy, Default)]
+#[repr(C, align(32))]
 pub struct ShearedRay {
-    origin: [Vec4; 3],
-    /// Axes: `kx`, `ky`, `kz` (chosen so that the winding is kept).
-    k: [usize; 3],
+    origin: [f32; 3],
     /// `(dx / dz, dy / dz, 1 / dz)` in the permuted axes.
-    shear: [Vec4; 3],
+    shear: [f32; 3],
     /// The origin's part of [`ShearedRay::tie_limit`]'s margin.
     tie_offset: f32,
+    /// Axes: `kx`, `ky`, `kz` (chosen so that the winding is kept).
+    k: [u8; 3],
 }
+
+const _: () = assert!(std::mem::size_of::<ShearedRay>() == 32);
 
 /// Relative margin of [`ShearedRay::tie_limit`].
 const TIE_MARGIN: f32 = 1.0 / 2_097_152.0;
@@ -392,9 +398,9 @@ impl ShearedRay {
             1.0 / direction[kz],
         ];
         ShearedRay {
-            origin: origin.to_array().map(Vec4::splat),
-            k: [kx, ky, kz],
-            shear: shear.map(Vec4::splat),
+            origin: origin.to_array(),
+            k: [kx, ky, kz].map(|axis| axis as u8),
+            shear,
             tie_offset: origin.abs().max_element() * TIE_MARGIN,
         }
     }
@@ -416,21 +422,22 @@ impl ShearedRay {
     /// tested together, [`ShearedLanes`]).
     #[inline(always)]
     pub fn permutation(&self) -> usize {
-        let [kx, _, kz] = self.k;
+        let [kx, _, kz] = self.k.map(usize::from);
         kz * 2 + usize::from(kx != (kz + 1) % 3)
     }
 
     /// Tests the first `live` lanes of `pack`.
     #[inline(always)]
     fn intersect_pack(&self, pack: &TrianglePack, live: usize, t_max: f32) -> PackHits {
-        let [kx, ky, kz] = self.k;
-        let [sx, sy, sz] = self.shear;
+        let [kx, ky, kz] = self.k.map(usize::from);
+        let [sx, sy, sz] = self.shear.map(Vec4::splat);
+        let origin = self.origin.map(Vec4::splat);
         // Vertex `i` relative to the origin, sheared: (x, y) in the ray's plane and z along it.
         let sheared = |i: usize| {
             let v = &pack.v[i];
-            let z = Vec4::from_array(v[kz]) - self.origin[kz];
-            let x = Vec4::from_array(v[kx]) - self.origin[kx] - sx * z;
-            let y = Vec4::from_array(v[ky]) - self.origin[ky] - sy * z;
+            let z = Vec4::from_array(v[kz]) - origin[kz];
+            let x = Vec4::from_array(v[kx]) - origin[kx] - sx * z;
+            let y = Vec4::from_array(v[ky]) - origin[ky] - sy * z;
             (x, y, z)
         };
         let (ax, ay, az) = sheared(0);
