@@ -354,6 +354,40 @@ fn a_packet_finds_what_each_of_its_rays_finds_alone() {
     );
 }
 
+/// A bundle of nearly parallel rays from different origins (no common apex, so the masked
+/// walk) through a dense soup: the rays find hits early, so leaves pushed before those hits
+/// are tested again with the shrunk limits when popped, sixteen rays at a time where the
+/// CPU has AVX-512 and ray by ray otherwise. Each ray still finds exactly what it finds
+/// alone, and with the other rays' hits first (the packet in reverse order too).
+#[test]
+fn a_masked_bundle_that_finds_hits_early_finds_each_ray_s_closest() {
+    let mut rng = Rng(0x9e37_79b9_7f4a_7c15);
+    let (_, mut tris) = random_soup(&mut rng, 6000);
+    let accel = Accel::build(&mut tris).unwrap();
+    for spacing in [0.05f32, 0.4, 2.0] {
+        let bundle: Vec<(Vec3A, Vec3A)> = (0..64)
+            .map(|i| {
+                let (x, y) = ((i % 8) as f32 - 3.5, (i / 8) as f32 - 3.5);
+                let origin = Vec3A::new(x * spacing, y * spacing, 40.0) + rng.point(0.01);
+                let direction = (Vec3A::new(0.0, 0.0, -1.0) + rng.point(0.02)).normalize();
+                (origin, direction)
+            })
+            .collect();
+        assert!(!crate::accel::wide::RayPacket::new(&[]).set_with_apex(&bundle, 30.0));
+        let reversed: Vec<(Vec3A, Vec3A)> = bundle.iter().rev().copied().collect();
+        let mut found = 0;
+        for rays in [&bundle[..], &reversed[..], &bundle[..20]] {
+            let mut masked = vec![None; rays.len()];
+            accel.closest_hits_masked(rays, f32::INFINITY, &mut masked);
+            for (&(o, d), masked) in rays.iter().zip(&masked) {
+                assert_eq!(*masked, accel.closest_hit(o, d, f32::INFINITY));
+                found += masked.is_some() as usize;
+            }
+        }
+        assert!(found > 100, "too few hits ({found}) at spacing {spacing}");
+    }
+}
+
 /// A packet of occlusion rays meets, for each ray, exactly the triangles the ray meets
 /// alone (every hit, with the same distance bits), and a visitor that stops a ray stops it
 /// as it would alone: rays from a tile's surface points converging on a light (several
