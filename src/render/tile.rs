@@ -149,12 +149,7 @@ pub(super) fn trace_tile<L: RayLod>(
         for w in waiting.iter() {
             spawned.clear();
             let first_child = vertices.len() as u32;
-            let combine = scene.finish(
-                &w.arrival,
-                &requests[w.first..w.end],
-                first_child,
-                spawned,
-            );
+            let combine = scene.finish(&w.arrival, &requests[w.first..w.end], first_child, spawned);
             vertices[w.vertex as usize] = combine;
             for (k, ray) in spawned.iter().enumerate() {
                 vertices.push(Combine::leaf(Vec3A::ZERO));

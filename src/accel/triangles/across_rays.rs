@@ -65,7 +65,11 @@ impl ShearedLanes {
         let mut lane = 0;
         let mut last = None;
         for ray in rays {
-            debug_assert_eq!(ray.k.map(usize::from), k, "rays of a lane group share their permutation");
+            debug_assert_eq!(
+                ray.k.map(usize::from),
+                k,
+                "rays of a lane group share their permutation"
+            );
             group.fill_lane(lane, ray);
             last = Some(ray);
             lane += 1;
