@@ -50,7 +50,7 @@ static WEIGHTS: LazyLock<[f32; WEIGHT_TABLE_SIZE]> = LazyLock::new(|| {
 /// Texel `(x, y)` of `level` as linear RGBA (the one place the filter reads texels).
 #[inline(always)]
 pub(super) fn texel_at(level: &MipLevel, x: usize, y: usize) -> Vec4 {
-    level.texel(y * level.width as usize + x)
+    level.texel_at(x, y)
 }
 
 impl MipPyramid {

@@ -35,12 +35,15 @@ fn texels(level: &MipLevel, taps: &BilinearTaps) -> [Vec4; 4] {
     // The storage is matched once per lookup, not once per texel.
     match &level.texels {
         Texels::Linear(t) => [t[i00], t[i10], t[i01], t[i11]],
-        Texels::Srgb8 { codes: c, tables } => [
-            tables.texel(c[i00]),
-            tables.texel(c[i10]),
-            tables.texel(c[i01]),
-            tables.texel(c[i11]),
-        ],
+        Texels::Srgb8 { codes, tables } => {
+            let c = codes.flat();
+            [
+                tables.texel(c[i00]),
+                tables.texel(c[i10]),
+                tables.texel(c[i01]),
+                tables.texel(c[i11]),
+            ]
+        }
     }
 }
 
@@ -59,7 +62,7 @@ pub(super) fn bilinear<const AVX2: bool>(level: &MipLevel, taps: &BilinearTaps) 
     if AVX2 && let Texels::Srgb8 { codes: c, tables } = &level.texels {
         // SAFETY: `AVX2` is true only in the copy `simd::dispatch` runs where the CPU has
         // AVX2.
-        return unsafe { avx2::bilinear(tables.decode_table(), codes(c, taps), taps) };
+        return unsafe { avx2::bilinear(tables.decode_table(), codes(c.flat(), taps), taps) };
     }
     bilinear_blend(texels(level, taps), taps.fx, taps.fy)
 }
@@ -86,7 +89,7 @@ pub(super) fn trilinear<const AVX2: bool>(
         ) = (&levels[0].texels, &levels[1].texels)
         && std::ptr::eq(tables.decode_table(), t.decode_table())
     {
-        let codes = [codes(lower, &taps[0]), codes(upper, &taps[1])];
+        let codes = [codes(lower.flat(), &taps[0]), codes(upper.flat(), &taps[1])];
         // SAFETY: as in `bilinear`.
         return unsafe { avx2::trilinear(tables.decode_table(), codes, taps, frac) };
     }

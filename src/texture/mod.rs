@@ -7,8 +7,9 @@
 //! - `ewa`: elliptically weighted average over the pyramid (pbrt-v4's EWA filter).
 //!
 //! Conventions shared by all three:
-//! - texels are linear RGBA `Vec4`, row-major, row 0 is the image's top row and sits at
-//!   v = 0 (glTF convention: no flip anywhere);
+//! - texels are linear RGBA `Vec4`, numbered row-major (`y * width + x`), row 0 is the
+//!   image's top row and sits at v = 0 (glTF convention: no flip anywhere); 8-bit levels
+//!   store them in 4 x 4 blocks, which only the lookup's taps see ([`MipLevel`]);
 //! - texel `(i, j)` of a `w x h` level has its centre at `((i + 0.5) / w, (j + 0.5) / h)`;
 //! - a pyramid always has at least one level, and every level's `texels.len()` is
 //!   `width * height` (guaranteed by [`MipPyramid::from_linear_rgba`], relied on by lookup);
@@ -50,12 +51,16 @@ pub struct Sampler {
     pub wrap_t: WrapMode,
 }
 
-/// One level of a pyramid: linear RGBA texels, row-major, row 0 at v = 0.
+/// One level of a pyramid: linear RGBA texels, row 0 at v = 0.
+///
+/// Texels are named two ways: by their row-major number `y * width + x` ([`MipLevel::texel`],
+/// [`MipLevel::texels`]: the public order), and by where the storage keeps them
+/// ([`MipLevel::row_start`] + [`MipLevel::column_offset`]: what a lookup's taps hold).
+/// The two agree for float levels; 8-bit levels keep their codes in 4 x 4 blocks.
 #[derive(Debug, Clone)]
 pub struct MipLevel {
     pub width: u32,
     pub height: u32,
-    /// `width * height` texels; texel `(x, y)` is at `y * width + x`.
     texels: Texels,
 }
 
@@ -73,9 +78,77 @@ enum Texels {
     /// sRGB-encoded colour codes and linear alpha codes, with the decoding tables (held
     /// here so a lookup does not go through the tables' lazy initialisation).
     Srgb8 {
-        codes: Vec<[u8; 4]>,
+        codes: BlockedCodes,
         tables: decode::Srgb8Tables,
     },
+}
+
+/// Sixteen texels' codes, a 4 x 4 block (row by row), in one cache line.
+#[derive(Debug, Clone, Copy, Default)]
+#[repr(C, align(64))]
+struct CodeBlock([[u8; 4]; 16]);
+
+// SAFETY: `CodeBlock` is `repr(C)` over 64 bytes with alignment 64, so it has no padding,
+// and every bit pattern is a valid array of bytes.
+unsafe impl bytemuck::Zeroable for CodeBlock {}
+// SAFETY: as above; it is `Copy` and `'static`.
+unsafe impl bytemuck::Pod for CodeBlock {}
+
+/// A level's 8-bit codes in 4 x 4 blocks, each block one cache line, blocks row by row
+/// (the last column and row of blocks padded with zero codes that no lookup reads).
+///
+/// Why: a bilinear lookup reads a 2 x 2 square of texels. Row-major, its two rows are
+/// always two cache lines (and often two pages, for a wide image); in blocks, the square
+/// lies in one line nine times in sixteen, and neighbouring lookups (a tile's pixels,
+/// which land near each other in the texture in both directions) share lines and pages.
+#[derive(Debug, Clone)]
+struct BlockedCodes {
+    blocks: Vec<CodeBlock>,
+    /// Blocks per row of blocks: `ceil(width / 4)`.
+    blocks_across: usize,
+}
+
+impl BlockedCodes {
+    /// The codes of a `width x height` level given row-major.
+    fn from_row_major(width: u32, height: u32, codes: &[[u8; 4]]) -> BlockedCodes {
+        let (w, h) = (width as usize, height as usize);
+        debug_assert_eq!(codes.len(), w * h);
+        let blocks_across = w.div_ceil(4);
+        let mut blocked = BlockedCodes {
+            blocks: vec![CodeBlock::default(); blocks_across * h.div_ceil(4)],
+            blocks_across,
+        };
+        for y in 0..h {
+            let start = blocked.row_start(y);
+            let flat = blocked.flat_mut();
+            for (x, &code) in codes[y * w..(y + 1) * w].iter().enumerate() {
+                flat[start + Self::column_offset(x)] = code;
+            }
+        }
+        blocked
+    }
+
+    /// Every code (padding included), indexed by `row_start(y) + column_offset(x)`.
+    #[inline(always)]
+    fn flat(&self) -> &[[u8; 4]] {
+        bytemuck::cast_slice(&self.blocks)
+    }
+
+    fn flat_mut(&mut self) -> &mut [[u8; 4]] {
+        bytemuck::cast_slice_mut(&mut self.blocks)
+    }
+
+    /// Where row `y`'s part of a texel's index starts.
+    #[inline(always)]
+    fn row_start(&self, y: usize) -> usize {
+        (y >> 2) * self.blocks_across * 16 + (y & 3) * 4
+    }
+
+    /// Column `x`'s part of a texel's index.
+    #[inline(always)]
+    fn column_offset(x: usize) -> usize {
+        (x >> 2) * 16 + (x & 3)
+    }
 }
 
 impl MipLevel {
@@ -88,28 +161,56 @@ impl MipLevel {
         }
     }
 
-    /// Texel `i` (`y * width + x`) as linear RGBA, whatever the storage: the one accessor
-    /// for filters that read texels one by one.
+    /// Texel number `i` (`y * width + x`) as linear RGBA, whatever the storage.
     #[inline(always)]
     pub fn texel(&self, i: usize) -> Vec4 {
+        let w = self.width as usize;
+        self.texel_at(i % w, i / w)
+    }
+
+    /// Texel `(x, y)` as linear RGBA, whatever the storage: the one accessor for filters
+    /// that read texels one by one.
+    #[inline(always)]
+    pub fn texel_at(&self, x: usize, y: usize) -> Vec4 {
+        let i = self.row_start(y) + self.column_offset(x);
         match &self.texels {
             Texels::Linear(t) => t[i],
-            Texels::Srgb8 { codes, tables } => tables.texel(codes[i]),
+            Texels::Srgb8 { codes, tables } => tables.texel(codes.flat()[i]),
         }
     }
 
-    /// Hints the cache to load texel `i` (`y * width + x`; nothing when out of range).
+    /// Where row `y`'s part of a texel's storage index starts; the index of texel
+    /// `(x, y)` is `row_start(y) + column_offset(x)`.
+    #[inline(always)]
+    pub(super) fn row_start(&self, y: usize) -> usize {
+        match &self.texels {
+            Texels::Linear(_) => y * self.width as usize,
+            Texels::Srgb8 { codes, .. } => codes.row_start(y),
+        }
+    }
+
+    /// Column `x`'s part of a texel's storage index (see [`MipLevel::row_start`]).
+    #[inline(always)]
+    pub(super) fn column_offset(&self, x: usize) -> usize {
+        match &self.texels {
+            Texels::Linear(_) => x,
+            Texels::Srgb8 { .. } => BlockedCodes::column_offset(x),
+        }
+    }
+
+    /// Hints the cache to load the texel at storage index `i` (nothing when out of range).
     #[inline(always)]
     fn prefetch(&self, i: usize) {
         match &self.texels {
             Texels::Linear(t) => crate::simd::prefetch(t, i),
-            Texels::Srgb8 { codes, .. } => crate::simd::prefetch(codes, i),
+            Texels::Srgb8 { codes, .. } => crate::simd::prefetch(codes.flat(), i),
         }
     }
 
-    /// Every texel in order.
+    /// Every texel in row-major order.
     pub fn texels(&self) -> impl ExactSizeIterator<Item = Vec4> + '_ {
-        (0..self.width as usize * self.height as usize).map(|i| self.texel(i))
+        let (w, h) = (self.width as usize, self.height as usize);
+        (0..w * h).map(move |i| self.texel_at(i % w, i / w))
     }
 
     /// Whether the level keeps 8-bit codes (see [`Texels`]).
@@ -129,6 +230,7 @@ impl MipLevel {
         let Some(codes) = codes else {
             return false;
         };
+        let codes = BlockedCodes::from_row_major(self.width, self.height, &codes);
         self.texels = Texels::Srgb8 { codes, tables };
         true
     }
@@ -140,7 +242,8 @@ impl MipLevel {
             return;
         };
         let tables = decode::Srgb8Tables::get();
-        let codes = texels.iter().map(|&t| tables.nearest_codes(t)).collect();
+        let codes: Vec<[u8; 4]> = texels.iter().map(|&t| tables.nearest_codes(t)).collect();
+        let codes = BlockedCodes::from_row_major(self.width, self.height, &codes);
         self.texels = Texels::Srgb8 { codes, tables };
     }
 }
@@ -204,5 +307,53 @@ impl MipPyramid {
     pub fn clamp_level(&self, lod: f32) -> f32 {
         // `f32::max` returns the non-NaN operand, so NaN becomes 0 here.
         lod.max(0.0).min((self.levels.len() - 1) as f32)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Blocked 8-bit storage: every texel of a level of any size has its own storage index
+    /// inside the codes, and reads back the texel it was given, in both namings.
+    #[test]
+    fn blocked_codes_give_every_texel_its_own_place() {
+        let tables = decode::Srgb8Tables::get();
+        for (w, h) in [
+            (1, 1),
+            (1, 7),
+            (5, 1),
+            (4, 4),
+            (3, 5),
+            (8, 12),
+            (37, 21),
+            (261, 6),
+        ] {
+            let texels: Vec<Vec4> = (0..w * h)
+                .map(|i: u32| tables.texel((i.wrapping_mul(0x9E37_79B9) ^ i).to_le_bytes()))
+                .collect();
+            let mut level = MipLevel::linear(w, h, texels.clone());
+            assert!(level.store_8bit_if_exact());
+            let Texels::Srgb8 { codes, .. } = &level.texels else {
+                unreachable!()
+            };
+            let mut seen = vec![false; codes.flat().len()];
+            for y in 0..h as usize {
+                for x in 0..w as usize {
+                    let at = level.row_start(y) + level.column_offset(x);
+                    assert!(
+                        !std::mem::replace(&mut seen[at], true),
+                        "{w}x{h}: ({x}, {y}) shares {at}"
+                    );
+                    let want = texels[y * w as usize + x];
+                    assert_eq!(level.texel_at(x, y).to_array(), want.to_array());
+                    assert_eq!(level.texel(y * w as usize + x).to_array(), want.to_array());
+                }
+            }
+            assert!(
+                level.texels().eq(texels.iter().copied()),
+                "{w}x{h} in row-major order"
+            );
+        }
     }
 }

@@ -26,8 +26,8 @@ use super::{MipLevel, Sampler, WrapMode};
 /// What a bilinear lookup reads in one level.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub(super) struct BilinearTaps {
-    /// Indices (`y * width + x`) of the texels `(x0, y0)`, `(x1, y0)`, `(x0, y1)`,
-    /// `(x1, y1)`, already wrapped into the level. `u32`: a level has at most
+    /// Storage indices (`MipLevel::row_start(y) + MipLevel::column_offset(x)`) of the
+    /// texels `(x0, y0)`, `(x1, y0)`, `(x0, y1)`, `(x1, y1)`, already wrapped into the level. `u32`: a level has at most
     /// `MAX_SIZE^2 = 2^28` texels, and a planned lookup keeps two sets of taps until it is
     /// filtered, so they are kept small.
     pub texels: [u32; 4],
@@ -46,9 +46,10 @@ impl BilinearTaps {
     pub fn new(level: &MipLevel, uv: Vec2, sampler: Sampler) -> BilinearTaps {
         let (x0, x1, fx) = axis_taps(uv.x, level.width, sampler.wrap_s);
         let (y0, y1, fy) = axis_taps(uv.y, level.height, sampler.wrap_t);
-        let w = level.width as usize;
+        let (row0, row1) = (level.row_start(y0), level.row_start(y1));
+        let (col0, col1) = (level.column_offset(x0), level.column_offset(x1));
         BilinearTaps {
-            texels: [y0 * w + x0, y0 * w + x1, y1 * w + x0, y1 * w + x1].map(|i| i as u32),
+            texels: [row0 + col0, row0 + col1, row1 + col0, row1 + col1].map(|i| i as u32),
             fx,
             fy,
         }
