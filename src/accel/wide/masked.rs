@@ -155,8 +155,9 @@ impl WideBvh {
         });
         let mut top = 1usize;
         let mut entering = [0u8; PACKET];
-        // Leaves visited so far (wrapping: compared only for equality, and a walk that
-        // visits 65,536 leaves between a push and its pop merely re-tests the box).
+        // Leaves visited so far (wrapping: compared only for equality; a walk that visits
+        // a multiple of 65,536 leaves between a push and its pop skips that re-test, which
+        // costs only the leaf visit the re-test would have spared).
         let mut leaves_visited = 0u16;
         while top > 0 {
             top -= 1;
