@@ -50,7 +50,7 @@ pub(super) const INLINE_STACK: usize = 128;
 ///
 /// Kept as scalars, half a cache line per ray, and splatted across the lanes where they
 /// are used (a broadcast load costs what a vector load does): a masked packet makes 64 of
-/// them per walk, and splatted ahead (240 bytes each) they filled a quarter of L1 with
+/// them per walk, and splatted ahead (240 bytes each) they filled a third of a 48 KB L1 with
 /// stores before the walk began.
 #[derive(Clone, Copy, Default)]
 #[repr(C, align(32))]
