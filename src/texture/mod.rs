@@ -172,10 +172,12 @@ impl MipLevel {
     /// that read texels one by one.
     #[inline(always)]
     pub fn texel_at(&self, x: usize, y: usize) -> Vec4 {
-        let i = self.row_start(y) + self.column_offset(x);
         match &self.texels {
-            Texels::Linear(t) => t[i],
-            Texels::Srgb8 { codes, tables } => tables.texel(codes.flat()[i]),
+            Texels::Linear(t) => t[y * self.width as usize + x],
+            Texels::Srgb8 { codes, tables } => {
+                let i = codes.row_start(y) + BlockedCodes::column_offset(x);
+                tables.texel(codes.flat()[i])
+            }
         }
     }
 
@@ -209,8 +211,7 @@ impl MipLevel {
 
     /// Every texel in row-major order.
     pub fn texels(&self) -> impl ExactSizeIterator<Item = Vec4> + '_ {
-        let (w, h) = (self.width as usize, self.height as usize);
-        (0..w * h).map(move |i| self.texel_at(i % w, i / w))
+        (0..self.width as usize * self.height as usize).map(|i| self.texel(i))
     }
 
     /// Whether the level keeps 8-bit codes (see [`Texels`]).

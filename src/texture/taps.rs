@@ -27,9 +27,10 @@ use super::{MipLevel, Sampler, WrapMode};
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub(super) struct BilinearTaps {
     /// Storage indices (`MipLevel::row_start(y) + MipLevel::column_offset(x)`) of the
-    /// texels `(x0, y0)`, `(x1, y0)`, `(x0, y1)`, `(x1, y1)`, already wrapped into the level. `u32`: a level has at most
-    /// `MAX_SIZE^2 = 2^28` texels, and a planned lookup keeps two sets of taps until it is
-    /// filtered, so they are kept small.
+    /// texels `(x0, y0)`, `(x1, y0)`, `(x0, y1)`, `(x1, y1)`, already wrapped into the
+    /// level. `u32`: a level stores at most `MAX_SIZE^2 = 2^28` texels (`MAX_SIZE` is a
+    /// multiple of the 8-bit blocks' side, so padding adds none at the limit), and a
+    /// planned lookup keeps two sets of taps until it is filtered, so they are kept small.
     pub texels: [u32; 4],
     /// Weight of the `x1` column (`x0` has `1 - fx`).
     pub fx: f32,
