@@ -368,6 +368,7 @@ impl TreeState {
                 .enumerate()
                 .filter(|(_, r)| **r != Rewrite::Keep)
                 .for_each(|(i, _)| {
+                    let instance = writer.instance(i);
                     ranges[i]
                         .clone()
                         .into_par_iter()
@@ -384,7 +385,7 @@ impl TreeState {
                             // `scatter`): one task per slot.
                             unsafe {
                                 slots.with_slot(slot, source, |p, n, uv| {
-                                    writer.write(source, p, n, uv)
+                                    instance.write(source, p, n, uv)
                                 })
                             };
                         });
@@ -396,11 +397,12 @@ impl TreeState {
                 .enumerate()
                 .filter(|(_, r)| **r != Rewrite::Keep);
             for (i, _) in visited_instances {
+                let instance = writer.instance(i);
                 for source in ranges[i].clone() {
                     let slot = slot_of_source[source as usize];
                     let s = slot as usize;
                     let mut position = accel.triangle(slot);
-                    let motion = writer.write(
+                    let motion = instance.write(
                         source,
                         &mut position,
                         &mut triangles.normals[s],
