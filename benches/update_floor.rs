@@ -1,6 +1,6 @@
 //! The floor of a skinned update on this machine: `cargo bench --bench update_floor`.
 //!
-//! Issue 12 asks that a million skinned triangles update in at most 10% of a 640x480 frame.
+//! The target for a million skinned triangles' update was at most 10% of a 640x480 frame.
 //! This bench measures what the least such update costs here, without the frame loop:
 //! 1M triangles (a 1,000 x 500-quad grid) skinned to 8 joints, two influences per vertex,
 //! then one pass over the triangles in spatial (Morton) order, the order a BVH's leaves

@@ -1,4 +1,4 @@
-//! The LOD methods side by side on scenes with closed-form answers (issue 5's tests).
+//! The LOD methods side by side on scenes with closed-form answers.
 
 mod common;
 
@@ -357,7 +357,7 @@ fn finite_difference_reference_agrees_with_the_closed_forms() {
     );
 }
 
-/// Issue 15's two-mirror chain, in the camera's xz plane: eye at the origin looking down
+/// The two-mirror chain, in the camera's xz plane: eye at the origin looking down
 /// -Z; a concave mirror (radius 2) 3 m away at 20 degrees incidence; 2 m on, past its
 /// focus, a convex mirror ball (radius 1) at 15 degrees; 5 m on, a textured wall facing the
 /// ray. `TwoMirrorChain` holds the designed geometry (f64) for the exact 2-D trace.
@@ -478,7 +478,7 @@ fn spherical_cap(
 fn cones_match_the_exact_trace_through_a_focus_and_a_convex_mirror() {
     let chain = TwoMirrorChain::design();
     let width = chain.exact_width_per_spread();
-    // Issue 15's figure: 26.7 pixel spreads (the |w| rule gave 2.0, 3.7 levels too sharp).
+    // The chain's figure: 26.7 pixel spreads (the |w| rule gave 2.0, 3.7 levels too sharp).
     assert!((width - 26.7).abs() < 0.05, "exact 2-D trace width {width}");
     let yfov = 30f32.to_radians();
     // A cone of width `width * gamma` on a facing wall looks like the wall seen directly
@@ -503,7 +503,7 @@ fn cones_match_the_exact_trace_through_a_focus_and_a_convex_mirror() {
 #[test]
 fn a_wide_field_of_view_renders_and_selects_levels_with_the_same_value() {
     // yfov 3.12 rad: tan(yfov / 2) = 92.6. The camera used to render such a camera at
-    // 0.8 rad while `log2 P_b` took 3.12 (issue 15, fix 2).
+    // 0.8 rad while `log2 P_b` took 3.12 (since fixed).
     let yfov = 3.12f32;
     let (distance, size, side) = (0.02f32, 2.0f32, 64u32);
     let mut renderer = Renderer::new(
@@ -551,7 +551,7 @@ fn a_wide_field_of_view_renders_and_selects_levels_with_the_same_value() {
     );
 }
 
-/// Asserts `got` is within 0.02 levels of `expected` (issue 15's tolerance for closed forms).
+/// Asserts `got` is within 0.02 levels of `expected` (the tolerance for closed forms).
 fn assert_level(what: &str, got: f32, expected: f64) {
     assert!(
         (got as f64 - expected).abs() < 0.02,

@@ -1,4 +1,4 @@
-//! An independent LOD reference from real sub-pixel rays (issue 15, item 2).
+//! An independent LOD reference from real sub-pixel rays.
 //!
 //! The finite-difference reference (`lod_error.rs`, "probe reference") forces its half-pixel
 //! rays through the centre ray's chain of planes with extrapolated normals: it is the

@@ -33,7 +33,7 @@
 //! uses `|w|`, and a zero width clamps to level 0. The surface spread keeps the sign of `w`
 //! (JCGT 2021's rule): past a focus the cone is inverted, so a convex mirror must push the
 //! (negative) spread further negative, which `|w|` would turn into a false convergence
-//! (3.7 levels too sharp on issue 15's two-mirror chain, `tests/lod_methods.rs`).
+//! (3.7 levels too sharp on the two-mirror chain, `tests/lod_methods.rs`).
 
 use glam::Vec3A;
 

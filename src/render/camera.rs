@@ -49,7 +49,7 @@ impl Camera {
         let up = right.cross(forward);
         // The raw field of view over the whole range the loaders accept: `log2 P_b` was
         // computed with the scene's value (`frame::Renderer::new`), so a camera that
-        // rendered with another would select levels for a different film (issue 15: the
+        // rendered with another would select levels for a different film (the
         // old clamp to (1e-4, 3.1) cost 7.8 levels at yfov 3.12). Values no loader lets
         // through (NaN, <= 0, >= pi: only a hand-built scene) get 0.8 rad rather than NaN
         // pixels.
