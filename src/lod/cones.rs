@@ -103,6 +103,7 @@ impl RayCone {
 impl RayLod for RayCone {
     const METHOD: LodMethod = LodMethod::Cones;
     const BYTES: usize = 12;
+    type Kept = crate::geometry::HitTriangle;
 
     #[inline]
     fn primary(camera: &LodCamera, px: f32, py: f32) -> Self {

@@ -127,6 +127,7 @@ fn normal_differentials(hit: &SurfaceHit, dp_dx: Vec3A, dp_dy: Vec3A) -> (Vec3A,
 impl RayLod for RayDiffs {
     const METHOD: LodMethod = LodMethod::Diffs;
     const BYTES: usize = 48;
+    type Kept = crate::geometry::HitTriangle;
 
     #[inline]
     fn primary(camera: &LodCamera, px: f32, py: f32) -> Self {

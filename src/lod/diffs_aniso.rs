@@ -49,6 +49,7 @@ impl TexelGradients {
 impl RayLod for RayDiffsAniso {
     const METHOD: LodMethod = LodMethod::DiffsAniso;
     const BYTES: usize = 48;
+    type Kept = crate::geometry::HitTriangle;
 
     #[inline]
     fn primary(camera: &LodCamera, px: f32, py: f32) -> Self {

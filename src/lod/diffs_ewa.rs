@@ -67,6 +67,7 @@ impl TexelGradients {
 impl RayLod for RayDiffsEwa {
     const METHOD: LodMethod = LodMethod::DiffsEwa;
     const BYTES: usize = 48;
+    type Kept = crate::geometry::HitTriangle;
 
     #[inline]
     fn primary(camera: &LodCamera, px: f32, py: f32) -> Self {

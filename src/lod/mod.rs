@@ -363,12 +363,61 @@ impl Footprint {
     }
 }
 
+/// What a hit waiting for its shadow rays keeps of its triangle for [`RayLod::reflect`] and
+/// [`RayLod::refract`]: the whole triangle for a method that reads it there, nothing for one
+/// that does not (a renderer keeps a tile's waiting hits, and the triangle was 128 of a
+/// waiting hit's 336 bytes, copied for every hit).
+pub trait KeptTriangle: Copy + Send + Sync {
+    /// What to keep of `triangle`.
+    fn keep(triangle: &HitTriangle) -> Self;
+    /// The kept triangle: for `()`, a triangle of NaNs, which a method whose `reflect` and
+    /// `refract` ignore the hit's triangle never reads (each such method's tests check that
+    /// both give the same state whatever the triangle).
+    fn triangle(&self) -> &HitTriangle;
+}
+
+impl KeptTriangle for HitTriangle {
+    #[inline(always)]
+    fn keep(triangle: &HitTriangle) -> Self {
+        *triangle
+    }
+
+    #[inline(always)]
+    fn triangle(&self) -> &HitTriangle {
+        self
+    }
+}
+
+/// The triangle a method that keeps none sees at a bounce: NaN everywhere, so a method that
+/// read it by mistake would give NaN levels, not plausible ones.
+static NOT_KEPT: HitTriangle = HitTriangle {
+    positions: [Vec3A::NAN; 3],
+    normals: [Vec3::NAN; 3],
+    uvs: [Vec2::NAN; 3],
+    material: u32::MAX,
+    log2_pb: f32::NAN,
+    source: u32::MAX,
+};
+
+impl KeptTriangle for () {
+    #[inline(always)]
+    fn keep(_: &HitTriangle) -> Self {}
+
+    #[inline(always)]
+    fn triangle(&self) -> &HitTriangle {
+        &NOT_KEPT
+    }
+}
+
 /// The per-ray state of one LOD method (see the module doc for the life cycle).
 pub trait RayLod: Copy + Send + Sync {
     const METHOD: LodMethod;
     /// Bytes of payload a ray carries (the method's honest cost, not `size_of`, which
     /// includes SIMD padding).
     const BYTES: usize;
+    /// What [`Self::reflect`] and [`Self::refract`] read of the hit's triangle:
+    /// [`HitTriangle`] when they read it, `()` when they read none of it.
+    type Kept: KeptTriangle;
 
     /// State of the primary ray through film point `(px, py)` (pixels).
     fn primary(camera: &LodCamera, px: f32, py: f32) -> Self;
@@ -453,6 +502,54 @@ pub fn mean_edge_curvature(p: [Vec3A; 3], n: [Vec3A; 3]) -> f32 {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// `reflect` and `refract` of the hit, once with its triangle and once with the NaN
+    /// triangle a method that keeps none sees at a bounce ([`KeptTriangle`]): whether the
+    /// states come out the same (compared as printed, bit patterns of NaN included).
+    fn bounce_ignores_the_triangle<L: RayLod + fmt::Debug>() -> bool {
+        let camera = test_support::camera(0.9, 480);
+        let mut state = L::primary(&camera, 131.0, 207.5);
+        let triangle = test_support::sphere_cap_triangle(2.5);
+        let direction = Vec3A::new(0.1, -0.2, -1.0).normalize();
+        let hit = test_support::hit_on(&triangle, 3.0, direction, 1.0);
+        state.arrive(&hit);
+        let blind = SurfaceHit {
+            triangle: ().triangle(),
+            ..hit
+        };
+        let reflected = Vec3A::new(0.1, -0.2, 1.0).normalize();
+        let refracted = Vec3A::new(0.05, -0.1, -1.0).normalize();
+        let same = |a: L, b: L| format!("{a:?}") == format!("{b:?}");
+        same(
+            state.reflect(&hit, reflected),
+            state.reflect(&blind, reflected),
+        ) && same(
+            state.refract(&hit, 0.67, refracted),
+            state.refract(&blind, 0.67, refracted),
+        )
+    }
+
+    /// The methods that keep no triangle for a bounce (`type Kept = ()`) must not read it
+    /// there; the check tells the others apart (they read it, and keep it).
+    #[test]
+    fn methods_that_keep_no_triangle_do_not_read_it_at_a_bounce() {
+        assert!(bounce_ignores_the_triangle::<NoLod>());
+        assert!(bounce_ignores_the_triangle::<PathLength>());
+        assert!(bounce_ignores_the_triangle::<PathLengthCos>());
+        assert!(!bounce_ignores_the_triangle::<RayCone>());
+        assert!(!bounce_ignores_the_triangle::<RayDiffs>());
+        assert!(!bounce_ignores_the_triangle::<RayDiffsAniso>());
+        assert!(!bounce_ignores_the_triangle::<RayDiffsEwa>());
+        // Which kind each method is, as the renderer keeps it.
+        let keeps = |size: usize| size == std::mem::size_of::<HitTriangle>();
+        assert!(!keeps(std::mem::size_of::<<PathLength as RayLod>::Kept>()));
+        assert!(!keeps(std::mem::size_of::<<NoLod as RayLod>::Kept>()));
+        assert!(!keeps(
+            std::mem::size_of::<<PathLengthCos as RayLod>::Kept>()
+        ));
+        assert!(keeps(std::mem::size_of::<<RayCone as RayLod>::Kept>()));
+        assert!(keeps(std::mem::size_of::<<RayDiffs as RayLod>::Kept>()));
+    }
 
     #[test]
     fn names_round_trip() {

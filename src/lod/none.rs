@@ -10,6 +10,7 @@ pub struct NoLod;
 impl RayLod for NoLod {
     const METHOD: LodMethod = LodMethod::None;
     const BYTES: usize = 0;
+    type Kept = ();
 
     #[inline]
     fn primary(_: &LodCamera, _: f32, _: f32) -> Self {

@@ -27,6 +27,7 @@ impl PathLength {
 impl RayLod for PathLength {
     const METHOD: LodMethod = LodMethod::Paper;
     const BYTES: usize = 4;
+    type Kept = ();
 
     #[inline]
     fn primary(_: &LodCamera, _: f32, _: f32) -> Self {

@@ -52,6 +52,7 @@ impl PathLengthCos {
 impl RayLod for PathLengthCos {
     const METHOD: LodMethod = LodMethod::PaperCos;
     const BYTES: usize = 12;
+    type Kept = ();
 
     #[inline]
     fn primary(camera: &LodCamera, px: f32, py: f32) -> Self {

@@ -20,7 +20,7 @@ use glam::{Vec2, Vec3A};
 
 use crate::accel::Hit;
 use crate::geometry::HitTriangle;
-use crate::lod::{Footprint, LodCamera, LodMethod, RayLod, SurfaceHit, finite_level};
+use crate::lod::{Footprint, KeptTriangle, LodCamera, LodMethod, RayLod, SurfaceHit, finite_level};
 use crate::render::light::{Incident, Light};
 use crate::render::material::{Material, ShadingModel};
 use crate::render::ray_log::{RayClass, RayLog};
@@ -144,9 +144,11 @@ enum TexelLookup {
 }
 
 /// A hit whose surface is made and texture lookup planned, waiting for its shadow rays.
-pub(super) struct Arrival<L> {
+pub(super) struct Arrival<L: RayLod> {
     hit: Hit,
-    triangle: HitTriangle,
+    /// What `reflect` and `refract` of the LOD method read of the triangle (nothing for
+    /// `none` and `paper`).
+    triangle: L::Kept,
     surface: SurfacePoint,
     /// Direction of the ray that arrived.
     direction: Vec3A,
@@ -159,7 +161,7 @@ pub(super) struct Arrival<L> {
     depth: u32,
 }
 
-impl<L> Arrival<L> {
+impl<L: RayLod> Arrival<L> {
     /// Bounces before this hit.
     pub(super) fn depth(&self) -> u32 {
         self.depth
@@ -355,7 +357,7 @@ impl FrameScene<'_> {
         Arrival {
             material: triangle.material,
             hit,
-            triangle,
+            triangle: L::Kept::keep(&triangle),
             surface,
             direction,
             lod,
@@ -403,7 +405,7 @@ impl FrameScene<'_> {
         let material = &self.materials[arrival.material as usize];
         let surface = &arrival.surface;
         let direction = arrival.direction;
-        let lod_hit = surface.lod_hit(&arrival.triangle, &arrival.hit, direction);
+        let lod_hit = surface.lod_hit(arrival.triangle.triangle(), &arrival.hit, direction);
         let mut children = Children {
             first: first_child,
             spawned,

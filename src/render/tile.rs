@@ -43,7 +43,7 @@ struct Pending<L> {
 
 /// A hit waiting for its shadow rays: its vertex, the sample's pixel, and its requests
 /// (`requests[first..end]`).
-struct Waiting<L> {
+struct Waiting<L: RayLod> {
     arrival: Arrival<L>,
     vertex: u32,
     pixel: u32,
@@ -56,7 +56,7 @@ struct Waiting<L> {
 /// for every tile copied them over and over (3% of a BART Kitchen frame in `memmove`).
 /// Every list is cleared before use, so what a tile computes does not depend on the tile
 /// before it.
-pub(super) struct TileBuffers<L> {
+pub(super) struct TileBuffers<L: RayLod> {
     samples: Vec<(u32, u32, u32)>,
     vertices: Vec<Combine>,
     bounce: Vec<(Pending<L>, Option<Hit>)>,
@@ -68,7 +68,7 @@ pub(super) struct TileBuffers<L> {
     pixel_of: Vec<u32>,
 }
 
-impl<L> Default for TileBuffers<L> {
+impl<L: RayLod> Default for TileBuffers<L> {
     fn default() -> Self {
         TileBuffers {
             samples: Vec::new(),
@@ -286,7 +286,7 @@ fn trace_bounce<L: RayLod>(
 /// Traces every request's shadow ray and fills in its transmittance: per light, the
 /// requests in the order they were made, as packets of up to [`PACKET`]. `of_light` and
 /// `pixel_of` are working lists (their contents on entry do not matter).
-fn trace_shadows<L>(
+fn trace_shadows<L: RayLod>(
     scene: &FrameScene,
     waiting: &[Waiting<L>],
     requests: &mut [ShadowRequest],
