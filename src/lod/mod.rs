@@ -371,8 +371,8 @@ pub trait KeptTriangle: Copy + Send + Sync {
     /// What to keep of `triangle`.
     fn keep(triangle: &HitTriangle) -> Self;
     /// The kept triangle: for `()`, a triangle of NaNs, which a method whose `reflect` and
-    /// `refract` ignore the hit's triangle never reads (each such method's tests check that
-    /// both give the same state whatever the triangle).
+    /// `refract` ignore the hit's triangle never reads (`lod::tests` checks, for every
+    /// method that keeps `()`, that both give the same state with it as with the real one).
     fn triangle(&self) -> &HitTriangle;
 }
 
