@@ -323,7 +323,6 @@ impl<'a> TriangleWriter<'a> {
             normals,
             first,
             indices,
-            flips_winding: placement.flips_winding,
             rewrites_uvs: self.uv_flips.get(i) != Some(&Some(placement.flips_winding)),
             placement,
         }
@@ -355,9 +354,9 @@ pub struct InstanceWriter<'a> {
     /// Its first source triangle and its primitive's index buffer.
     first: u32,
     indices: &'a [u32],
-    flips_winding: bool,
     /// Whether its slots' uvs were last written under another winding (or never).
     rewrites_uvs: bool,
+    /// Its placement (its winding decides the vertex order).
     placement: &'a Placement,
 }
 
@@ -369,7 +368,7 @@ impl InstanceWriter<'_> {
         let vertices = [self.indices[at], self.indices[at + 1], self.indices[at + 2]];
         self.writer.geometry.placed_triangle(
             vertices,
-            self.flips_winding,
+            self.placement.flips_winding,
             self.positions,
             self.normals,
         )

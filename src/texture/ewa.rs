@@ -13,8 +13,8 @@
 //!   reconstruction filter that keeps at least the nearest texels inside it however thin the
 //!   footprint.
 //!
-//! Texels are read through one accessor, [`texel_at`], which returns a texel of a level as
-//! linear RGBA floats whatever the level's storage.
+//! Texels are read through one accessor, [`MipLevel::texel_at`], which returns a texel of a
+//! level as linear RGBA floats whatever the level's storage.
 //!
 //! Invariants (as for the other lookups): never allocates, never panics on a pyramid built
 //! by [`MipPyramid::from_linear_rgba`], never returns NaN for finite texels. Non-finite
@@ -46,12 +46,6 @@ static WEIGHTS: LazyLock<[f32; WEIGHT_TABLE_SIZE]> = LazyLock::new(|| {
         (-ALPHA * r2).exp() - (-ALPHA).exp()
     })
 });
-
-/// Texel `(x, y)` of `level` as linear RGBA (the one place the filter reads texels).
-#[inline(always)]
-pub(super) fn texel_at(level: &MipLevel, x: usize, y: usize) -> Vec4 {
-    level.texel_at(x, y)
-}
 
 impl MipPyramid {
     /// EWA lookup at `uv` over the ellipse with conjugate semi-axes `major` and `minor`
@@ -96,7 +90,7 @@ fn ewa_in_level(
 ) -> Option<Vec4> {
     if level.width == 1 && level.height == 1 {
         // Every index wraps to the one texel: the weighted mean is that texel.
-        return Some(texel_at(level, 0, 0));
+        return Some(level.texel_at(0, 0));
     }
     let size = Vec2::new(level.width as f32, level.height as f32);
     let (a0, a1) = (major * size, minor * size);
@@ -131,7 +125,7 @@ fn ewa_in_level(
             if r2 < 1.0 {
                 let index = ((r2 * WEIGHT_TABLE_SIZE as f32) as usize).min(WEIGHT_TABLE_SIZE - 1);
                 let weight = weights[index];
-                sum += texel_at(level, x as usize, y) * weight;
+                sum += level.texel_at(x as usize, y) * weight;
                 total += weight;
             }
         }
