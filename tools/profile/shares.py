@@ -1,0 +1,158 @@
+#!/usr/bin/env python3
+"""Where a profile's samples fall, by mipray module and source file, inlining resolved.
+
+`perf report --sort srcfile` names a sample's innermost source line, which for inlined code
+is often a standard-library file (a SIMD intrinsic, a slice index), so a module's share of
+a frame is split over `core_arch/x86/avx.rs`, `slice/index.rs` and the like. This script
+resolves each sampled address's inline chain with `addr2line -i` and charges the sample
+to the innermost frame that lies in the project's `src/` (outside `src/simd/`, whose vector
+type, prefetch hints and dispatch are charged to the code using them): an intrinsic
+inlined into the texture filter counts as texture filtering, a glam operation inlined
+into shading counts as shading.
+
+Usage (needs `perf` and binutils' `addr2line`; the binary must carry line tables, as the
+`bench` profile's does):
+
+    perf record -F 2000 -o perf.data target/release/mipray render SCENE ...
+    tools/profile/shares.py perf.data target/release/mipray [--files N]
+
+Prints the share of all samples (every DSO, the kernel included) per module
+(`src/<module>/`), then the N busiest project files. Samples outside the binary are
+counted as `outside the binary` (libm's `powf`, the kernel's page faults, ...); samples in
+the binary with no project frame (a standard-library or dependency function that was not
+inlined) as `not in src/`.
+"""
+
+import argparse
+import collections
+import os
+import re
+import subprocess
+import sys
+
+
+SRC = "/src/"
+# Paths of the standard library (`/rustc/<hash>/library/...`) and of dependencies (cargo's
+# registry and git checkouts), which also have `src/` directories.
+NOT_PROJECT = ("/rustc/", "/library/", "/.cargo/", "index.crates.io", "/cargo/registry/")
+
+
+# mipray's own building blocks, charged to the code that uses them like the standard
+# library's: `simd/` (the 8-lane vector type, prefetch hints, the dispatch itself).
+HELPERS = ("/src/simd/",)
+
+
+def is_project_file(location):
+    """Whether an addr2line location (`path:line`) is in mipray's own `src/`, outside the
+    helper modules."""
+    return (
+        SRC in location
+        and not any(part in location for part in NOT_PROJECT)
+        and not any(part in location for part in HELPERS)
+    )
+
+
+def text_mapping(data, binary):
+    """(runtime start, file offset) of the binary's executable mapping, from the mmap events."""
+    events = subprocess.run(
+        ["perf", "script", "-i", data, "--show-mmap-events", "-F", "ip"],
+        capture_output=True, text=True, check=True,
+    ).stdout
+    name = os.path.realpath(binary)
+    pattern = re.compile(r"\[(0x[0-9a-f]+)\((0x[0-9a-f]+)\) @ (0x[0-9a-f]+) .*\]: r-xp (\S+)")
+    for line in events.splitlines():
+        m = pattern.search(line)
+        if m and os.path.realpath(m.group(4)) == name:
+            return int(m.group(1), 16), int(m.group(3), 16)
+    sys.exit(f"{data}: no executable mapping of {binary} (was it recorded from this binary?)")
+
+
+def offset_to_vaddr(binary):
+    """The executable segments' (file offset, size, virtual address), from the ELF header."""
+    headers = subprocess.run(
+        ["readelf", "-lW", binary], capture_output=True, text=True, check=True
+    ).stdout
+    segments = []
+    for line in headers.splitlines():
+        fields = line.split()
+        if fields[:1] == ["LOAD"] and "E" in fields[6:-1]:
+            segments.append((int(fields[1], 16), int(fields[4], 16), int(fields[2], 16)))
+    return segments
+
+
+def main():
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("data", help="perf.data recorded from the binary")
+    parser.add_argument("binary", help="the binary the profile was recorded from")
+    parser.add_argument("--files", type=int, default=15, help="how many files to list")
+    args = parser.parse_args()
+
+    start, offset = text_mapping(args.data, args.binary)
+    segments = offset_to_vaddr(args.binary)
+    samples = subprocess.run(
+        ["perf", "script", "-i", args.data, "-F", "ip,dso", "-G"],
+        capture_output=True, text=True, check=True,
+    ).stdout
+    name = os.path.realpath(args.binary)
+    in_binary = collections.Counter()
+    total = 0
+    for line in samples.splitlines():
+        fields = line.split()
+        if len(fields) < 2:
+            continue
+        total += 1
+        if os.path.realpath(fields[1].strip("()")) != name:
+            continue
+        file_offset = int(fields[0], 16) - start + offset
+        for seg_offset, size, vaddr in segments:
+            if seg_offset <= file_offset < seg_offset + size:
+                in_binary[file_offset - seg_offset + vaddr] += 1
+                break
+    if total == 0:
+        sys.exit(f"{args.data}: no samples")
+
+    addresses = sorted(in_binary)
+    resolved = subprocess.run(
+        ["addr2line", "-i", "-a", "-f", "-C", "-e", args.binary],
+        input="\n".join(hex(a) for a in addresses), capture_output=True, text=True, check=True,
+    ).stdout.splitlines()
+    # Per address: its frames, innermost first, as (function, file:line) pairs.
+    frames = collections.defaultdict(list)
+    current, i = None, 0
+    while i < len(resolved):
+        if resolved[i].startswith("0x"):
+            current = int(resolved[i], 16)
+            i += 1
+            continue
+        location = resolved[i + 1] if i + 1 < len(resolved) else ""
+        frames[current].append((resolved[i], location))
+        i += 2
+
+    modules = collections.Counter()
+    files = collections.Counter()
+    for address, count in in_binary.items():
+        project = [loc for _, loc in frames[address] if is_project_file(loc)]
+        if not project:
+            modules["not in src/"] += count
+            continue
+        path = project[0].rsplit(SRC, 1)[1].split(":", 1)[0]
+        parts = path.split("/")
+        modules[parts[0] if len(parts) > 1 else path] += count
+        files[path] += count
+    modules["outside the binary"] = total - sum(in_binary.values())
+
+    print(f"{total} samples, {sum(in_binary.values())} in {args.binary}")
+    print()
+    print("| module | samples | share |")
+    print("|---|---:|---:|")
+    for module, count in modules.most_common():
+        print(f"| {module} | {count} | {100 * count / total:.1f}% |")
+    print()
+    print("| file | samples | share |")
+    print("|---|---:|---:|")
+    for path, count in files.most_common(args.files):
+        print(f"| {path} | {count} | {100 * count / total:.1f}% |")
+
+
+if __name__ == "__main__":
+    main()
