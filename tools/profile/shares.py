@@ -52,12 +52,19 @@ def is_project_file(location):
     )
 
 
+def run(command, **kwargs):
+    """`command`'s standard output; a clear exit when it fails or is missing."""
+    try:
+        return subprocess.run(command, capture_output=True, text=True, check=True, **kwargs).stdout
+    except FileNotFoundError:
+        sys.exit(f"{command[0]}: not found (install perf and binutils)")
+    except subprocess.CalledProcessError as e:
+        sys.exit(f"{' '.join(command)}: exit {e.returncode}: {e.stderr.strip()[:300]}")
+
+
 def text_mapping(data, binary):
     """(runtime start, file offset) of the binary's executable mapping, from the mmap events."""
-    events = subprocess.run(
-        ["perf", "script", "-i", data, "--show-mmap-events", "-F", "ip"],
-        capture_output=True, text=True, check=True,
-    ).stdout
+    events = run(["perf", "script", "-i", data, "--show-mmap-events", "-F", "ip"])
     name = os.path.realpath(binary)
     pattern = re.compile(r"\[(0x[0-9a-f]+)\((0x[0-9a-f]+)\) @ (0x[0-9a-f]+) .*\]: r-xp (\S+)")
     for line in events.splitlines():
@@ -69,9 +76,7 @@ def text_mapping(data, binary):
 
 def offset_to_vaddr(binary):
     """The executable segments' (file offset, size, virtual address), from the ELF header."""
-    headers = subprocess.run(
-        ["readelf", "-lW", binary], capture_output=True, text=True, check=True
-    ).stdout
+    headers = run(["readelf", "-lW", binary])
     segments = []
     for line in headers.splitlines():
         fields = line.split()
@@ -86,13 +91,13 @@ def main():
     parser.add_argument("binary", help="the binary the profile was recorded from")
     parser.add_argument("--files", type=int, default=15, help="how many files to list")
     args = parser.parse_args()
+    for path, what in ((args.data, "perf data"), (args.binary, "binary")):
+        if not os.path.isfile(path):
+            sys.exit(f"{path}: no such file (the {what})")
 
     start, offset = text_mapping(args.data, args.binary)
     segments = offset_to_vaddr(args.binary)
-    samples = subprocess.run(
-        ["perf", "script", "-i", args.data, "-F", "ip,dso", "-G"],
-        capture_output=True, text=True, check=True,
-    ).stdout
+    samples = run(["perf", "script", "-i", args.data, "-F", "ip,dso", "-G"])
     name = os.path.realpath(args.binary)
     in_binary = collections.Counter()
     total = 0
@@ -110,12 +115,14 @@ def main():
                 break
     if total == 0:
         sys.exit(f"{args.data}: no samples")
+    if not in_binary:
+        sys.exit(f"{args.data}: none of its {total} samples is in {args.binary}")
 
     addresses = sorted(in_binary)
-    resolved = subprocess.run(
+    resolved = run(
         ["addr2line", "-i", "-a", "-f", "-C", "-e", args.binary],
-        input="\n".join(hex(a) for a in addresses), capture_output=True, text=True, check=True,
-    ).stdout.splitlines()
+        input="\n".join(hex(a) for a in addresses),
+    ).splitlines()
     # Per address: its frames, innermost first, as (function, file:line) pairs.
     frames = collections.defaultdict(list)
     current, i = None, 0
