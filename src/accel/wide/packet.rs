@@ -174,9 +174,30 @@ impl RayPacket {
 
     /// Calls `each(ray, &mut limit)` for every ray from `first` on that enters lane `lane`
     /// of `node` before its limit, in ray order; returns whether any did. Eight rays are
-    /// tested at once ([`F32x8`]), all before the first of them is handed to `each`.
+    /// tested at once ([`F32x8`]), or sixteen in the AVX2 copy where the CPU has AVX-512
+    /// ([`sixteen_rays`]: the same operations lane by lane, so the same rays), all of a
+    /// group before the first of them is handed to `each`. (`each` changes only the limit
+    /// of the ray it is handed, so the group size changes no ray's test.)
     #[inline(always)]
     fn enter_leaf<const AVX: bool>(
+        &self,
+        node: &WideNode,
+        lane: usize,
+        first: usize,
+        limits: &mut [f32; PACKET],
+        each: impl FnMut(usize, &mut f32),
+    ) -> bool {
+        #[cfg(target_arch = "x86_64")]
+        if AVX && simd::avx512() {
+            // SAFETY: `simd::avx512()` holds only where the CPU has AVX-512F.
+            return unsafe { sixteen_rays::enter_leaf(self, node, lane, first, limits, each) };
+        }
+        self.enter_leaf_by_eight::<AVX>(node, lane, first, limits, each)
+    }
+
+    /// [`RayPacket::enter_leaf`] eight rays at a time.
+    #[inline(always)]
+    fn enter_leaf_by_eight<const AVX: bool>(
         &self,
         node: &WideNode,
         lane: usize,
@@ -228,6 +249,64 @@ impl RayPacket {
         }
         let limit = eight(limits);
         near.le_mask::<AVX>(far.mul::<AVX>(F32x8::splat(ROBUST_FAR)).min::<AVX>(limit))
+    }
+}
+
+/// A leaf's box tested against sixteen rays of a packet per AVX-512 instruction.
+#[cfg(target_arch = "x86_64")]
+mod sixteen_rays {
+    use std::arch::x86_64::*;
+
+    use super::{PACKET, ROBUST_FAR, RayPacket, WideNode};
+
+    /// [`RayPacket::enter_leaf`] sixteen rays at a time: per ray, `enter_box`'s operations
+    /// in the same order on the same operands (`_mm512_min_ps` and `_mm512_max_ps` pick
+    /// between NaN and zero operands as their AVX2 forms do), so the same rays enter.
+    ///
+    /// # Safety
+    /// The CPU must have AVX-512F.
+    #[inline]
+    #[target_feature(enable = "avx512f")]
+    pub(super) unsafe fn enter_leaf(
+        packet: &RayPacket,
+        node: &WideNode,
+        lane: usize,
+        first: usize,
+        limits: &mut [f32; PACKET],
+        mut each: impl FnMut(usize, &mut f32),
+    ) -> bool {
+        let lower = [0, 1, 2].map(|axis| _mm512_set1_ps(node.bounds[axis][lane]));
+        let upper = [0, 1, 2].map(|axis| _mm512_set1_ps(node.bounds[axis + 3][lane]));
+        let robust_far = _mm512_set1_ps(ROBUST_FAR);
+        let mut any = false;
+        for group in first / 16..packet.len.div_ceil(16) {
+            let at = group * 16;
+            // SAFETY (loads): `at + 16 <= PACKET`, within each row.
+            let sixteen = |row: &[f32; PACKET]| unsafe { _mm512_loadu_ps(row[at..].as_ptr()) };
+            let mut near = _mm512_set1_ps(0.0);
+            let mut far = _mm512_set1_ps(f32::INFINITY);
+            for axis in 0..3 {
+                let origin = sixteen(&packet.origin[axis]);
+                let inverse = sixteen(&packet.inverse[axis]);
+                let t_lower = _mm512_mul_ps(_mm512_sub_ps(lower[axis], origin), inverse);
+                let t_upper = _mm512_mul_ps(_mm512_sub_ps(upper[axis], origin), inverse);
+                near = _mm512_max_ps(near, _mm512_min_ps(t_lower, t_upper));
+                far = _mm512_min_ps(far, _mm512_max_ps(t_lower, t_upper));
+            }
+            let limit = sixteen(limits);
+            let ceiling = _mm512_min_ps(_mm512_mul_ps(far, robust_far), limit);
+            let mut mask = u32::from(_mm512_cmp_ps_mask::<_CMP_LE_OQ>(near, ceiling));
+            // Rays before `first` are not this subtree's; slots past `len` are no rays.
+            mask &= (0xffff << first.saturating_sub(at).min(16)) & 0xffff;
+            mask &= (1u32 << (packet.len - at).min(16)) - 1;
+            any |= mask != 0;
+            while mask != 0 {
+                let k = mask.trailing_zeros() as usize;
+                mask &= mask - 1;
+                each(at + k, &mut limits[at + k]);
+            }
+        }
+        any
     }
 }
 
@@ -953,10 +1032,59 @@ mod tests {
         vec![block, straddling, zeros, scattered]
     }
 
+    /// A box of no thickness (an axis-aligned quad's) met head-on at exactly a ray's limit:
+    /// the boundary case of the leaf box test (entry distance equal to the limit counts as
+    /// entered), in every copy of the test, against each ray alone.
+    #[test]
+    fn a_leaf_box_met_exactly_at_the_limit_is_entered_in_every_copy() {
+        let mut node = WideNode::UNUSED;
+        let quad = Aabb::new(Vec3A::new(-1.0, -1.0, 2.0), Vec3A::new(1.0, 1.0, 2.0));
+        node.set_box(3, &quad);
+        node.child[3] = 1;
+        let rays: Vec<_> = (0..40)
+            .map(|i| (Vec3A::new(-0.9 + i as f32 * 0.045, 0.25, 5.0), Vec3A::NEG_Z))
+            .collect();
+        let packet = RayPacket::new(&rays);
+        // The quad is 3 away: even rays stop exactly there, odd ones just short of it.
+        let mut limits = [0.0; PACKET];
+        for (r, limit) in limits.iter_mut().enumerate() {
+            *limit = if r % 2 == 0 { 3.0 } else { 3.0f32.next_down() };
+        }
+        let alone: Vec<usize> = (0..rays.len())
+            .filter(|&r| packet.ray(r).enter::<false>(&node, limits[r]).1 & (1 << 3) != 0)
+            .collect();
+        assert_eq!(alone, (0..rays.len()).step_by(2).collect::<Vec<_>>());
+        for first in [0, 5, 17, 39] {
+            let want: Vec<usize> = alone.iter().copied().filter(|&r| r >= first).collect();
+            let mut found = Vec::new();
+            let mut copy = limits;
+            packet.enter_leaf_by_eight::<false>(&node, 3, first, &mut copy, |r, _| found.push(r));
+            assert_eq!(found, want, "baseline, from ray {first}");
+            if crate::simd::Isa::cpu_has_avx2() {
+                found.clear();
+                packet
+                    .enter_leaf_by_eight::<true>(&node, 3, first, &mut copy, |r, _| found.push(r));
+                assert_eq!(found, want, "AVX2, from ray {first}");
+            }
+            #[cfg(target_arch = "x86_64")]
+            if crate::simd::Isa::cpu_has_avx512() {
+                found.clear();
+                // SAFETY: the CPU has AVX-512F (checked just above).
+                unsafe {
+                    sixteen_rays::enter_leaf(&packet, &node, 3, first, &mut copy, |r, _| {
+                        found.push(r)
+                    })
+                };
+                assert_eq!(found, want, "AVX-512, from ray {first}");
+            }
+        }
+    }
+
     #[test]
     fn eight_rays_at_a_leaf_decide_as_each_ray_alone() {
         let mut next = stream(0x9e3779b97f4a7c15);
         let mut entered = 0;
+        let (mut tested_avx2, mut tested_avx512) = (0, 0);
         for _ in 0..200 {
             let node = random_node(&mut next);
             for rays in packets(&mut next) {
@@ -978,10 +1106,32 @@ mod tests {
                     assert_eq!(found, alone);
                     if crate::simd::Isa::cpu_has_avx2() {
                         let mut found_avx = Vec::new();
-                        packet.enter_leaf::<true>(&node, lane, first, &mut copy, |r, _| {
-                            found_avx.push(r)
-                        });
+                        packet.enter_leaf_by_eight::<true>(
+                            &node,
+                            lane,
+                            first,
+                            &mut copy,
+                            |r, _| found_avx.push(r),
+                        );
                         assert_eq!(found_avx, alone, "the AVX2 copy of the leaf box test");
+                        tested_avx2 += 1;
+                    }
+                    #[cfg(target_arch = "x86_64")]
+                    if crate::simd::Isa::cpu_has_avx512() {
+                        let mut found_16 = Vec::new();
+                        // SAFETY: the CPU has AVX-512F (checked just above).
+                        unsafe {
+                            sixteen_rays::enter_leaf(
+                                &packet,
+                                &node,
+                                lane,
+                                first,
+                                &mut copy,
+                                |r, _| found_16.push(r),
+                            )
+                        };
+                        assert_eq!(found_16, alone, "sixteen rays at once (AVX-512)");
+                        tested_avx512 += 1;
                     }
                     entered += found.len();
                 }
@@ -991,6 +1141,8 @@ mod tests {
             entered > 1000,
             "only {entered} entries: the test means little"
         );
+        // Which copies this CPU could compare (the baseline copy always runs).
+        println!("AVX2 copy compared {tested_avx2} times, AVX-512 copy {tested_avx512} times");
     }
 
     #[test]
