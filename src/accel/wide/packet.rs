@@ -17,10 +17,11 @@
 //!   rounding: occlusion rays whose segments end near one point (a tile's shadow rays toward
 //!   a point light; [`RayPacket::set_converging`]) and rays whose lines pass through one
 //!   point behind them (a tile's rays off a plane mirror; [`RayPacket::set_with_apex`]).
-//! - **Eight rays per box at a leaf**: the rays of the packet are kept as structure of
-//!   arrays too, and a leaf's box is tested against eight rays per SIMD slab test. The
-//!   arithmetic is the scalar test's (the nearer of the two planes is the front one), so
-//!   each ray takes the same decision it would take alone.
+//! - **Eight or sixteen rays per box at a leaf**: the rays of the packet are kept as
+//!   structure of arrays too, and a leaf's box is tested against eight rays per SIMD slab
+//!   test (sixteen where the CPU has AVX-512). The arithmetic is the scalar test's (the
+//!   nearer of the two planes is the front one), so each ray takes the same decision it
+//!   would take alone.
 //!
 //! Neither test changes which leaves a ray reaches among those it can hit: they only prune
 //! boxes no ray enters, so a packet finds bit for bit what each of its rays finds alone.
