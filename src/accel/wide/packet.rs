@@ -204,18 +204,35 @@ impl RayPacket {
         lane: usize,
         first: usize,
         limits: &mut [f32; PACKET],
-        mut each: impl FnMut(usize, &mut f32),
+        each: impl FnMut(usize, &mut f32),
     ) -> bool {
-        let mut any = false;
         let lower = [0, 1, 2].map(|axis| F32x8::splat(node.bounds[axis][lane]));
         let upper = [0, 1, 2].map(|axis| F32x8::splat(node.bounds[axis + 3][lane]));
-        let groups = self.len.div_ceil(8);
-        for group in first / 8..groups {
-            let at = group * 8;
-            let mut mask = self.enter_box::<AVX>(&lower, &upper, at, limits);
+        self.hand_entering::<8>(first, limits, each, |at, limits| {
+            self.enter_box::<AVX>(&lower, &upper, at, limits)
+        })
+    }
+
+    /// The group loop of a leaf's box test, `WIDTH_OF_GROUP` rays per group: `enter(at,
+    /// limits)` gives the mask of the rays from `at` that enter the box, and each of them
+    /// from `first` on (and below `len`) is handed to `each`, in ray order, after the whole
+    /// group is tested; returns whether any was.
+    #[inline(always)]
+    fn hand_entering<const WIDTH_OF_GROUP: usize>(
+        &self,
+        first: usize,
+        limits: &mut [f32; PACKET],
+        mut each: impl FnMut(usize, &mut f32),
+        mut enter: impl FnMut(usize, &[f32; PACKET]) -> u32,
+    ) -> bool {
+        let all = (1u32 << WIDTH_OF_GROUP) - 1;
+        let mut any = false;
+        for group in first / WIDTH_OF_GROUP..self.len.div_ceil(WIDTH_OF_GROUP) {
+            let at = group * WIDTH_OF_GROUP;
+            let mut mask = enter(at, limits);
             // Rays before `first` are not this subtree's; slots past `len` are no rays.
-            mask &= (0xff << first.saturating_sub(at).min(8)) & 0xff;
-            mask &= (1u32 << (self.len - at).min(8)) - 1;
+            mask &= (all << first.saturating_sub(at).min(WIDTH_OF_GROUP)) & all;
+            mask &= (1u32 << (self.len - at).min(WIDTH_OF_GROUP)) - 1;
             any |= mask != 0;
             while mask != 0 {
                 let k = mask.trailing_zeros() as usize;
@@ -274,14 +291,12 @@ mod sixteen_rays {
         lane: usize,
         first: usize,
         limits: &mut [f32; PACKET],
-        mut each: impl FnMut(usize, &mut f32),
+        each: impl FnMut(usize, &mut f32),
     ) -> bool {
         let lower = [0, 1, 2].map(|axis| _mm512_set1_ps(node.bounds[axis][lane]));
         let upper = [0, 1, 2].map(|axis| _mm512_set1_ps(node.bounds[axis + 3][lane]));
         let robust_far = _mm512_set1_ps(ROBUST_FAR);
-        let mut any = false;
-        for group in first / 16..packet.len.div_ceil(16) {
-            let at = group * 16;
+        packet.hand_entering::<16>(first, limits, each, |at, limits| {
             // SAFETY (loads): `at + 16 <= PACKET`, within each row.
             let sixteen = |row: &[f32; PACKET]| unsafe { _mm512_loadu_ps(row[at..].as_ptr()) };
             let mut near = _mm512_set1_ps(0.0);
@@ -294,20 +309,9 @@ mod sixteen_rays {
                 near = _mm512_max_ps(near, _mm512_min_ps(t_lower, t_upper));
                 far = _mm512_min_ps(far, _mm512_max_ps(t_lower, t_upper));
             }
-            let limit = sixteen(limits);
-            let ceiling = _mm512_min_ps(_mm512_mul_ps(far, robust_far), limit);
-            let mut mask = u32::from(_mm512_cmp_ps_mask::<_CMP_LE_OQ>(near, ceiling));
-            // Rays before `first` are not this subtree's; slots past `len` are no rays.
-            mask &= (0xffff << first.saturating_sub(at).min(16)) & 0xffff;
-            mask &= (1u32 << (packet.len - at).min(16)) - 1;
-            any |= mask != 0;
-            while mask != 0 {
-                let k = mask.trailing_zeros() as usize;
-                mask &= mask - 1;
-                each(at + k, &mut limits[at + k]);
-            }
-        }
-        any
+            let ceiling = _mm512_min_ps(_mm512_mul_ps(far, robust_far), sixteen(limits));
+            u32::from(_mm512_cmp_ps_mask::<_CMP_LE_OQ>(near, ceiling))
+        })
     }
 }
 
