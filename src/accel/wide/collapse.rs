@@ -101,14 +101,10 @@ fn open_children(binary: &Bvh2, id: u32) -> ([u32; WIDTH], usize) {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::accel::wide::node::ChildRef;
     use crate::accel::wide::test_support::*;
-    #[allow(unused_imports)]
-    use crate::accel::wide::{LeafVisit, node::ChildRef, walk::RayBoxes};
-    #[allow(unused_imports)]
     use glam::Vec3A;
-    #[allow(unused_imports)]
     use obvhs::{BvhBuildParams, aabb::Aabb, bvh2::builder::build_bvh2};
-    #[allow(unused_imports)]
     use std::time::Duration;
 
     #[test]

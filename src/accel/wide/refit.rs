@@ -193,14 +193,8 @@ impl WideNode {
 mod tests {
     use super::*;
     use crate::accel::wide::test_support::*;
-    #[allow(unused_imports)]
-    use crate::accel::wide::{LeafVisit, node::ChildRef, walk::RayBoxes};
-    #[allow(unused_imports)]
     use glam::Vec3A;
-    #[allow(unused_imports)]
-    use obvhs::{BvhBuildParams, aabb::Aabb, bvh2::builder::build_bvh2};
-    #[allow(unused_imports)]
-    use std::time::Duration;
+    use obvhs::aabb::Aabb;
 
     #[test]
     fn refits_move_a_leaf_and_its_ancestors() {

@@ -10,7 +10,6 @@ use std::time::Duration;
 
 use super::{RayBoxes, WideBvh};
 
-/// A row of unit boxes along x.
 /// A xorshift64 stream.
 pub fn xorshift(mut seed: u64) -> impl FnMut() -> u64 {
     move || {
@@ -27,6 +26,7 @@ pub fn uniform(seed: u64, low: f32, span: f32) -> impl FnMut() -> f32 {
     move || (next() >> 40) as f32 / (1u64 << 24) as f32 * span + low
 }
 
+/// A row of unit boxes along x.
 pub fn boxes(n: usize) -> Vec<Aabb> {
     (0..n)
         .map(|i| {

@@ -415,13 +415,9 @@ fn push_rest_take_first(
 mod tests {
     use super::*;
     use crate::accel::wide::test_support::*;
-    #[allow(unused_imports)]
-    use crate::accel::wide::{LeafVisit, node::ChildRef, walk::RayBoxes};
-    #[allow(unused_imports)]
+    use crate::accel::wide::walk::RayBoxes;
     use glam::Vec3A;
-    #[allow(unused_imports)]
     use obvhs::{BvhBuildParams, aabb::Aabb, bvh2::builder::build_bvh2};
-    #[allow(unused_imports)]
     use std::time::Duration;
 
     #[test]
