@@ -903,3 +903,90 @@ fn the_ray_file_records_every_ray_with_answers_brute_force_confirms() {
         assert!(row.trim_end().ends_with("| 0 |"), "answers differ: {row}");
     }
 }
+
+/// A scene whose moving meshes the default layout places as instances (BART-like robots at
+/// a small size): `export` still writes every triangle `info` counts, its ray file's answers
+/// are those faces (`bench --rays FILE` finds no answer differing), and the library refuses
+/// a renderer with instances instead of writing a partial mesh.
+#[test]
+fn a_scene_with_instances_exports_every_triangle_and_its_rays_agree() {
+    let info = mipray(&["info", "robots"]);
+    assert!(info.status.success());
+    let text = String::from_utf8_lossy(&info.stdout).into_owned();
+    let count: usize = text
+        .lines()
+        .find_map(|l| l.strip_prefix("triangles: "))
+        .and_then(|l| l.split_whitespace().next())
+        .and_then(|n| n.parse().ok())
+        .expect("info prints the triangle count");
+    // At this size the default layout places the walking robots' parts as instances (the
+    // premise of the test: checked here, so that a change of the cost model shows).
+    let size = "32x24";
+    let path = mipray::cli::resolve_scene("robots").expect("robots scene");
+    let mut renderer = Renderer::new(
+        mipray::cli::load_scene(&path).expect("load robots"),
+        settings(32, 24),
+    );
+    let instanced = renderer.layout().instanced_meshes();
+    assert!(instanced > 0, "robots at {size} is not instanced by auto");
+    let dir = tempfile::tempdir().unwrap();
+    let options = ExportOptions {
+        format: ExportFormat::Obj,
+        dir: dir.path().join("library"),
+        frames: 0..1,
+        clock: mipray::frame::FrameClock::Fps(30.0),
+        rays: false,
+    };
+    let refused = export_frames(&mut renderer, &options, |_| {}).unwrap_err();
+    assert!(refused.to_string().contains("instances"), "{refused}");
+    assert!(!dir.path().join("library").join("frame_0000.obj").exists());
+
+    let out = dir.path().join("cli");
+    let run = mipray(&[
+        "export",
+        "robots",
+        "--frames",
+        "3",
+        "--size",
+        size,
+        "--rays",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert!(
+        run.status.success(),
+        "{}",
+        String::from_utf8_lossy(&run.stderr)
+    );
+    let obj = std::fs::read_to_string(out.join("frame_0003.obj")).unwrap();
+    assert_eq!(obj.lines().filter(|l| l.starts_with("f ")).count(), count);
+    let file = out.join("rays_0003.bin");
+    let bench = mipray(&[
+        "bench",
+        "robots",
+        "--frames",
+        "3",
+        "--size",
+        size,
+        "--rays",
+        file.to_str().unwrap(),
+        "--threads",
+        "1",
+        "--repeats",
+        "1",
+    ]);
+    assert!(
+        bench.status.success(),
+        "{}",
+        String::from_utf8_lossy(&bench.stderr)
+    );
+    let table = String::from_utf8_lossy(&bench.stdout);
+    let rows: Vec<&str> = table
+        .lines()
+        .filter(|l| l.starts_with("| ") && !l.starts_with("| class"))
+        .collect();
+    assert!(rows.len() >= 4, "{table}");
+    for row in rows {
+        assert!(row.trim_end().ends_with("| 0 |"), "answers differ: {row}");
+    }
+}

@@ -45,7 +45,8 @@ pub struct BenchArgs {
     #[arg(long, value_parser = parse_rays_arg)]
     pub rays: Option<RaysArg>,
     /// BVH layouts and policies, comma separated, as `render --bvh` (whole frames: each is a
-    /// configuration; `--rays`: the first).
+    /// configuration; `--rays primary|shadow|all`: the first; a ray file is always traced on
+    /// the flat tree, whose slots are the faces its answers name).
     #[arg(long, value_enum, value_delimiter = ',', default_value = "auto")]
     pub bvh: Vec<BvhMode>,
 }
@@ -121,13 +122,17 @@ pub fn bench(args: &BenchArgs) -> Result<()> {
     }
     if let Some(RaysArg::Kinds(kinds)) = args.rays {
         eprintln!(
-            "bench --rays: {} frames {}..{} at {}x{}, lights {:?}, threads {:?} x {} repeats",
+            "bench --rays: {} frames {}..{} at {}x{}, {}, threads {:?} x {} repeats",
             path.display(),
             frames.start,
             frames.end,
             settings.width,
             settings.height,
-            args.lights.lights,
+            args.lights
+                .lights
+                .map_or("the scene's lights".to_string(), |n| format!(
+                    "{n} light(s)"
+                )),
             threads,
             args.repeats
         );

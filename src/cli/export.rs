@@ -7,6 +7,7 @@ use clap::Args;
 
 use super::args::{LightArgs, SequenceArgs, TraceArgs, render_settings};
 use super::scene::open_scene;
+use crate::accel::BvhLayout;
 use crate::export::{ExportFormat, ExportOptions, export_frames};
 use crate::frame::Renderer;
 
@@ -43,6 +44,10 @@ pub fn export(args: &ExportArgs) -> Result<()> {
         max_depth: args.max_depth,
     };
     let mut settings = render_settings(&args.sequence, &trace, args.lights.lights, args.spp)?;
+    // Every triangle in one world-space tree: the files hold its triangles, and the ray
+    // file's answers are its slots (under `auto` a mesh placed as an instance would be left
+    // out of both). With `--rays`, the frames are traced as `render --bvh flat` traces them.
+    settings.layout = BvhLayout::Flat;
     let scene = open_scene(&args.sequence)?;
     settings.animation = scene.animation;
     let options = ExportOptions {

@@ -86,6 +86,13 @@ pub enum ExportError {
     },
     #[error(transparent)]
     Frame(#[from] FrameError),
+    /// The renderer places some meshes as instances, whose triangles are not in its world
+    /// tree: the export writes the world tree's triangles, so it needs the flat layout.
+    #[error(
+        "export needs every triangle in one world-space tree, but {meshes} mesh(es) are placed \
+         as instances: make the renderer with the flat layout (`BvhLayout::Flat`)"
+    )]
+    Instanced { meshes: usize },
 }
 
 pub(crate) fn io_error(path: &Path) -> impl FnOnce(io::Error) -> ExportError + '_ {
@@ -178,14 +185,22 @@ fn write_frame_rays(
 /// written) so that `deformed` always means "changed since the previous frame", whatever
 /// frame an export starts at; frame 0 has no previous frame and flags nothing.
 ///
+/// The renderer must use the flat layout ([`crate::accel::BvhLayout::Flat`]): the files
+/// hold the world tree's triangles, and the ray file's answers are its slots' faces, so a
+/// mesh placed as an instance would be missing from both.
+///
 /// # Errors
-/// The folder or a file cannot be written, a texture cannot be encoded, or animation
-/// produced a non-finite vertex.
+/// The renderer places meshes as instances, the folder or a file cannot be written, a
+/// texture cannot be encoded, or animation produced a non-finite vertex.
 pub fn export_frames(
     renderer: &mut Renderer,
     options: &ExportOptions,
     mut on_frame: impl FnMut(&ExportedFrame),
 ) -> Result<Vec<ExportedFrame>, ExportError> {
+    let meshes = renderer.layout().instanced_meshes();
+    if meshes > 0 {
+        return Err(ExportError::Instanced { meshes });
+    }
     fs::create_dir_all(&options.dir).map_err(io_error(&options.dir))?;
     let time_of = |frame: u32| options.clock.time(frame);
     if options.frames.start > 0 {
