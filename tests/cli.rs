@@ -162,6 +162,10 @@ fn bad_options_are_refused() {
         &["render", "tri.gltf", "--spp", "0"],
         &["render", "tri.gltf", "--lod", "bogus"],
         &["render", "no-such-scene"],
+        // Worker counts the system would take minutes to start are refused up front.
+        &["render", "tri.gltf", "--threads", "0"],
+        &["render", "tri.gltf", "--threads", "100000"],
+        &["bench", "tri.gltf", "--threads", "1,100000"],
     ] {
         let out = mipray(args, dir.path());
         assert!(!out.status.success(), "{args:?} succeeded");
@@ -170,6 +174,9 @@ fn bad_options_are_refused() {
             "{args:?}: {}",
             stderr(&out)
         );
+        if args.contains(&"--threads") {
+            assert!(stderr(&out).contains("must be 1 to 1024"), "{}", stderr(&out));
+        }
     }
 }
 

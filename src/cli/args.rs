@@ -17,6 +17,18 @@ pub const MAX_SPP: u32 = 65536;
 pub const MAX_DEPTH: u32 = 64;
 /// Most lights.
 pub const MAX_LIGHTS: usize = 1024;
+
+/// The most worker threads `--threads` accepts: far above any machine's cores, and below
+/// the counts that take the system minutes to start (100,000 threads never finished).
+pub const MAX_THREADS: usize = 1024;
+
+/// Checks a `--threads` count: 1 to [`MAX_THREADS`].
+pub fn check_threads(n: usize) -> Result<()> {
+    if n == 0 || n > MAX_THREADS {
+        bail!("--threads {n}: must be 1 to {MAX_THREADS}");
+    }
+    Ok(())
+}
 /// Largest `--lod-bias` magnitude accepted: past 16 levels every texture is at one end.
 pub const MAX_LOD_BIAS: f32 = 16.0;
 

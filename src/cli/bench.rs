@@ -3,7 +3,7 @@
 use anyhow::{Result, bail};
 use clap::Args;
 
-use super::args::{LightArgs, SequenceArgs, TraceArgs, render_settings};
+use super::args::{LightArgs, SequenceArgs, TraceArgs, check_threads, render_settings};
 use super::render::{BvhMode, apply_bvh};
 use super::scene::{load_scene, open_scene};
 use crate::accel::BvhPolicy;
@@ -29,7 +29,7 @@ pub struct BenchArgs {
     /// LOD methods, comma separated; ratios are against the first.
     #[arg(long, value_delimiter = ',', default_value = "none,paper")]
     pub methods: Vec<LodMethod>,
-    /// Thread counts, comma separated [default: 1 and all cores].
+    /// Thread counts, comma separated, each 1 to 1024 [default: 1 and all cores].
     #[arg(long, value_delimiter = ',')]
     pub threads: Vec<usize>,
     #[arg(long, default_value_t = 1)]
@@ -92,8 +92,8 @@ pub fn bench(args: &BenchArgs) -> Result<()> {
         args.threads.clone()
     };
     threads.dedup();
-    if threads.contains(&0) {
-        bail!("--threads: counts must be at least 1");
+    for &n in &threads {
+        check_threads(n)?;
     }
     if let Some(RaysArg::File(file)) = &args.rays {
         eprintln!(

@@ -6,7 +6,7 @@ use std::process::ExitCode;
 use anyhow::{Context, Result, bail};
 use clap::Args;
 
-use super::args::{LightArgs, SequenceArgs, TraceArgs, View, render_settings};
+use super::args::{LightArgs, SequenceArgs, TraceArgs, View, check_threads, render_settings};
 use super::diff::CheckArgs;
 use super::progress::{SequenceLines, print_sequence_end};
 use super::scene::open_scene;
@@ -33,7 +33,7 @@ pub struct RenderArgs {
     /// Samples per pixel (stratified; a square number fills the strata grid exactly).
     #[arg(long, default_value_t = 1)]
     pub spp: u32,
-    /// Worker threads [default: all cores].
+    /// Worker threads, 1 to 1024 [default: all cores].
     #[arg(long)]
     pub threads: Option<usize>,
     /// Frame file format.
@@ -176,9 +176,7 @@ pub fn apply_bvh(
 fn thread_pool(threads: Option<usize>) -> Result<rayon::ThreadPool> {
     let mut builder = rayon::ThreadPoolBuilder::new();
     if let Some(n) = threads {
-        if n == 0 {
-            bail!("--threads must be at least 1");
-        }
+        check_threads(n)?;
         builder = builder.num_threads(n);
     }
     builder.build().context("cannot start worker threads")
