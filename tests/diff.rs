@@ -59,6 +59,10 @@ fn identical_sequences_pass() {
         assert_eq!(row[8], "0", "{row:?}");
     }
     assert!(dir.path().join("d/diff.md").is_file());
+    // A NaN threshold would fail every frame whatever it held: refused as a usage error.
+    let out = mipray(&["diff", "a", "b", "--threshold", "nan"], dir.path());
+    assert_eq!(out.status.code(), Some(2), "{}", text(&out));
+    assert!(text(&out).contains("NaN"), "{}", text(&out));
 }
 
 #[test]

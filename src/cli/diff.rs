@@ -17,11 +17,20 @@ pub struct CheckArgs {
     #[arg(long, value_enum, default_value_t = DiffMetric::Psnr)]
     pub metric: DiffMetric,
     /// Threshold for the metric [default: psnr 40 dB, flip 0.01, max-abs 0].
-    #[arg(long)]
+    #[arg(long, value_parser = parse_threshold)]
     pub threshold: Option<f64>,
     /// Also write a JUnit XML report (one test case per frame).
     #[arg(long)]
     pub junit: Option<PathBuf>,
+}
+
+/// A threshold is a number (NaN would fail every frame, whatever it held).
+fn parse_threshold(s: &str) -> Result<f64, String> {
+    match s.trim().parse::<f64>() {
+        Ok(t) if !t.is_nan() => Ok(t),
+        Ok(_) => Err("not a number (NaN); give a threshold such as 40 or 0.01".into()),
+        Err(e) => Err(e.to_string()),
+    }
 }
 
 impl CheckArgs {
