@@ -140,11 +140,15 @@ pub fn load_from_memory(
     main: &Path,
     files: impl IntoIterator<Item = (PathBuf, Vec<u8>)>,
 ) -> Result<(SceneDesc, AffStats), LoadError> {
-    let files = includes::Files::in_memory(files);
+    let files: Vec<(PathBuf, Vec<u8>)> = files.into_iter().collect();
     let error = |message| LoadError {
         path: main.to_path_buf(),
         message,
     };
+    if files.iter().any(|(path, bytes)| path == main && bytes.is_empty()) {
+        return Err(error("file is empty".into()));
+    }
+    let files = includes::Files::in_memory(files);
     if !files.exists(main) {
         return Err(error("cannot read file: not found".into()));
     }
@@ -173,6 +177,11 @@ fn display_name(path: &Path) -> String {
 fn load_scene(path: &Path) -> Result<(SceneDesc, AffStats), String> {
     if !path.is_file() {
         return Err("cannot read file: not found".into());
+    }
+    // An empty main file is a mistake (a failed download or copy), not an empty scene: as
+    // for glTF and USD files, an error rather than a black picture.
+    if std::fs::metadata(path).is_ok_and(|m| m.len() == 0) {
+        return Err("file is empty".into());
     }
     let mut p = new_parser(path);
     p.parse_file(path, &display_name(path))?;

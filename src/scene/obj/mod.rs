@@ -83,6 +83,10 @@ pub fn load(path: &Path) -> Result<SceneDesc, ObjError> {
 /// # Errors
 /// As [`load`].
 pub fn load_from_text(path: &Path, text: &str) -> Result<SceneDesc, ObjError> {
+    // An empty file is a mistake, not an empty scene (as for the other formats).
+    if text.trim().is_empty() {
+        return Err(error(path, None, "file is empty"));
+    }
     if let Some((line, message)) = first_bad_obj_line(text) {
         return Err(error(path, Some(line), message));
     }
