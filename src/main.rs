@@ -19,7 +19,7 @@ fn main() -> ExitCode {
     match mipray::cli::run(mipray::cli::Cli::parse()) {
         Ok(code) => code,
         Err(error) => {
-            eprintln!("error: {error:#}");
+            eprintln!("error: {}", error_chain(&error));
             if error
                 .downcast_ref::<mipray::diff::DiffInputError>()
                 .is_some()
@@ -30,4 +30,19 @@ fn main() -> ExitCode {
             }
         }
     }
+}
+
+/// The error and its causes joined by `: ` (as `{:#}` prints them), leaving out a cause
+/// whose text its parent's message already holds: many errors name their source in their
+/// own message (`{path}: {source}`), and `{:#}` then printed it twice.
+fn error_chain(error: &anyhow::Error) -> String {
+    let mut text = error.to_string();
+    for cause in error.chain().skip(1) {
+        let cause = cause.to_string();
+        if !text.contains(&cause) {
+            text.push_str(": ");
+            text.push_str(&cause);
+        }
+    }
+    text
 }

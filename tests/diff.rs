@@ -156,6 +156,15 @@ fn missing_frame_or_size_mismatch_is_bad_input() {
         text(&out)
     );
 
+    // A frame that is not an image: named once, its problem said once.
+    std::fs::write(dir.path().join("b/frame_0002.png"), "not a picture").unwrap();
+    let out = mipray(&["diff", "a", "b"], dir.path());
+    assert_eq!(out.status.code(), Some(2), "{}", text(&out));
+    let stderr = String::from_utf8_lossy(&out.stderr).into_owned();
+    assert_eq!(stderr.matches("frame_0002.png").count(), 1, "{stderr}");
+    assert_eq!(stderr.matches("cannot read image").count(), 1, "{stderr}");
+    std::fs::remove_file(dir.path().join("b/frame_0002.png")).unwrap();
+
     let out = mipray(
         &[
             "render", "default", "--size", "40x20", "--frames", "0..3", "--out", "c",
