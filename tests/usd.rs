@@ -586,3 +586,18 @@ def DistantLight "Sun" { float intensity = 2  color3f color = (1, 0.5, 0.25) }
     assert_eq!(sun.intensity, 2.0);
     assert_eq!(sun.color, glam::Vec3::new(1.0, 0.5, 0.25));
 }
+
+/// A USDA file with a character its grammar does not allow: the error names the file and
+/// says so in words (the lexer itself reports only `Logos error: ()`).
+#[test]
+fn a_damaged_usda_file_is_an_error_in_words() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("damaged.usda");
+    std::fs::write(&path, "#usda 1.0\n$\n").unwrap();
+    let out = mipray(&["info", path.to_str().unwrap()]);
+    assert_eq!(out.status.code(), Some(1));
+    let stderr = String::from_utf8_lossy(&out.stderr).into_owned();
+    assert!(stderr.contains("damaged.usda"), "{stderr}");
+    assert!(stderr.contains("does not allow"), "{stderr}");
+    assert!(!stderr.contains("Logos"), "{stderr}");
+}

@@ -112,7 +112,17 @@ fn open(path: &Path) -> Result<usd::Stage, String> {
     usd::Stage::builder()
         .resolver(guard::CheckingResolver(openusd::ar::DefaultResolver::new()))
         .open(name)
-        .map_err(|e| format!("cannot open the stage: {e:#}"))
+        .map_err(|e| stage_error(&format!("{e:#}")))
+}
+
+/// The message for a stage that does not open. The USDA lexer reports a character or word
+/// its grammar does not allow only as `Logos error: ()`; that is said in words.
+fn stage_error(message: &str) -> String {
+    let message = message.replace(
+        "Logos error: ()",
+        "a character or word USDA does not allow (a damaged or truncated file, or not USDA)",
+    );
+    format!("cannot open the stage: {message}")
 }
 
 fn read_metadata(stage: &usd::Stage) -> Result<StageMetadata, String> {
