@@ -88,6 +88,49 @@ fn huge_coordinates() {
     render_all_methods("moved by 1e6", moved, &[0.0]);
 }
 
+/// Coordinates up to f32's range: the facing quad's scene scaled by 1e12, 1e20 and 1e30 (a
+/// quad of 2e30 at 3e30) renders as at unit scale. Where the triangle test's edge functions
+/// or distance, or the length of a triangle's normal, leave f32's range, they are decided in
+/// f64, so such a quad neither vanishes nor turns black. Lit at 1e12; at 1e20 and 1e30 by
+/// the ambient term alone, as a light's squared distance leaves f32's range there (the
+/// light then delivers nothing, documented in the guide).
+#[test]
+fn a_scene_scaled_to_f32_range_renders_as_at_unit_scale() {
+    for method in [LodMethod::None, LodMethod::Paper] {
+        for layout in [BvhLayout::Flat, BvhLayout::TwoLevel] {
+            let render = |scale: f32, lights: Option<usize>| {
+                let settings = RenderSettings {
+                    layout,
+                    lights,
+                    ..settings(24, 16, method)
+                };
+                let scene = facing_quad_scene(3.0 * scale, 2.0 * scale, 64, 0.8);
+                let mut renderer = Renderer::new(scene, settings);
+                let (image, record) = renderer.render_frame(0, 0.0).unwrap();
+                assert_eq!(record.nonfinite_samples, 0, "scale {scale}");
+                image.pixels
+            };
+            for (scale, lights) in [(1e12, None), (1e20, Some(0)), (1e30, Some(0))] {
+                let (unit, scaled) = (render(1.0, lights), render(scale, lights));
+                let worst = unit
+                    .iter()
+                    .zip(&scaled)
+                    .map(|(a, b)| (*a - *b).abs().max_element())
+                    .fold(0.0f32, f32::max);
+                assert!(
+                    worst < 0.02,
+                    "--lod {method} ({layout:?}) at scale {scale}: differs by {worst}"
+                );
+                // The quad is seen: the picture is not the background alone.
+                assert!(
+                    scaled.iter().any(|p| (p.x - 0.1).abs() > 0.05),
+                    "scale {scale}"
+                );
+            }
+        }
+    }
+}
+
 /// UVs near 1e5: the quad maps the texture 1e5 times (the level clamps at the coarsest),
 /// and a quad whose UVs are offset by 1e5 (rebased per triangle at load time by the
 /// loaders; here, built in code, sampled at 1e5 directly).

@@ -36,6 +36,26 @@ pub struct FrameTriangles {
     pub source: Vec<u32>,
 }
 
+/// The unit normal of triangle `p` (counter-clockwise front), or zero for a triangle of no
+/// area. In f32; where that leaves f32's range (edges beyond about 4e9: the squared length
+/// of the cross product is their fourth power), in f64.
+#[inline]
+pub fn unit_normal([p0, p1, p2]: [Vec3A; 3]) -> Vec3A {
+    let cross = (p1 - p0).cross(p2 - p0);
+    let normal = cross.normalize_or_zero();
+    if normal != Vec3A::ZERO || cross == Vec3A::ZERO {
+        return normal;
+    }
+    unit_normal_f64([p0, p1, p2])
+}
+
+#[cold]
+#[inline(never)]
+fn unit_normal_f64(p: [Vec3A; 3]) -> Vec3A {
+    let [p0, p1, p2] = p.map(|v| v.as_dvec3());
+    (p1 - p0).cross(p2 - p0).normalize_or_zero().as_vec3a()
+}
+
 /// One triangle as shading reads it at a hit: world-space vertices and normals in the
 /// winding the flat arrays use, and the per-triangle values.
 #[derive(Debug, Clone, Copy)]
@@ -130,7 +150,7 @@ impl Placement {
             uv.swap(1, 2);
         }
         let p = p.map(|v| Vec3A::from(self.place_point(Vec3::from(v))));
-        let geometric = Vec3::from((p[1] - p[0]).cross(p[2] - p[0]).normalize_or_zero());
+        let geometric = Vec3::from(unit_normal(p));
         let n = n.map(|n| {
             let placed = self.place_normal(n);
             if placed == Vec3::ZERO {

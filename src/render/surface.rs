@@ -47,7 +47,7 @@ impl SurfacePoint {
         direction: Vec3A,
     ) -> SurfacePoint {
         let [p0, p1, p2] = triangle.positions;
-        let geometric = (p1 - p0).cross(p2 - p0).normalize_or_zero();
+        let geometric = crate::geometry::unit_normal([p0, p1, p2]);
         let [n0, n1, n2] = triangle.normals;
         let (b1, b2) = (hit.bary.x, hit.bary.y);
         let interpolated =

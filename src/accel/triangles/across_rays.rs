@@ -17,7 +17,7 @@
 
 use glam::Vec2;
 
-use super::{ShearedRay, TrianglePack};
+use super::{ShearedRay, TrianglePack, intersect_beyond_f32};
 use crate::simd::F32x8;
 
 /// Rays per group.
@@ -162,14 +162,28 @@ impl ShearedLanes {
         let inverse = F32x8::splat(1.0).div::<AVX>(det);
         let t = t_scaled.mul::<AVX>(inverse);
         let (v, w) = (v.mul::<AVX>(inverse), w.mul::<AVX>(inverse));
+        // Lanes whose distance or determinant left f32's range: decided in f64, as the pack
+        // test decides them.
+        let finite = det.sub::<AVX>(det).eq_mask::<AVX>(zero)
+            & t_scaled.sub::<AVX>(t_scaled).eq_mask::<AVX>(zero);
         let mut bits = inside;
         while bits != 0 {
             let l = bits.trailing_zeros() as usize;
             bits &= bits - 1;
-            if t.0[l] >= 0.0 && t.0[l] < t_max.0[l] && t.0[l].is_finite() {
+            let found = if finite & (1 << l) != 0 {
+                let t = t.0[l];
+                (t >= 0.0 && t < t_max.0[l] && t.is_finite())
+                    .then(|| (t, Vec2::new(v.0[l], w.0[l])))
+            } else {
+                let origin = self.origin.map(|axis| axis.0[l]);
+                let shear = self.shear.map(|axis| axis.0[l]);
+                let k = self.k.map(|axis| axis as u8);
+                intersect_beyond_f32(origin, shear, k, pack, lane, t_max.0[l])
+            };
+            if let Some((t, bary)) = found {
                 hits.mask |= 1 << l;
-                hits.t[l] = t.0[l];
-                hits.bary[l] = Vec2::new(v.0[l], w.0[l]);
+                hits.t[l] = t;
+                hits.bary[l] = bary;
             }
         }
         hits
@@ -311,6 +325,81 @@ mod tests {
         }
         assert!(
             compared > 10_000 && hit > 1_000 && edges > 100,
+            "{compared} compared, {hit} hits"
+        );
+    }
+
+    /// Triangles so large and far (1e13 to 1e37) that the f32 edge functions or distance
+    /// overflow: both tests decide them in f64 and agree bit for bit, and the rays aimed at
+    /// them hit (in f32 alone they were missed).
+    #[test]
+    fn huge_triangles_are_hit_and_agree_across_rays() {
+        let mut s = 0x2545_f491_4f6c_dd1du64;
+        let mut next = || xorshift(&mut s);
+        let (mut compared, mut hit) = (0, 0);
+        for round in 0..120 {
+            let scale = [1e13f32, 1e20, 1e30, 1e37][round % 4];
+            let mut pack = TrianglePack::default();
+            for lane in 0..4 {
+                // A big triangle facing the origin, about `scale` away along -z.
+                let centre = Vec3A::new(next() * 0.3, next() * 0.3, -1.0 - next().abs()) * scale;
+                let tri = [
+                    centre + Vec3A::new(-2.0, -2.0, next() * 0.1) * scale,
+                    centre + Vec3A::new(2.0, -2.0, next() * 0.1) * scale,
+                    centre + Vec3A::new(0.0, 2.0, next() * 0.1) * scale,
+                ];
+                pack.set(lane, &tri);
+            }
+            let rays: Vec<ShearedRay> = (0..RAYS)
+                .map(|_| {
+                    let d = Vec3A::new(next() * 0.4, next() * 0.4, -1.0);
+                    ShearedRay::new(Vec3A::new(next(), next(), next()), d)
+                })
+                .collect();
+            for code in 0..6 {
+                let members: Vec<usize> = (0..RAYS)
+                    .filter(|&i| rays[i].permutation() == code)
+                    .collect();
+                if members.is_empty() {
+                    continue;
+                }
+                let group = ShearedLanes::gather(members.iter().map(|&i| &rays[i]));
+                let t_max = F32x8::splat(f32::INFINITY);
+                for lane in 0..4 {
+                    let run = |avx2: bool| {
+                        let k = Intersect {
+                            group: &group,
+                            pack: &pack,
+                            lane,
+                            t_max,
+                        };
+                        if avx2 {
+                            simd::run_avx2_if_available(k)
+                        } else {
+                            Some(simd::run_baseline(k))
+                        }
+                    };
+                    for hits in [run(false), run(true)].into_iter().flatten() {
+                        for (l, &r) in members.iter().enumerate() {
+                            let alone = rays[r].intersect_pack(&pack, 4, f32::INFINITY);
+                            let hit_alone = alone.mask & (1 << lane) != 0;
+                            assert_eq!(hits.mask & (1 << l) != 0, hit_alone, "round {round}");
+                            if hit_alone {
+                                assert_eq!(hits.t[l].to_bits(), alone.t[lane].to_bits());
+                                assert_eq!(hits.bary[l].x.to_bits(), alone.bary[lane].x.to_bits());
+                                assert_eq!(hits.bary[l].y.to_bits(), alone.bary[lane].y.to_bits());
+                                let t = alone.t[lane];
+                                assert!(t.is_finite() && t > 0.5 * scale, "t {t} at {scale}");
+                                hit += 1;
+                            }
+                            compared += 1;
+                        }
+                    }
+                }
+            }
+        }
+        assert!(
+            compared > 2_000 && hit > 500,
             "{compared} compared, {hit} hits"
         );
     }

@@ -493,18 +493,71 @@ impl ShearedRay {
         let inverse = Vec4::ONE / det;
         let t = (t_scaled * inverse).to_array();
         let (v, w) = ((v * inverse).to_array(), (w * inverse).to_array());
+        // Lanes whose distance or determinant left f32's range (only for vertices beyond
+        // about 1e12 from the origin): decided in f64 instead.
+        let finite = ((det - det).cmpeq(zero) & (t_scaled - t_scaled).cmpeq(zero)).bitmask();
         let mut bits = inside;
         while bits != 0 {
             let l = bits.trailing_zeros() as usize;
             bits &= bits - 1;
-            if t[l] >= 0.0 && t[l] < t_max && t[l].is_finite() {
+            let found = if finite & (1 << l) != 0 {
+                (t[l] >= 0.0 && t[l] < t_max && t[l].is_finite())
+                    .then(|| (t[l], Vec2::new(v[l], w[l])))
+            } else {
+                intersect_beyond_f32(self.origin, self.shear, self.k, pack, l, t_max)
+            };
+            if let Some((t, bary)) = found {
                 hits.mask |= 1 << l;
-                hits.t[l] = t[l];
-                hits.bary[l] = Vec2::new(v[l], w[l]);
+                hits.t[l] = t;
+                hits.bary[l] = bary;
             }
         }
         hits
     }
+}
+
+/// The sheared test of one ray and one triangle in f64, for the rare pair whose f32
+/// determinant or distance left f32's range (vertices beyond about 1e12 from the ray's
+/// origin: the distance's numerator grows as the cube of the coordinates). The ray is given
+/// as [`ShearedRay`] holds it (`origin` unpermuted, `shear` and `k` permuted), the triangle
+/// as lane `lane` of `pack`. The sheared vertices are computed in f32 exactly as the f32
+/// tests compute them, then each edge function is a difference of two exact products in
+/// f64, rounded once, so its sign is right. The pack test and the test across rays both
+/// call this with the same operands, so they still agree bit for bit.
+#[cold]
+#[inline(never)]
+pub(super) fn intersect_beyond_f32(
+    origin: [f32; 3],
+    shear: [f32; 3],
+    k: [u8; 3],
+    pack: &TrianglePack,
+    lane: usize,
+    t_max: f32,
+) -> Option<(f32, Vec2)> {
+    let [kx, ky, kz] = k.map(usize::from);
+    let [sx, sy, sz] = shear;
+    let sheared = |i: usize| {
+        let v = &pack.v[i];
+        let z = v[kz][lane] - origin[kz];
+        let x = v[kx][lane] - origin[kx] - sx * z;
+        let y = v[ky][lane] - origin[ky] - sy * z;
+        [x, y, z].map(f64::from)
+    };
+    let [a, b, c] = [sheared(0), sheared(1), sheared(2)];
+    let u = c[0] * b[1] - c[1] * b[0];
+    let v = a[0] * c[1] - a[1] * c[0];
+    let w = b[0] * a[1] - b[1] * a[0];
+    let negative = u < 0.0 || v < 0.0 || w < 0.0;
+    let positive = u > 0.0 || v > 0.0 || w > 0.0;
+    let det = u + v + w;
+    if (negative && positive) || det == 0.0 || !det.is_finite() {
+        return None;
+    }
+    let sz = f64::from(sz);
+    let t_scaled = u * (sz * a[2]) + v * (sz * b[2]) + w * (sz * c[2]);
+    let t = (t_scaled / det) as f32;
+    (t >= 0.0 && t < t_max && t.is_finite())
+        .then(|| (t, Vec2::new((v / det) as f32, (w / det) as f32)))
 }
 
 /// One triangle against one ray, the same arithmetic as one lane of a pack (tests compare
