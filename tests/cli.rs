@@ -175,7 +175,11 @@ fn bad_options_are_refused() {
             stderr(&out)
         );
         if args.contains(&"--threads") {
-            assert!(stderr(&out).contains("must be 1 to 1024"), "{}", stderr(&out));
+            assert!(
+                stderr(&out).contains("must be 1 to 1024"),
+                "{}",
+                stderr(&out)
+            );
         }
     }
 }

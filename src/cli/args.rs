@@ -62,7 +62,7 @@ pub struct SequenceArgs {
 /// How rays are traced: render, bench and compare.
 #[derive(Args, Debug, Clone)]
 pub struct TraceArgs {
-    /// Levels added to every MIP-mapped lookup (positive: blurrier); `none` ignores it.
+    /// Levels added to every MIP-mapped lookup (positive: blurrier); `--lod none` ignores it.
     #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
     pub lod_bias: f32,
     /// Maximum reflection/refraction depth.

@@ -145,7 +145,10 @@ pub fn load_from_memory(
         path: main.to_path_buf(),
         message,
     };
-    if files.iter().any(|(path, bytes)| path == main && bytes.is_empty()) {
+    if files
+        .iter()
+        .any(|(path, bytes)| path == main && bytes.is_empty())
+    {
         return Err(error("file is empty".into()));
     }
     let files = includes::Files::in_memory(files);
