@@ -182,6 +182,22 @@ fn bad_options_are_refused() {
             );
         }
     }
+    // A folder given as the scene, a file given as the output folder: said in words.
+    std::fs::create_dir(dir.path().join("folder.gltf")).unwrap();
+    let out = mipray(&["render", "folder.gltf"], dir.path());
+    assert!(
+        stderr(&out).contains("folder.gltf: is a folder"),
+        "{}",
+        stderr(&out)
+    );
+    std::fs::write(dir.path().join("taken"), "").unwrap();
+    let out = mipray(&["render", "tri.gltf", "--out", "taken"], dir.path());
+    assert_eq!(out.status.code(), Some(1));
+    assert!(
+        stderr(&out).contains("taken: exists and is not a folder"),
+        "{}",
+        stderr(&out)
+    );
 }
 
 #[test]

@@ -63,6 +63,11 @@ pub fn resolve_scene(scene: &str) -> Result<PathBuf> {
     if direct.is_file() {
         return Ok(direct);
     }
+    if direct.is_dir() {
+        bail!(
+            "{scene}: is a folder; give a scene file (.gltf, .glb, .usd*, .aff or .obj) or a name in animations/"
+        );
+    }
     let folders = [
         PathBuf::from("animations"),
         Path::new(env!("CARGO_MANIFEST_DIR")).join("animations"),

@@ -96,6 +96,11 @@ impl OutputDir {
         frames: std::ops::Range<u32>,
         resume: bool,
     ) -> Result<(OutputDir, Vec<FrameRecord>), FileWriteError> {
+        if dir.exists() && !dir.is_dir() {
+            // `create_dir_all` would say only "File exists".
+            let message = "exists and is not a folder (the output must be a folder)";
+            return Err(io_error(dir)(std::io::Error::other(message)));
+        }
         fs::create_dir_all(dir).map_err(io_error(dir))?;
         let (stats_name, summary_name) = match shard {
             Some(s) => (
