@@ -97,6 +97,9 @@ pub fn resolve_scene(scene: &str) -> Result<PathBuf> {
 /// # Errors
 /// No camera node, or several, match; the message lists the camera nodes.
 pub fn select_camera(desc: &mut SceneDesc, name: &str) -> Result<(), String> {
+    if name.is_empty() {
+        return Err("--camera: give a camera node's name".into());
+    }
     let cameras: Vec<usize> = desc
         .traversal_order()
         .into_iter()
@@ -111,7 +114,10 @@ pub fn select_camera(desc: &mut SceneDesc, name: &str) -> Result<(), String> {
     let listed = || {
         let names: Vec<String> = cameras
             .iter()
-            .map(|&i| format!("{:?}", desc.nodes[i].name))
+            .map(|&i| match desc.nodes[i].name.as_str() {
+                "" => format!("an unnamed camera (node {i}), which no name can choose"),
+                named => format!("{named:?}"),
+            })
             .collect();
         if names.is_empty() {
             "the scene has no cameras".to_string()
@@ -141,4 +147,41 @@ fn scene_name(path: &Path) -> String {
     path.file_stem()
         .map(|s| s.to_string_lossy().into_owned())
         .unwrap_or_else(|| "scene".into())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::scene::NodeDesc;
+
+    /// Two camera nodes, "front" and one without a name.
+    fn two_cameras() -> SceneDesc {
+        let camera = |name: &str| NodeDesc {
+            name: name.into(),
+            camera: Some(0),
+            ..NodeDesc::default()
+        };
+        SceneDesc {
+            nodes: vec![camera("front"), camera("")],
+            roots: vec![0, 1],
+            ..SceneDesc::default()
+        }
+    }
+
+    #[test]
+    fn cameras_are_chosen_by_name_and_unnamed_ones_are_listed_as_such() {
+        let mut desc = two_cameras();
+        select_camera(&mut desc, "front").unwrap();
+        assert_eq!(desc.nodes[0].camera, Some(0));
+        assert_eq!(desc.nodes[1].camera, None);
+        let mut desc = two_cameras();
+        let error = select_camera(&mut desc, "back").unwrap_err();
+        assert!(
+            error.contains("\"front\"") && error.contains("unnamed camera (node 1)"),
+            "{error}"
+        );
+        // An empty name would pick the unnamed camera by accident: refused.
+        let error = select_camera(&mut two_cameras(), "").unwrap_err();
+        assert!(error.contains("give a camera node's name"), "{error}");
+    }
 }
