@@ -66,6 +66,13 @@ pub fn moving_nodes(scene: &SceneDesc, selection: AnimationSelection) -> Vec<boo
 /// No clip has that name or index, or the name is shared by several clips; the message
 /// lists the clips (index and name) to choose from.
 pub fn select_animation(scene: &SceneDesc, spec: &str) -> Result<AnimationSelection, String> {
+    // An empty spec would pick an unnamed clip by accident (unnamed clips go by number).
+    if spec.trim().is_empty() {
+        return Err(format!(
+            "give an animation's name or number.{}",
+            available(scene)
+        ));
+    }
     let named: Vec<usize> = (0..scene.animations.len())
         .filter(|&i| scene.animations[i].name == spec)
         .collect();
@@ -161,5 +168,11 @@ mod tests {
         assert!(select_animation(&s, "-1").is_err());
         let e = select_animation(&scene(Vec::new()), "0").unwrap_err();
         assert!(e.contains("no animations"), "{e}");
+        // Empty: refused, not the unnamed clip 2.
+        let e = select_animation(&s, "").unwrap_err();
+        assert!(
+            e.contains("name or number") && e.contains("2 (unnamed)"),
+            "{e}"
+        );
     }
 }
