@@ -167,7 +167,10 @@ pub fn parse_frames(s: &str) -> Result<Range<u32>> {
                 .trim()
                 .parse()
                 .with_context(|| format!("--frames {s}: expected A..B or A"))?;
-            a..a.saturating_add(1)
+            if a == u32::MAX {
+                bail!("--frames {s}: frame numbers go up to {}", u32::MAX - 1);
+            }
+            a..a + 1
         }
     };
     if range.is_empty() {
@@ -220,6 +223,10 @@ mod tests {
         assert!(parse_frames("x..3").is_err());
         // A huge range is accepted: it is iterated, never collected.
         assert_eq!(parse_frames("0..4000000000").unwrap().len(), 4_000_000_000);
+        // The last frame number a half-open range can end after, and one past it.
+        assert_eq!(parse_frames("4294967294").unwrap(), 4294967294..4294967295);
+        let e = parse_frames("4294967295").unwrap_err().to_string();
+        assert!(e.contains("go up to 4294967294"), "{e}");
     }
 
     #[test]
