@@ -131,7 +131,16 @@ fn include_cycle_is_an_error_naming_the_chain() {
 #[test]
 fn errors_name_file_and_line() {
     let err = load_text("b 0 0 0\nv from 0 0 foo\n").unwrap_err();
-    assert_eq!(err, "t.aff:2: expected a number after 'from', found 'foo'");
+    assert_eq!(
+        err,
+        "t.aff:2: expected a number after 'from', found 'foo': not a number"
+    );
+    // A number single precision cannot hold says so.
+    let err = load_text("p 3 0 0 0 1e39 0 0 0 1 0\n").unwrap_err();
+    assert_eq!(
+        err,
+        "t.aff:1: expected a number after 'p', found '1e39': outside the range of single precision (about ±3.4e38)"
+    );
     let err = load_text("\n\nqq 1 2\n").unwrap_err();
     assert_eq!(err, "t.aff:3: unknown command 'qq'");
     let err = load_text("\ni 0 missing.aff\n").unwrap_err();

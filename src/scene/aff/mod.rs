@@ -115,7 +115,7 @@ impl AffStats {
 ///
 /// # Errors
 /// A [`LoadError`] for the main file whose message names the file and line of the problem
-/// (`kitchen.aff:1234: expected a number after 'v', found 'foo'`): unreadable or missing
+/// (`kitchen.aff:1234: expected a number after 'v', found 'foo': not a number`): unreadable or missing
 /// include or texture, malformed number or count, unknown command, index out of range,
 /// include cycle (naming the chain), unbalanced `}`, decreasing key times.
 pub fn load(path: &Path) -> Result<SceneDesc, LoadError> {

@@ -46,9 +46,16 @@ impl<'a> Reader<'a> {
     pub fn number(&mut self, after: &str) -> Result<f32, String> {
         let t = self.token("a number", after)?;
         parse_number(t.text).ok_or_else(|| {
+            let text = t.to_text();
+            // A number f64 reads that f32 cannot hold (or a NaN): said as such.
+            let problem = match text.parse::<f64>() {
+                Ok(x) if x.is_nan() => "not a number (NaN)",
+                Ok(_) => "outside the range of single precision (about ±3.4e38)",
+                Err(_) => "not a number",
+            };
             self.error_at(
                 t.line,
-                format!("expected a number after '{after}', found '{}'", t.to_text()),
+                format!("expected a number after '{after}', found '{text}': {problem}"),
             )
         })
     }
