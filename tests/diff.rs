@@ -243,3 +243,32 @@ fn render_check_passes_on_an_unchanged_scene_and_fails_fast_on_a_changed_one() {
         "--fail-fast rendered past the failing frame"
     );
 }
+
+/// `render --resume --check REF` judges the frames the resume keeps as well as those it
+/// renders (it passed 0 of 0 frames before), and `--check` into its own output folder is
+/// refused before anything is overwritten.
+#[test]
+fn a_resumed_check_judges_every_frame_and_a_check_against_itself_is_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let render = |out: &str, extra: &[&str]| {
+        let mut args = vec![
+            "render", "default", "--size", "48x27", "--frames", "0..3", "--out", out,
+        ];
+        args.extend_from_slice(extra);
+        mipray(&args, dir.path())
+    };
+    assert!(render("shallow", &["--max-depth", "1"]).status.success());
+    assert!(render("full", &[]).status.success());
+    // Every frame is complete: nothing is rendered, and all three are judged (and fail).
+    let out = render("full", &["--resume", "--check", "shallow"]);
+    assert_eq!(out.status.code(), Some(1), "{}", text(&out));
+    assert_eq!(text(&out).matches("check frame").count(), 3, "{}", text(&out));
+    assert!(text(&out).contains("FAIL"), "{}", text(&out));
+    // Against its own folder: refused, and the frames are left as they were.
+    let before = std::fs::read(dir.path().join("full/frame_0000.png")).unwrap();
+    let out = render("full", &["--max-depth", "1", "--check", "full"]);
+    assert_eq!(out.status.code(), Some(1), "{}", text(&out));
+    assert!(text(&out).contains("is the output folder itself"), "{}", text(&out));
+    let after = std::fs::read(dir.path().join("full/frame_0000.png")).unwrap();
+    assert!(before == after, "the reference frame was overwritten");
+}

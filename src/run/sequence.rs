@@ -133,6 +133,9 @@ pub fn render_sequence(
         Some(shard) => shard.frames(frames),
         None => frames,
     };
+    if let Some(check) = check {
+        refuse_checking_against_itself(&check.reference, &out.dir)?;
+    }
     let resume = out.resume == Resume::SkipComplete;
     let (mut output, previous) =
         OutputDir::open(&out.dir, out.format, out.shard, frames.clone(), resume)?;
@@ -146,9 +149,30 @@ pub fn render_sequence(
         progress.resumed(done.len(), frames.len());
     }
     let mut checked: Vec<FrameDiff> = Vec::new();
-    progress.started(frames.len() as u64 - done.len() as u64);
+    // Frames a resume keeps are judged too, before any new frame is rendered: a check
+    // speaks for the whole range, not only for the frames this run wrote.
+    let mut stopped = false;
+    if let Some(check) = check {
+        for &frame in &done {
+            let judged = check_frame(frame, &output.frame_path(frame), out.format, check)?;
+            progress.frame_checked(&judged);
+            let stop = !judged.passed && check.fail_fast;
+            checked.push(judged);
+            if stop {
+                progress.stopping(frame);
+                stopped = true;
+                break;
+            }
+        }
+    }
+    let to_render = if stopped {
+        0
+    } else {
+        frames.len() as u64 - done.len() as u64
+    };
+    progress.started(to_render);
     let start = Instant::now();
-    for frame in frames.clone().filter(|f| !done.contains(f)) {
+    for frame in frames.clone().filter(|f| !done.contains(f) && !stopped) {
         let time_s = clock.time(frame);
         let (image, record, view) =
             renderer.render_frame_with_view(frame, time_s, out.level_image)?;
@@ -206,6 +230,23 @@ fn check_frame(frame: u32, path: &Path, format: FrameFormat, check: &Check) -> R
         path,
         &check.options,
     )?)
+}
+
+/// `render --check REF` writing into `REF` itself would judge each frame against itself
+/// after overwriting the reference: refused.
+fn refuse_checking_against_itself(reference: &Path, out: &Path) -> Result<()> {
+    let same = match (reference.canonicalize(), out.canonicalize()) {
+        (Ok(a), Ok(b)) => a == b,
+        _ => reference == out,
+    };
+    if same {
+        anyhow::bail!(
+            "--check {}: is the output folder itself (its frames would be overwritten and then \
+             compared with themselves); give the reference and the output different folders",
+            reference.display()
+        );
+    }
+    Ok(())
 }
 
 /// The check's report over the frames judged, with the two folders' stats compared.
