@@ -182,6 +182,19 @@ fn bad_options_are_refused() {
             );
         }
     }
+    // So is a worker count given through rayon's own variable.
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_mipray"))
+        .args(["render", "tri.gltf"])
+        .current_dir(dir.path())
+        .env("RAYON_NUM_THREADS", "99999")
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(1));
+    assert!(
+        stderr(&out).contains("RAYON_NUM_THREADS=99999: at most 1024"),
+        "{}",
+        stderr(&out)
+    );
     // A folder given as the scene, a file given as the output folder: said in words.
     std::fs::create_dir(dir.path().join("folder.gltf")).unwrap();
     let out = mipray(&["render", "folder.gltf"], dir.path());

@@ -92,9 +92,25 @@ pub struct ReportArgs {
     pub expect_frames: Option<String>,
 }
 
+/// `RAYON_NUM_THREADS` sizes the worker pool where `--threads` is not given (rayon reads it);
+/// a count the system would take minutes to start is refused as `--threads` is.
+fn check_rayon_threads() -> Result<()> {
+    let Ok(value) = std::env::var("RAYON_NUM_THREADS") else {
+        return Ok(());
+    };
+    match value.trim().parse::<usize>() {
+        Ok(n) if n > args::MAX_THREADS => anyhow::bail!(
+            "RAYON_NUM_THREADS={value}: at most {} worker threads",
+            args::MAX_THREADS
+        ),
+        _ => Ok(()),
+    }
+}
+
 /// Runs the parsed command line. `Ok(FAILURE)` means a regression check found frames outside
 /// the threshold; errors are bad input (see `main.rs` for the exit codes).
 pub fn run(cli: Cli) -> Result<ExitCode> {
+    check_rayon_threads()?;
     let ok = |()| ExitCode::SUCCESS;
     match cli.command {
         None => render::render(&RenderArgs::default()),
