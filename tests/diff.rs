@@ -59,6 +59,23 @@ fn identical_sequences_pass() {
         assert_eq!(row[8], "0", "{row:?}");
     }
     assert!(dir.path().join("d/diff.md").is_file());
+    // A JUnit report that could not be written is refused before the comparison.
+    let out = mipray(&["diff", "a", "b", "--junit", "no/such/j.xml"], dir.path());
+    assert_eq!(out.status.code(), Some(2), "{}", text(&out));
+    assert!(text(&out).contains("does not exist"), "{}", text(&out));
+    let out = mipray(
+        &[
+            "render", "default", "--size", "48x27", "--frames", "0", "--out", "j", "--check", "a",
+            "--junit", "a",
+        ],
+        dir.path(),
+    );
+    assert_eq!(out.status.code(), Some(2), "{}", text(&out));
+    assert!(text(&out).contains("is a folder"), "{}", text(&out));
+    assert!(
+        !dir.path().join("j/frame_0000.png").exists(),
+        "rendered before refusing"
+    );
     // A NaN threshold would fail every frame whatever it held: refused as a usage error.
     let out = mipray(&["diff", "a", "b", "--threshold", "nan"], dir.path());
     assert_eq!(out.status.code(), Some(2), "{}", text(&out));
@@ -262,13 +279,22 @@ fn a_resumed_check_judges_every_frame_and_a_check_against_itself_is_refused() {
     // Every frame is complete: nothing is rendered, and all three are judged (and fail).
     let out = render("full", &["--resume", "--check", "shallow"]);
     assert_eq!(out.status.code(), Some(1), "{}", text(&out));
-    assert_eq!(text(&out).matches("check frame").count(), 3, "{}", text(&out));
+    assert_eq!(
+        text(&out).matches("check frame").count(),
+        3,
+        "{}",
+        text(&out)
+    );
     assert!(text(&out).contains("FAIL"), "{}", text(&out));
     // Against its own folder: refused, and the frames are left as they were.
     let before = std::fs::read(dir.path().join("full/frame_0000.png")).unwrap();
     let out = render("full", &["--max-depth", "1", "--check", "full"]);
     assert_eq!(out.status.code(), Some(1), "{}", text(&out));
-    assert!(text(&out).contains("is the output folder itself"), "{}", text(&out));
+    assert!(
+        text(&out).contains("is the output folder itself"),
+        "{}",
+        text(&out)
+    );
     let after = std::fs::read(dir.path().join("full/frame_0000.png")).unwrap();
     assert!(before == after, "the reference frame was overwritten");
 }

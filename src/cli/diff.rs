@@ -55,6 +55,9 @@ pub struct DiffArgs {
 
 /// `mipray diff`: `Ok(FAILURE)` when frames fall outside the threshold.
 pub fn diff(args: &DiffArgs) -> Result<ExitCode> {
+    if let Some(junit) = &args.check.junit {
+        crate::run::check_junit_path(junit)?;
+    }
     let options = DiffOptions {
         metric: args.check.metric,
         threshold: args.check.threshold(),

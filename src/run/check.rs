@@ -25,6 +25,31 @@ pub struct CheckFinished {
 ///
 /// # Errors
 /// A report file or the page cannot be written.
+/// Checks, before any work, that a JUnit report can be written at `path`: its folder exists
+/// and the path is not a folder (else a long run would end in an error after every frame
+/// passed). Bad input to the check, so the exit status is 2.
+pub fn check_junit_path(path: &Path) -> Result<()> {
+    let parent = match path.parent() {
+        Some(p) if !p.as_os_str().is_empty() => p,
+        _ => Path::new("."),
+    };
+    let problem = if path.is_dir() {
+        "is a folder; --junit takes a file name".to_string()
+    } else if !parent.is_dir() {
+        format!(
+            "cannot write the JUnit report: the folder {} does not exist",
+            parent.display()
+        )
+    } else {
+        return Ok(());
+    };
+    Err(crate::diff::DiffInputError::Folder {
+        dir: path.to_path_buf(),
+        message: problem,
+    }
+    .into())
+}
+
 pub fn finish_check(
     report: &DiffReport,
     out: &Path,

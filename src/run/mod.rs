@@ -12,7 +12,7 @@ mod check;
 mod output;
 mod sequence;
 
-pub use check::{CheckFinished, finish_check};
+pub use check::{CheckFinished, check_junit_path, finish_check};
 pub use output::{FrameFormat, OutputDir, Shard, frame_file_name, write_frame_atomically};
 pub use sequence::{
     Check, Resume, SequenceOutput, SequenceProgress, SequenceReport, WrittenFrame, render_sequence,

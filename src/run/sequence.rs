@@ -135,6 +135,9 @@ pub fn render_sequence(
     };
     if let Some(check) = check {
         refuse_checking_against_itself(&check.reference, &out.dir)?;
+        if let Some(junit) = &check.junit {
+            super::check::check_junit_path(junit)?;
+        }
     }
     let resume = out.resume == Resume::SkipComplete;
     let (mut output, previous) =
