@@ -199,19 +199,57 @@ fn int(row: &HashMap<String, Value>, key: &str) -> i64 {
     }
 }
 
-// ---------------------------------------------------------------- tests
-
-#[test]
-fn exported_triangle_counts_match_info_for_obj_and_ply() {
-    let info = mipray(&["info", "default"]);
+/// The triangle count `mipray info SCENE` prints.
+fn info_triangle_count(scene: &str) -> usize {
+    let info = mipray(&["info", scene]);
     assert!(info.status.success());
-    let text = String::from_utf8_lossy(&info.stdout).into_owned();
-    let count: usize = text
+    String::from_utf8_lossy(&info.stdout)
         .lines()
         .find_map(|l| l.strip_prefix("triangles: "))
         .and_then(|l| l.split_whitespace().next())
         .and_then(|n| n.parse().ok())
-        .expect("info prints the triangle count");
+        .expect("info prints the triangle count")
+}
+
+/// Runs `bench SCENE --frames FRAME --size SIZE --rays FILE` and returns its table's rows,
+/// after checking that no answer differs from the file's.
+fn bench_rows_agree(scene: &str, frame: &str, size: &str, file: &Path) -> Vec<String> {
+    let bench = mipray(&[
+        "bench",
+        scene,
+        "--frames",
+        frame,
+        "--size",
+        size,
+        "--rays",
+        file.to_str().unwrap(),
+        "--threads",
+        "1",
+        "--repeats",
+        "1",
+    ]);
+    assert!(
+        bench.status.success(),
+        "{}",
+        String::from_utf8_lossy(&bench.stderr)
+    );
+    let table = String::from_utf8_lossy(&bench.stdout).into_owned();
+    let rows: Vec<String> = table
+        .lines()
+        .filter(|l| l.starts_with("| ") && !l.starts_with("| class"))
+        .map(str::to_string)
+        .collect();
+    for row in &rows {
+        assert!(row.trim_end().ends_with("| 0 |"), "answers differ: {row}");
+    }
+    rows
+}
+
+// ---------------------------------------------------------------- tests
+
+#[test]
+fn exported_triangle_counts_match_info_for_obj_and_ply() {
+    let count = info_triangle_count("default");
     assert!(count > 100);
 
     let dir = tempfile::tempdir().unwrap();
@@ -869,39 +907,12 @@ fn the_ray_file_records_every_ray_with_answers_brute_force_confirms() {
     }
     assert_eq!(checked.iter().sum::<usize>(), records.len());
 
-    let file = dir.path().join("rays_0005.bin");
-    let bench = mipray(&[
-        "bench",
-        "default",
-        "--frames",
-        "5",
-        "--size",
-        &size,
-        "--rays",
-        file.to_str().unwrap(),
-        "--threads",
-        "1",
-        "--repeats",
-        "1",
-    ]);
-    assert!(
-        bench.status.success(),
-        "{}",
-        String::from_utf8_lossy(&bench.stderr)
-    );
-    let table = String::from_utf8_lossy(&bench.stdout);
-    let rows: Vec<&str> = table
-        .lines()
-        .filter(|l| l.starts_with("| ") && !l.starts_with("| class"))
-        .collect();
+    let rows = bench_rows_agree("default", "5", &size, &dir.path().join("rays_0005.bin"));
     assert_eq!(
         rows.len(),
         8,
-        "packets and single for primary, shadow, reflection and refraction:\n{table}"
+        "packets and single for primary, shadow, reflection and refraction: {rows:?}"
     );
-    for row in rows {
-        assert!(row.trim_end().ends_with("| 0 |"), "answers differ: {row}");
-    }
 }
 
 /// A scene whose moving meshes the default layout places as instances (BART-like robots at
@@ -910,15 +921,7 @@ fn the_ray_file_records_every_ray_with_answers_brute_force_confirms() {
 /// a renderer with instances instead of writing a partial mesh.
 #[test]
 fn a_scene_with_instances_exports_every_triangle_and_its_rays_agree() {
-    let info = mipray(&["info", "robots"]);
-    assert!(info.status.success());
-    let text = String::from_utf8_lossy(&info.stdout).into_owned();
-    let count: usize = text
-        .lines()
-        .find_map(|l| l.strip_prefix("triangles: "))
-        .and_then(|l| l.split_whitespace().next())
-        .and_then(|n| n.parse().ok())
-        .expect("info prints the triangle count");
+    let count = info_triangle_count("robots");
     // At this size the default layout places the walking robots' parts as instances (the
     // premise of the test: checked here, so that a change of the cost model shows).
     let size = "32x24";
@@ -960,33 +963,6 @@ fn a_scene_with_instances_exports_every_triangle_and_its_rays_agree() {
     );
     let obj = std::fs::read_to_string(out.join("frame_0003.obj")).unwrap();
     assert_eq!(obj.lines().filter(|l| l.starts_with("f ")).count(), count);
-    let file = out.join("rays_0003.bin");
-    let bench = mipray(&[
-        "bench",
-        "robots",
-        "--frames",
-        "3",
-        "--size",
-        size,
-        "--rays",
-        file.to_str().unwrap(),
-        "--threads",
-        "1",
-        "--repeats",
-        "1",
-    ]);
-    assert!(
-        bench.status.success(),
-        "{}",
-        String::from_utf8_lossy(&bench.stderr)
-    );
-    let table = String::from_utf8_lossy(&bench.stdout);
-    let rows: Vec<&str> = table
-        .lines()
-        .filter(|l| l.starts_with("| ") && !l.starts_with("| class"))
-        .collect();
-    assert!(rows.len() >= 4, "{table}");
-    for row in rows {
-        assert!(row.trim_end().ends_with("| 0 |"), "answers differ: {row}");
-    }
+    let rows = bench_rows_agree("robots", "3", size, &out.join("rays_0003.bin"));
+    assert!(rows.len() >= 4, "{rows:?}");
 }

@@ -233,6 +233,71 @@ mod tests {
         (*state >> 40) as f32 / (1u64 << 24) as f32 * 2.0 - 1.0
     }
 
+    /// Tests each triangle of `pack` across the rays `rays` (ray `r` cut at `limits[r]`),
+    /// grouped by permutation, in every copy (baseline always, AVX2 where the CPU has it),
+    /// and checks every lane against the ray alone against the pack: mask, distance and
+    /// barycentric bits, and no hit past the group. Returns how many ray-triangle pairs
+    /// were compared and the distance of every hit.
+    fn check_against_each_ray_alone(
+        rays: &[ShearedRay],
+        limits: &[f32],
+        pack: &TrianglePack,
+        round: usize,
+    ) -> (usize, Vec<f32>) {
+        let (mut compared, mut distances) = (0, Vec::new());
+        for code in 0..6 {
+            let members: Vec<usize> = (0..rays.len())
+                .filter(|&i| rays[i].permutation() == code)
+                .collect();
+            if members.is_empty() {
+                continue;
+            }
+            let group = ShearedLanes::gather(members.iter().map(|&i| &rays[i]));
+            let t_max = F32x8(std::array::from_fn(|l| {
+                limits[members[l.min(members.len() - 1)]]
+            }));
+            for lane in 0..4 {
+                let run = |avx2: bool| {
+                    let k = Intersect {
+                        group: &group,
+                        pack,
+                        lane,
+                        t_max,
+                    };
+                    if avx2 {
+                        simd::run_avx2_if_available(k)
+                    } else {
+                        Some(simd::run_baseline(k))
+                    }
+                };
+                for hits in [run(false), run(true)].into_iter().flatten() {
+                    for (l, &r) in members.iter().enumerate() {
+                        let alone = rays[r].intersect_pack(pack, 4, limits[r]);
+                        let hit_alone = alone.mask & (1 << lane) != 0;
+                        assert_eq!(
+                            hits.mask & (1 << l) != 0,
+                            hit_alone,
+                            "round {round} ray {r} lane {lane}"
+                        );
+                        if hit_alone {
+                            assert_eq!(hits.t[l].to_bits(), alone.t[lane].to_bits());
+                            assert_eq!(hits.bary[l].x.to_bits(), alone.bary[lane].x.to_bits());
+                            assert_eq!(hits.bary[l].y.to_bits(), alone.bary[lane].y.to_bits());
+                            distances.push(alone.t[lane]);
+                        }
+                        compared += 1;
+                    }
+                    assert_eq!(
+                        hits.mask >> members.len(),
+                        0,
+                        "lanes past the group hit nothing"
+                    );
+                }
+            }
+        }
+        (compared, distances)
+    }
+
     /// Random triangles against random rays, grouped by permutation: every lane of every
     /// copy (baseline always, AVX2 where the CPU has it) finds exactly what the ray finds
     /// alone against the pack (mask, distance and barycentric bits). Includes rays through
@@ -269,58 +334,9 @@ mod tests {
                 .collect();
             let limits: [f32; RAYS] =
                 std::array::from_fn(|i| if i % 3 == 0 { 2.5 } else { f32::INFINITY });
-            // groups of one permutation, in ray order
-            for code in 0..6 {
-                let members: Vec<usize> = (0..RAYS)
-                    .filter(|&i| rays[i].permutation() == code)
-                    .collect();
-                if members.is_empty() {
-                    continue;
-                }
-                let group = ShearedLanes::gather(members.iter().map(|&i| &rays[i]));
-                let t_max = F32x8(std::array::from_fn(|l| {
-                    limits[members[l.min(members.len() - 1)]]
-                }));
-                for lane in 0..4 {
-                    let run = |avx2: bool| {
-                        let k = Intersect {
-                            group: &group,
-                            pack: &pack,
-                            lane,
-                            t_max,
-                        };
-                        if avx2 {
-                            simd::run_avx2_if_available(k)
-                        } else {
-                            Some(simd::run_baseline(k))
-                        }
-                    };
-                    let copies = [run(false), run(true)].into_iter().flatten();
-                    for hits in copies {
-                        for (l, &r) in members.iter().enumerate() {
-                            let alone = rays[r].intersect_pack(&pack, 4, limits[r]);
-                            let hit_alone = alone.mask & (1 << lane) != 0;
-                            assert_eq!(
-                                hits.mask & (1 << l) != 0,
-                                hit_alone,
-                                "round {round} ray {r} lane {lane}"
-                            );
-                            if hit_alone {
-                                assert_eq!(hits.t[l].to_bits(), alone.t[lane].to_bits());
-                                assert_eq!(hits.bary[l].x.to_bits(), alone.bary[lane].x.to_bits());
-                                assert_eq!(hits.bary[l].y.to_bits(), alone.bary[lane].y.to_bits());
-                                hit += 1;
-                            }
-                            compared += 1;
-                        }
-                        assert_eq!(
-                            hits.mask >> members.len(),
-                            0,
-                            "lanes past the group hit nothing"
-                        );
-                    }
-                }
-            }
+            let (n, distances) = check_against_each_ray_alone(&rays, &limits, &pack, round);
+            compared += n;
+            hit += distances.len();
             edges += usize::from(round % 3 == 0);
         }
         assert!(
@@ -356,47 +372,13 @@ mod tests {
                     ShearedRay::new(Vec3A::new(next(), next(), next()), d)
                 })
                 .collect();
-            for code in 0..6 {
-                let members: Vec<usize> = (0..RAYS)
-                    .filter(|&i| rays[i].permutation() == code)
-                    .collect();
-                if members.is_empty() {
-                    continue;
-                }
-                let group = ShearedLanes::gather(members.iter().map(|&i| &rays[i]));
-                let t_max = F32x8::splat(f32::INFINITY);
-                for lane in 0..4 {
-                    let run = |avx2: bool| {
-                        let k = Intersect {
-                            group: &group,
-                            pack: &pack,
-                            lane,
-                            t_max,
-                        };
-                        if avx2 {
-                            simd::run_avx2_if_available(k)
-                        } else {
-                            Some(simd::run_baseline(k))
-                        }
-                    };
-                    for hits in [run(false), run(true)].into_iter().flatten() {
-                        for (l, &r) in members.iter().enumerate() {
-                            let alone = rays[r].intersect_pack(&pack, 4, f32::INFINITY);
-                            let hit_alone = alone.mask & (1 << lane) != 0;
-                            assert_eq!(hits.mask & (1 << l) != 0, hit_alone, "round {round}");
-                            if hit_alone {
-                                assert_eq!(hits.t[l].to_bits(), alone.t[lane].to_bits());
-                                assert_eq!(hits.bary[l].x.to_bits(), alone.bary[lane].x.to_bits());
-                                assert_eq!(hits.bary[l].y.to_bits(), alone.bary[lane].y.to_bits());
-                                let t = alone.t[lane];
-                                assert!(t.is_finite() && t > 0.5 * scale, "t {t} at {scale}");
-                                hit += 1;
-                            }
-                            compared += 1;
-                        }
-                    }
-                }
+            let limits = [f32::INFINITY; RAYS];
+            let (n, distances) = check_against_each_ray_alone(&rays, &limits, &pack, round);
+            for t in &distances {
+                assert!(t.is_finite() && *t > 0.5 * scale, "t {t} at {scale}");
             }
+            compared += n;
+            hit += distances.len();
         }
         assert!(
             compared > 2_000 && hit > 500,
