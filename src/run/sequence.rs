@@ -157,12 +157,8 @@ pub fn render_sequence(
     let mut stopped = false;
     if let Some(check) = check {
         for &frame in &done {
-            let judged = check_frame(frame, &output.frame_path(frame), out.format, check)?;
-            progress.frame_checked(&judged);
-            let stop = !judged.passed && check.fail_fast;
-            checked.push(judged);
-            if stop {
-                progress.stopping(frame);
+            let path = output.frame_path(frame);
+            if judge_frame(frame, &path, out.format, check, progress, &mut checked)? {
                 stopped = true;
                 break;
             }
@@ -175,7 +171,14 @@ pub fn render_sequence(
     };
     progress.started(to_render);
     let start = Instant::now();
-    for frame in frames.clone().filter(|f| !done.contains(f) && !stopped) {
+    // A stop while judging the kept frames renders nothing (and the range, which may be
+    // billions of frames long, is not walked).
+    let pending = if stopped {
+        frames.end..frames.end
+    } else {
+        frames.clone()
+    };
+    for frame in pending.filter(|f| !done.contains(f)) {
         let time_s = clock.time(frame);
         let (image, record, view) =
             renderer.render_frame_with_view(frame, time_s, out.level_image)?;
@@ -193,15 +196,10 @@ pub fn render_sequence(
             path: &path,
         });
         records.push(record);
-        if let Some(check) = check {
-            let judged = check_frame(frame, &path, out.format, check)?;
-            progress.frame_checked(&judged);
-            let stop = !judged.passed && check.fail_fast;
-            checked.push(judged);
-            if stop {
-                progress.stopping(frame);
-                break;
-            }
+        if let Some(check) = check
+            && judge_frame(frame, &path, out.format, check, progress, &mut checked)?
+        {
+            break;
         }
     }
     progress.finished();
@@ -233,6 +231,26 @@ fn check_frame(frame: u32, path: &Path, format: FrameFormat, check: &Check) -> R
         path,
         &check.options,
     )?)
+}
+
+/// Judges frame `frame` (its file at `path`) against the reference, tells `progress` and
+/// keeps the verdict in `checked`; returns whether `--fail-fast` stops the sequence here.
+fn judge_frame(
+    frame: u32,
+    path: &Path,
+    format: FrameFormat,
+    check: &Check,
+    progress: &mut dyn SequenceProgress,
+    checked: &mut Vec<FrameDiff>,
+) -> Result<bool> {
+    let judged = check_frame(frame, path, format, check)?;
+    progress.frame_checked(&judged);
+    let stop = !judged.passed && check.fail_fast;
+    checked.push(judged);
+    if stop {
+        progress.stopping(frame);
+    }
+    Ok(stop)
 }
 
 /// `render --check REF` writing into `REF` itself would judge each frame against itself

@@ -1040,6 +1040,50 @@ mod tests {
     /// A box of no thickness (an axis-aligned quad's) met head-on at exactly a ray's limit:
     /// the boundary case of the leaf box test (entry distance equal to the limit counts as
     /// entered), in every copy of the test, against each ray alone.
+    /// The rays from `first` on that enter lane `lane` of `node` (with `limits`), as each
+    /// copy of the leaf box test this CPU can run finds them: `(copy, rays)` for the
+    /// baseline, then AVX2 and AVX-512 where the CPU has them.
+    fn entered_by_every_copy(
+        packet: &RayPacket,
+        node: &WideNode,
+        lane: usize,
+        first: usize,
+        limits: &[f32; PACKET],
+    ) -> Vec<(&'static str, Vec<usize>)> {
+        let run = |test: &dyn Fn(&mut [f32; PACKET], &mut Vec<usize>)| {
+            let (mut copy, mut found) = (*limits, Vec::new());
+            test(&mut copy, &mut found);
+            found
+        };
+        let mut copies = vec![(
+            "baseline",
+            run(&|l, found| {
+                packet.enter_leaf_by_eight::<false>(node, lane, first, l, |r, _| found.push(r));
+            }),
+        )];
+        if crate::simd::Isa::cpu_has_avx2() {
+            copies.push((
+                "AVX2",
+                run(&|l, found| {
+                    packet.enter_leaf_by_eight::<true>(node, lane, first, l, |r, _| found.push(r));
+                }),
+            ));
+        }
+        #[cfg(target_arch = "x86_64")]
+        if crate::simd::Isa::cpu_has_avx512() {
+            copies.push((
+                "AVX-512",
+                run(&|l, found| {
+                    // SAFETY: the CPU has AVX-512F (checked just above).
+                    unsafe {
+                        sixteen_rays::enter_leaf(packet, node, lane, first, l, |r, _| found.push(r))
+                    };
+                }),
+            ));
+        }
+        copies
+    }
+
     #[test]
     fn a_leaf_box_met_exactly_at_the_limit_is_entered_in_every_copy() {
         let mut node = WideNode::UNUSED;
@@ -1061,26 +1105,8 @@ mod tests {
         assert_eq!(alone, (0..rays.len()).step_by(2).collect::<Vec<_>>());
         for first in [0, 5, 17, 39] {
             let want: Vec<usize> = alone.iter().copied().filter(|&r| r >= first).collect();
-            let mut found = Vec::new();
-            let mut copy = limits;
-            packet.enter_leaf_by_eight::<false>(&node, 3, first, &mut copy, |r, _| found.push(r));
-            assert_eq!(found, want, "baseline, from ray {first}");
-            if crate::simd::Isa::cpu_has_avx2() {
-                found.clear();
-                packet
-                    .enter_leaf_by_eight::<true>(&node, 3, first, &mut copy, |r, _| found.push(r));
-                assert_eq!(found, want, "AVX2, from ray {first}");
-            }
-            #[cfg(target_arch = "x86_64")]
-            if crate::simd::Isa::cpu_has_avx512() {
-                found.clear();
-                // SAFETY: the CPU has AVX-512F (checked just above).
-                unsafe {
-                    sixteen_rays::enter_leaf(&packet, &node, 3, first, &mut copy, |r, _| {
-                        found.push(r)
-                    })
-                };
-                assert_eq!(found, want, "AVX-512, from ray {first}");
+            for (copy, found) in entered_by_every_copy(&packet, &node, 3, first, &limits) {
+                assert_eq!(found, want, "{copy}, from ray {first}");
             }
         }
     }
@@ -1100,45 +1126,20 @@ mod tests {
                 }
                 let first = (next().abs() * 10.0) as usize % rays.len();
                 for lane in 0..WIDTH {
-                    let mut found = Vec::new();
-                    let mut copy = limits;
-                    packet.enter_leaf::<false>(&node, lane, first, &mut copy, |r, _| found.push(r));
                     let alone: Vec<usize> = (first..rays.len())
                         .filter(|&r| {
                             packet.ray(r).enter::<false>(&node, limits[r]).1 & (1 << lane) != 0
                         })
                         .collect();
-                    assert_eq!(found, alone);
-                    if crate::simd::Isa::cpu_has_avx2() {
-                        let mut found_avx = Vec::new();
-                        packet.enter_leaf_by_eight::<true>(
-                            &node,
-                            lane,
-                            first,
-                            &mut copy,
-                            |r, _| found_avx.push(r),
-                        );
-                        assert_eq!(found_avx, alone, "the AVX2 copy of the leaf box test");
-                        tested_avx2 += 1;
+                    for (copy, found) in entered_by_every_copy(&packet, &node, lane, first, &limits)
+                    {
+                        assert_eq!(found, alone, "the {copy} copy of the leaf box test");
+                        match copy {
+                            "AVX2" => tested_avx2 += 1,
+                            "AVX-512" => tested_avx512 += 1,
+                            _ => entered += found.len(),
+                        }
                     }
-                    #[cfg(target_arch = "x86_64")]
-                    if crate::simd::Isa::cpu_has_avx512() {
-                        let mut found_16 = Vec::new();
-                        // SAFETY: the CPU has AVX-512F (checked just above).
-                        unsafe {
-                            sixteen_rays::enter_leaf(
-                                &packet,
-                                &node,
-                                lane,
-                                first,
-                                &mut copy,
-                                |r, _| found_16.push(r),
-                            )
-                        };
-                        assert_eq!(found_16, alone, "sixteen rays at once (AVX-512)");
-                        tested_avx512 += 1;
-                    }
-                    entered += found.len();
                 }
             }
         }
