@@ -14,16 +14,18 @@ fn main() -> ExitCode {
         libc::signal(libc::SIGPIPE, libc::SIG_DFL);
     }
     // Exit codes: 0 success; 1 failure (a regression check found frames outside the
-    // threshold, or a render/load error); 2 bad input to `diff` / `render --check` (a missing
+    // threshold, or a render/load error); 2 a usage error (the parser's own, or a flag value
+    // out of range: `UsageError`), or bad input to `diff` / `render --check` (a missing
     // frame, different sizes, unreadable files).
     match mipray::cli::run(mipray::cli::Cli::parse()) {
         Ok(code) => code,
         Err(error) => {
             eprintln!("error: {}", error_chain(&error));
-            if error
+            let usage = error.downcast_ref::<mipray::cli::UsageError>().is_some();
+            let bad_input = error
                 .downcast_ref::<mipray::diff::DiffInputError>()
-                .is_some()
-            {
+                .is_some();
+            if usage || bad_input {
                 ExitCode::from(2)
             } else {
                 ExitCode::FAILURE

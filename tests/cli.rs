@@ -156,19 +156,33 @@ fn truncated_file_names_the_file() {
 fn bad_options_are_refused() {
     let dir = tempfile::tempdir().unwrap();
     write_textured_triangle(dir.path(), true);
+    // A flag value out of its range is a usage error (status 2, as the parser's own); a
+    // scene that does not exist is an error of the run (status 1).
     for args in [
         &["render", "tri.gltf", "--size", "0x5"][..],
+        &["render", "tri.gltf", "--size", "12xa"],
         &["render", "tri.gltf", "--frames", "5..2"],
         &["render", "tri.gltf", "--spp", "0"],
         &["render", "tri.gltf", "--lod", "bogus"],
-        &["render", "no-such-scene"],
+        &["render", "tri.gltf", "--lod-bias", "99"],
+        &["render", "tri.gltf", "--shard", "4/4"],
+        &["render", "tri.gltf", "--shard", "x"],
+        &["compare", "tri.gltf", "--repeats", "0"],
+        &["man", "rendr"],
         // Worker counts the system would take minutes to start are refused up front.
         &["render", "tri.gltf", "--threads", "0"],
         &["render", "tri.gltf", "--threads", "100000"],
         &["bench", "tri.gltf", "--threads", "1,100000"],
+        &["render", "no-such-scene"],
     ] {
         let out = mipray(args, dir.path());
-        assert!(!out.status.success(), "{args:?} succeeded");
+        let usage = args[1] != "no-such-scene";
+        assert_eq!(
+            out.status.code(),
+            Some(if usage { 2 } else { 1 }),
+            "{args:?}: {}",
+            stderr(&out)
+        );
         assert!(
             !stderr(&out).contains("panicked"),
             "{args:?}: {}",
@@ -189,9 +203,23 @@ fn bad_options_are_refused() {
         .env("RAYON_NUM_THREADS", "99999")
         .output()
         .unwrap();
-    assert_eq!(out.status.code(), Some(1));
+    assert_eq!(out.status.code(), Some(2));
     assert!(
         stderr(&out).contains("RAYON_NUM_THREADS=99999: at most 1024"),
+        "{}",
+        stderr(&out)
+    );
+    // A copy of the hot loops that does not exist is refused, not silently replaced by the
+    // default one (a comparison would measure the wrong copy).
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_mipray"))
+        .args(["info", "tri.gltf"])
+        .current_dir(dir.path())
+        .env("MIPRAY_SIMD", "avx-512")
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(2));
+    assert!(
+        stderr(&out).contains("MIPRAY_SIMD=avx-512: expected auto, baseline or avx2"),
         "{}",
         stderr(&out)
     );
@@ -210,6 +238,18 @@ fn bad_options_are_refused() {
         stderr(&out).contains("taken: exists and is not a folder"),
         "{}",
         stderr(&out)
+    );
+    // `compare` says so before its renders (which take minutes on a real scene), not after.
+    let out = mipray(
+        &["compare", "tri.gltf", "--size", "8x8", "--out", "taken"],
+        dir.path(),
+    );
+    assert_eq!(out.status.code(), Some(1));
+    let err = stderr(&out);
+    assert!(err.contains("taken: exists and is not a folder"), "{err}");
+    assert!(
+        !err.lines().any(|l| l.starts_with("compare: ")),
+        "refused only after starting the renders: {err}"
     );
 }
 
@@ -418,7 +458,7 @@ fn the_avx2_and_baseline_walks_render_identical_frames() {
     let dir = tempfile::tempdir().unwrap();
     for bvh in ["flat", "two-level"] {
         let mut frames = Vec::new();
-        for simd in ["baseline", "detected"] {
+        for simd in ["baseline", "auto"] {
             let out_dir = format!("{bvh}-{simd}");
             let out = Command::new(env!("CARGO_BIN_EXE_mipray"))
                 .args([

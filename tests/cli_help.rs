@@ -151,7 +151,7 @@ fn man_pages_for_mipray_and_each_command() {
         );
     }
     let unknown = mipray(&["man", "rendr"]);
-    assert_eq!(unknown.status.code(), Some(1));
+    assert_eq!(unknown.status.code(), Some(2));
     let error = String::from_utf8_lossy(&unknown.stderr);
     assert!(
         error.contains("rendr") && error.contains("render"),

@@ -289,7 +289,12 @@ fn a_resumed_check_judges_every_frame_and_a_check_against_itself_is_refused() {
     // With --fail-fast the first kept frame that fails stops the run.
     let out = render("full", &["--resume", "--check", "shallow", "--fail-fast"]);
     assert_eq!(out.status.code(), Some(1), "{}", text(&out));
-    assert_eq!(text(&out).matches("check frame").count(), 1, "{}", text(&out));
+    assert_eq!(
+        text(&out).matches("check frame").count(),
+        1,
+        "{}",
+        text(&out)
+    );
     // Against its own folder: refused, and the frames are left as they were.
     let before = std::fs::read(dir.path().join("full/frame_0000.png")).unwrap();
     let out = render("full", &["--max-depth", "1", "--check", "full"]);

@@ -3,7 +3,7 @@
 
 use std::ops::Range;
 
-use anyhow::{Context, Result, bail};
+use anyhow::{Context, Result};
 use clap::Args;
 
 use crate::anim::AnimationSelection;
@@ -22,10 +22,23 @@ pub const MAX_LIGHTS: usize = 1024;
 /// the counts that take the system minutes to start (100,000 threads never finished).
 pub const MAX_THREADS: usize = 1024;
 
+/// A flag, or an environment variable standing in for one, with a value the command cannot
+/// use: a usage error. `main` gives it exit status 2, as the parser's own errors have, so a
+/// script tells a mistyped command from a render that failed (status 1). Attached as an
+/// error's context it keeps the cause (`--size 12xa: bad height: invalid digit ...`).
+#[derive(Debug, thiserror::Error)]
+#[error("{0}")]
+pub struct UsageError(pub String);
+
+/// A [`UsageError`] as an `anyhow` error, for `return Err(usage(...))`.
+pub fn usage(message: String) -> anyhow::Error {
+    UsageError(message).into()
+}
+
 /// Checks a `--threads` count: 1 to [`MAX_THREADS`].
 pub fn check_threads(n: usize) -> Result<()> {
     if n == 0 || n > MAX_THREADS {
-        bail!("--threads {n}: must be 1 to {MAX_THREADS}");
+        return Err(usage(format!("--threads {n}: must be 1 to {MAX_THREADS}")));
     }
     Ok(())
 }
@@ -95,16 +108,19 @@ pub fn render_settings(
 ) -> Result<RenderSettings> {
     let (width, height) = parse_size(&sequence.size)?;
     if spp == 0 || spp > MAX_SPP {
-        bail!("--spp {spp}: must be 1 to {MAX_SPP}");
+        return Err(usage(format!("--spp {spp}: must be 1 to {MAX_SPP}")));
     }
     if trace.max_depth > MAX_DEPTH {
-        bail!("--max-depth {}: at most {MAX_DEPTH}", trace.max_depth);
+        return Err(usage(format!(
+            "--max-depth {}: at most {MAX_DEPTH}",
+            trace.max_depth
+        )));
     }
     if lights.is_some_and(|n| n > MAX_LIGHTS) {
-        bail!("--lights: at most {MAX_LIGHTS}");
+        return Err(usage(format!("--lights: at most {MAX_LIGHTS}")));
     }
     if let Some(fps) = sequence.fps.filter(|f| !(f.is_finite() && *f > 0.0)) {
-        bail!("--fps {fps}: must be a positive number");
+        return Err(usage(format!("--fps {fps}: must be a positive number")));
     }
     check_lod_bias(trace.lod_bias)?;
     Ok(RenderSettings {
@@ -121,7 +137,9 @@ pub fn render_settings(
 
 fn check_lod_bias(bias: f32) -> Result<()> {
     if !(bias.is_finite() && bias.abs() <= MAX_LOD_BIAS) {
-        bail!("--lod-bias {bias}: must be a number from -{MAX_LOD_BIAS} to {MAX_LOD_BIAS}");
+        return Err(usage(format!(
+            "--lod-bias {bias}: must be a number from -{MAX_LOD_BIAS} to {MAX_LOD_BIAS}"
+        )));
     }
     Ok(())
 }
@@ -130,19 +148,19 @@ fn check_lod_bias(bias: f32) -> Result<()> {
 pub fn parse_size(s: &str) -> Result<(u32, u32)> {
     let (w, h) = s
         .split_once(['x', 'X'])
-        .with_context(|| format!("--size {s}: expected WxH, e.g. 640x360"))?;
+        .with_context(|| UsageError(format!("--size {s}: expected WxH, e.g. 640x360")))?;
     let w: u32 = w
         .trim()
         .parse()
-        .with_context(|| format!("--size {s}: bad width"))?;
+        .with_context(|| UsageError(format!("--size {s}: bad width")))?;
     let h: u32 = h
         .trim()
         .parse()
-        .with_context(|| format!("--size {s}: bad height"))?;
+        .with_context(|| UsageError(format!("--size {s}: bad height")))?;
     if w == 0 || h == 0 || w as u64 * h as u64 > MAX_PIXELS {
-        bail!(
+        return Err(usage(format!(
             "--size {s}: width and height must be at least 1 and at most {MAX_PIXELS} pixels in all"
-        );
+        )));
     }
     Ok((w, h))
 }
@@ -155,26 +173,31 @@ pub fn parse_frames(s: &str) -> Result<Range<u32>> {
             let a: u32 = a
                 .trim()
                 .parse()
-                .with_context(|| format!("--frames {s}: bad start"))?;
+                .with_context(|| UsageError(format!("--frames {s}: bad start")))?;
             let b: u32 = b
                 .trim()
                 .parse()
-                .with_context(|| format!("--frames {s}: bad end"))?;
+                .with_context(|| UsageError(format!("--frames {s}: bad end")))?;
             a..b
         }
         None => {
             let a: u32 = s
                 .trim()
                 .parse()
-                .with_context(|| format!("--frames {s}: expected A..B or A"))?;
+                .with_context(|| UsageError(format!("--frames {s}: expected A..B or A")))?;
             if a == u32::MAX {
-                bail!("--frames {s}: frame numbers go up to {}", u32::MAX - 1);
+                return Err(usage(format!(
+                    "--frames {s}: frame numbers go up to {}",
+                    u32::MAX - 1
+                )));
             }
             a..a + 1
         }
     };
     if range.is_empty() {
-        bail!("--frames {s}: empty range (the end is exclusive)");
+        return Err(usage(format!(
+            "--frames {s}: empty range (the end is exclusive)"
+        )));
     }
     Ok(range)
 }
@@ -191,7 +214,7 @@ pub fn parse_lights(s: &str) -> Result<LightsSpec> {
     let number = |t: &str| -> Result<usize> {
         t.trim()
             .parse::<usize>()
-            .with_context(|| format!("--lights {s}: '{t}' is not a whole number"))
+            .with_context(|| UsageError(format!("--lights {s}: '{t}' is not a whole number")))
     };
     let spec = match s.split_once("..") {
         None => LightsSpec::Count(number(s)?),
@@ -202,7 +225,9 @@ pub fn parse_lights(s: &str) -> Result<LightsSpec> {
         LightsSpec::Range(a, b) => (a, b),
     };
     if lo == 0 || lo > hi || hi > MAX_LIGHTS {
-        bail!("--lights {s}: counts must satisfy 1 <= A <= B <= {MAX_LIGHTS}");
+        return Err(usage(format!(
+            "--lights {s}: counts must satisfy 1 <= A <= B <= {MAX_LIGHTS}"
+        )));
     }
     Ok(spec)
 }

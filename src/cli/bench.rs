@@ -1,9 +1,9 @@
 //! `mipray bench`: LOD methods and thread counts timed side by side (see `crate::bench`).
 
-use anyhow::{Result, bail};
+use anyhow::Result;
 use clap::Args;
 
-use super::args::{LightArgs, SequenceArgs, TraceArgs, check_threads, render_settings};
+use super::args::{LightArgs, SequenceArgs, TraceArgs, check_threads, render_settings, usage};
 use super::render::{BvhMode, apply_bvh};
 use super::scene::{load_scene, open_scene};
 use crate::accel::BvhPolicy;
@@ -71,10 +71,14 @@ fn parse_rays_arg(s: &str) -> Result<RaysArg, String> {
 pub fn bench(args: &BenchArgs) -> Result<()> {
     let mut settings = render_settings(&args.sequence, &args.trace, args.lights.lights, args.spp)?;
     if args.repeats == 0 || args.repeats > MAX_REPEATS || args.methods.is_empty() {
-        bail!("bench needs 1 to {MAX_REPEATS} repeats and at least one method");
+        return Err(usage(format!(
+            "bench needs 1 to {MAX_REPEATS} repeats and at least one method"
+        )));
     }
     let Some(&first_bvh) = args.bvh.first() else {
-        bail!("--bvh: give at least one of auto, flat, two-level, rebuild");
+        return Err(usage(
+            "--bvh: give at least one of auto, flat, two-level, rebuild".into(),
+        ));
     };
     apply_bvh(
         &mut settings,

@@ -3,11 +3,11 @@
 
 use std::path::PathBuf;
 
-use anyhow::{Result, bail};
+use anyhow::Result;
 use clap::Args;
 
 use super::args::{
-    LightsSpec, MAX_SPP, SequenceArgs, TraceArgs, View, parse_lights, render_settings,
+    LightsSpec, MAX_SPP, SequenceArgs, TraceArgs, View, parse_lights, render_settings, usage,
 };
 use super::bench::MAX_REPEATS;
 use super::progress::progress_bar;
@@ -52,6 +52,17 @@ pub struct CompareArgs {
     pub view: Option<View>,
 }
 
+/// Creates `out` (and its parents), or says why it cannot be the output folder.
+fn prepare_out_folder(out: &std::path::Path) -> Result<()> {
+    if out.exists() && !out.is_dir() {
+        anyhow::bail!(
+            "{}: exists and is not a folder (the output must be a folder)",
+            out.display()
+        );
+    }
+    std::fs::create_dir_all(out).map_err(|e| anyhow::anyhow!("{}: {e}", out.display()))
+}
+
 /// `mipray compare`.
 pub fn compare(args: &CompareArgs) -> Result<()> {
     let lights = args.lights.as_deref().map(parse_lights).transpose()?;
@@ -61,13 +72,16 @@ pub fn compare(args: &CompareArgs) -> Result<()> {
     };
     let mut settings = render_settings(&args.sequence, &args.trace, light_count, 1)?;
     if args.reference_spp == 0 || args.reference_spp > MAX_SPP {
-        bail!(
+        return Err(usage(format!(
             "--reference-spp {}: must be 1 to {MAX_SPP}",
             args.reference_spp
-        );
+        )));
     }
     if args.repeats == 0 || args.repeats as usize > MAX_REPEATS {
-        bail!("--repeats {}: must be 1 to {MAX_REPEATS}", args.repeats);
+        return Err(usage(format!(
+            "--repeats {}: must be 1 to {MAX_REPEATS}",
+            args.repeats
+        )));
     }
     let scene = open_scene(&args.sequence)?;
     settings.animation = scene.animation;
@@ -77,6 +91,9 @@ pub fn compare(args: &CompareArgs) -> Result<()> {
         .out
         .clone()
         .unwrap_or_else(|| PathBuf::from("out").join(&scene.name).join("compare"));
+    // The folder is made before the renders, which take minutes: a path that cannot be a
+    // folder fails now, not after them.
+    prepare_out_folder(&out)?;
     let options = CompareOptions {
         scene_name: scene.name,
         settings,

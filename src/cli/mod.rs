@@ -23,7 +23,8 @@ use anyhow::{Context, Result};
 use clap::{Parser, Subcommand};
 
 pub use args::{
-    LightArgs, LightsSpec, SequenceArgs, TraceArgs, View, parse_frames, parse_lights, parse_size,
+    LightArgs, LightsSpec, SequenceArgs, TraceArgs, UsageError, View, parse_frames, parse_lights,
+    parse_size,
 };
 pub use bench::BenchArgs;
 pub use compare::CompareArgs;
@@ -99,18 +100,29 @@ fn check_rayon_threads() -> Result<()> {
         return Ok(());
     };
     match value.trim().parse::<usize>() {
-        Ok(n) if n > args::MAX_THREADS => anyhow::bail!(
+        Ok(n) if n > args::MAX_THREADS => Err(args::usage(format!(
             "RAYON_NUM_THREADS={value}: at most {} worker threads",
             args::MAX_THREADS
-        ),
+        ))),
         _ => Ok(()),
     }
+}
+
+/// `MIPRAY_SIMD` chooses the copy of the hot loops; a value it does not know is refused
+/// rather than silently running the default copy.
+fn check_simd_override() -> Result<()> {
+    crate::simd::simd_override().map(|_| ()).map_err(|value| {
+        args::usage(format!(
+            "MIPRAY_SIMD={value}: expected auto, baseline or avx2"
+        ))
+    })
 }
 
 /// Runs the parsed command line. `Ok(FAILURE)` means a regression check found frames outside
 /// the threshold; errors are bad input (see `main.rs` for the exit codes).
 pub fn run(cli: Cli) -> Result<ExitCode> {
     check_rayon_threads()?;
+    check_simd_override()?;
     let ok = |()| ExitCode::SUCCESS;
     match cli.command {
         None => render::render(&RenderArgs::default()),
@@ -134,7 +146,7 @@ fn report(args: &ReportArgs) -> Result<()> {
         .as_deref()
         .map(parse_frames)
         .transpose()
-        .context("--expect-frames")?;
+        .context(args::UsageError("--expect-frames".into()))?;
     let svg = args.svg.clone().unwrap_or_else(|| {
         let first = &args.dirs[0];
         let folder = if first.is_dir() {

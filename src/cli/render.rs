@@ -3,10 +3,12 @@
 use std::path::PathBuf;
 use std::process::ExitCode;
 
-use anyhow::{Context, Result, bail};
+use anyhow::{Context, Result};
 use clap::Args;
 
-use super::args::{LightArgs, SequenceArgs, TraceArgs, View, check_threads, render_settings};
+use super::args::{
+    LightArgs, SequenceArgs, TraceArgs, UsageError, View, check_threads, render_settings, usage,
+};
 use super::diff::CheckArgs;
 use super::progress::{SequenceLines, print_sequence_end};
 use super::scene::open_scene;
@@ -159,7 +161,9 @@ pub fn apply_bvh(
     rebuild_threshold: f32,
 ) -> Result<()> {
     if !(rebuild_threshold.is_finite() && rebuild_threshold >= 1.0) {
-        bail!("--rebuild-threshold {rebuild_threshold}: must be a number >= 1");
+        return Err(usage(format!(
+            "--rebuild-threshold {rebuild_threshold}: must be a number >= 1"
+        )));
     }
     settings.bvh = match mode {
         BvhMode::Auto | BvhMode::Flat | BvhMode::TwoLevel => BvhPolicy::Refit { rebuild_threshold },
@@ -193,12 +197,12 @@ pub fn resolve_shard(
     let parse = |name: &str, v: &str| -> Result<u32> {
         v.trim()
             .parse()
-            .with_context(|| format!("{name}={v}: not a whole number"))
+            .with_context(|| UsageError(format!("{name}={v}: not a whole number")))
     };
     let (index, count) = if let Some(spec) = arg {
         let (i, n) = spec
             .split_once('/')
-            .with_context(|| format!("--shard {spec}: expected I/N, e.g. 0/4"))?;
+            .with_context(|| UsageError(format!("--shard {spec}: expected I/N, e.g. 0/4")))?;
         (parse("--shard index", i)?, parse("--shard count", n)?)
     } else if let (Some(id), Some(count)) =
         (env("SLURM_ARRAY_TASK_ID"), env("SLURM_ARRAY_TASK_COUNT"))
@@ -209,14 +213,18 @@ pub fn resolve_shard(
         };
         let id = parse("SLURM_ARRAY_TASK_ID", &id)?;
         (
-            id.checked_sub(min)
-                .context("SLURM_ARRAY_TASK_ID is below SLURM_ARRAY_TASK_MIN")?,
+            id.checked_sub(min).with_context(|| {
+                UsageError("SLURM_ARRAY_TASK_ID is below SLURM_ARRAY_TASK_MIN".into())
+            })?,
             parse("SLURM_ARRAY_TASK_COUNT", &count)?,
         )
     } else if let Some(index) = env("JOB_COMPLETION_INDEX") {
-        let count = env("MIPRAY_SHARD_COUNT").context(
-            "JOB_COMPLETION_INDEX is set but MIPRAY_SHARD_COUNT (the Job's completions) is not",
-        )?;
+        let count = env("MIPRAY_SHARD_COUNT").with_context(|| {
+            UsageError(
+                "JOB_COMPLETION_INDEX is set but MIPRAY_SHARD_COUNT (the Job's completions) is not"
+                    .into(),
+            )
+        })?;
         (
             parse("JOB_COMPLETION_INDEX", &index)?,
             parse("MIPRAY_SHARD_COUNT", &count)?,
@@ -225,7 +233,9 @@ pub fn resolve_shard(
         return Ok(None);
     };
     if count == 0 || index >= count {
-        bail!("shard {index} of {count}: the index must be below the count");
+        return Err(usage(format!(
+            "shard {index} of {count}: the index must be below the count"
+        )));
     }
     Ok(Some(Shard { index, count }))
 }

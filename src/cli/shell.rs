@@ -5,11 +5,12 @@
 
 use std::io::Write;
 
-use anyhow::{Context, Result, bail};
+use anyhow::{Context, Result};
 use clap::{Args, CommandFactory};
 use clap_complete::Shell;
 
 use super::Cli;
+use super::args::usage;
 
 #[derive(Args, Debug, Clone)]
 pub struct CompletionsArgs {
@@ -52,7 +53,10 @@ pub fn man_page(command: Option<&str>, out: &mut Vec<u8>) -> Result<()> {
             Some(sub) => sub.clone(),
             None => {
                 let known: Vec<&str> = root.get_subcommands().map(|c| c.get_name()).collect();
-                bail!("man {name}: no such command (one of {})", known.join(", "));
+                return Err(usage(format!(
+                    "man {name}: no such command (one of {})",
+                    known.join(", ")
+                )));
             }
         },
     };

@@ -22,6 +22,33 @@ mod prefetch;
 pub use f32x8::F32x8;
 pub use prefetch::{prefetch, prefetch_ptr};
 
+/// What the `MIPRAY_SIMD` environment variable asks for.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum SimdOverride {
+    /// Unset, empty or `auto`: the best copy the CPU runs.
+    None,
+    /// `baseline`: the baseline copy on any CPU.
+    Baseline,
+    /// `avx2`: the AVX2 copy without the AVX-512 routines.
+    Avx2,
+}
+
+/// Reads `MIPRAY_SIMD`; `Err` holds a value it does not know. The kernels treat such a value
+/// as unset; the command line refuses it before any work (a typo must not silently measure
+/// the copy it meant to leave out).
+pub fn simd_override() -> Result<SimdOverride, String> {
+    match std::env::var("MIPRAY_SIMD") {
+        Err(std::env::VarError::NotPresent) => Ok(SimdOverride::None),
+        Err(std::env::VarError::NotUnicode(value)) => Err(value.to_string_lossy().into_owned()),
+        Ok(value) => match value.as_str() {
+            "" | "auto" => Ok(SimdOverride::None),
+            "baseline" => Ok(SimdOverride::Baseline),
+            "avx2" => Ok(SimdOverride::Avx2),
+            _ => Err(value),
+        },
+    }
+}
+
 /// The instruction sets a kernel is compiled for.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Isa {
@@ -38,7 +65,7 @@ impl Isa {
     pub fn current() -> Isa {
         static CHOICE: OnceLock<Isa> = OnceLock::new();
         *CHOICE.get_or_init(|| {
-            let forced_baseline = std::env::var("MIPRAY_SIMD").is_ok_and(|v| v == "baseline");
+            let forced_baseline = simd_override() == Ok(SimdOverride::Baseline);
             if Isa::cpu_has_avx2() && !forced_baseline {
                 Isa::Avx2
             } else {
@@ -79,7 +106,7 @@ pub fn avx2() -> bool {
 pub fn avx512() -> bool {
     static CHOICE: OnceLock<bool> = OnceLock::new();
     *CHOICE.get_or_init(|| {
-        let forced_off = std::env::var("MIPRAY_SIMD").is_ok_and(|v| v == "avx2");
+        let forced_off = simd_override() == Ok(SimdOverride::Avx2);
         avx2() && Isa::cpu_has_avx512() && !forced_off
     })
 }
@@ -162,7 +189,7 @@ mod tests {
         if Isa::current() == Isa::Avx2 {
             assert!(Isa::cpu_has_avx2());
         }
-        if std::env::var("MIPRAY_SIMD").is_ok_and(|v| v == "baseline") {
+        if simd_override() == Ok(SimdOverride::Baseline) {
             assert_eq!(Isa::current(), Isa::Baseline);
         }
     }
