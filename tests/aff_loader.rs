@@ -323,6 +323,26 @@ fn fixture_uses_every_command() {
     );
 }
 
+/// An `a` line a user may not have meant is rendered as the formula says, with a note: no
+/// frames (one frame at the start time), or an end before the start (played backwards).
+#[test]
+fn unusual_frame_times_are_noted() {
+    let scene = |a: &str| {
+        load_text(&format!("{a}\np 3\n-1 -1 0\n1 -1 0\n0 1 0\n"))
+            .unwrap()
+            .0
+    };
+    let noted = |scene: &SceneDesc, text: &str| scene.notes.iter().any(|n| n.contains(text));
+    assert!(noted(&scene("a 0 1 0"), "'a 0 1 0' asks for no frames"));
+    assert!(noted(&scene("a 5 1 10"), "'a 5 1 10' ends before it starts"));
+    let usual = scene("a 0 1 10");
+    assert!(
+        !noted(&usual, "asks for no frames") && !noted(&usual, "ends before it starts"),
+        "{:?}",
+        usual.notes
+    );
+}
+
 #[test]
 fn tpa_weights_reproduce_linear_interpolation_between_samples() {
     let (scene, _) = load_text(

@@ -58,8 +58,8 @@ pub use lexer::{Lexer, Token, latin1};
 pub use shapes::CONE_SEGMENTS;
 
 use super::{
-    AnimationDesc, CameraDesc, ChannelDesc, ChannelTarget, Interpolation, LightDesc, LightKind,
-    SceneDesc, Trs,
+    AnimationDesc, CameraDesc, ChannelDesc, ChannelTarget, FrameTimes, Interpolation, LightDesc,
+    LightKind, SceneDesc, Trs,
 };
 use crate::anim::{sample_rotation, sample_vec3};
 use parser::Parser;
@@ -192,6 +192,24 @@ fn load_scene(path: &Path) -> Result<(SceneDesc, AffStats), String> {
 }
 
 /// Resolves key blocks, adds camera and light nodes, and assembles the description.
+/// Notes for an `a start end frames` line a user may not have meant: no frames at all
+/// (rendered as one frame at `start`), or an end before the start (played backwards, as
+/// the line's formula says).
+fn note_frame_times(times: Option<FrameTimes>, notes: &mut Vec<String>) {
+    let Some(t) = times else { return };
+    if t.frames == 0 {
+        notes.push(format!(
+            "'a {} {} 0' asks for no frames; the default range is one frame, at time {}",
+            t.start, t.end, t.start
+        ));
+    } else if t.end < t.start {
+        notes.push(format!(
+            "'a {} {} {}' ends before it starts: the animation plays backwards",
+            t.start, t.end, t.frames
+        ));
+    }
+}
+
 /// The scene and counts of a whole parse: `k` blocks resolved onto their nodes, then the
 /// camera, the lights and the morph channels added, each section in its own step below
 /// (node order: the parse's, then the camera, then the lights; channel order: animated
@@ -204,6 +222,7 @@ fn finish(path: &Path, mut p: Parser) -> Result<(SceneDesc, AffStats), String> {
             p.scopes.len() - 1
         ));
     }
+    note_frame_times(p.frame_times, &mut notes);
     let rest_time = p.frame_times.map_or(0.0, |f| f.start);
     let mut tracks = ResolvedTracks::default();
     animate_transforms(&mut p, rest_time, &mut tracks);
