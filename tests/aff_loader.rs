@@ -334,7 +334,10 @@ fn unusual_frame_times_are_noted() {
     };
     let noted = |scene: &SceneDesc, text: &str| scene.notes.iter().any(|n| n.contains(text));
     assert!(noted(&scene("a 0 1 0"), "'a 0 1 0' asks for no frames"));
-    assert!(noted(&scene("a 5 1 10"), "'a 5 1 10' ends before it starts"));
+    assert!(noted(
+        &scene("a 5 1 10"),
+        "'a 5 1 10' ends before it starts"
+    ));
     let usual = scene("a 0 1 10");
     assert!(
         !noted(&usual, "asks for no frames") && !noted(&usual, "ends before it starts"),

@@ -601,3 +601,265 @@ fn a_damaged_usda_file_is_an_error_in_words() {
     assert!(stderr.contains("does not allow"), "{stderr}");
     assert!(!stderr.contains("Logos"), "{stderr}");
 }
+
+/// A stage written to a temporary folder and loaded through the library.
+fn load_text(text: &str) -> (tempfile::TempDir, Result<mipray::scene::SceneDesc, String>) {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("stage.usda");
+    std::fs::write(&path, text).unwrap();
+    let scene = mipray::scene::load(&path).map_err(|e| e.to_string());
+    (dir, scene)
+}
+
+/// A triangle mesh prim named `name` with extra lines `body`.
+fn triangle(name: &str, body: &str) -> String {
+    format!(
+        r#"def Mesh "{name}"
+{{
+    uniform token subdivisionScheme = "none"
+    int[] faceVertexCounts = [3]
+    int[] faceVertexIndices = [0, 1, 2]
+    point3f[] points = [(0, 0, 0), (1, 0, 0), (0, 1, 0)]
+    {body}
+}}
+"#
+    )
+}
+
+/// Names that cannot name a prim are refused in words. Two of them (`""` at the root, `.`
+/// anywhere) made the stage's traversal run forever; the test runs on a watchdog thread so
+/// a regression fails instead of hanging the suite.
+#[test]
+fn prims_that_cannot_be_named_are_refused_instead_of_hanging() {
+    let cases = [
+        (
+            "#usda 1.0\ndef Xform \"\"\n{\n}\n",
+            "the root of the stage is named \"\"",
+        ),
+        (
+            "#usda 1.0\ndef Xform \"A\"\n{\n    def Xform \".\"\n    {\n    }\n}\n",
+            "/A is named \".\"",
+        ),
+    ];
+    for (text, expected) in cases {
+        let (sender, receiver) = std::sync::mpsc::channel();
+        std::thread::spawn(move || {
+            let _ = sender.send(load_text(text).1.map(|_| ()));
+        });
+        let result = receiver
+            .recv_timeout(std::time::Duration::from_secs(60))
+            .expect("loading the stage did not end within a minute");
+        let error = result.expect_err("a prim without a valid name loaded");
+        assert!(error.contains(expected), "{error}");
+    }
+}
+
+/// A skeleton marked `guide` (as exporters often do) or hidden still skins its meshes: it is
+/// never drawn, only read.
+#[test]
+fn a_guide_skeleton_still_skins_its_meshes() {
+    for skeleton_line in [
+        "uniform token purpose = \"guide\"",
+        "token visibility = \"invisible\"",
+        "",
+    ] {
+        let text = format!(
+            r#"#usda 1.0
+def SkelRoot "Root"
+{{
+    def Skeleton "Skel" (prepend apiSchemas = ["SkelBindingAPI"])
+    {{
+        {skeleton_line}
+        uniform token[] joints = ["a"]
+        uniform matrix4d[] bindTransforms = [( (1, 0, 0, 0), (0, 1, 0, 0), (0, 0, 1, 0), (0, 0, 0, 1) )]
+        uniform matrix4d[] restTransforms = [( (1, 0, 0, 0), (0, 1, 0, 0), (0, 0, 1, 0), (2, 0, 0, 1) )]
+    }}
+    {}
+}}
+"#,
+            triangle(
+                "m",
+                r#"int[] primvars:skel:jointIndices = [0, 0, 0] (interpolation = "vertex" elementSize = 1)
+    float[] primvars:skel:jointWeights = [1, 1, 1] (interpolation = "vertex" elementSize = 1)
+    rel skel:skeleton = </Root/Skel>"#
+            )
+        );
+        let (_dir, scene) = load_text(&text);
+        let scene = scene.unwrap_or_else(|e| panic!("{skeleton_line}: {e}"));
+        assert_eq!(scene.skins.len(), 1, "{skeleton_line}: {:?}", scene.notes);
+    }
+    // Dual-quaternion skinning is skinned with linear blending, and said so.
+    let text = format!(
+        r#"#usda 1.0
+def SkelRoot "Root"
+{{
+    def Skeleton "Skel" (prepend apiSchemas = ["SkelBindingAPI"])
+    {{
+        uniform token[] joints = ["a"]
+        uniform matrix4d[] bindTransforms = [( (1, 0, 0, 0), (0, 1, 0, 0), (0, 0, 1, 0), (0, 0, 0, 1) )]
+        uniform matrix4d[] restTransforms = [( (1, 0, 0, 0), (0, 1, 0, 0), (0, 0, 1, 0), (0, 0, 0, 1) )]
+    }}
+    {}
+}}
+"#,
+        triangle(
+            "m",
+            r#"int[] primvars:skel:jointIndices = [0, 0, 0] (interpolation = "vertex" elementSize = 1)
+    float[] primvars:skel:jointWeights = [1, 1, 1] (interpolation = "vertex" elementSize = 1)
+    uniform token primvars:skel:skinningMethod = "dualQuaternion"
+    rel skel:skeleton = </Root/Skel>"#
+        )
+    );
+    let scene = load_text(&text).1.unwrap();
+    assert!(
+        scene.notes.iter().any(|n| n.contains("dual quaternion")),
+        "{:?}",
+        scene.notes
+    );
+}
+
+/// The usual way to colour a mesh by its `displayColor` in a material (a
+/// `UsdPrimvarReader_float3` into `diffuseColor`) gives each mesh its own colour; a missing
+/// image and a binding to nothing fall back as USD does, with notes instead of errors.
+#[test]
+fn materials_fall_back_as_usd_does() {
+    let text = format!(
+        r#"#usda 1.0
+{}{}{}{}
+def Scope "M"
+{{
+    def Material "ByColor"
+    {{
+        token outputs:surface.connect = </M/ByColor/S.outputs:surface>
+        def Shader "S"
+        {{
+            uniform token info:id = "UsdPreviewSurface"
+            color3f inputs:diffuseColor.connect = </M/ByColor/P.outputs:result>
+            token outputs:surface
+        }}
+        def Shader "P"
+        {{
+            uniform token info:id = "UsdPrimvarReader_float3"
+            token inputs:varname = "displayColor"
+            float3 inputs:fallback = (0.5, 0.5, 0.5)
+            float3 outputs:result
+        }}
+    }}
+    def Material "NoImage"
+    {{
+        token outputs:surface.connect = </M/NoImage/S.outputs:surface>
+        def Shader "S"
+        {{
+            uniform token info:id = "UsdPreviewSurface"
+            color3f inputs:diffuseColor.connect = </M/NoImage/T.outputs:rgb>
+            token outputs:surface
+        }}
+        def Shader "T"
+        {{
+            uniform token info:id = "UsdUVTexture"
+            float4 inputs:fallback = (0.1, 0.2, 0.3, 1)
+            float3 outputs:rgb
+        }}
+    }}
+}}
+"#,
+        triangle(
+            "Red",
+            "color3f[] primvars:displayColor = [(1, 0, 0)]\n    rel material:binding = </M/ByColor>"
+        ),
+        triangle(
+            "Green",
+            "color3f[] primvars:displayColor = [(0, 1, 0)]\n    rel material:binding = </M/ByColor>"
+        ),
+        triangle("Plain", "rel material:binding = </M/NoImage>"),
+        triangle(
+            "Orphan",
+            "color3f[] primvars:displayColor = [(0, 0, 1)]\n    rel material:binding = </M/Gone>"
+        ),
+    );
+    let (_dir, scene) = load_text(&text);
+    let scene = scene.unwrap();
+    let colour = |name: &str| {
+        let node = scene.nodes.iter().find(|n| n.name == name).unwrap();
+        let mesh = &scene.meshes[node.mesh.unwrap()];
+        scene.materials[mesh.primitives[0].material.unwrap()].base_color
+    };
+    assert_eq!(colour("/Red"), glam::Vec3::new(1.0, 0.0, 0.0));
+    assert_eq!(colour("/Green"), glam::Vec3::new(0.0, 1.0, 0.0));
+    assert_eq!(colour("/Plain"), glam::Vec3::new(0.1, 0.2, 0.3));
+    assert_eq!(colour("/Orphan"), glam::Vec3::new(0.0, 0.0, 1.0));
+    for note in ["without an image", "target a prim that does not exist"] {
+        assert!(
+            scene.notes.iter().any(|n| n.contains(note)),
+            "{note}: {:?}",
+            scene.notes
+        );
+    }
+}
+
+/// openusd does not enter an instance nested in another instance: the missing geometry is
+/// noted, not silent.
+#[test]
+fn an_unexpanded_nested_instance_is_noted() {
+    let text = format!(
+        r#"#usda 1.0
+def Xform "Protos"
+{{
+    def Xform "Leaf"
+    {{
+        {}
+    }}
+    def Xform "Set"
+    {{
+        def Xform "a" (instanceable = true references = </Protos/Leaf>)
+        {{
+        }}
+    }}
+}}
+def Xform "World"
+{{
+    def Xform "set1" (instanceable = true references = </Protos/Set>)
+    {{
+    }}
+}}
+"#,
+        triangle("tri", "")
+    );
+    let (_dir, scene) = load_text(&text);
+    let scene = scene.unwrap();
+    assert!(
+        scene
+            .notes
+            .iter()
+            .any(|n| n.contains("/World/set1/a: an instance inside an instance")),
+        "{:?}",
+        scene.notes
+    );
+}
+
+/// What a stage asks for that mipray does not do is noted: an off-centre aperture, and a
+/// time code range longer than a stage's own range gives.
+#[test]
+fn aperture_offsets_and_overlong_ranges_are_noted() {
+    let text = r#"#usda 1.0
+(
+    startTimeCode = 0
+    endTimeCode = 100000000
+)
+def Camera "Cam"
+{
+    float horizontalApertureOffset = 3
+}
+"#;
+    let scene = load_text(text).1.unwrap();
+    for note in [
+        "/Cam.horizontalApertureOffset is ignored",
+        "asks for more than 1000001 frames",
+    ] {
+        assert!(
+            scene.notes.iter().any(|n| n.contains(note)),
+            "{note}: {:?}",
+            scene.notes
+        );
+    }
+}

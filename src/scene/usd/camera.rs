@@ -67,6 +67,18 @@ pub(super) fn add(b: &mut Builder, prim: &Prim, node: usize) -> Result<(), Strin
     };
     b.cameras.push(CameraDesc { yfov, znear });
     b.nodes[node].camera = Some(b.cameras.len() - 1);
+    for offset in ["horizontalApertureOffset", "verticalApertureOffset"] {
+        if reader
+            .static_value(prim, offset)?
+            .as_ref()
+            .and_then(scalar)
+            .is_some_and(|x| x != 0.0)
+        {
+            b.notes.push(format!(
+                "{path}.{offset} is ignored: the camera looks through the centre of its aperture"
+            ));
+        }
+    }
     let aspect = horizontal / vertical;
     if (aspect - 16.0 / 9.0).abs() > 0.01 {
         b.notes.push(format!(

@@ -58,6 +58,10 @@ impl UvRead {
 pub(super) struct Bound {
     pub index: usize,
     pub uv: Option<UvRead>,
+    /// The diffuse colour is the mesh's own `displayColor` (a `UsdPrimvarReader_float3` of
+    /// it feeds `diffuseColor`): each mesh takes a copy of the material with its colour,
+    /// and the material's colour is the reader's fallback, for a mesh without one.
+    pub reads_display_color: bool,
 }
 
 /// Builds materials and textures once each.
@@ -73,6 +77,8 @@ pub(super) struct Materials {
     by_texture: HashMap<(String, bool, [u8; 2]), usize>,
     /// displayColor (bits), double-sided -> material index.
     by_color: HashMap<([u32; 3], bool), usize>,
+    /// (material index, diffuse colour bits) -> its copy in that colour.
+    recoloured: HashMap<(usize, [u32; 3]), usize>,
 }
 
 /// Counts of what was ignored, turned into one note each at the end.
@@ -84,6 +90,13 @@ pub(super) struct Ignored {
     pub bias: usize,
     pub black_wrap: usize,
     pub other_shaders: usize,
+    /// `diffuseColor` fed by a shader the loader does not evaluate (neither a texture nor
+    /// a primvar reader of `displayColor`).
+    pub other_colour_sources: usize,
+    /// `UsdUVTexture`s without an image.
+    pub textures_without_file: usize,
+    /// `material:binding`s to a prim that does not exist.
+    pub missing_bindings: usize,
 }
 
 impl Ignored {
@@ -114,6 +127,20 @@ impl Ignored {
             self.other_shaders,
             "use a surface shader other than UsdPreviewSurface; rendered with the default material",
         );
+        note(
+            self.other_colour_sources,
+            "feed diffuseColor from a shader other than a texture or a displayColor primvar reader; the default diffuse colour is used",
+        );
+        note(
+            self.textures_without_file,
+            "have a UsdUVTexture without an image (inputs:file); its fallback colour is used",
+        );
+        if self.missing_bindings > 0 {
+            notes.push(format!(
+                "{} material binding(s) target a prim that does not exist; those meshes render as if nothing were bound (displayColor or the default material)",
+                self.missing_bindings
+            ));
+        }
     }
 }
 
@@ -127,7 +154,7 @@ impl Materials {
         double_sided: bool,
         ignored: &mut Ignored,
     ) -> Result<Option<Bound>, String> {
-        let Some(material) = binding(reader, prim)? else {
+        let Some(material) = binding(reader, prim, ignored)? else {
             return Ok(None);
         };
         let key = (material.as_str().to_string(), double_sided);
@@ -158,6 +185,21 @@ impl Materials {
         i
     }
 
+    /// Material `index` with diffuse colour `color` (for a material that reads the mesh's
+    /// `displayColor`; one copy per colour).
+    pub fn recoloured(&mut self, index: usize, color: Vec3) -> usize {
+        let key = (index, color.to_array().map(f32::to_bits));
+        if let Some(&i) = self.recoloured.get(&key) {
+            return i;
+        }
+        let mut copy = self.materials[index].clone();
+        copy.base_color = color;
+        self.materials.push(copy);
+        let i = self.materials.len() - 1;
+        self.recoloured.insert(key, i);
+        i
+    }
+
     /// The default material, double-sided or not (for meshes with neither a material nor a
     /// displayColor that need the double-sided flag).
     pub fn plain(&mut self, double_sided: bool) -> usize {
@@ -183,20 +225,36 @@ impl Materials {
             return Ok(Bound {
                 index: self.materials.len() - 1,
                 uv: None,
+                reads_display_color: false,
             });
         };
         let input = |name: &str| -> Result<Input, String> { shader_input(reader, &shader, name) };
         let mut uv = None;
+        let mut reads_display_color = false;
         match input("diffuseColor")? {
             Input::Value(v) => {
                 desc.base_color = color(&v, &shader, "inputs:diffuseColor")?;
             }
-            Input::Connected(source, output) => {
-                let (texture, read, scale) = self.texture(reader, &source, &output, ignored)?;
-                desc.base_color_texture = Some(texture);
-                desc.base_color = scale;
-                uv = Some(read);
-            }
+            Input::Connected(source, output) => match info_id(reader, &source)?.as_deref() {
+                Some("UsdUVTexture") => match self.texture(reader, &source, &output, ignored)? {
+                    Some((texture, read, scale)) => {
+                        desc.base_color_texture = Some(texture);
+                        desc.base_color = scale;
+                        uv = Some(read);
+                    }
+                    None => desc.base_color = texture_fallback(reader, &source)?,
+                },
+                Some(id) if id.starts_with("UsdPrimvarReader_float") => {
+                    match primvar_colour(reader, &source)? {
+                        Some(fallback) => {
+                            desc.base_color = fallback;
+                            reads_display_color = true;
+                        }
+                        None => ignored.other_colour_sources += 1,
+                    }
+                }
+                _ => ignored.other_colour_sources += 1,
+            },
             Input::Unset => {}
         }
         let mut float = |name: &str, default: f32| -> Result<f32, String> {
@@ -266,31 +324,30 @@ impl Materials {
         Ok(Bound {
             index: self.materials.len() - 1,
             uv,
+            reads_display_color,
         })
     }
 
     /// The texture behind a `UsdUVTexture` output: its index, how its uvs are read, and
-    /// the colour factor (`scale.rgb`).
+    /// the colour factor (`scale.rgb`). `None` for a texture without an image
+    /// (`inputs:file` unset or empty), which USD renders in its fallback colour.
     fn texture(
         &mut self,
         reader: &Reader,
         shader: &Prim,
         output: &str,
         ignored: &mut Ignored,
-    ) -> Result<(usize, UvRead, Vec3), String> {
+    ) -> Result<Option<(usize, UvRead, Vec3)>, String> {
         let path = shader.path().as_str().to_string();
-        let id = info_id(reader, shader)?;
-        if id.as_deref() != Some("UsdUVTexture") {
-            return Err(format!(
-                "{path}: diffuseColor is connected to a {} shader, expected UsdUVTexture",
-                id.unwrap_or_else(|| "untyped".into())
-            ));
-        }
         if !matches!(output, "rgb" | "rgba") {
             ignored.maps += 1;
         }
         let file = match shader_input(reader, shader, "file")? {
-            Input::Value(Value::AssetPath(a)) => a,
+            Input::Value(Value::AssetPath(a)) if !a.asset_path().is_empty() => a,
+            Input::Value(Value::AssetPath(_)) | Input::Unset => {
+                ignored.textures_without_file += 1;
+                return Ok(None);
+            }
             _ => return Err(format!("{path}: inputs:file is not an asset path")),
         };
         let resolved = file
@@ -349,7 +406,7 @@ impl Materials {
         }
         let read = uv_read(reader, shader)?;
         let index = self.texture_index(&resolved, raw, sampler, &path)?;
-        Ok((index, read, scale))
+        Ok(Some((index, read, scale)))
     }
 
     /// The texture of image `resolved` with `sampler`, decoding the image once.
@@ -448,8 +505,13 @@ fn color(v: &Value, shader: &Prim, input: &str) -> Result<Vec3, String> {
     }
 }
 
-/// The material bound to `prim` or its closest ancestor with a binding.
-fn binding(reader: &Reader, prim: &Prim) -> Result<Option<sdf::Path>, String> {
+/// The material bound to `prim` or its closest ancestor with a binding. A binding to a prim
+/// that does not exist binds nothing (as in USD, which warns); it is counted in `ignored`.
+fn binding(
+    reader: &Reader,
+    prim: &Prim,
+    ignored: &mut Ignored,
+) -> Result<Option<sdf::Path>, String> {
     let stage = reader.stage;
     let mut current = Some(prim.path().clone());
     while let Some(path) = current {
@@ -461,11 +523,8 @@ fn binding(reader: &Reader, prim: &Prim) -> Result<Option<sdf::Path>, String> {
             if let Some(target) = reader.targets(&p, rel)?.into_iter().next() {
                 let target = target.prim_path();
                 if !prim_exists(stage, &target) {
-                    return Err(format!(
-                        "{}: {rel} targets {}, which does not exist",
-                        p.path().as_str(),
-                        target.as_str()
-                    ));
+                    ignored.missing_bindings += 1;
+                    return Ok(None);
                 }
                 return Ok(Some(target));
             }
@@ -572,6 +631,32 @@ fn shader_input(reader: &Reader, shader: &Prim, name: &str) -> Result<Input, Str
         "{}: connections loop or nest too deeply",
         attr_path(shader, &format!("inputs:{name}"))
     ))
+}
+
+/// The colour a `UsdUVTexture` without an image gives: its `inputs:fallback` (rgb), by
+/// default black as the shader's specification says.
+fn texture_fallback(reader: &Reader, texture: &Prim) -> Result<Vec3, String> {
+    match shader_input(reader, texture, "fallback")? {
+        Input::Value(v) => color(&v, texture, "inputs:fallback"),
+        _ => Ok(Vec3::ZERO),
+    }
+}
+
+/// For a `UsdPrimvarReader_float3` (or `float4`) of `displayColor`: its fallback colour
+/// (`inputs:fallback`, by default black as the shader's specification says). `None` for a
+/// reader of another primvar.
+fn primvar_colour(reader: &Reader, primvar_reader: &Prim) -> Result<Option<Vec3>, String> {
+    let varname = match shader_input(reader, primvar_reader, "varname")? {
+        Input::Value(v) => token(&v),
+        _ => None,
+    };
+    if varname.as_deref() != Some("displayColor") {
+        return Ok(None);
+    }
+    match shader_input(reader, primvar_reader, "fallback")? {
+        Input::Value(v) => color(&v, primvar_reader, "inputs:fallback").map(Some),
+        _ => Ok(Some(Vec3::ZERO)),
+    }
 }
 
 /// How a `UsdUVTexture` reads its uvs: the primvar reader's `varname` (default `st`), and

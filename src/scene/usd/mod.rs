@@ -150,8 +150,20 @@ fn read_metadata(stage: &usd::Stage) -> Result<StageMetadata, String> {
     }
     let time_codes_per_second = stage.time_codes_per_second();
     let frames_per_second = stage.frames_per_second_or(time_codes_per_second);
+    // The stage reports the rate it fell back on under timeCodesPerSecond; say which one the
+    // file authored.
+    let tcps_authored = stage
+        .stage_metadata("timeCodesPerSecond")
+        .ok()
+        .flatten()
+        .is_some();
+    let tcps_name = if tcps_authored {
+        "timeCodesPerSecond"
+    } else {
+        "framesPerSecond (standing in for the unauthored timeCodesPerSecond)"
+    };
     for (name, v) in [
-        ("timeCodesPerSecond", time_codes_per_second),
+        (tcps_name, time_codes_per_second),
         ("framesPerSecond", frames_per_second),
     ] {
         if !(v.is_finite() && v > 0.0) {
@@ -179,6 +191,10 @@ fn read_metadata(stage: &usd::Stage) -> Result<StageMetadata, String> {
     })
 }
 
+/// Most frames a stage's own time code range gives (a longer range keeps its start and end,
+/// with frames further apart; `info` shows the spacing and `--frames`/`--fps` choose others).
+const MAX_STAGE_FRAMES: f64 = 1e6;
+
 /// Reads `framesPerSecond` when authored.
 trait FramesPerSecond {
     fn frames_per_second_or(&self, fallback: f64) -> f64;
@@ -200,12 +216,31 @@ impl StageMetadata {
     /// `startTimeCode` to `endTimeCode` (both included).
     pub fn frame_times(&self) -> Option<FrameTimes> {
         let (start, end) = self.time_code_range?;
-        let seconds = (end - start) / self.time_codes_per_second;
-        let frames = (seconds * self.frames_per_second).round().clamp(0.0, 1e6) as u32 + 1;
+        let frames = self.stage_frames(start, end).min(MAX_STAGE_FRAMES) as u32 + 1;
         Some(FrameTimes {
             start: (start / self.time_codes_per_second) as f32,
             end: (end / self.time_codes_per_second) as f32,
             frames,
+        })
+    }
+
+    /// The frames (less one) a time code range asks for at `framesPerSecond`.
+    fn stage_frames(&self, start: f64, end: f64) -> f64 {
+        let seconds = (end - start) / self.time_codes_per_second;
+        (seconds * self.frames_per_second).round().max(0.0)
+    }
+
+    /// A note when the time code range asks for more frames than a stage's own range gives.
+    fn frame_limit_note(&self) -> Option<String> {
+        let (start, end) = self.time_code_range?;
+        (self.stage_frames(start, end) > MAX_STAGE_FRAMES).then(|| {
+            format!(
+                "the time code range {start}..{end} asks for more than {} frames at {} frames per second; \
+                 the default range is {} frames over the same time (use --frames and --fps to choose)",
+                MAX_STAGE_FRAMES + 1.0,
+                self.frames_per_second,
+                MAX_STAGE_FRAMES + 1.0
+            )
         })
     }
 
@@ -287,6 +322,8 @@ fn load_stage(path: &Path) -> Result<SceneDesc, String> {
         b.nodes[root].local = xform::decompose(&matrix);
         b.stage_root = Some(root);
     }
+    check_prim_names(&stage)?;
+    b.notes.extend(metadata.frame_limit_note());
     let mut paths = Vec::new();
     stage
         .traverse(usd::PrimPredicate::DEFAULT_PROXIES, |p| {
@@ -294,6 +331,7 @@ fn load_stage(path: &Path) -> Result<SceneDesc, String> {
         })
         .map_err(|e| format!("cannot traverse the stage: {e:#}"))?;
     check_composition(&stage)?;
+    note_unexpanded_nested_instances(&stage, &paths, &mut b.notes)?;
     // The traversal is depth first, parents before children, so a skipped prim's subtree
     // is the run of paths right after it: one prefix at a time is enough.
     let mut skipped: Option<String> = None;
@@ -349,6 +387,85 @@ fn load_stage(path: &Path) -> Result<SceneDesc, String> {
         frame_times: metadata.frame_times(),
         notes,
     })
+}
+
+/// Refuses a prim whose name cannot name a prim: USD itself refuses them, and openusd's
+/// traversal would never end on two of them (a root prim named `""` or any prim named `.`
+/// makes a child path equal to its parent, which it visits again). A walk over the composed
+/// child names, before the traversal; the names are checked before their prims are entered.
+fn check_prim_names(stage: &usd::Stage) -> Result<(), String> {
+    let root = openusd::sdf::Path::abs_root();
+    let mut stack = vec![root.clone()];
+    while let Some(parent) = stack.pop() {
+        let names = if parent == root {
+            stage.root_prims()
+        } else {
+            stage.prim(parent.clone()).child_names()
+        }
+        .map_err(|e| format!("{}: {e:#}", parent.as_str()))?;
+        for name in names {
+            let name = name.as_str();
+            if !is_prim_name(name) {
+                let below = if parent == root {
+                    "the root of the stage".to_string()
+                } else {
+                    parent.as_str().to_string()
+                };
+                return Err(format!(
+                    "a prim under {below} is named {name:?}, which is not a prim name \
+                     (a letter or '_', then letters, digits or '_')"
+                ));
+            }
+            let child = parent
+                .append_path(name)
+                .map_err(|e| format!("{}/{name}: {e:#}", parent.as_str()))?;
+            stack.push(child);
+        }
+    }
+    Ok(())
+}
+
+/// openusd's traversal does not enter an instance that lies inside another instance (the
+/// inner prototype's prims never appear), so their geometry would be missing without a
+/// word. Such an inner instance with nothing below it in the traversal is noted.
+fn note_unexpanded_nested_instances(
+    stage: &usd::Stage,
+    paths: &[openusd::sdf::Path],
+    notes: &mut Vec<String>,
+) -> Result<(), String> {
+    // The instances enclosing the current path (the traversal is depth first).
+    let mut enclosing: Vec<&str> = Vec::new();
+    for (i, path) in paths.iter().enumerate() {
+        let name = path.as_str();
+        while enclosing.last().is_some_and(|outer| !is_under(name, outer)) {
+            enclosing.pop();
+        }
+        let status = stage
+            .prim_status(path.clone())
+            .map_err(|e| format!("{name}: {e:#}"))?;
+        if !status.contains(usd::PrimStatus::INSTANCE) {
+            continue;
+        }
+        let entered = paths
+            .get(i + 1)
+            .is_some_and(|next| is_under(next.as_str(), name));
+        if !enclosing.is_empty() && !entered {
+            notes.push(format!(
+                "{name}: an instance inside an instance; nested instances are not expanded, \
+                 so what its prototype holds is not drawn"
+            ));
+        }
+        enclosing.push(name);
+    }
+    Ok(())
+}
+
+/// A USD identifier: a letter (any script, as USD's UTF-8 identifiers allow) or `_`, then
+/// letters, digits or `_`.
+fn is_prim_name(name: &str) -> bool {
+    let mut chars = name.chars();
+    chars.next().is_some_and(|c| c == '_' || c.is_alphabetic())
+        && chars.all(|c| c == '_' || c.is_alphanumeric())
 }
 
 /// A missing layer, a composition cycle and the like: openusd reports them as recoverable
@@ -445,7 +562,9 @@ impl Builder<'_> {
         if kind == PrimKind::Referenced {
             return Ok(false);
         }
-        if !self.rendered(prim)? {
+        // A skeleton is never drawn, only read by the meshes bound to it: exporters often
+        // mark it `guide` (or hide it), and its meshes must still be skinned.
+        if kind != PrimKind::Skeleton && !self.rendered(prim)? {
             return Ok(false);
         }
         if kind == PrimKind::Unsupported {
@@ -710,6 +829,12 @@ impl Builder<'_> {
             self.materials
                 .bound(&self.reader, prim, double_sided, &mut self.ignored)?
         {
+            if bound.reads_display_color
+                && let Some(color) = mesh::display_color(&self.reader, mesh, &mut self.notes)?
+            {
+                let index = self.materials.recoloured(bound.index, color);
+                return Ok(Some((index, bound.uv)));
+            }
             return Ok(Some((bound.index, bound.uv)));
         }
         if let Some(color) = mesh::display_color(&self.reader, mesh, &mut self.notes)? {

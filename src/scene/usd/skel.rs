@@ -325,6 +325,16 @@ fn bind_mesh(b: &mut Builder, pending: &PendingMesh) -> Result<(), String> {
     };
     let local_count = remap.as_ref().map_or(joint_count, Vec::len);
     let points = influences_per_point(b, prim, local_count, &path)?;
+    if reader
+        .static_value(prim, "primvars:skel:skinningMethod")?
+        .as_ref()
+        .and_then(super::values::token)
+        .is_some_and(|method| method != "classicLinear")
+    {
+        b.notes.push(format!(
+            "{path}: skinningMethod other than classicLinear (dual quaternion) is skinned with linear blending"
+        ));
+    }
     let geom_bind = match reader.static_value(prim, "primvars:skel:geomBindTransform")? {
         Some(v) => dmat4(&v).filter(|m| m.is_finite()).ok_or_else(|| {
             format!(
