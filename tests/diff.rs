@@ -307,3 +307,128 @@ fn a_resumed_check_judges_every_frame_and_a_check_against_itself_is_refused() {
     let after = std::fs::read(dir.path().join("full/frame_0000.png")).unwrap();
     assert!(before == after, "the reference frame was overwritten");
 }
+
+/// `render default --size SIZE --frames 0..3 --out out --check reference` and `extra`, in
+/// `dir`.
+fn render_checked(dir: &Path, size: &str, extra: &[&str]) -> Output {
+    let mut args = vec![
+        "render",
+        "default",
+        "--size",
+        size,
+        "--frames",
+        "0..3",
+        "--out",
+        "out",
+        "--check",
+        "reference",
+        "--junit",
+        "j.xml",
+    ];
+    args.extend_from_slice(extra);
+    mipray(&args, dir)
+}
+
+/// The JUnit report's test cases with an `<error>` (bad input), by name.
+fn junit_errors(dir: &Path) -> Vec<String> {
+    let xml = std::fs::read_to_string(dir.join("j.xml")).unwrap();
+    let doc = roxmltree::Document::parse(&xml).expect("well-formed XML");
+    doc.descendants()
+        .filter(|n| n.has_tag_name("testcase"))
+        .filter(|c| c.children().any(|k| k.has_tag_name("error")))
+        .filter_map(|c| c.attribute("name").map(str::to_string))
+        .collect()
+}
+
+/// A reference frame missing (or of another size) in `render --check`: the render goes on
+/// (the frames are the product), the frame is reported as not compared in the report and
+/// the JUnit file, the summary and page are written, and the exit status is 2 (bad input,
+/// as `mipray diff` says of a frame missing on one side). `--fail-fast` stops there.
+#[test]
+fn a_check_without_a_reference_frame_renders_on_and_exits_2() {
+    let dir = tempfile::tempdir().unwrap();
+    render(dir.path(), "reference");
+    std::fs::remove_file(dir.path().join("reference/frame_0001.png")).unwrap();
+    let out = render_checked(dir.path(), "48x27", &[]);
+    assert_eq!(out.status.code(), Some(2), "{}", text(&out));
+    for file in [
+        "frame_0002.png",
+        "summary.json",
+        "index.html",
+        "check/diff.md",
+    ] {
+        assert!(
+            dir.path().join("out").join(file).is_file(),
+            "{file}: {}",
+            text(&out)
+        );
+    }
+    assert!(
+        text(&out).contains("check frame 0001: not compared: frame 1: reference/frame_0001.png is missing (reference side)"),
+        "{}",
+        text(&out)
+    );
+    assert_eq!(junit_errors(dir.path()), ["frame_0001"]);
+    let rows = csv_rows(&dir.path().join("out/check/diff.csv"));
+    assert_eq!((rows[1][0].as_str(), rows[1][1].as_str()), ("1", "false"));
+    assert!(
+        rows[1].last().unwrap().contains("is missing"),
+        "{:?}",
+        rows[1]
+    );
+
+    std::fs::remove_dir_all(dir.path().join("out")).unwrap();
+    let out = render_checked(dir.path(), "48x27", &["--fail-fast"]);
+    assert_eq!(out.status.code(), Some(2), "{}", text(&out));
+    assert!(
+        !dir.path().join("out/frame_0002.png").exists(),
+        "--fail-fast rendered on"
+    );
+    assert!(
+        dir.path().join("out/summary.json").is_file()
+            && dir.path().join("out/check/diff.md").is_file()
+    );
+
+    // Frames of another size than the reference's: the same.
+    render(dir.path(), "reference");
+    let out = render_checked(dir.path(), "40x20", &[]);
+    assert_eq!(out.status.code(), Some(2), "{}", text(&out));
+    assert!(
+        text(&out).contains("48x27") && text(&out).contains("40x20"),
+        "{}",
+        text(&out)
+    );
+    assert_eq!(junit_errors(dir.path()).len(), 3);
+    assert!(dir.path().join("out/frame_0002.png").is_file());
+}
+
+/// `render --check` pairs a PNG frame with an EXR reference frame of the same number, as
+/// `mipray diff` does.
+#[test]
+fn a_check_pairs_png_frames_with_an_exr_reference() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = mipray(
+        &[
+            "render",
+            "default",
+            "--size",
+            "48x27",
+            "--frames",
+            "0..3",
+            "--out",
+            "reference",
+            "--format",
+            "exr",
+        ],
+        dir.path(),
+    );
+    assert!(out.status.success(), "{}", text(&out));
+    let out = render_checked(dir.path(), "48x27", &[]);
+    assert_ne!(out.status.code(), Some(2), "{}", text(&out));
+    let compared = text(&out)
+        .lines()
+        .filter(|l| l.starts_with("check frame") && l.contains(" psnr "))
+        .count();
+    assert_eq!(compared, 3, "{}", text(&out));
+    assert!(junit_errors(dir.path()).is_empty());
+}

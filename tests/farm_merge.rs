@@ -21,9 +21,7 @@ fn merge_fails_naming_the_frames_a_shard_did_not_render() {
     let out = dir.path().to_str().unwrap();
     // Shards 0 and 2 of 3 over frames 0..9 render 0..3 and 6..9; shard 1 never runs.
     for shard in ["0/3", "2/3"] {
-        let rendered = mipray(&[
-            "render", SCENE, "--frames", "0..9", "--size", "32x18", "--out", out, "--shard", shard,
-        ]);
+        let rendered = render(dir.path(), "0..9", "32x18", &["--shard", shard]);
         assert!(rendered.status.success(), "{rendered:?}");
     }
     let merged = mipray(&["report", out, "--expect-frames", "0..9"]);
@@ -67,4 +65,240 @@ fn merge_fails_naming_the_frames_a_shard_did_not_render() {
     let bad = mipray(&["report", out, "--expect-frames", "9..3"]);
     assert!(!bad.status.success());
     assert!(String::from_utf8_lossy(&bad.stderr).contains("--expect-frames"));
+}
+
+/// `mipray render SCENE --frames FRAMES --size SIZE --out OUT` and `extra`.
+fn render(out: &std::path::Path, frames: &str, size: &str, extra: &[&str]) -> std::process::Output {
+    let out = out.to_str().unwrap();
+    let mut args = vec![
+        "render", SCENE, "--frames", frames, "--size", size, "--out", out,
+    ];
+    args.extend_from_slice(extra);
+    mipray(&args)
+}
+
+fn stderr(o: &std::process::Output) -> String {
+    String::from_utf8_lossy(&o.stderr).into_owned()
+}
+
+/// A resume, a shard beside other shards, and a merge each refuse frames of another run
+/// (here another size), naming the file and the setting; a resume is refused before
+/// anything is rendered or rewritten.
+#[test]
+fn frames_of_other_settings_are_never_mixed() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("seq");
+    assert!(render(&out, "0..3", "48x27", &[]).status.success());
+    let stats_before = std::fs::read(out.join("stats.jsonl")).unwrap();
+    let resumed = render(&out, "0..5", "40x20", &["--resume"]);
+    let message = stderr(&resumed);
+    assert_eq!(resumed.status.code(), Some(1), "{message}");
+    assert!(
+        message.contains(&format!("{}: cannot resume", out.display()))
+            && message.contains("size 48x27 there, 40x20 in this render")
+            && message.contains("without --resume"),
+        "{message}"
+    );
+    assert!(
+        !out.join("frame_0003.png").exists(),
+        "rendered before refusing"
+    );
+    assert_eq!(
+        std::fs::read(out.join("stats.jsonl")).unwrap(),
+        stats_before
+    );
+    // Another scene is refused too, by its file name and digest.
+    let other_scene = common::farm::write_failing_scene(dir.path());
+    let resumed = mipray(&[
+        "render",
+        other_scene.to_str().unwrap(),
+        "--frames",
+        "0..3",
+        "--size",
+        "48x27",
+        "--out",
+        out.to_str().unwrap(),
+        "--resume",
+    ]);
+    assert!(
+        stderr(&resumed).contains("scene default.gltf#"),
+        "{}",
+        stderr(&resumed)
+    );
+    // The same settings resume (the identity is the same on every run).
+    assert!(
+        render(&out, "0..4", "48x27", &["--resume"])
+            .status
+            .success()
+    );
+
+    // Shards of one folder rendered at two sizes: the second is refused.
+    let farm = dir.path().join("farm");
+    assert!(
+        render(&farm, "0..6", "32x18", &["--shard", "0/2"])
+            .status
+            .success()
+    );
+    let second = render(&farm, "0..6", "40x20", &["--shard", "1/2"]);
+    assert_eq!(second.status.code(), Some(1), "{}", stderr(&second));
+    assert!(
+        stderr(&second)
+            .contains("stats.shard-0-of-2.jsonl: its frames were rendered with other settings")
+            && stderr(&second).contains("size 32x18 there, 40x20 in this render"),
+        "{}",
+        stderr(&second)
+    );
+    assert!(!farm.join("frame_0003.png").exists());
+
+    // Two folders of different sizes merged: a warning without a completeness claim, a
+    // failure with one.
+    let small = dir.path().join("small");
+    assert!(render(&small, "3..6", "32x18", &[]).status.success());
+    let (seq, small) = (out.to_str().unwrap(), small.to_str().unwrap());
+    let merged = mipray(&["report", seq, small]);
+    assert!(merged.status.success(), "{}", stderr(&merged));
+    assert!(
+        stderr(&merged).contains("warning: frame 0 of")
+            && stderr(&merged).contains("size 48x27 in the first, 32x18 in the second"),
+        "{}",
+        stderr(&merged)
+    );
+    let merged = mipray(&["report", seq, small, "--expect-frames", "0..6"]);
+    assert_eq!(merged.status.code(), Some(1));
+    assert!(
+        stderr(&merged).contains("stats.jsonl were rendered with different settings"),
+        "{}",
+        stderr(&merged)
+    );
+}
+
+/// Records written before the run identity existed load, resume and merge: an absent
+/// identity is unknown, not a difference.
+#[test]
+fn records_without_an_identity_still_resume_and_merge() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("old");
+    assert!(render(&out, "0..3", "32x18", &[]).status.success());
+    let stats = out.join("stats.jsonl");
+    let old: Vec<String> = std::fs::read_to_string(&stats)
+        .unwrap()
+        .lines()
+        .map(|line| {
+            let mut record: serde_json::Value = serde_json::from_str(line).unwrap();
+            let object = record.as_object_mut().unwrap();
+            assert!(object.remove("scene").is_some() && object.remove("settings").is_some());
+            record.to_string()
+        })
+        .collect();
+    std::fs::write(&stats, old.join("\n") + "\n").unwrap();
+    let resumed = render(&out, "0..5", "32x18", &["--resume"]);
+    assert!(resumed.status.success(), "{}", stderr(&resumed));
+    assert!(String::from_utf8_lossy(&resumed.stdout).contains("3 of 5 frame(s) already complete"));
+    let merged = mipray(&["report", out.to_str().unwrap(), "--expect-frames", "0..5"]);
+    assert!(merged.status.success(), "{}", stderr(&merged));
+}
+
+/// A frame file cut short and a text file under a frame's name: a merge fails naming them,
+/// and a resume renders them again, saying which and why.
+#[test]
+fn damaged_frame_files_are_missing_frames() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("seq");
+    assert!(render(&out, "0..6", "32x18", &[]).status.success());
+    let cut = out.join("frame_0002.png");
+    let whole = std::fs::read(&cut).unwrap();
+    std::fs::write(&cut, &whole[..whole.len() / 2]).unwrap();
+    std::fs::write(out.join("frame_0004.png"), "not a picture").unwrap();
+    let seq = out.to_str().unwrap();
+    let merged = mipray(&["report", seq, "--expect-frames", "0..6"]);
+    let message = stderr(&merged);
+    assert_eq!(merged.status.code(), Some(1), "{message}");
+    assert!(
+        message.contains("2 frame(s) of 0..6 have no record or no frame file: 2, 4")
+            && message.contains("damaged frame files: ")
+            && message.contains(&format!("{} cannot be decoded", cut.display())),
+        "{message}"
+    );
+    let resumed = render(&out, "0..6", "32x18", &["--resume"]);
+    let stdout = String::from_utf8_lossy(&resumed.stdout).into_owned();
+    assert!(resumed.status.success(), "{}", stderr(&resumed));
+    assert!(
+        stdout.contains("4 of 6 frame(s) already complete"),
+        "{stdout}"
+    );
+    for frame in [2, 4] {
+        let line = format!("frame_{frame:04}.png cannot be decoded");
+        assert!(stdout.contains(&line), "{stdout}");
+        assert!(
+            stdout.contains(&format!("frame {frame} is rendered again")),
+            "{stdout}"
+        );
+    }
+    assert!(
+        std::fs::read(&cut).unwrap() == whole,
+        "frame 2 rendered again"
+    );
+    let merged = mipray(&["report", seq, "--expect-frames", "0..6"]);
+    assert!(merged.status.success(), "{}", stderr(&merged));
+}
+
+/// A line that is not a record in the middle of a stats file (not the torn last line an
+/// interrupted write leaves): `report` and a resume both refuse it, naming the file and
+/// line, and the resume says how to go on; none of the records after it is dropped.
+#[test]
+fn a_bad_line_inside_a_stats_file_is_refused_by_report_and_resume_alike() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("seq");
+    assert!(render(&out, "0..4", "32x18", &[]).status.success());
+    let stats = out.join("stats.jsonl");
+    let mut lines: Vec<String> = std::fs::read_to_string(&stats)
+        .unwrap()
+        .lines()
+        .map(str::to_string)
+        .collect();
+    lines.insert(1, "garbage".into());
+    std::fs::write(&stats, lines.join("\n") + "\n").unwrap();
+    let at = format!("{}:2: invalid JSON", stats.display());
+    let merged = mipray(&["report", out.to_str().unwrap()]);
+    assert!(!merged.status.success());
+    assert!(stderr(&merged).contains(&at), "{}", stderr(&merged));
+    let resumed = render(&out, "0..4", "32x18", &["--resume"]);
+    let message = stderr(&resumed);
+    assert_eq!(resumed.status.code(), Some(1), "{message}");
+    assert!(
+        message.contains(&at)
+            && message.contains("cannot resume")
+            && message.contains("Remove or mend that line"),
+        "{message}"
+    );
+    // Once mended, the resume keeps every record: nothing to render.
+    lines.remove(1);
+    std::fs::write(&stats, lines.join("\n") + "\n").unwrap();
+    let resumed = render(&out, "0..4", "32x18", &["--resume"]);
+    assert!(String::from_utf8_lossy(&resumed.stdout).contains("4 of 4 frame(s) already complete"));
+}
+
+/// A shard whose block of the range is empty (3 frames over 8 shards) succeeds, and its
+/// summary says it has no frames instead of a size of 0 and an empty method.
+#[test]
+fn an_empty_shard_says_it_has_no_frames() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("farm");
+    for shard in ["0/8", "7/8"] {
+        let rendered = render(&out, "0..3", "32x18", &["--shard", shard]);
+        assert!(rendered.status.success(), "{shard}: {}", stderr(&rendered));
+    }
+    let summary = |name: &str| -> serde_json::Value {
+        serde_json::from_str(&std::fs::read_to_string(out.join(name)).unwrap()).unwrap()
+    };
+    let empty = summary("summary.shard-0-of-8.json");
+    assert_eq!(empty["frames"], 0);
+    for field in ["width", "height", "lod_method"] {
+        assert!(empty[field].is_null(), "{field}: {empty}");
+    }
+    let full = summary("summary.shard-7-of-8.json");
+    assert_eq!(
+        (full["width"].as_u64(), full["lod_method"].as_str()),
+        (Some(32), Some("paper"))
+    );
 }

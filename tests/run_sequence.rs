@@ -10,6 +10,7 @@ use common::scenes::{dynamic_scene, settings};
 use mipray::diff::{DiffMetric, DiffOptions, FrameDiff, Verdict};
 use mipray::frame::{FrameClock, LevelImage, Renderer};
 use mipray::lod::LodMethod;
+use mipray::record::RunIdentity;
 use mipray::run::{
     Check, FrameFormat, Resume, SequenceOutput, SequenceProgress, SequenceReport, WrittenFrame,
     render_sequence,
@@ -50,6 +51,7 @@ fn output(dir: &Path, resume: Resume) -> SequenceOutput {
         shard: None,
         resume,
         level_image: LevelImage::Skip,
+        identity: RunIdentity::default(),
     }
 }
 

@@ -88,7 +88,8 @@ pub struct ReportArgs {
     #[arg(long)]
     pub svg: Option<PathBuf>,
     /// The frames the sequence must have (`A..B`, as `render --frames`): after the report,
-    /// fail, naming them, when one has no record or no frame file (a farm's merge step).
+    /// fail, naming them, when one has no record or no frame file, or a damaged one, or
+    /// when the records came from different renders (a farm's merge step).
     #[arg(long, value_name = "A..B")]
     pub expect_frames: Option<String>,
 }
@@ -158,6 +159,11 @@ fn report(args: &ReportArgs) -> Result<()> {
     });
     let summary = crate::report::report(&args.dirs, &svg)?;
     print!("{summary}");
+    if let Some(mixed) = &summary.mixed_runs {
+        // Without --expect-frames the statistics are still worth a look; a completeness
+        // claim fails on it below.
+        eprintln!("warning: {mixed}");
+    }
     let page_dir = svg.parent().unwrap_or(Path::new("."));
     let page = crate::pages::write_render_page(&args.dirs, page_dir, Some(&svg))?;
     println!("page: {}", page.display());

@@ -40,6 +40,13 @@ impl SequenceLines {
 }
 
 impl SequenceProgress for SequenceLines {
+    fn frame_damaged(&mut self, frame: u32, path: &std::path::Path, problem: &str) {
+        self.print(&format!(
+            "resuming: {} {problem}: frame {frame} is rendered again",
+            path.display()
+        ));
+    }
+
     fn resumed(&mut self, complete: usize, of: usize) {
         self.print(&format!(
             "resuming: {complete} of {of} frame(s) already complete"
@@ -93,6 +100,9 @@ fn frame_line(f: &WrittenFrame) -> String {
 
 /// The line printed for each checked frame.
 fn check_line(judged: &FrameDiff) -> String {
+    if let Some(problem) = &judged.problem {
+        return format!("check frame {:04}: not compared: {problem}", judged.frame);
+    }
     format!(
         "check frame {:04}: {}  psnr {} dB  flip {:.5}  max abs {}",
         judged.frame,

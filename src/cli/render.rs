@@ -11,11 +11,13 @@ use super::args::{
 };
 use super::diff::CheckArgs;
 use super::progress::{SequenceLines, print_sequence_end};
-use super::scene::open_scene;
+use super::scene::{OpenedScene, open_scene};
 use crate::accel::{BvhLayout, BvhPolicy};
+use crate::anim::AnimationSelection;
 use crate::diff::{DiffOptions, Verdict};
-use crate::frame::{LevelImage, Renderer};
+use crate::frame::{FrameClock, LevelImage, RenderSettings, Renderer};
 use crate::lod::LodMethod;
+use crate::record::{RunIdentity, scene_identity};
 use crate::run::{Check, FrameFormat, Resume, SequenceOutput, Shard, render_sequence};
 
 #[derive(Args, Debug, Clone)]
@@ -96,7 +98,9 @@ impl Default for RenderArgs {
     }
 }
 
-/// `mipray render`. `Ok(FAILURE)` when a `--check` found frames outside the threshold.
+/// `mipray render`. `Ok(FAILURE)` when a `--check` found frames outside the threshold;
+/// exit status 2 when it could not compare some frame (bad input), after every frame was
+/// rendered (or `--fail-fast` stopped there) and the reports were written.
 pub fn render(args: &RenderArgs) -> Result<ExitCode> {
     let mut settings = render_settings(&args.sequence, &args.trace, args.lights.lights, args.spp)?;
     settings.lod = args.lod;
@@ -106,6 +110,7 @@ pub fn render(args: &RenderArgs) -> Result<ExitCode> {
     let pool = thread_pool(args.threads)?;
     let scene = open_scene(&args.sequence)?;
     settings.animation = scene.animation;
+    let identity = run_identity(&scene, &settings, args.format)?;
     let output = SequenceOutput {
         dir: args.out.clone().unwrap_or_else(|| {
             PathBuf::from("out")
@@ -123,6 +128,7 @@ pub fn render(args: &RenderArgs) -> Result<ExitCode> {
             Some(View::Lod) => LevelImage::Make,
             None => LevelImage::Skip,
         },
+        identity,
     };
     let check = args.check.as_ref().map(|reference| Check {
         reference: reference.clone(),
@@ -148,10 +154,86 @@ pub fn render(args: &RenderArgs) -> Result<ExitCode> {
         )
     })?;
     print_sequence_end(&report);
-    Ok(match report.check.map(|c| c.verdict) {
-        Some(Verdict::Failed) => ExitCode::FAILURE,
+    Ok(match report.check {
+        Some(check) if check.not_compared > 0 => {
+            eprintln!(
+                "error: --check: {} frame(s) could not be compared with the reference (bad \
+                 input: see {})",
+                check.not_compared,
+                check.report.display()
+            );
+            ExitCode::from(2)
+        }
+        Some(check) if check.verdict == Verdict::Failed => ExitCode::FAILURE,
         _ => ExitCode::SUCCESS,
     })
+}
+
+/// What identifies this render's frames (see `crate::record::RunIdentity`): the scene's
+/// file name and digest, and by flag name every setting that changes the pixels, each as
+/// resolved (the clip and camera chosen, not how they were named). Threads and `--bvh`
+/// change no pixel and are left out; so is anything that differs between machines.
+fn run_identity(
+    scene: &OpenedScene,
+    settings: &RenderSettings,
+    format: FrameFormat,
+) -> Result<RunIdentity> {
+    let file = std::fs::File::open(&scene.path)
+        .with_context(|| format!("{}: cannot read the scene", scene.path.display()))?;
+    let file_name = scene
+        .path
+        .file_name()
+        .map_or(String::new(), |n| n.to_string_lossy().into_owned());
+    let scene_id = scene_identity(&file_name, std::io::BufReader::new(file))
+        .with_context(|| format!("{}: cannot read the scene", scene.path.display()))?;
+    let entries = [
+        ("size", format!("{}x{}", settings.width, settings.height)),
+        ("camera", camera_in_use(&scene.desc)),
+        (
+            "animation",
+            match settings.animation {
+                AnimationSelection::All => "all clips".to_string(),
+                AnimationSelection::One(i) => format!("clip {i}"),
+            },
+        ),
+        (
+            "fps",
+            match scene.clock {
+                FrameClock::Fps(fps) => fps.to_string(),
+                FrameClock::Scene(_) => "the scene's frame times".to_string(),
+            },
+        ),
+        ("lod", settings.lod.to_string()),
+        ("lod-bias", settings.lod_bias.to_string()),
+        ("max-depth", settings.max_depth.to_string()),
+        (
+            "lights",
+            settings.lights.map_or("all".to_string(), |n| n.to_string()),
+        ),
+        ("spp", settings.spp.to_string()),
+        ("format", format.extension().to_string()),
+    ];
+    Ok(RunIdentity {
+        scene: scene_id,
+        settings: entries
+            .into_iter()
+            .map(|(name, value)| (name.to_string(), value))
+            .collect(),
+    })
+}
+
+/// The camera the frame loop looks through: the first camera node in traversal order, by
+/// name (or number when unnamed), else the default view of a scene without cameras.
+fn camera_in_use(desc: &crate::scene::SceneDesc) -> String {
+    desc.traversal_order()
+        .into_iter()
+        .find(|&i| desc.nodes[i].camera.is_some())
+        .map_or("none (default view)".to_string(), |i| {
+            match desc.nodes[i].name.as_str() {
+                "" => format!("node {i}"),
+                name => name.to_string(),
+            }
+        })
 }
 
 /// Sets the BVH policy and layout of `--bvh MODE` and `--rebuild-threshold`.

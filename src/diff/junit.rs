@@ -1,5 +1,6 @@
 //! JUnit XML for CI systems: one test case per frame, a failure element for each frame
-//! outside the threshold.
+//! outside the threshold, an error element for each frame that could not be compared (bad
+//! input, such as a missing reference frame).
 
 use std::fmt::Write as _;
 
@@ -15,18 +16,29 @@ pub fn junit_xml(report: &DiffReport) -> String {
         report.test_dir.display()
     );
     let mut s = String::from("<?xml version=\"1.0\" encoding=\"UTF-8\"?>\n");
-    let (n, failed) = (report.frames.len(), report.failed());
+    let (n, failed, errors) = (report.frames.len(), report.failed(), report.not_compared());
     let _ = writeln!(
         s,
-        "<testsuites name=\"mipray\" tests=\"{n}\" failures=\"{failed}\">"
+        "<testsuites name=\"mipray\" tests=\"{n}\" failures=\"{failed}\" errors=\"{errors}\">"
     );
     let _ = writeln!(
         s,
-        "  <testsuite name=\"{}\" tests=\"{n}\" failures=\"{failed}\" errors=\"0\">",
+        "  <testsuite name=\"{}\" tests=\"{n}\" failures=\"{failed}\" errors=\"{errors}\">",
         escape(&suite)
     );
     for f in &report.frames {
         let name = format!("frame_{:04}", f.frame);
+        if let Some(problem) = &f.problem {
+            let _ = writeln!(
+                s,
+                "    <testcase classname=\"mipray.diff\" name=\"{name}\">\n      \
+                 <error type=\"bad-input\" message=\"{}\">reference {}\ntest {}</error>\n    </testcase>",
+                escape(problem),
+                escape(&f.reference.display().to_string()),
+                escape(&f.test.display().to_string()),
+            );
+            continue;
+        }
         let m = &f.metrics;
         let summary = format!(
             "psnr {} dB, mean FLIP {:.5}, max abs {}, {} differing pixels; {} threshold {}",

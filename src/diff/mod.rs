@@ -6,7 +6,11 @@
 //! (render time ratio, rays, `lod_recomputed`, MIP histogram shift), for information.
 //! Bad input (a frame missing on either side, sizes that differ, unreadable files) is a
 //! [`DiffInputError`], distinct from a regression: the CLI exits 2 for it and 1 for a
-//! failing frame.
+//! failing frame. `mipray diff` stops at it; `render --check`, whose frames are the
+//! product, keeps rendering and records the frame as not compared
+//! ([`FrameDiff::not_compared`]), shown as such in every report, and exits 2 at the end.
+//! Both find a frame by number with one rule ([`frame_file`], [`list_frames`]): a PNG
+//! frame pairs with an EXR frame of the same number.
 
 mod junit;
 mod stats;
@@ -113,6 +117,42 @@ pub struct FrameDiff {
     pub heat_map: Option<PathBuf>,
     /// Stats of the two renders for this frame, when both have a record.
     pub stats: Option<StatsDelta>,
+    /// Why the frame could not be compared (bad input: no reference frame, sizes that
+    /// differ, a file that cannot be read); its metrics are then NaN and 0, and it does
+    /// not pass.
+    pub problem: Option<String>,
+}
+
+impl FrameDiff {
+    /// A frame that could not be compared, and why.
+    pub fn not_compared(
+        frame: u32,
+        reference: &Path,
+        test: &Path,
+        problem: &DiffInputError,
+    ) -> FrameDiff {
+        FrameDiff {
+            frame,
+            reference: reference.to_path_buf(),
+            test: test.to_path_buf(),
+            metrics: FrameMetrics {
+                psnr_db: f64::NAN,
+                mean_flip: f64::NAN,
+                max_abs: 0,
+                differing_pixels: 0,
+                differing_share: f64::NAN,
+            },
+            passed: false,
+            heat_map: None,
+            stats: None,
+            problem: Some(problem.to_string()),
+        }
+    }
+
+    /// Whether the frame was compared (else [`FrameDiff::problem`] says why not).
+    pub fn compared(&self) -> bool {
+        self.problem.is_none()
+    }
 }
 
 /// How to judge and where to write.
@@ -124,7 +164,20 @@ pub struct DiffOptions {
     pub out: PathBuf,
 }
 
-/// The frames of an output folder by number (`frame_NNNN.png` / `.exr`).
+/// The file of frame `frame` in `dir`: `frame_NNNN.png`, else `frame_NNNN.exr` (the names
+/// a render writes), `None` when neither is there.
+pub fn frame_file(dir: &Path, frame: u32) -> Option<PathBuf> {
+    FRAME_EXTENSIONS
+        .iter()
+        .map(|ext| dir.join(format!("frame_{frame:04}.{ext}")))
+        .find(|path| path.is_file())
+}
+
+/// Frame file extensions, in the order a frame number is looked up.
+const FRAME_EXTENSIONS: [&str; 2] = ["png", "exr"];
+
+/// The frames of an output folder by number (`frame_NNNN.png` / `.exr`; where a number
+/// has both, the PNG, as [`frame_file`] finds it).
 pub fn list_frames(dir: &Path) -> Result<BTreeMap<u32, PathBuf>, DiffInputError> {
     let entries = std::fs::read_dir(dir).map_err(|e| DiffInputError::Folder {
         dir: dir.to_path_buf(),
@@ -140,7 +193,11 @@ pub fn list_frames(dir: &Path) -> Result<BTreeMap<u32, PathBuf>, DiffInputError>
             continue;
         };
         if let Ok(n) = number.parse::<u32>() {
-            frames.insert(n, entry.path());
+            let path = entry.path();
+            let is_png = path.extension().is_some_and(|e| e == FRAME_EXTENSIONS[0]);
+            if is_png || !frames.contains_key(&n) {
+                frames.insert(n, path);
+            }
         }
     }
     Ok(frames)
@@ -198,6 +255,7 @@ pub fn diff_frame(
         passed,
         heat_map,
         stats: None,
+        problem: None,
     })
 }
 
@@ -291,27 +349,41 @@ pub fn diff_dirs(
 }
 
 impl DiffReport {
+    /// Frames compared and outside the threshold.
     pub fn failed(&self) -> usize {
-        self.frames.iter().filter(|f| !f.passed).count()
+        self.frames
+            .iter()
+            .filter(|f| f.compared() && !f.passed)
+            .count()
     }
 
-    /// Frames, worst first by the deciding metric.
+    /// Frames that could not be compared (bad input).
+    pub fn not_compared(&self) -> usize {
+        self.frames.iter().filter(|f| !f.compared()).count()
+    }
+
+    /// Frames, those not compared first, then worst first by the deciding metric.
     pub fn worst_first(&self) -> Vec<&FrameDiff> {
         let mut frames: Vec<&FrameDiff> = self.frames.iter().collect();
         frames.sort_by(|a, b| {
-            self.metric
-                .badness(&b.metrics)
-                .total_cmp(&self.metric.badness(&a.metrics))
+            a.compared()
+                .cmp(&b.compared())
+                .then(
+                    self.metric
+                        .badness(&b.metrics)
+                        .total_cmp(&self.metric.badness(&a.metrics)),
+                )
                 .then(a.frame.cmp(&b.frame))
         });
         frames
     }
 
-    /// One line: PASS/FAIL, counts, the worst frame.
+    /// One line: PASS/FAIL, counts, the worst frame compared, the frames not compared.
     pub fn verdict(&self) -> String {
         let worst = self
             .worst_first()
-            .first()
+            .into_iter()
+            .find(|f| f.compared())
             .map(|f| (f.frame, self.metric.value(&f.metrics)));
         let worst = worst.map_or(String::new(), |(frame, v)| {
             format!(
@@ -320,9 +392,17 @@ impl DiffReport {
                 format_value(self.metric, v)
             )
         });
-        let status = if self.failed() == 0 { "PASS" } else { "FAIL" };
+        let status = if self.failed() + self.not_compared() == 0 {
+            "PASS"
+        } else {
+            "FAIL"
+        };
+        let not_compared = match self.not_compared() {
+            0 => String::new(),
+            n => format!("; {n} frame(s) not compared (bad input, see the report)"),
+        };
         format!(
-            "{status}: {} of {} frame(s) outside {} threshold {}{worst}",
+            "{status}: {} of {} frame(s) outside {} threshold {}{worst}{not_compared}",
             self.failed(),
             self.frames.len(),
             self.metric.name(),
@@ -339,6 +419,15 @@ impl DiffReport {
         );
         let _ = writeln!(s, "|---:|---|---:|---:|---:|---:|---:|---:|---:|---:|");
         for f in self.worst_first() {
+            if let Some(problem) = &f.problem {
+                let _ = writeln!(
+                    s,
+                    "| {} | not compared: {} | - | - | - | - | - | - | - | - |",
+                    f.frame,
+                    problem.replace('|', "\\|")
+                );
+                continue;
+            }
             let m = &f.metrics;
             let st = f.stats.as_ref();
             let _ = writeln!(
@@ -363,14 +452,25 @@ impl DiffReport {
     /// `diff.csv`: one row per frame, in frame order.
     pub fn csv(&self) -> String {
         let mut s = String::from(
-            "frame,passed,psnr_db,mean_flip,max_abs,differing_pixels,differing_share,time_ratio,rays_delta,lod_recomputed_delta,mip_level_shift,reference,test\n",
+            "frame,passed,psnr_db,mean_flip,max_abs,differing_pixels,differing_share,time_ratio,rays_delta,lod_recomputed_delta,mip_level_shift,reference,test,problem\n",
         );
         for f in &self.frames {
+            if let Some(problem) = &f.problem {
+                let _ = writeln!(
+                    s,
+                    "{},false,,,,,,,,,,{},{},{}",
+                    f.frame,
+                    csv_field(&f.reference.display().to_string()),
+                    csv_field(&f.test.display().to_string()),
+                    csv_field(problem),
+                );
+                continue;
+            }
             let m = &f.metrics;
             let st = f.stats.as_ref();
             let _ = writeln!(
                 s,
-                "{},{},{},{},{},{},{},{},{},{},{},{},{}",
+                "{},{},{},{},{},{},{},{},{},{},{},{},{},",
                 f.frame,
                 f.passed,
                 if m.psnr_db.is_infinite() {

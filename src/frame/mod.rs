@@ -389,6 +389,9 @@ impl Renderer {
             rays: counters.rays,
             mip_histogram: counters.mip_histogram.to_vec(),
             nonfinite_samples: counters.nonfinite_samples,
+            // The run's identity is the run layer's to stamp (`run::SequenceOutput`).
+            scene: String::new(),
+            settings: Default::default(),
         }
     }
 }

@@ -15,6 +15,8 @@ const DIFF_JS: &str = include_str!("assets/diff.js");
 /// Columns of `diff.csv` the page needs.
 const FRAME: &str = "frame";
 const PASSED: &str = "passed";
+/// Why a frame was not compared (empty when it was; absent from older reports).
+const PROBLEM: &str = "problem";
 
 /// Writes `out/index.html` for the `mipray diff` report in `out` (`diff.csv` and the
 /// failing frames' `frame_NNNN_{ref,test,diff}.png`). `metric` is the metric's CLI name
@@ -40,7 +42,12 @@ pub fn write_diff_page(
     let (frame_col, passed_col) = (column(FRAME)?, column(PASSED)?);
     let metric_col = column(metric_column(metric))?;
     let mut body_rows: Vec<Vec<String>> = rows[1..].to_vec();
+    let problem_col = column(PROBLEM).ok();
     let badness = |row: &Vec<String>| -> Result<f64, PageError> {
+        // A frame not compared has no metrics: listed first.
+        if row[metric_col].is_empty() {
+            return Ok(f64::INFINITY);
+        }
         let value: f64 = row[metric_col].parse().map_err(|_| {
             PageError::input(
                 &csv_path,
@@ -62,11 +69,11 @@ pub fn write_diff_page(
     });
     let mut frames = Vec::with_capacity(keyed.len());
     for (_, row) in &keyed {
-        frames.push(frame_images(
-            out,
-            &row[frame_col],
-            row[passed_col] == "true",
-        )?);
+        let mut entry = frame_images(out, &row[frame_col], row[passed_col] == "true")?;
+        if let Some(problem) = problem_col.map(|i| &row[i]).filter(|p| !p.is_empty()) {
+            entry["problem"] = problem.as_str().into();
+        }
+        frames.push(entry);
     }
     // The table without the two path columns, which are long and shown nowhere else.
     let shown: Vec<usize> = (0..rows[0].len())
@@ -76,17 +83,22 @@ pub fn write_diff_page(
     let table_rows: Vec<Vec<String>> = std::iter::once(pick(&rows[0]))
         .chain(keyed.iter().map(|(_, r)| pick(r)))
         .collect();
+    let not_compared = |row: &Vec<String>| problem_col.is_some_and(|i| !row[i].is_empty());
     let failed = keyed
         .iter()
-        .filter(|(_, r)| r[passed_col] != "true")
+        .filter(|(_, r)| r[passed_col] != "true" && !not_compared(r))
         .count();
+    let unjudged = match keyed.iter().filter(|(_, r)| not_compared(r)).count() {
+        0 => String::new(),
+        n => format!(", {n} not compared (bad input)"),
+    };
     let title = format!("mipray diff: {}", out.display());
     let body = format!(
         "<h1>{}</h1>\n<p class=\"{}\" id=\"verdict\">{}</p>\n<p class=\"note\">metric <code>{}</code>, threshold {}; \
-         {failed} of {} frame(s) outside it. Frames are listed worst first; click a row to show it.</p>\n\
+         {failed} of {} frame(s) outside it{unjudged}. Frames are listed worst first; click a row to show it.</p>\n\
          <h2>Frame</h2>\n{}<h2>Per-frame metrics</h2>\n{}{}",
         escape(&title),
-        if failed == 0 {
+        if failed == 0 && unjudged.is_empty() {
             "verdict-pass"
         } else {
             "verdict-fail"

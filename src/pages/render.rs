@@ -10,11 +10,13 @@
 
 use std::path::{Path, PathBuf};
 
-use serde_json::{Map, Value, json};
+#[cfg(test)]
+use serde_json::json;
+use serde_json::{Map, Value};
 
 use super::html::{document, escape, json_data, relative_url};
 use super::{PageError, write_page};
-use crate::record::{Phase, Record, load_sequence};
+use crate::record::{Phase, Record, StatsFileError, load_sequence};
 
 const RENDER_JS: &str = include_str!("assets/render.js");
 
@@ -23,39 +25,57 @@ const RENDER_JS: &str = include_str!("assets/render.js");
 /// `page_dir`, and `plot` (the `mipray report` SVG) is shown when given.
 ///
 /// # Errors
-/// The stats files cannot be read (see [`crate::record::load_sequence`]: no stats file or
-/// no record, a line other than a torn last one that is not a record), or a file cannot be
-/// read or written.
+/// The stats files cannot be read (see [`crate::record::load_sequence`]: no stats file, a
+/// line other than a torn last one that is not a record; stats files without a record
+/// give a page of no frames), or a file cannot be read or written.
 pub fn write_render_page(
     dirs: &[PathBuf],
     page_dir: &Path,
     plot: Option<&Path>,
 ) -> Result<PathBuf, PageError> {
     let page_dir = super::non_empty(page_dir);
-    let records = load_sequence(dirs)?.records;
+    // A folder with no record yet (the first shard to finish had an empty block of the
+    // range) gets a page of no frames, which the next shard's page replaces.
+    let records = match load_sequence(dirs) {
+        Ok(sequence) => sequence.records,
+        Err(StatsFileError::Empty { .. }) => Vec::new(),
+        Err(error) => return Err(error.into()),
+    };
     let folders: Vec<PathBuf> = dirs.iter().map(|d| frame_folder(d)).collect();
+    let lines: Vec<&Map<String, Value>> = records.iter().map(Record::line).collect();
+    let summary = summary_of(&lines);
+    let fps = playback_fps(&lines);
+    // Each record's line moves into the page data (a sequence may have hundreds of
+    // thousands): never a second copy of it.
     let mut frames = Vec::with_capacity(records.len());
-    for record in &records {
+    for record in records {
         let frame = record.frame();
-        frames.push(json!({
-            "frame": frame,
-            "image": find_image(&folders, page_dir, &[&format!("frame_{frame:04}.png"), &format!("preview_{frame:04}.png")])?,
-            "lod": find_image(&folders, page_dir, &[&format!("lod_{frame:04}.png")])?,
-            "stats": record.line(),
-        }));
+        let mut entry = Map::new();
+        entry.insert("frame".into(), frame.into());
+        let image = [
+            format!("frame_{frame:04}.png"),
+            format!("preview_{frame:04}.png"),
+        ];
+        let image_names: Vec<&str> = image.iter().map(String::as_str).collect();
+        entry.insert(
+            "image".into(),
+            find_image(&folders, page_dir, &image_names)?,
+        );
+        let lod = format!("lod_{frame:04}.png");
+        entry.insert("lod".into(), find_image(&folders, page_dir, &[&lod])?);
+        entry.insert("stats".into(), Value::Object(record.into_line()));
+        frames.push(Value::Object(entry));
     }
-    let records: Vec<&Map<String, Value>> = records.iter().map(Record::line).collect();
-    let summary = summary_of(&records);
     let plot = match plot {
         Some(p) if p.is_file() => Some(relative_url(page_dir, p)?),
         _ => None,
     };
     let title = format!("mipray render: {}", page_dir.display());
+    let mut data = Map::new();
+    data.insert("frames".into(), Value::Array(frames));
+    data.insert("fps".into(), fps.into());
     let body = render_body(&title, &summary, plot.as_deref())
-        + &json_data(
-            "render-data",
-            &json!({ "frames": frames, "fps": playback_fps(&records) }),
-        );
+        + &json_data("render-data", &Value::Object(data));
     write_page(page_dir, &document(&title, &body, RENDER_JS))
 }
 
@@ -125,7 +145,11 @@ fn summary_of(records: &[&Map<String, Value>]) -> PageSummary {
             0.0
         },
         mean_frame_ms: total_ms / records.len().max(1) as f64,
-        size: format!("{}x{}", text("width"), text("height")),
+        size: if records.is_empty() {
+            "no frames yet".to_string()
+        } else {
+            format!("{}x{}", text("width"), text("height"))
+        },
         lod_method: text("lod_method"),
     }
 }
@@ -232,6 +256,12 @@ mod tests {
         );
         let empty = tempfile::tempdir().unwrap();
         assert!(write_render_page(&[empty.path().to_path_buf()], empty.path(), None).is_err());
+        // Stats files without a record (shards whose block of the range was empty): a page
+        // of no frames.
+        std::fs::write(empty.path().join("stats.shard-0-of-8.jsonl"), "").unwrap();
+        let page = write_render_page(&[empty.path().to_path_buf()], empty.path(), None).unwrap();
+        let html = std::fs::read_to_string(page).unwrap();
+        assert!(html.contains("0 frame(s), no frames yet"), "{html}");
     }
 
     #[test]

@@ -17,6 +17,7 @@
 use std::fs;
 use std::path::{Path, PathBuf};
 
+use super::identity::{SettingDifference, describe_differences, run_differences};
 use super::read::{Record, RecordError};
 
 /// Why the stats files of a sequence could not be read: every error names the file (and
@@ -69,6 +70,50 @@ pub struct Sequence {
     pub files: Vec<PathBuf>,
     /// Records dropped because a later record had the same frame number.
     pub duplicates_dropped: usize,
+    /// The first two records read that came from different runs (another scene or
+    /// settings), when any did: their frames do not make one sequence.
+    pub mixed_runs: Option<MixedRuns>,
+}
+
+/// Two records of one sequence that came from different runs, and where each was read.
+#[derive(Debug, Clone, PartialEq)]
+pub struct MixedRuns {
+    pub first: (PathBuf, u32),
+    pub second: (PathBuf, u32),
+    pub differences: Vec<SettingDifference>,
+}
+
+impl std::fmt::Display for MixedRuns {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "frame {} of {} and frame {} of {} were rendered with different settings ({}): \
+             their frames are not one sequence",
+            self.first.1,
+            self.first.0.display(),
+            self.second.1,
+            self.second.0.display(),
+            describe_differences(&self.differences, "in the first", "in the second")
+        )
+    }
+}
+
+/// The first record that disagrees with the first record read that says which run it
+/// belongs to (records that do not say are unknown, never a disagreement).
+fn find_mixed_runs(files: &[(PathBuf, Vec<Record>)]) -> Option<MixedRuns> {
+    let mut identified = files
+        .iter()
+        .flat_map(|(path, records)| records.iter().map(move |r| (path, r)))
+        .filter(|(_, r)| r.values.has_run_identity());
+    let (first_path, first) = identified.next()?;
+    identified.find_map(|(path, record)| {
+        let differences = run_differences(&first.values, &record.values);
+        (!differences.is_empty()).then(|| MixedRuns {
+            first: (first_path.clone(), first.frame()),
+            second: (path.clone(), record.frame()),
+            differences,
+        })
+    })
 }
 
 /// Reads, merges, sorts and de-duplicates the records of `dirs` (see the module docs).
@@ -93,10 +138,12 @@ pub fn load_sequence(dirs: &[PathBuf]) -> Result<Sequence, StatsFileError> {
             }
         }
     }
-    let mut records = Vec::new();
+    let mut read = Vec::with_capacity(files.len());
     for file in &files {
-        records.extend(read_stats_file(file)?);
+        read.push((file.clone(), read_stats_file(file)?));
     }
+    let mixed_runs = find_mixed_runs(&read);
+    let records: Vec<Record> = read.into_iter().flat_map(|(_, records)| records).collect();
     if records.is_empty() {
         return Err(StatsFileError::Empty {
             sources: describe(dirs),
@@ -107,6 +154,7 @@ pub fn load_sequence(dirs: &[PathBuf]) -> Result<Sequence, StatsFileError> {
         records,
         files,
         duplicates_dropped,
+        mixed_runs,
     })
 }
 
@@ -147,7 +195,11 @@ fn stats_files(path: &Path) -> Result<Vec<PathBuf>, StatsFileError> {
 }
 
 /// The records of one stats file, in line order (a torn last line left out).
-fn read_stats_file(path: &Path) -> Result<Vec<Record>, StatsFileError> {
+///
+/// # Errors
+/// The file cannot be read, or a line other than a torn last one is not a record (the
+/// error names the file and line).
+pub fn read_stats_file(path: &Path) -> Result<Vec<Record>, StatsFileError> {
     let text = fs::read_to_string(path).map_err(StatsFileError::io(path))?;
     let torn_tail = !text.is_empty() && !text.ends_with('\n');
     let lines: Vec<&str> = text.lines().collect();

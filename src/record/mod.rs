@@ -12,14 +12,24 @@
 //! for what it needs (the frame number always; a resumed render every field it rewrites,
 //! [`Record::missing`]).
 //!
+//! Each record also says which run it belongs to (`scene` and `settings`, see
+//! [`run_differences`]), so frames of different renders are never mixed in one sequence.
+//!
 //! [`Phase`] is the one list of the preprocessing phases (the update steps before the
 //! render, in frame-loop order): the summary, the report table, its plot, the render page
 //! and `compare` iterate over [`Phase::ALL`] rather than naming the fields again.
 
+mod identity;
 mod load;
 mod read;
 
-pub use load::{Sequence, StatsFileError, is_stats_file_name, load_records, load_sequence};
+pub use identity::{
+    RunIdentity, SettingDifference, Settings, describe_differences, run_differences, scene_identity,
+};
+pub use load::{
+    MixedRuns, Sequence, StatsFileError, is_stats_file_name, load_records, load_sequence,
+    read_stats_file,
+};
 pub use read::{Record, RecordError};
 
 use serde::Serialize;
@@ -56,6 +66,14 @@ pub struct FrameRecord {
     pub mip_histogram: Vec<u64>,
     /// Samples that came out NaN/inf and were written as black (expected 0).
     pub nonfinite_samples: u64,
+    /// The scene: its file name and a digest of its bytes ([`scene_identity`]). Empty, and
+    /// not written, when unknown (records written before it existed).
+    #[serde(skip_serializing_if = "String::is_empty")]
+    pub scene: String,
+    /// Every setting that changes the pixels, by flag name (`size`, `lod`, `max-depth`...).
+    /// Empty, and not written, when unknown (records written before it existed).
+    #[serde(skip_serializing_if = "Settings::is_empty")]
+    pub settings: Settings,
 }
 
 /// What the per-frame update did and cost (flattened into each `stats.jsonl` line).
@@ -159,7 +177,7 @@ impl UpdateStats {
 
 impl FrameRecord {
     /// The `stats.jsonl` name of every field, in the order a line is written.
-    pub const FIELDS: [&'static str; 27] = [
+    pub const FIELDS: [&'static str; 29] = [
         "frame",
         "time_s",
         "width",
@@ -187,12 +205,21 @@ impl FrameRecord {
         "rays",
         "mip_histogram",
         "nonfinite_samples",
+        "scene",
+        "settings",
     ];
 
     /// Fields that records written before they existed lack, and whose absence means their
     /// default (`lod_bias`: 0, no bias; `bvh_layout` and `instanced_meshes`: not recorded,
-    /// empty and 0): a record without them is still complete.
-    pub const DEFAULTED: &'static [&'static str] = &["lod_bias", "bvh_layout", "instanced_meshes"];
+    /// empty and 0; `scene` and `settings`: unknown, empty): a record without them is still
+    /// complete.
+    pub const DEFAULTED: &'static [&'static str] = &[
+        "lod_bias",
+        "bvh_layout",
+        "instanced_meshes",
+        "scene",
+        "settings",
+    ];
 
     /// Milliseconds spent in `phase` this frame.
     pub fn phase_ms(&self, phase: Phase) -> f64 {
@@ -234,13 +261,19 @@ mod tests {
 
     #[test]
     fn field_list_is_the_written_line_in_order() {
-        let line = serde_json::to_string(&FrameRecord::default()).unwrap();
+        let record = FrameRecord {
+            scene: "s.gltf#0".into(),
+            settings: Settings::from([("size".into(), "1x1".into())]),
+            ..FrameRecord::default()
+        };
+        let line = serde_json::to_string(&record).unwrap();
         let at: Vec<usize> = FrameRecord::FIELDS
             .iter()
             .map(|f| line.find(&format!("\"{f}\":")).expect(f))
             .collect();
         assert!(at.windows(2).all(|w| w[0] < w[1]), "{line}");
-        assert_eq!(line.matches("\":").count(), FrameRecord::FIELDS.len());
+        // One more for the setting inside `settings`.
+        assert_eq!(line.matches("\":").count(), FrameRecord::FIELDS.len() + 1);
         for name in FrameRecord::DEFAULTED {
             assert!(FrameRecord::FIELDS.contains(name), "{name}");
         }

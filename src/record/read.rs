@@ -10,7 +10,7 @@
 
 use serde_json::{Map, Value};
 
-use super::{FrameRecord, UpdateStats};
+use super::{FrameRecord, Settings, UpdateStats};
 
 /// One frame's record as read back from a stats file, and which fields the line had.
 #[derive(Debug, Clone, PartialEq, Default)]
@@ -83,6 +83,11 @@ impl Record {
         &self.line
     }
 
+    /// [`Record::line`], taken out of the record (no copy).
+    pub fn into_line(self) -> Map<String, Value> {
+        self.line
+    }
+
     fn from_object(o: Map<String, Value>) -> Result<Record, String> {
         let frame = integer(&o, "frame")?.ok_or("missing `frame`")?;
         let mut f = Fields {
@@ -119,6 +124,8 @@ impl Record {
             rays: f.integer("rays")?,
             mip_histogram: f.counts("mip_histogram")?,
             nonfinite_samples: f.integer("nonfinite_samples")?,
+            scene: f.string("scene")?,
+            settings: f.settings("settings")?,
         };
         let present = f.present;
         Ok(Record {
@@ -166,6 +173,11 @@ impl Fields<'_> {
 
     fn counts(&mut self, name: &'static str) -> Result<Vec<u64>, String> {
         let value = counts(self.o, name)?;
+        Ok(self.mark(name, value))
+    }
+
+    fn settings(&mut self, name: &'static str) -> Result<Settings, String> {
+        let value = settings(self.o, name)?;
         Ok(self.mark(name, value))
     }
 }
@@ -227,6 +239,23 @@ fn counts(o: &Map<String, Value>, name: &str) -> Result<Option<Vec<u64>>, String
         .transpose()
 }
 
+/// An object whose every value is a string (a record's `settings`).
+fn settings(o: &Map<String, Value>, name: &str) -> Result<Option<Settings>, String> {
+    let expected = "an object of strings";
+    field(o, name)
+        .map(|v| {
+            let entries = v.as_object().ok_or_else(|| wrong_type(name, v, expected))?;
+            entries
+                .iter()
+                .map(|(key, value)| match value.as_str() {
+                    Some(text) => Ok((key.clone(), text.to_owned())),
+                    None => Err(wrong_type(name, v, expected)),
+                })
+                .collect()
+        })
+        .transpose()
+}
+
 /// Why a line is not a record.
 #[derive(Debug)]
 pub enum RecordError {
@@ -283,11 +312,22 @@ mod tests {
             lod_method: "cones".into(),
             total_ms: 3.5,
             mip_histogram: vec![4, 5],
+            scene: "s.gltf#0123456789abcdef".into(),
+            settings: Settings::from([
+                ("size".into(), "8x4".into()),
+                ("lod".into(), "cones".into()),
+            ]),
             ..FrameRecord::default()
         };
         values.update.rebuild = true;
         let line = serde_json::to_string(&values).unwrap();
         assert_eq!(Record::parse(&line).unwrap().values, values);
+        // Settings are strings: anything else is an error naming the field.
+        let bad = line.replace("\"8x4\"", "[8, 4]");
+        let Err(RecordError::Invalid(message)) = Record::parse(&bad) else {
+            panic!("expected an error: {bad}");
+        };
+        assert!(message.starts_with("`settings` is"), "{message}");
     }
 
     #[test]

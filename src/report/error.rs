@@ -16,17 +16,22 @@ pub enum ReportError {
         path: PathBuf,
         source: std::io::Error,
     },
-    /// Frames of the expected range have no record or no frame file (a shard failed, was
-    /// cancelled or never ran).
+    /// Frames of the expected range have no record, no frame file or a damaged one (a
+    /// shard failed, was cancelled or never ran; a file was cut short).
     #[error(
-        "{sources}: {count} frame(s) of {expected} have no record or no frame file: {frames} (render them again with --resume)"
+        "{sources}: {count} frame(s) of {expected} have no record or no frame file: {frames} (render them again with --resume){damaged}"
     )]
     Incomplete {
         sources: String,
-        count: usize,
+        count: u64,
         frames: String,
         expected: String,
+        /// `; damaged frame files: ...` when some are, else empty.
+        damaged: String,
     },
+    /// The records of the sequence came from different runs (another scene or settings).
+    #[error("{0}; render the frames again with one scene and settings, or report them apart")]
+    MixedRuns(crate::record::MixedRuns),
     /// The plot could not be drawn.
     #[error("{path}: cannot draw the plot: {message}")]
     Plot { path: PathBuf, message: String },

@@ -20,7 +20,9 @@ mod summary_json;
 
 use std::path::{Path, PathBuf};
 
-pub use complete::{frame_folders, missing_frames, require_frames};
+pub use complete::{
+    MissingFrames, frame_file_problem, frame_folders, missing_frames, require_frames,
+};
 pub use error::ReportError;
 pub use metrics::{
     COUNTS, DEFORMED_TRIANGLES, LOD_RECOMPUTED, MOVED_TRIANGLES, Metric, PLOTTED_COUNTS,

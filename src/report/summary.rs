@@ -29,6 +29,8 @@ pub struct ReportSummary {
     pub rebuilds: Option<usize>,
     /// Where the plot was written.
     pub svg: PathBuf,
+    /// Records of different runs among those merged (a warning: the statistics mix them).
+    pub mixed_runs: Option<crate::record::MixedRuns>,
 }
 
 impl ReportSummary {
@@ -46,6 +48,7 @@ impl ReportSummary {
             preprocessing: PreprocessingShare::of(records),
             rebuilds: rebuild_count(records),
             svg,
+            mixed_runs: sequence.mixed_runs.clone(),
         }
     }
 
@@ -158,6 +161,7 @@ mod tests {
                 PathBuf::from("b/stats.jsonl"),
             ],
             duplicates_dropped: 1,
+            mixed_runs: None,
         }
     }
 

@@ -20,9 +20,11 @@ use crate::record::{FrameRecord, Phase};
 #[derive(Debug, Clone, serde::Serialize)]
 pub struct Summary {
     pub frames: usize,
-    pub width: u32,
-    pub height: u32,
-    pub lod_method: String,
+    /// The first record's size and method; `null` when there are no frames (a shard
+    /// whose block of the range is empty), never an invented 0 or "".
+    pub width: Option<u32>,
+    pub height: Option<u32>,
+    pub lod_method: Option<String>,
     pub total_rays: u64,
     pub total_render_ms: f64,
     pub total_ms: f64,
@@ -69,20 +71,21 @@ impl Serialize for PhasePercentiles {
 }
 
 impl Summary {
-    /// The summary of `records` (any order; an empty slice gives zeros and NaN spreads).
+    /// The summary of `records` (any order; an empty slice gives zero totals, null size and
+    /// method, and NaN spreads).
     pub fn of(records: &[FrameRecord]) -> Summary {
         let first = records.first();
         let spread = |metric: Metric| Percentiles::of(records.iter().map(|r| metric.of(r)));
         let total_rays = records.iter().map(|r| r.rays).sum();
-        let total_render_ms = records.iter().map(|r| r.render_ms).sum();
+        let total_render_ms = milliseconds_total(records.iter().map(|r| r.render_ms));
         Summary {
             frames: records.len(),
-            width: first.map_or(0, |r| r.width),
-            height: first.map_or(0, |r| r.height),
-            lod_method: first.map_or(String::new(), |r| r.lod_method.clone()),
+            width: first.map(|r| r.width),
+            height: first.map(|r| r.height),
+            lod_method: first.map(|r| r.lod_method.clone()),
             total_rays,
             total_render_ms,
-            total_ms: records.iter().map(|r| r.total_ms).sum(),
+            total_ms: milliseconds_total(records.iter().map(|r| r.total_ms)),
             total_lod_recomputed: records.iter().map(|r| r.update.lod_recomputed as u64).sum(),
             total_nonfinite_samples: records.iter().map(|r| r.nonfinite_samples).sum(),
             rebuilds: rebuild_count(records).unwrap_or(0),
@@ -103,6 +106,11 @@ impl Summary {
             },
         }
     }
+}
+
+/// The sum of `values`, 0 (not `-0`, the float sum of nothing) when there are none.
+fn milliseconds_total(values: impl Iterator<Item = f64>) -> f64 {
+    values.fold(0.0, |total, v| total + v)
 }
 
 /// Texture lookups per level over the sequence (as many levels as the first record has).
@@ -191,7 +199,10 @@ mod tests {
             record(2, 3.0, false),
         ];
         let s = Summary::of(&records);
-        assert_eq!((s.frames, s.width, s.lod_method.as_str()), (3, 8, "paper"));
+        assert_eq!(
+            (s.frames, s.width, s.lod_method.as_deref()),
+            (3, Some(8), Some("paper"))
+        );
         assert_eq!((s.total_rays, s.rebuilds), (3000, 1));
         assert_eq!(s.mip_histogram, [3, 6]);
         // (animate + build) = 2 ms per ms of `ms`, total 20: a share of 0.1.
@@ -208,7 +219,12 @@ mod tests {
     fn empty_sequence_has_zeros_and_null_spreads() {
         let json = serde_json::to_value(Summary::of(&[])).unwrap();
         assert_eq!(json["frames"], 0);
+        // No frames, so no size or method: null, not 0 and "".
+        for field in ["width", "height", "lod_method"] {
+            assert!(json[field].is_null(), "{field}: {}", json[field]);
+        }
         assert_eq!(json["preprocessing_share"], 0.0);
+        assert_eq!(json["total_ms"].to_string(), "0.0");
         assert!(json["animate_ms"]["median"].is_null());
     }
 }

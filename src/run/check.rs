@@ -14,6 +14,9 @@ pub struct CheckFinished {
     pub verdict: Verdict,
     /// The verdict in one line ([`DiffReport::verdict`]).
     pub summary: String,
+    /// Frames that could not be compared (bad input: no reference frame, sizes that
+    /// differ); the verdict is then `Failed`, and the CLI exits 2.
+    pub not_compared: usize,
     /// `diff.md`.
     pub report: PathBuf,
     /// The diff page.
@@ -66,12 +69,13 @@ pub fn finish_check(
     let page =
         crate::pages::write_diff_page(out, report.metric.name(), report.threshold, &summary)?;
     Ok(CheckFinished {
-        verdict: if report.failed() == 0 {
+        verdict: if report.failed() + report.not_compared() == 0 {
             Verdict::Passed
         } else {
             Verdict::Failed
         },
         summary,
+        not_compared: report.not_compared(),
         report: out.join("diff.md"),
         page,
     })

@@ -6,16 +6,21 @@
 //! renamed into place); a stats line is written with one `write_all` and flushed. The
 //! record is [`FrameRecord`]; the summary is [`Summary`], built from a slice of records.
 
+use std::collections::BTreeMap;
 use std::fs::{self, File, OpenOptions};
-use std::io::Write;
+use std::io::{BufRead, Write};
 use std::path::{Path, PathBuf};
 
+use anyhow::{Result, bail};
 use image::{ImageBuffer, ImageFormat, Rgb};
 
 use crate::atomic_file::{
     FileWriteError, temporary_target, write_bytes_atomically, write_image_atomically,
 };
-use crate::record::{FrameRecord, Record};
+use crate::record::{
+    FrameRecord, Record, RunIdentity, StatsFileError, describe_differences, is_stats_file_name,
+    read_stats_file,
+};
 use crate::render::LinearImage;
 use crate::report::Summary;
 
@@ -89,17 +94,24 @@ impl OutputDir {
     /// temporary files an interrupted run of this shard left are removed: those of its
     /// `frames` and its own stats and summary files; never another shard's, which may be
     /// running beside it in the same folder (without a shard, every temporary).
+    ///
+    /// Refused before anything in the folder changes: records of another run (other scene
+    /// or settings than `identity`) in a stats file this render would keep (`resume`) or
+    /// beside it (another shard's, or a whole render's), and a line of the kept stats file
+    /// that is not a record (other than a torn last one): its frame would be rendered again
+    /// while the line was silently dropped.
     pub fn open(
         dir: &Path,
         format: FrameFormat,
         shard: Option<Shard>,
         frames: std::ops::Range<u32>,
         resume: bool,
-    ) -> Result<(OutputDir, Vec<FrameRecord>), FileWriteError> {
+        identity: &RunIdentity,
+    ) -> Result<(OutputDir, Vec<FrameRecord>)> {
         if dir.exists() && !dir.is_dir() {
             // `create_dir_all` would say only "File exists".
             let message = "exists and is not a folder (the output must be a folder)";
-            return Err(io_error(dir)(std::io::Error::other(message)));
+            return Err(io_error(dir)(std::io::Error::other(message)).into());
         }
         fs::create_dir_all(dir).map_err(io_error(dir))?;
         let (stats_name, summary_name) = match shard {
@@ -110,6 +122,14 @@ impl OutputDir {
             None => ("stats.jsonl".to_string(), "summary.json".to_string()),
         };
         let stats_path = dir.join(&stats_name);
+        refuse_other_runs_beside(dir, &stats_name, identity)?;
+        let previous = if resume {
+            let kept = read_complete_records(&stats_path)?;
+            refuse_resuming_another_run(dir, &kept, identity)?;
+            kept
+        } else {
+            Vec::new()
+        };
         if resume {
             remove_stale_temporaries(dir, |target| match shard {
                 None => true,
@@ -119,13 +139,6 @@ impl OutputDir {
                         || frame_of_file(target).is_some_and(|f| frames.contains(&f))
                 }
             });
-        }
-        let previous = if resume {
-            read_complete_records(&stats_path)?
-        } else {
-            Vec::new()
-        };
-        if resume {
             // Rewrite without any torn tail before appending to it.
             let mut text = String::new();
             for r in &previous {
@@ -234,25 +247,102 @@ fn frame_of_file(name: &str) -> Option<u32> {
     digits.parse().ok()
 }
 
-/// The records of a stats file up to its first line that is not a complete record (an
-/// interrupted write leaves at most a torn last line; a resumed render writes its records
-/// back, so it keeps only those it can write back unchanged). A missing file has no records.
-fn read_complete_records(path: &Path) -> Result<Vec<FrameRecord>, FileWriteError> {
-    let text = match fs::read_to_string(path) {
-        Ok(t) => t,
-        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(Vec::new()),
-        Err(e) => {
-            return Err(FileWriteError::Io {
-                path: path.to_path_buf(),
-                source: e,
-            });
-        }
+/// The complete records of a stats file, which a resumed render keeps and writes back, one
+/// per frame (the last, as every reader keeps it), by frame: a torn last line (an
+/// interrupted write) is dropped, and so is a record that lacks a field (an older
+/// version's, which cannot be written back unchanged; its frame is rendered again). A
+/// missing file has no records.
+///
+/// # Errors
+/// The file cannot be read, or a line other than the last is not a record: the one stats
+/// reader's rule ([`crate::record::read_stats_file`]), so a resume and `mipray report`
+/// judge a file alike; the message says how to go on.
+fn read_complete_records(path: &Path) -> Result<Vec<FrameRecord>> {
+    if !path.exists() {
+        return Ok(Vec::new());
+    }
+    let records = read_stats_file(path).map_err(|error| match error {
+        StatsFileError::Json { .. } | StatsFileError::Record { .. } => anyhow::anyhow!(
+            "{error}; cannot resume: the line is not a frame record, and a resume would drop \
+             it. Remove or mend that line (its frame is then rendered again), or render \
+             without --resume to replace the records"
+        ),
+        other => other.into(),
+    })?;
+    let mut last_of_each: BTreeMap<u32, FrameRecord> = BTreeMap::new();
+    for record in records.into_iter().filter(|r| r.missing().is_empty()) {
+        last_of_each.insert(record.frame(), record.values);
+    }
+    Ok(last_of_each.into_values().collect())
+}
+
+/// Refuses a resume whose kept records were rendered by another run than `identity`.
+fn refuse_resuming_another_run(
+    dir: &Path,
+    kept: &[FrameRecord],
+    identity: &RunIdentity,
+) -> Result<()> {
+    let Some(differences) = kept
+        .iter()
+        .map(|r| identity.differences_from(r))
+        .find(|d| !d.is_empty())
+    else {
+        return Ok(());
     };
-    Ok(text
+    bail!(
+        "{}: cannot resume: the frames there were rendered with other settings ({}); \
+         render without --resume to replace them, or into another folder",
+        dir.display(),
+        describe_differences(&differences, "there", "in this render")
+    )
+}
+
+/// Refuses to render into a folder whose other stats files (other shards', or a whole
+/// render's beside shards) hold records of another run than `identity`: their frames would
+/// be merged with this render's. A file's records agree with each other (every render
+/// that writes one checks), so the first record that says which run it belongs to speaks
+/// for the file; lines that are not records are left to the tools that read the file.
+fn refuse_other_runs_beside(dir: &Path, own: &str, identity: &RunIdentity) -> Result<()> {
+    let Ok(entries) = fs::read_dir(dir) else {
+        return Ok(());
+    };
+    let mut others: Vec<PathBuf> = entries
+        .flatten()
+        .map(|e| e.path())
+        .filter(|p| {
+            p.file_name()
+                .and_then(|n| n.to_str())
+                .is_some_and(|n| is_stats_file_name(n) && n != own)
+        })
+        .collect();
+    others.sort();
+    for path in others {
+        let Some(first) = first_identified_record(&path) else {
+            continue;
+        };
+        let differences = identity.differences_from(&first);
+        if !differences.is_empty() {
+            bail!(
+                "{}: its frames were rendered with other settings than this render ({}); \
+                 the frames of one folder must all be rendered alike: render into another \
+                 folder, or remove that file (and its frames) if they are no longer wanted",
+                path.display(),
+                describe_differences(&differences, "there", "in this render")
+            );
+        }
+    }
+    Ok(())
+}
+
+/// The first record of a stats file that says which run it belongs to, if any.
+fn first_identified_record(path: &Path) -> Option<FrameRecord> {
+    let file = File::open(path).ok()?;
+    std::io::BufReader::new(file)
         .lines()
-        .map_while(|line| Record::parse(line).ok().filter(|r| r.missing().is_empty()))
+        .map_while(std::result::Result::ok)
+        .filter_map(|line| Record::parse(&line).ok())
         .map(|r| r.values)
-        .collect())
+        .find(FrameRecord::has_run_identity)
 }
 
 /// Writes `image` to `path` in `format` atomically (see [`crate::atomic_file`]).
@@ -304,7 +394,8 @@ mod tests {
             fs::write(dir.path().join(name), b"half").unwrap();
         }
         let shard = Some(Shard { index: 0, count: 2 });
-        OutputDir::open(dir.path(), FrameFormat::Png, shard, 0..5, true).unwrap();
+        let identity = RunIdentity::default();
+        OutputDir::open(dir.path(), FrameFormat::Png, shard, 0..5, true, &identity).unwrap();
         let mut left: Vec<String> = fs::read_dir(dir.path())
             .unwrap()
             .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
@@ -313,7 +404,7 @@ mod tests {
         left.sort();
         assert_eq!(left, [names[3], names[6], names[4], names[5]]);
         // Alone in its folder (no shard), a resumed render removes every temporary.
-        OutputDir::open(dir.path(), FrameFormat::Png, None, 0..10, true).unwrap();
+        OutputDir::open(dir.path(), FrameFormat::Png, None, 0..10, true, &identity).unwrap();
         assert!(
             fs::read_dir(dir.path()).unwrap().all(|e| !e
                 .unwrap()

@@ -20,9 +20,13 @@ use anyhow::{Context, Result};
 use super::check::{CheckFinished, finish_check};
 use super::output::{FrameFormat, OutputDir, Shard, frame_file_name};
 use crate::atomic_file::write_rgb8_atomically;
-use crate::diff::{DiffOptions, DiffReport, FrameDiff, compare_stats, diff_frame};
+use crate::diff::{
+    DiffInputError, DiffOptions, DiffReport, FrameDiff, compare_stats, diff_frame, frame_file,
+};
 use crate::frame::{FrameClock, LevelImage, Renderer};
-use crate::record::FrameRecord;
+use crate::record::{FrameRecord, RunIdentity};
+use crate::report::frame_file_problem;
+use rayon::prelude::*;
 
 /// Where and how a sequence is written.
 #[derive(Debug, Clone)]
@@ -34,6 +38,9 @@ pub struct SequenceOutput {
     pub resume: Resume,
     /// Whether each frame also writes `lod_NNNN.png` (`--view lod`).
     pub level_image: LevelImage,
+    /// The scene and settings stamped on every record: a resume, or a shard beside others
+    /// in the folder, is refused when the records there came from another run.
+    pub identity: RunIdentity,
 }
 
 /// Whether a sequence continues an interrupted run in its folder.
@@ -41,7 +48,8 @@ pub struct SequenceOutput {
 pub enum Resume {
     /// Render every frame of the range (earlier records of the folder are replaced).
     Restart,
-    /// Skip frames whose file exists and whose record was written after it.
+    /// Skip frames whose file decodes at its record's size and whose record was written
+    /// after it (damaged frame files are rendered again).
     SkipComplete,
 }
 
@@ -64,8 +72,8 @@ pub struct WrittenFrame<'a> {
     pub path: &'a Path,
 }
 
-/// What a sequence tells as it goes, in this order: `resumed` (when frames were already
-/// complete), `started`, then per frame `frame_written` (and `frame_checked`, and
+/// What a sequence tells as it goes, in this order: `frame_damaged` for each kept frame
+/// whose file does not decode, `resumed` (when frames were already complete), `started`, then per frame `frame_written` (and `frame_checked`, and
 /// `stopping` when `--fail-fast` ends the run there), then `finished` once no more frames
 /// will be rendered, before the summary and the page are written. Every method does
 /// nothing by default.
@@ -73,6 +81,11 @@ pub trait SequenceProgress {
     /// `complete` of the range's `of` frames are already on disk and will not be rendered.
     fn resumed(&mut self, complete: usize, of: usize) {
         let _ = (complete, of);
+    }
+    /// A resume found frame `frame`'s file at `path` damaged (`problem`): it is rendered
+    /// again. Told before `resumed`.
+    fn frame_damaged(&mut self, frame: u32, path: &Path, problem: &str) {
+        let _ = (frame, path, problem);
     }
     /// `frames` frames are about to be rendered.
     fn started(&mut self, frames: u64) {
@@ -119,8 +132,11 @@ pub struct SequenceReport {
 /// `progress` each step.
 ///
 /// # Errors
-/// A frame fails to update (non-finite vertices), a file cannot be written, or a checked
-/// frame cannot be compared (missing reference frame, different sizes).
+/// A frame fails to update (non-finite vertices), a file cannot be written, the folder
+/// holds records of another run (see [`OutputDir::open`]). A checked frame that cannot be
+/// compared (missing reference frame, different sizes) is no error: the check reports it
+/// ([`CheckFinished::not_compared`]) and the sequence goes on, or stops there with
+/// `--fail-fast`.
 pub fn render_sequence(
     renderer: &mut Renderer,
     frames: Range<u32>,
@@ -140,13 +156,15 @@ pub fn render_sequence(
         }
     }
     let resume = out.resume == Resume::SkipComplete;
-    let (mut output, previous) =
-        OutputDir::open(&out.dir, out.format, out.shard, frames.clone(), resume)?;
-    // A frame is complete when its file exists and its record was written after it.
-    let mut records: Vec<FrameRecord> = previous
-        .into_iter()
-        .filter(|r| frames.contains(&r.frame) && output.frame_path(r.frame).is_file())
-        .collect();
+    let (mut output, previous) = OutputDir::open(
+        &out.dir,
+        out.format,
+        out.shard,
+        frames.clone(),
+        resume,
+        &out.identity,
+    )?;
+    let mut records = complete_frames(&output, &frames, previous, progress);
     let done: BTreeSet<u32> = records.iter().map(|r| r.frame).collect();
     if !done.is_empty() {
         progress.resumed(done.len(), frames.len());
@@ -180,8 +198,9 @@ pub fn render_sequence(
     };
     for frame in pending.filter(|f| !done.contains(f)) {
         let time_s = clock.time(frame);
-        let (image, record, view) =
+        let (image, mut record, view) =
             renderer.render_frame_with_view(frame, time_s, out.level_image)?;
+        out.identity.stamp(&mut record);
         let path = output.write_frame(frame, &image)?;
         if let Some(view) = view {
             let view_path = output.path().join(format!("lod_{frame:04}.png"));
@@ -222,15 +241,52 @@ pub fn render_sequence(
     })
 }
 
-/// Compares a written frame with the reference's frame of the same number.
+/// The kept records (of a resume) whose frames are complete: in `frames`, with a frame file
+/// that decodes at the record's size (a record is written after its frame, so the pair
+/// means the frame was finished). A damaged file is told to `progress` and its frame is
+/// rendered again. Files are decoded in parallel: milliseconds each.
+fn complete_frames(
+    output: &OutputDir,
+    frames: &Range<u32>,
+    previous: Vec<FrameRecord>,
+    progress: &mut dyn SequenceProgress,
+) -> Vec<FrameRecord> {
+    let judged: Vec<(FrameRecord, Option<String>)> = previous
+        .into_par_iter()
+        .filter(|r| frames.contains(&r.frame) && output.frame_path(r.frame).exists())
+        .map(|r| {
+            let problem =
+                frame_file_problem(&output.frame_path(r.frame), Some((r.width, r.height)));
+            (r, problem)
+        })
+        .collect();
+    let mut complete = Vec::with_capacity(judged.len());
+    for (record, problem) in judged {
+        match problem {
+            None => complete.push(record),
+            Some(problem) => {
+                progress.frame_damaged(record.frame, &output.frame_path(record.frame), &problem);
+            }
+        }
+    }
+    complete
+}
+
+/// Compares a written frame with the reference's frame of the same number (found as
+/// `mipray diff` finds it: a PNG or EXR frame of that number). Bad input (no reference
+/// frame, sizes that differ, a file that cannot be read) makes a frame not compared rather
+/// than an error: the render goes on, and the check reports it.
+///
+/// # Errors
+/// The failure images cannot be written.
 fn check_frame(frame: u32, path: &Path, format: FrameFormat, check: &Check) -> Result<FrameDiff> {
-    let name = frame_file_name(frame, format);
-    Ok(diff_frame(
-        frame,
-        &check.reference.join(&name),
-        path,
-        &check.options,
-    )?)
+    let reference = frame_file(&check.reference, frame)
+        .unwrap_or_else(|| check.reference.join(frame_file_name(frame, format)));
+    match diff_frame(frame, &reference, path, &check.options) {
+        Ok(judged) => Ok(judged),
+        Err(error @ DiffInputError::Folder { .. }) => Err(error.into()),
+        Err(error) => Ok(FrameDiff::not_compared(frame, &reference, path, &error)),
+    }
 }
 
 /// Judges frame `frame` (its file at `path`) against the reference, tells `progress` and

@@ -23,10 +23,11 @@
     current = frame;
     if (!frame) return;
     document.getElementById("frame-title").textContent =
-      "frame " + frame.frame + (frame.passed ? " (pass)" : " (FAIL)");
+      "frame " + frame.frame + (frame.passed ? " (pass)" : frame.problem ? " (not compared)" : " (FAIL)");
     const hasImages = frame.ref && frame.test;
     document.getElementById("frame-images").style.display = hasImages ? "" : "none";
-    document.getElementById("no-images").textContent = hasImages ? "" :
+    document.getElementById("no-images").textContent = hasImages ? "" : frame.problem ?
+      "Frame " + frame.frame + " was not compared: " + frame.problem :
       "Frame " + frame.frame + " is within the threshold; mipray diff writes images only for failing frames.";
     if (hasImages) {
       swipe.set(frame.test, frame.ref, "test", "reference");
