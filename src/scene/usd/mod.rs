@@ -326,7 +326,7 @@ fn load_stage(path: &Path) -> Result<SceneDesc, String> {
     b.notes.extend(metadata.frame_limit_note());
     let mut paths = Vec::new();
     stage
-        .traverse(usd::PrimPredicate::DEFAULT_PROXIES, |p| {
+        .traverse(TRAVERSAL, |p| {
             paths.push(p.clone())
         })
         .map_err(|e| format!("cannot traverse the stage: {e:#}"))?;
@@ -389,10 +389,17 @@ fn load_stage(path: &Path) -> Result<SceneDesc, String> {
     })
 }
 
+/// The prims the loader reads: active, loaded, defined and not abstract, instance proxies
+/// included (each instance's prims are loaded as its own).
+const TRAVERSAL: usd::PrimPredicate = usd::PrimPredicate::DEFAULT_PROXIES;
+
 /// Refuses a prim whose name cannot name a prim: USD itself refuses them, and openusd's
 /// traversal would never end on two of them (a root prim named `""` or any prim named `.`
 /// makes a child path equal to its parent, which it visits again). A walk over the composed
-/// child names, before the traversal; the names are checked before their prims are entered.
+/// child names before the traversal, entering the prims the traversal enters (those its
+/// predicate does not prune): entering others would compose what the stage never uses
+/// (an unloaded payload, a `class`), and their composition errors would fail the stage.
+/// Every listed name is checked, entered or not, as the traversal lists them all.
 fn check_prim_names(stage: &usd::Stage) -> Result<(), String> {
     let root = openusd::sdf::Path::abs_root();
     let mut stack = vec![root.clone()];
@@ -419,7 +426,12 @@ fn check_prim_names(stage: &usd::Stage) -> Result<(), String> {
             let child = parent
                 .append_path(name)
                 .map_err(|e| format!("{}/{name}: {e:#}", parent.as_str()))?;
-            stack.push(child);
+            let status = stage
+                .prim_status(child.clone())
+                .map_err(|e| format!("{}: {e:#}", child.as_str()))?;
+            if TRAVERSAL.matches(status) {
+                stack.push(child);
+            }
         }
     }
     Ok(())
