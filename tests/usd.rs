@@ -652,6 +652,13 @@ fn prims_that_cannot_be_named_are_refused_instead_of_hanging() {
         let error = result.expect_err("a prim without a valid name loaded");
         assert!(error.contains(expected), "{error}");
     }
+    // The check enters only what the stage draws: below an `over` (never drawn) a reference
+    // to a layer that does not exist is never composed, and the stage loads.
+    let (_dir, scene) = load_text(&format!(
+        "#usda 1.0\nover \"Unused\"\n{{\n    def Scope \"M\" (references = @missing.usda@)\n    {{\n    }}\n}}\n{}",
+        triangle("Drawn", "")
+    ));
+    assert_eq!(scene.unwrap().meshes.len(), 1);
 }
 
 /// A skeleton marked `guide` (as exporters often do) or hidden still skins its meshes: it is
