@@ -723,6 +723,14 @@ def SkelRoot "Root"
         "{:?}",
         scene.notes
     );
+    // Only below a SkelRoot does UsdSkel skin: elsewhere the mesh's own points hold.
+    let scene = load_text(&text.replace("def SkelRoot", "def Xform")).1.unwrap();
+    assert!(scene.skins.is_empty(), "{:?}", scene.notes);
+    assert!(
+        scene.notes.iter().any(|n| n.contains("not below a SkelRoot")),
+        "{:?}",
+        scene.notes
+    );
 }
 
 /// The usual way to colour a mesh by its `displayColor` in a material (a

@@ -75,9 +75,38 @@ fn inherited_target(
 }
 
 /// Whether the mesh is bound to a skeleton and has joint influences.
-pub(super) fn is_bound(b: &Builder, prim: &Prim) -> Result<bool, String> {
-    Ok(inherited_target(b, prim, "skel:skeleton")?.is_some()
-        && b.reader.has_value(prim, "primvars:skel:jointIndices")?)
+pub(super) fn is_bound(b: &mut Builder, prim: &Prim) -> Result<bool, String> {
+    let bound = inherited_target(b, prim, "skel:skeleton")?.is_some()
+        && b.reader.has_value(prim, "primvars:skel:jointIndices")?;
+    if bound && !under_skel_root(b, prim)? {
+        // UsdSkel skins only below a SkelRoot; elsewhere the mesh's own points hold (a
+        // baked result often keeps the binding it was baked from).
+        b.notes.push(format!(
+            "{}: bound to a skeleton but not below a SkelRoot, so not skinned (as in UsdSkel): its own points are used",
+            prim.path().as_str()
+        ));
+        return Ok(false);
+    }
+    Ok(bound)
+}
+
+/// Whether `prim` lies below (or is) a `SkelRoot`.
+fn under_skel_root(b: &Builder, prim: &Prim) -> Result<bool, String> {
+    let mut current = Some(prim.path().clone());
+    while let Some(path) = current {
+        if path == openusd::sdf::Path::abs_root() {
+            break;
+        }
+        let ancestor = b.reader.stage.prim(path.clone());
+        let type_name = ancestor
+            .type_name()
+            .map_err(|e| format!("{}: {e:#}", path.as_str()))?;
+        if type_name.is_some_and(|t| t.as_str() == "SkelRoot") {
+            return Ok(true);
+        }
+        current = path.parent();
+    }
+    Ok(false)
 }
 
 /// Adds the skeleton's joint nodes (and their animation channels) under `node`.
