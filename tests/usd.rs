@@ -878,3 +878,15 @@ def Camera "Cam"
         );
     }
 }
+
+/// USD's text format allows C-style comments and whitespace after the header; openusd's
+/// reader does not, so the loader hands it the layer without them.
+#[test]
+fn c_style_comments_and_a_loose_header_load() {
+    let text = format!(
+        "#usda 1.0 \n// a line comment\n/* a block\n   comment */\n{}",
+        triangle("Drawn", "// after a property")
+    );
+    let (_dir, scene) = load_text(&text);
+    assert_eq!(scene.unwrap().meshes.len(), 1);
+}

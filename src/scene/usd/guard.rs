@@ -103,11 +103,74 @@ impl Resolver for CheckingResolver {
         check_bytes(&bytes).map_err(|e| {
             io::Error::new(io::ErrorKind::InvalidData, format!("{resolved_path}: {e}"))
         })?;
-        Ok(Box::new(Cursor::new(bytes)))
+        Ok(Box::new(Cursor::new(tolerate_text(bytes))))
     }
     fn identity(&self) -> String {
         self.0.identity()
     }
+}
+
+/// A text layer as openusd 0.6 reads it, where USD's own text format allows more: the
+/// header line's trailing whitespace is dropped (`#usda 1.0 `), and `//` and `/* */`
+/// comments become spaces (newlines kept, so lines keep their numbers). Strings, asset paths
+/// and path literals are left alone. Crate files and packages pass unchanged.
+pub(super) fn tolerate_text(mut bytes: Vec<u8>) -> Vec<u8> {
+    if !bytes.starts_with(b"#usda") {
+        return bytes;
+    }
+    let header_end = bytes.iter().position(|&b| b == b'\n').unwrap_or(bytes.len());
+    let trimmed = bytes[..header_end]
+        .iter()
+        .rposition(|b| !b.is_ascii_whitespace())
+        .map_or(0, |i| i + 1);
+    bytes.drain(trimmed..header_end);
+    let mut i = 0;
+    while i < bytes.len() {
+        match bytes[i] {
+            b'#' => i = skip_until(&bytes, i + 1, |b| b == b'\n'),
+            quote @ (b'"' | b'\'' | b'@') if bytes[i..].starts_with(&[quote; 3]) => {
+                i = bytes[i + 3..]
+                    .windows(3)
+                    .position(|w| w == [quote; 3])
+                    .map_or(bytes.len(), |k| i + 3 + k + 3);
+            }
+            quote @ (b'"' | b'\'' | b'@') => {
+                let mut j = i + 1;
+                while j < bytes.len() && bytes[j] != quote {
+                    j += if bytes[j] == b'\\' { 2 } else { 1 };
+                }
+                i = j + 1;
+            }
+            b'<' => i = skip_until(&bytes, i + 1, |b| b == b'>' || b.is_ascii_whitespace()) + 1,
+            b'/' if bytes.get(i + 1) == Some(&b'/') => {
+                let end = skip_until(&bytes, i, |b| b == b'\n');
+                bytes[i..end].fill(b' ');
+                i = end;
+            }
+            b'/' if bytes.get(i + 1) == Some(&b'*') => {
+                let end = bytes[i + 2..]
+                    .windows(2)
+                    .position(|w| w == b"*/")
+                    .map_or(bytes.len(), |k| i + 2 + k + 2);
+                for b in &mut bytes[i..end] {
+                    if *b != b'\n' {
+                        *b = b' ';
+                    }
+                }
+                i = end;
+            }
+            _ => i += 1,
+        }
+    }
+    bytes
+}
+
+/// The index of the first byte from `from` on that `stop` accepts (the length if none).
+fn skip_until(bytes: &[u8], from: usize, stop: impl Fn(u8) -> bool) -> usize {
+    bytes
+        .get(from..)
+        .and_then(|rest| rest.iter().position(|&b| stop(b)))
+        .map_or(bytes.len(), |k| from + k)
 }
 
 /// Text: UTF-8, the `#usda` header, brackets nested at most [`MAX_DEPTH`] deep (outside
@@ -707,6 +770,19 @@ fn list_count(header: Option<u8>) -> u32 {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn c_comments_and_a_loose_header_are_tolerated_and_strings_kept() {
+        let text = "#usda 1.0 \t\n// line\ndef \"A//B\" /* block\nspans */ {\n  string s = \"\"\"x \"y // z\"\"\"\n  asset a = @//server/x.png@\n  rel r = </A/B> // after\n}\n";
+        let out = String::from_utf8(tolerate_text(text.as_bytes().to_vec())).unwrap();
+        assert_eq!(
+            out,
+            "#usda 1.0\n       \ndef \"A//B\"         \n         {\n  string s = \"\"\"x \"y // z\"\"\"\n  asset a = @//server/x.png@\n  rel r = </A/B>         \n}\n"
+        );
+        // Crate files and packages pass unchanged.
+        let crate_bytes = b"PXR-USDC// not text".to_vec();
+        assert_eq!(tolerate_text(crate_bytes.clone()), crate_bytes);
+    }
 
     #[test]
     fn text_checks_accept_real_layers_and_refuse_runaway_paths_and_nesting() {
