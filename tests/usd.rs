@@ -661,17 +661,11 @@ fn prims_that_cannot_be_named_are_refused_instead_of_hanging() {
     assert_eq!(scene.unwrap().meshes.len(), 1);
 }
 
-/// A skeleton marked `guide` (as exporters often do) or hidden still skins its meshes: it is
-/// never drawn, only read.
-#[test]
-fn a_guide_skeleton_still_skins_its_meshes() {
-    for skeleton_line in [
-        "uniform token purpose = \"guide\"",
-        "token visibility = \"invisible\"",
-        "",
-    ] {
-        let text = format!(
-            r#"#usda 1.0
+/// A SkelRoot holding a one-joint skeleton (with `skeleton_line` among its properties) and
+/// a triangle skinned to it (with `mesh_line` among its properties).
+fn skinned_stage(skeleton_line: &str, mesh_line: &str) -> String {
+    format!(
+        r#"#usda 1.0
 def SkelRoot "Root"
 {{
     def Skeleton "Skel" (prepend apiSchemas = ["SkelBindingAPI"])
@@ -684,38 +678,35 @@ def SkelRoot "Root"
     {}
 }}
 "#,
-            triangle(
-                "m",
+        triangle(
+            "m",
+            &format!(
                 r#"int[] primvars:skel:jointIndices = [0, 0, 0] (interpolation = "vertex" elementSize = 1)
     float[] primvars:skel:jointWeights = [1, 1, 1] (interpolation = "vertex" elementSize = 1)
+    {mesh_line}
     rel skel:skeleton = </Root/Skel>"#
             )
-        );
-        let (_dir, scene) = load_text(&text);
+        )
+    )
+}
+
+/// A skeleton marked `guide` (as exporters often do) or hidden still skins its meshes: it is
+/// never drawn, only read.
+#[test]
+fn a_guide_skeleton_still_skins_its_meshes() {
+    for skeleton_line in [
+        "uniform token purpose = \"guide\"",
+        "token visibility = \"invisible\"",
+        "",
+    ] {
+        let (_dir, scene) = load_text(&skinned_stage(skeleton_line, ""));
         let scene = scene.unwrap_or_else(|e| panic!("{skeleton_line}: {e}"));
         assert_eq!(scene.skins.len(), 1, "{skeleton_line}: {:?}", scene.notes);
     }
     // Dual-quaternion skinning is skinned with linear blending, and said so.
-    let text = format!(
-        r#"#usda 1.0
-def SkelRoot "Root"
-{{
-    def Skeleton "Skel" (prepend apiSchemas = ["SkelBindingAPI"])
-    {{
-        uniform token[] joints = ["a"]
-        uniform matrix4d[] bindTransforms = [( (1, 0, 0, 0), (0, 1, 0, 0), (0, 0, 1, 0), (0, 0, 0, 1) )]
-        uniform matrix4d[] restTransforms = [( (1, 0, 0, 0), (0, 1, 0, 0), (0, 0, 1, 0), (0, 0, 0, 1) )]
-    }}
-    {}
-}}
-"#,
-        triangle(
-            "m",
-            r#"int[] primvars:skel:jointIndices = [0, 0, 0] (interpolation = "vertex" elementSize = 1)
-    float[] primvars:skel:jointWeights = [1, 1, 1] (interpolation = "vertex" elementSize = 1)
-    uniform token primvars:skel:skinningMethod = "dualQuaternion"
-    rel skel:skeleton = </Root/Skel>"#
-        )
+    let text = skinned_stage(
+        "",
+        "uniform token primvars:skel:skinningMethod = \"dualQuaternion\"",
     );
     let scene = load_text(&text).1.unwrap();
     assert!(
@@ -724,10 +715,15 @@ def SkelRoot "Root"
         scene.notes
     );
     // Only below a SkelRoot does UsdSkel skin: elsewhere the mesh's own points hold.
-    let scene = load_text(&text.replace("def SkelRoot", "def Xform")).1.unwrap();
+    let scene = load_text(&text.replace("def SkelRoot", "def Xform"))
+        .1
+        .unwrap();
     assert!(scene.skins.is_empty(), "{:?}", scene.notes);
     assert!(
-        scene.notes.iter().any(|n| n.contains("not below a SkelRoot")),
+        scene
+            .notes
+            .iter()
+            .any(|n| n.contains("not below a SkelRoot")),
         "{:?}",
         scene.notes
     );

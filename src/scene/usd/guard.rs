@@ -118,7 +118,10 @@ pub(super) fn tolerate_text(mut bytes: Vec<u8>) -> Vec<u8> {
     if !bytes.starts_with(b"#usda") {
         return bytes;
     }
-    let header_end = bytes.iter().position(|&b| b == b'\n').unwrap_or(bytes.len());
+    let header_end = bytes
+        .iter()
+        .position(|&b| b == b'\n')
+        .unwrap_or(bytes.len());
     let trimmed = bytes[..header_end]
         .iter()
         .rposition(|b| !b.is_ascii_whitespace())

@@ -242,7 +242,7 @@ impl Materials {
                         desc.base_color = scale;
                         uv = Some(read);
                     }
-                    None => desc.base_color = texture_fallback(reader, &source)?,
+                    None => desc.base_color = fallback_colour(reader, &source)?,
                 },
                 Some(id) if id.starts_with("UsdPrimvarReader_float") => {
                     match primvar_colour(reader, &source)? {
@@ -633,18 +633,17 @@ fn shader_input(reader: &Reader, shader: &Prim, name: &str) -> Result<Input, Str
     ))
 }
 
-/// The colour a `UsdUVTexture` without an image gives: its `inputs:fallback` (rgb), by
-/// default black as the shader's specification says.
-fn texture_fallback(reader: &Reader, texture: &Prim) -> Result<Vec3, String> {
-    match shader_input(reader, texture, "fallback")? {
-        Input::Value(v) => color(&v, texture, "inputs:fallback"),
+/// A shader's `inputs:fallback` as a colour; black when unset (the default both the
+/// `UsdUVTexture` and the `UsdPrimvarReader` specifications give).
+fn fallback_colour(reader: &Reader, shader: &Prim) -> Result<Vec3, String> {
+    match shader_input(reader, shader, "fallback")? {
+        Input::Value(v) => color(&v, shader, "inputs:fallback"),
         _ => Ok(Vec3::ZERO),
     }
 }
 
 /// For a `UsdPrimvarReader_float3` (or `float4`) of `displayColor`: its fallback colour
-/// (`inputs:fallback`, by default black as the shader's specification says). `None` for a
-/// reader of another primvar.
+/// (black by default). `None` for a reader of another primvar.
 fn primvar_colour(reader: &Reader, primvar_reader: &Prim) -> Result<Option<Vec3>, String> {
     let varname = match shader_input(reader, primvar_reader, "varname")? {
         Input::Value(v) => token(&v),
@@ -653,10 +652,7 @@ fn primvar_colour(reader: &Reader, primvar_reader: &Prim) -> Result<Option<Vec3>
     if varname.as_deref() != Some("displayColor") {
         return Ok(None);
     }
-    match shader_input(reader, primvar_reader, "fallback")? {
-        Input::Value(v) => color(&v, primvar_reader, "inputs:fallback").map(Some),
-        _ => Ok(Some(Vec3::ZERO)),
-    }
+    fallback_colour(reader, primvar_reader).map(Some)
 }
 
 /// How a `UsdUVTexture` reads its uvs: the primvar reader's `varname` (default `st`), and

@@ -326,9 +326,7 @@ fn load_stage(path: &Path) -> Result<SceneDesc, String> {
     b.notes.extend(metadata.frame_limit_note());
     let mut paths = Vec::new();
     stage
-        .traverse(TRAVERSAL, |p| {
-            paths.push(p.clone())
-        })
+        .traverse(TRAVERSAL, |p| paths.push(p.clone()))
         .map_err(|e| format!("cannot traverse the stage: {e:#}"))?;
     check_composition(&stage)?;
     note_unexpanded_nested_instances(&stage, &paths, &mut b.notes)?;
