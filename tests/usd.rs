@@ -990,3 +990,56 @@ def Mesh "M"
         "{error}"
     );
 }
+
+/// An `upAxis` USD does not allow (only Y and Z) is read as USD's own tools read it: USD
+/// returns the token as authored and usdview treats every axis but Z as Y. So the stage is
+/// not turned, and a note says so.
+#[test]
+fn an_x_up_axis_reads_as_y_with_a_note() {
+    let stage = |axis: &str| {
+        format!(
+            "#usda 1.0\n(\n    upAxis = \"{axis}\"\n    metersPerUnit = 1\n)\n{}",
+            triangle("M", "")
+        )
+    };
+    let turned = |scene: &mipray::scene::SceneDesc| {
+        scene
+            .nodes
+            .iter()
+            .any(|n| n.name.starts_with("stage (upAxis"))
+    };
+    let z = load_text(&stage("Z")).1.unwrap();
+    assert!(turned(&z));
+    let x = load_text(&stage("X")).1.unwrap();
+    assert!(!turned(&x));
+    let (corners, _) = only_triangle(&x);
+    assert_eq!(corners, [[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]]);
+    assert!(
+        x.notes
+            .iter()
+            .any(|n| n.contains("upAxis \"X\"") && n.contains("read as Y")),
+        "{:?}",
+        x.notes
+    );
+}
+
+/// A time code range that ends before it starts is empty to usdview (a warning, no
+/// playback, the stage shown at time code 0): it gives one frame at time 0, noted.
+#[test]
+fn a_reversed_time_code_range_gives_one_frame_at_time_zero() {
+    let text = format!(
+        "#usda 1.0\n(\n    startTimeCode = 10\n    endTimeCode = 2\n)\n{}",
+        triangle("M", "")
+    );
+    let scene = load_text(&text).1.unwrap();
+    let times = scene.frame_times.expect("a frame sequence");
+    assert_eq!((times.start, times.end, times.frames), (0.0, 0.0, 1));
+    assert!(
+        scene
+            .notes
+            .iter()
+            .any(|n| n.contains("startTimeCode 10 is after endTimeCode 2")),
+        "{:?}",
+        scene.notes
+    );
+}

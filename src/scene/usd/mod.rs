@@ -61,7 +61,7 @@ const MAX_NOTES: usize = 40;
 /// The stage metadata `mipray info` reports.
 #[derive(Debug, Clone, PartialEq)]
 pub struct StageMetadata {
-    /// `"Y"` or `"Z"`.
+    /// `"Y"` or `"Z"`: the axis applied (an authored axis USD does not allow reads as Y).
     pub up_axis: String,
     pub up_axis_authored: bool,
     pub meters_per_unit: f64,
@@ -70,6 +70,9 @@ pub struct StageMetadata {
     pub frames_per_second: f64,
     /// `(startTimeCode, endTimeCode)` when both are authored.
     pub time_code_range: Option<(f64, f64)>,
+    /// How metadata USD reads but does not allow was read (an `upAxis` other than Y or Z, a
+    /// time code range that ends before it starts).
+    pub notes: Vec<String>,
 }
 
 /// Loads a `.usda`, `.usdc` or `.usdz` stage.
@@ -131,10 +134,18 @@ fn read_metadata(stage: &usd::Stage) -> Result<StageMetadata, String> {
         .map_err(|e| e.to_string())?
         .as_ref()
         .and_then(token);
+    let mut notes = Vec::new();
+    // USD allows only Y and Z, but reads any token: UsdGeomGetStageUpAxis returns it as
+    // authored, and usdview (like UsdLux's dome light) treats every axis but Z as Y.
     let up_axis = match up.as_deref() {
-        None | Some("Y") => "Y".to_string(),
         Some("Z") => "Z".to_string(),
-        Some(other) => return Err(format!("upAxis '{other}' is neither Y nor Z")),
+        None | Some("Y") => "Y".to_string(),
+        Some(other) => {
+            notes.push(format!(
+                "upAxis \"{other}\" is not one USD allows (Y or Z); read as Y, as usdview does"
+            ));
+            "Y".to_string()
+        }
     };
     let mpu = stage
         .stage_metadata("metersPerUnit")
@@ -173,12 +184,19 @@ fn read_metadata(stage: &usd::Stage) -> Result<StageMetadata, String> {
     let time_code_range = stage
         .has_authored_time_code_range()
         .then(|| (stage.start_time_code(), stage.end_time_code()));
-    if let Some((start, end)) = time_code_range
-        && !(start.is_finite() && end.is_finite() && start <= end)
-    {
-        return Err(format!(
-            "startTimeCode {start} and endTimeCode {end} are not a finite range"
-        ));
+    if let Some((start, end)) = time_code_range {
+        if !(start.is_finite() && end.is_finite()) {
+            return Err(format!(
+                "startTimeCode {start} and endTimeCode {end} are not a finite range"
+            ));
+        }
+        // usdview warns of an invalid frame range and plays nothing, showing time code 0.
+        if start > end {
+            notes.push(format!(
+                "startTimeCode {start} is after endTimeCode {end}: an empty range, as in usdview, \
+                 which shows the stage at time code 0; one frame at time code 0 (use --frames to choose)"
+            ));
+        }
     }
     Ok(StageMetadata {
         up_axis,
@@ -188,6 +206,7 @@ fn read_metadata(stage: &usd::Stage) -> Result<StageMetadata, String> {
         time_codes_per_second,
         frames_per_second,
         time_code_range,
+        notes,
     })
 }
 
@@ -216,6 +235,14 @@ impl StageMetadata {
     /// `startTimeCode` to `endTimeCode` (both included).
     pub fn frame_times(&self) -> Option<FrameTimes> {
         let (start, end) = self.time_code_range?;
+        if start > end {
+            // An empty range: the stage at time code 0, as usdview shows it.
+            return Some(FrameTimes {
+                start: 0.0,
+                end: 0.0,
+                frames: 1,
+            });
+        }
         let frames = self.stage_frames(start, end).min(MAX_STAGE_FRAMES) as u32 + 1;
         Some(FrameTimes {
             start: (start / self.time_codes_per_second) as f32,
@@ -323,6 +350,7 @@ fn load_stage(path: &Path) -> Result<SceneDesc, String> {
         b.stage_root = Some(root);
     }
     check_prim_names(&stage)?;
+    b.notes.extend(metadata.notes.iter().cloned());
     b.notes.extend(metadata.frame_limit_note());
     let mut paths = Vec::new();
     stage
