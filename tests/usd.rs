@@ -1043,3 +1043,31 @@ fn a_reversed_time_code_range_gives_one_frame_at_time_zero() {
         scene.notes
     );
 }
+
+/// A parse error in a text layer names the layer and the line it is on (openusd's reader
+/// reports none), for the root layer and for a sublayer.
+#[test]
+fn a_text_parse_error_names_its_layer_and_line() {
+    let (dir, root) = load_text(&format!(
+        "#usda 1.0\n// a comment\n{}def Xform \"X\" {{\n    double a = = 1\n}}\n",
+        triangle("M", "")
+    ));
+    let error = root.map(|_| ()).unwrap_err();
+    let at = format!("{}:12:", dir.path().join("stage.usda").display()); // the `double` line
+    assert!(error.contains(&at), "{error}");
+
+    let sub = dir.path().join("sub.usda");
+    std::fs::write(
+        &sub,
+        "#usda 1.0\n\ndef Xform \"S\"\n{\n    point3f[] p = [(.5, 0, 0)]\n    double b = = 1\n}\n",
+    )
+    .unwrap();
+    let root = dir.path().join("root.usda");
+    std::fs::write(&root, "#usda 1.0\n(\n    subLayers = [@./sub.usda@]\n)\n").unwrap();
+    let error = mipray::scene::load(&root)
+        .map(|_| ())
+        .unwrap_err()
+        .to_string();
+    assert!(error.contains("root.usda"), "{error}");
+    assert!(error.contains("sub.usda:6:"), "{error}");
+}

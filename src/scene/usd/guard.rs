@@ -85,28 +85,80 @@ pub(super) fn without_panics<T>(f: impl FnOnce() -> Result<T, String>) -> Result
 }
 
 /// The default resolver, with every layer's bytes checked before `openusd` sees them.
-pub(super) struct CheckingResolver(pub DefaultResolver);
+pub(super) struct CheckingResolver {
+    inner: DefaultResolver,
+    /// The text layers handed to `openusd` so far, in order (see [`TextLayers`]).
+    text_layers: TextLayers,
+}
+
+impl CheckingResolver {
+    pub(super) fn new(text_layers: TextLayers) -> Self {
+        CheckingResolver {
+            inner: DefaultResolver::new(),
+            text_layers,
+        }
+    }
+}
+
+/// The text layers a [`CheckingResolver`] has handed to `openusd`, kept so that a parse
+/// error (which `openusd` reports without a position) can be placed: see
+/// [`TextLayers::place`].
+#[derive(Clone, Default)]
+pub(super) struct TextLayers(std::rc::Rc<std::cell::RefCell<Vec<ResolvedPath>>>);
+
+impl TextLayers {
+    /// An error message from `openusd`, led by `file:line` when it is a text parse error.
+    pub(super) fn place(&self, message: &str) -> String {
+        if !message.contains("failed to parse USDA layer") {
+            return message.to_string();
+        }
+        match self.locate_parse_error() {
+            Some(at) => format!("{at}: {message}"),
+            None => message.to_string(),
+        }
+    }
+
+    /// `file:line` of the text parse error that stopped the stage: the layers handed to
+    /// `openusd` are parsed again, latest first (the failing one is the last opened), as
+    /// `openusd` parsed them; the line is the original file's (the text pass keeps lines).
+    fn locate_parse_error(&self) -> Option<String> {
+        let resolver = DefaultResolver::new();
+        self.0.borrow().iter().rev().find_map(|path| {
+            let bytes = resolver.open_asset(path).ok()?.read_all().ok()?;
+            let text = String::from_utf8(tolerate_text(bytes)).ok()?;
+            let mut parser = openusd::usda::parser::Parser::new(&text);
+            let failed = parser.parse().is_err();
+            failed
+                .then(|| parser.last_error_highlight())
+                .flatten()
+                .map(|at| format!("{path}:{}", at.line))
+        })
+    }
+}
 
 impl Resolver for CheckingResolver {
     fn create_identifier(&self, asset_path: &str, anchor: Option<&ResolvedPath>) -> String {
-        self.0.create_identifier(asset_path, anchor)
+        self.inner.create_identifier(asset_path, anchor)
     }
     fn resolve(&self, asset_path: &str) -> Option<ResolvedPath> {
-        self.0.resolve(asset_path)
+        self.inner.resolve(asset_path)
     }
     fn resolve_for_new_asset(&self, asset_path: &str) -> Option<ResolvedPath> {
-        self.0.resolve_for_new_asset(asset_path)
+        self.inner.resolve_for_new_asset(asset_path)
     }
     fn open_asset(&self, resolved_path: &ResolvedPath) -> io::Result<Box<dyn Asset>> {
-        let mut asset = self.0.open_asset(resolved_path)?;
+        let mut asset = self.inner.open_asset(resolved_path)?;
         let bytes = asset.read_all()?;
         check_bytes(&bytes).map_err(|e| {
             io::Error::new(io::ErrorKind::InvalidData, format!("{resolved_path}: {e}"))
         })?;
+        if bytes.starts_with(b"#usda") {
+            self.text_layers.0.borrow_mut().push(resolved_path.clone());
+        }
         Ok(Box::new(Cursor::new(tolerate_text(bytes))))
     }
     fn identity(&self) -> String {
-        self.0.identity()
+        self.inner.identity()
     }
 }
 

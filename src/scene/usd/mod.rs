@@ -101,21 +101,24 @@ pub fn metadata(path: &Path) -> Result<StageMetadata, LoadError> {
     };
     guard::check_file(path).map_err(error)?;
     guard::without_panics(|| {
-        let stage = open(path)?;
+        let (stage, _) = open(path)?;
         read_metadata(&stage)
     })
     .map_err(error)
 }
 
-fn open(path: &Path) -> Result<usd::Stage, String> {
+/// Opens the stage, with the text layers it read (to place a parse error found later).
+fn open(path: &Path) -> Result<(usd::Stage, guard::TextLayers), String> {
     let name = path
         .to_str()
         .ok_or_else(|| "the path is not valid UTF-8".to_string())?;
     // Every layer the stage opens goes through the checking resolver (`guard.rs`).
-    usd::Stage::builder()
-        .resolver(guard::CheckingResolver(openusd::ar::DefaultResolver::new()))
+    let text_layers = guard::TextLayers::default();
+    let stage = usd::Stage::builder()
+        .resolver(guard::CheckingResolver::new(text_layers.clone()))
         .open(name)
-        .map_err(|e| stage_error(&format!("{e:#}")))
+        .map_err(|e| stage_error(&text_layers.place(&format!("{e:#}"))))?;
+    Ok((stage, text_layers))
 }
 
 /// The message for a stage that does not open. The USDA lexer reports a character or word
@@ -319,7 +322,7 @@ pub(super) struct Builder<'s> {
 }
 
 fn load_stage(path: &Path) -> Result<SceneDesc, String> {
-    let stage = open(path)?;
+    let (stage, text_layers) = open(path)?;
     let metadata = read_metadata(&stage)?;
     let mut b = Builder {
         reader: Reader {
@@ -356,7 +359,7 @@ fn load_stage(path: &Path) -> Result<SceneDesc, String> {
     stage
         .traverse(TRAVERSAL, |p| paths.push(p.clone()))
         .map_err(|e| format!("cannot traverse the stage: {e:#}"))?;
-    check_composition(&stage)?;
+    check_composition(&stage, &text_layers)?;
     note_unexpanded_nested_instances(&stage, &paths, &mut b.notes)?;
     // The traversal is depth first, parents before children, so a skipped prim's subtree
     // is the run of paths right after it: one prefix at a time is enough.
@@ -372,7 +375,7 @@ fn load_stage(path: &Path) -> Result<SceneDesc, String> {
             skipped = Some(name.to_string());
         }
     }
-    check_composition(&stage)?;
+    check_composition(&stage, &text_layers)?;
     skel::bind_meshes(&mut b)?;
     b.ignored.notes(&mut b.notes);
     let Builder {
@@ -508,10 +511,13 @@ fn is_prim_name(name: &str) -> bool {
 
 /// A missing layer, a composition cycle and the like: openusd reports them as recoverable
 /// composition errors; the renderer cannot draw a stage with holes, so they are errors.
-fn check_composition(stage: &usd::Stage) -> Result<(), String> {
+fn check_composition(stage: &usd::Stage, text_layers: &guard::TextLayers) -> Result<(), String> {
     match stage.composition_errors().first() {
         None => Ok(()),
-        Some(e) => Err(format!("composition failed: {e}")),
+        Some(e) => Err(format!(
+            "composition failed: {}",
+            text_layers.place(&e.to_string())
+        )),
     }
 }
 
