@@ -886,3 +886,188 @@ fn c_style_comments_and_a_loose_header_load() {
     let (_dir, scene) = load_text(&text);
     assert_eq!(scene.unwrap().meshes.len(), 1);
 }
+
+/// The one triangle of a stage's one mesh: its three corners and their normals.
+fn only_triangle(scene: &mipray::scene::SceneDesc) -> (Vec<[f32; 3]>, Option<Vec<[f32; 3]>>) {
+    assert_eq!(scene.meshes.len(), 1);
+    let primitive = &scene.meshes[0].primitives[0];
+    assert_eq!(primitive.indices.len(), 3);
+    let corners = |values: &[glam::Vec3]| {
+        primitive
+            .indices
+            .iter()
+            .map(|&i| values[i as usize].to_array())
+            .collect::<Vec<_>>()
+    };
+    (
+        corners(&primitive.positions),
+        primitive.normals.as_deref().map(corners),
+    )
+}
+
+/// USD's text format writes numbers without a digit on one side of the point (`.5`, `0.`,
+/// `1.e5`); openusd's reader does not, so the loader gives them the digit.
+#[test]
+fn numbers_with_a_bare_point_load_with_their_values() {
+    let text = r#"#usda 1.0
+(
+    startTimeCode = 0.
+    endTimeCode = 1.e1
+)
+def Mesh "M"
+{
+    uniform token subdivisionScheme = "none"
+    int[] faceVertexCounts = [3]
+    int[] faceVertexIndices = [0, 1, 2]
+    point3f[] points = [(.5, -.25, 0.), (1.e1, 0, 5.E-1), (0, 1., -0.)]
+}
+"#;
+    let scene = load_text(text).1.unwrap();
+    let (corners, _) = only_triangle(&scene);
+    assert_eq!(
+        corners,
+        [[0.5, -0.25, 0.0], [10.0, 0.0, 0.5], [0.0, 1.0, 0.0]]
+    );
+    let times = scene.frame_times.expect("the stage's own range");
+    assert_eq!(times.frames, 11);
+}
+
+/// Legacy value type names USD still reads (`PointFloat`, `NormalFloat`, `Vec3f`, ...) and
+/// `config` variability, as older exporters wrote them.
+#[test]
+fn legacy_type_names_load_as_the_types_they_stand_for() {
+    let text = r#"#usda 1.0
+def Mesh "M" (
+    customData = {
+        Vec3f pivot = (1, 2, 3)
+    }
+)
+{
+    config token subdivisionScheme = "none"
+    int[] faceVertexCounts = [3]
+    int[] faceVertexIndices = [0, 1, 2]
+    PointFloat[] points = [(0, 0, 0), (2, 0, 0), (0, 3, 0)]
+    NormalFloat[] normals = [(0, 0, 1), (0, 0, 1), (0, 0, 1)] (
+        interpolation = "vertex"
+    )
+    custom Color tint = (1, 0.5, 0.25)
+}
+"#;
+    let scene = load_text(text).1.unwrap();
+    let (corners, normals) = only_triangle(&scene);
+    assert_eq!(corners, [[0.0, 0.0, 0.0], [2.0, 0.0, 0.0], [0.0, 3.0, 0.0]]);
+    assert_eq!(normals, Some(vec![[0.0, 0.0, 1.0]; 3]));
+    // `config` reads as `uniform`: the authored scheme holds, so no subdivision note.
+    assert!(
+        !scene.notes.iter().any(|n| n.contains("subdivision")),
+        "{:?}",
+        scene.notes
+    );
+}
+
+/// `uint[]` arrays (openusd reads no unsigned arrays) load as `int64[]`, which holds every
+/// `uint` value.
+#[test]
+fn unsigned_integer_arrays_load() {
+    let text = r#"#usda 1.0
+def Mesh "M"
+{
+    uniform token subdivisionScheme = "none"
+    uint[] faceVertexCounts = [3]
+    uint[] faceVertexIndices = [2, 0, 1]
+    point3f[] points = [(0, 0, 0), (1, 0, 0), (0, 1, 0)]
+    uint64[] ids = [18446744073]
+}
+"#;
+    let scene = load_text(text).1.unwrap();
+    let (corners, _) = only_triangle(&scene);
+    assert_eq!(corners, [[0.0, 1.0, 0.0], [0.0, 0.0, 0.0], [1.0, 0.0, 0.0]]);
+    // A `uint64` past the largest `int64` is refused, not altered.
+    let (_dir, scene) = load_text(&text.replace("18446744073", "18446744073709551615"));
+    let error = scene.map(|_| ()).unwrap_err();
+    assert!(
+        error.contains("stage.usda") && error.contains("18446744073709551615"),
+        "{error}"
+    );
+}
+
+/// An `upAxis` USD does not allow (only Y and Z) is read as USD's own tools read it: USD
+/// returns the token as authored and usdview treats every axis but Z as Y. So the stage is
+/// not turned, and a note says so.
+#[test]
+fn an_x_up_axis_reads_as_y_with_a_note() {
+    let stage = |axis: &str| {
+        format!(
+            "#usda 1.0\n(\n    upAxis = \"{axis}\"\n    metersPerUnit = 1\n)\n{}",
+            triangle("M", "")
+        )
+    };
+    let turned = |scene: &mipray::scene::SceneDesc| {
+        scene
+            .nodes
+            .iter()
+            .any(|n| n.name.starts_with("stage (upAxis"))
+    };
+    let z = load_text(&stage("Z")).1.unwrap();
+    assert!(turned(&z));
+    let x = load_text(&stage("X")).1.unwrap();
+    assert!(!turned(&x));
+    let (corners, _) = only_triangle(&x);
+    assert_eq!(corners, [[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]]);
+    assert!(
+        x.notes
+            .iter()
+            .any(|n| n.contains("upAxis \"X\"") && n.contains("read as Y")),
+        "{:?}",
+        x.notes
+    );
+}
+
+/// A time code range that ends before it starts is empty to usdview (a warning, no
+/// playback, the stage shown at time code 0): it gives one frame at time 0, noted.
+#[test]
+fn a_reversed_time_code_range_gives_one_frame_at_time_zero() {
+    let text = format!(
+        "#usda 1.0\n(\n    startTimeCode = 10\n    endTimeCode = 2\n)\n{}",
+        triangle("M", "")
+    );
+    let scene = load_text(&text).1.unwrap();
+    let times = scene.frame_times.expect("a frame sequence");
+    assert_eq!((times.start, times.end, times.frames), (0.0, 0.0, 1));
+    assert!(
+        scene
+            .notes
+            .iter()
+            .any(|n| n.contains("startTimeCode 10 is after endTimeCode 2")),
+        "{:?}",
+        scene.notes
+    );
+}
+
+/// A parse error in a text layer names the layer and the line it is on (openusd's reader
+/// reports none), for the root layer and for a sublayer.
+#[test]
+fn a_text_parse_error_names_its_layer_and_line() {
+    let (dir, root) = load_text(&format!(
+        "#usda 1.0\n// a comment\n{}def Xform \"X\" {{\n    double a = = 1\n}}\n",
+        triangle("M", "")
+    ));
+    let error = root.map(|_| ()).unwrap_err();
+    let at = format!("{}:12:", dir.path().join("stage.usda").display()); // the `double` line
+    assert!(error.contains(&at), "{error}");
+
+    let sub = dir.path().join("sub.usda");
+    std::fs::write(
+        &sub,
+        "#usda 1.0\n\ndef Xform \"S\"\n{\n    point3f[] p = [(.5, 0, 0)]\n    double b = = 1\n}\n",
+    )
+    .unwrap();
+    let root = dir.path().join("root.usda");
+    std::fs::write(&root, "#usda 1.0\n(\n    subLayers = [@./sub.usda@]\n)\n").unwrap();
+    let error = mipray::scene::load(&root)
+        .map(|_| ())
+        .unwrap_err()
+        .to_string();
+    assert!(error.contains("root.usda"), "{error}");
+    assert!(error.contains("sub.usda:6:"), "{error}");
+}

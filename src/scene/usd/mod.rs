@@ -61,7 +61,7 @@ const MAX_NOTES: usize = 40;
 /// The stage metadata `mipray info` reports.
 #[derive(Debug, Clone, PartialEq)]
 pub struct StageMetadata {
-    /// `"Y"` or `"Z"`.
+    /// `"Y"` or `"Z"`: the axis applied (an authored axis USD does not allow reads as Y).
     pub up_axis: String,
     pub up_axis_authored: bool,
     pub meters_per_unit: f64,
@@ -70,6 +70,9 @@ pub struct StageMetadata {
     pub frames_per_second: f64,
     /// `(startTimeCode, endTimeCode)` when both are authored.
     pub time_code_range: Option<(f64, f64)>,
+    /// How metadata USD reads but does not allow was read (an `upAxis` other than Y or Z, a
+    /// time code range that ends before it starts).
+    pub notes: Vec<String>,
 }
 
 /// Loads a `.usda`, `.usdc` or `.usdz` stage.
@@ -98,21 +101,24 @@ pub fn metadata(path: &Path) -> Result<StageMetadata, LoadError> {
     };
     guard::check_file(path).map_err(error)?;
     guard::without_panics(|| {
-        let stage = open(path)?;
+        let (stage, _) = open(path)?;
         read_metadata(&stage)
     })
     .map_err(error)
 }
 
-fn open(path: &Path) -> Result<usd::Stage, String> {
+/// Opens the stage, with the text layers it read (to place a parse error found later).
+fn open(path: &Path) -> Result<(usd::Stage, guard::TextLayers), String> {
     let name = path
         .to_str()
         .ok_or_else(|| "the path is not valid UTF-8".to_string())?;
     // Every layer the stage opens goes through the checking resolver (`guard.rs`).
-    usd::Stage::builder()
-        .resolver(guard::CheckingResolver(openusd::ar::DefaultResolver::new()))
+    let text_layers = guard::TextLayers::default();
+    let stage = usd::Stage::builder()
+        .resolver(guard::CheckingResolver::new(text_layers.clone()))
         .open(name)
-        .map_err(|e| stage_error(&format!("{e:#}")))
+        .map_err(|e| stage_error(&text_layers.place(&format!("{e:#}"))))?;
+    Ok((stage, text_layers))
 }
 
 /// The message for a stage that does not open. The USDA lexer reports a character or word
@@ -131,10 +137,18 @@ fn read_metadata(stage: &usd::Stage) -> Result<StageMetadata, String> {
         .map_err(|e| e.to_string())?
         .as_ref()
         .and_then(token);
+    let mut notes = Vec::new();
+    // USD allows only Y and Z, but reads any token: UsdGeomGetStageUpAxis returns it as
+    // authored, and usdview (like UsdLux's dome light) treats every axis but Z as Y.
     let up_axis = match up.as_deref() {
-        None | Some("Y") => "Y".to_string(),
         Some("Z") => "Z".to_string(),
-        Some(other) => return Err(format!("upAxis '{other}' is neither Y nor Z")),
+        None | Some("Y") => "Y".to_string(),
+        Some(other) => {
+            notes.push(format!(
+                "upAxis \"{other}\" is not one USD allows (Y or Z); read as Y, as usdview does"
+            ));
+            "Y".to_string()
+        }
     };
     let mpu = stage
         .stage_metadata("metersPerUnit")
@@ -173,12 +187,19 @@ fn read_metadata(stage: &usd::Stage) -> Result<StageMetadata, String> {
     let time_code_range = stage
         .has_authored_time_code_range()
         .then(|| (stage.start_time_code(), stage.end_time_code()));
-    if let Some((start, end)) = time_code_range
-        && !(start.is_finite() && end.is_finite() && start <= end)
-    {
-        return Err(format!(
-            "startTimeCode {start} and endTimeCode {end} are not a finite range"
-        ));
+    if let Some((start, end)) = time_code_range {
+        if !(start.is_finite() && end.is_finite()) {
+            return Err(format!(
+                "startTimeCode {start} and endTimeCode {end} are not a finite range"
+            ));
+        }
+        // usdview warns of an invalid frame range and plays nothing, showing time code 0.
+        if start > end {
+            notes.push(format!(
+                "startTimeCode {start} is after endTimeCode {end}: an empty range, as in usdview, \
+                 which shows the stage at time code 0; one frame at time code 0 (use --frames to choose)"
+            ));
+        }
     }
     Ok(StageMetadata {
         up_axis,
@@ -188,6 +209,7 @@ fn read_metadata(stage: &usd::Stage) -> Result<StageMetadata, String> {
         time_codes_per_second,
         frames_per_second,
         time_code_range,
+        notes,
     })
 }
 
@@ -216,6 +238,14 @@ impl StageMetadata {
     /// `startTimeCode` to `endTimeCode` (both included).
     pub fn frame_times(&self) -> Option<FrameTimes> {
         let (start, end) = self.time_code_range?;
+        if start > end {
+            // An empty range: the stage at time code 0, as usdview shows it.
+            return Some(FrameTimes {
+                start: 0.0,
+                end: 0.0,
+                frames: 1,
+            });
+        }
         let frames = self.stage_frames(start, end).min(MAX_STAGE_FRAMES) as u32 + 1;
         Some(FrameTimes {
             start: (start / self.time_codes_per_second) as f32,
@@ -292,7 +322,7 @@ pub(super) struct Builder<'s> {
 }
 
 fn load_stage(path: &Path) -> Result<SceneDesc, String> {
-    let stage = open(path)?;
+    let (stage, text_layers) = open(path)?;
     let metadata = read_metadata(&stage)?;
     let mut b = Builder {
         reader: Reader {
@@ -323,12 +353,13 @@ fn load_stage(path: &Path) -> Result<SceneDesc, String> {
         b.stage_root = Some(root);
     }
     check_prim_names(&stage)?;
+    b.notes.extend(metadata.notes.iter().cloned());
     b.notes.extend(metadata.frame_limit_note());
     let mut paths = Vec::new();
     stage
         .traverse(TRAVERSAL, |p| paths.push(p.clone()))
         .map_err(|e| format!("cannot traverse the stage: {e:#}"))?;
-    check_composition(&stage)?;
+    check_composition(&stage, &text_layers)?;
     note_unexpanded_nested_instances(&stage, &paths, &mut b.notes)?;
     // The traversal is depth first, parents before children, so a skipped prim's subtree
     // is the run of paths right after it: one prefix at a time is enough.
@@ -344,7 +375,7 @@ fn load_stage(path: &Path) -> Result<SceneDesc, String> {
             skipped = Some(name.to_string());
         }
     }
-    check_composition(&stage)?;
+    check_composition(&stage, &text_layers)?;
     skel::bind_meshes(&mut b)?;
     b.ignored.notes(&mut b.notes);
     let Builder {
@@ -480,10 +511,13 @@ fn is_prim_name(name: &str) -> bool {
 
 /// A missing layer, a composition cycle and the like: openusd reports them as recoverable
 /// composition errors; the renderer cannot draw a stage with holes, so they are errors.
-fn check_composition(stage: &usd::Stage) -> Result<(), String> {
+fn check_composition(stage: &usd::Stage, text_layers: &guard::TextLayers) -> Result<(), String> {
     match stage.composition_errors().first() {
         None => Ok(()),
-        Some(e) => Err(format!("composition failed: {e}")),
+        Some(e) => Err(format!(
+            "composition failed: {}",
+            text_layers.place(&e.to_string())
+        )),
     }
 }
 
