@@ -302,3 +302,46 @@ fn an_empty_shard_says_it_has_no_frames() {
         (Some(32), Some("paper"))
     );
 }
+
+/// Temporaries an interrupted writer left in a shared folder: a whole render resumed there
+/// removes its own (no owner in the name) and keeps the shards' and `mipray report`'s, which
+/// may be in the middle of their writes; a resumed shard removes its own page's; and
+/// `mipray report` removes those of its own plot and page.
+#[test]
+fn each_run_removes_only_the_temporaries_it_owns() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("seq");
+    let ok = |o: std::process::Output| assert!(o.status.success(), "{}", stderr(&o));
+    ok(render(&out, "0..4", "16x9", &["--shard", "1/2"]));
+    let shard_1 = [
+        ".frame_0003.png.shard-1-of-2.22.tmp",
+        ".index.html.shard-1-of-2.22.tmp",
+        ".stats.shard-1-of-2.jsonl.shard-1-of-2.22.tmp",
+    ];
+    let whole = [".frame_0003.png.33.tmp", ".index.html.33.tmp"];
+    let report = [".index.html.report.44.tmp", ".report.svg.report.44.tmp"];
+    for name in shard_1.iter().chain(&whole).chain(&report) {
+        std::fs::write(out.join(name), b"half").unwrap();
+    }
+    let left = || {
+        let mut names = common::farm::temporaries(&out);
+        names.sort();
+        names
+    };
+    let sorted = |names: &[&[&str]]| {
+        let mut all: Vec<String> = names.concat().iter().map(|n| n.to_string()).collect();
+        all.sort();
+        all
+    };
+    ok(render(&out, "0..4", "16x9", &["--resume"]));
+    assert_eq!(left(), sorted(&[&shard_1, &report]));
+    ok(render(
+        &out,
+        "0..4",
+        "16x9",
+        &["--shard", "1/2", "--resume"],
+    ));
+    assert_eq!(left(), sorted(&[&report]));
+    ok(mipray(&["report", out.to_str().unwrap()]));
+    assert_eq!(left(), Vec::<String>::new());
+}
