@@ -24,9 +24,10 @@ pub mod camera_file;
 pub mod gltf;
 mod load;
 pub mod obj;
+pub mod sources;
 pub mod usd;
 
-pub use load::load;
+pub use load::{load, load_with_sources};
 
 use std::path::PathBuf;
 
