@@ -432,3 +432,32 @@ fn a_check_pairs_png_frames_with_an_exr_reference() {
     assert_eq!(compared, 3, "{}", text(&out));
     assert!(junit_errors(dir.path()).is_empty());
 }
+
+/// A `--out` that cannot hold the report (a file, or a folder below a file) is bad input
+/// to the comparison, as a `--junit` path whose folder does not exist: refused with status
+/// 2, naming the path and the problem, before any frame is compared.
+#[test]
+fn an_out_folder_that_cannot_be_written_is_refused_before_comparing() {
+    let dir = tempfile::tempdir().unwrap();
+    render(dir.path(), "a");
+    render(dir.path(), "b");
+    std::fs::write(dir.path().join("file"), b"not a folder").unwrap();
+    for (out, problem) in [
+        ("file", "exists and is not a folder"),
+        ("file/diff", "cannot create the report folder"),
+    ] {
+        let run = mipray(&["diff", "a", "b", "--out", out], dir.path());
+        assert_eq!(run.status.code(), Some(2), "{}", text(&run));
+        let stderr = String::from_utf8_lossy(&run.stderr);
+        assert!(
+            stderr.contains(&format!("error: {out}: {problem}")),
+            "{stderr}"
+        );
+        // Nothing compared: no table on stdout.
+        assert!(run.stdout.is_empty(), "{}", text(&run));
+    }
+    assert_eq!(
+        std::fs::read(dir.path().join("file")).unwrap(),
+        b"not a folder"
+    );
+}

@@ -187,6 +187,7 @@ fn records_without_an_identity_still_resume_and_merge() {
             let mut record: serde_json::Value = serde_json::from_str(line).unwrap();
             let object = record.as_object_mut().unwrap();
             assert!(object.remove("scene").is_some() && object.remove("settings").is_some());
+            object.remove("scene_files");
             record.to_string()
         })
         .collect();
@@ -300,5 +301,159 @@ fn an_empty_shard_says_it_has_no_frames() {
     assert_eq!(
         (full["width"].as_u64(), full["lod_method"].as_str()),
         (Some(32), Some("paper"))
+    );
+}
+
+/// Temporaries an interrupted writer left in a shared folder: a whole render resumed there
+/// removes its own (no owner in the name) and keeps the shards' and `mipray report`'s, which
+/// may be in the middle of their writes; a resumed shard removes its own page's; and
+/// `mipray report` removes those of its own plot and page.
+#[test]
+fn each_run_removes_only_the_temporaries_it_owns() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("seq");
+    let ok = |o: std::process::Output| assert!(o.status.success(), "{}", stderr(&o));
+    ok(render(&out, "0..4", "16x9", &["--shard", "1/2"]));
+    let shard_1 = [
+        ".frame_0003.png.shard-1-of-2.22.tmp",
+        ".index.html.shard-1-of-2.22.tmp",
+        ".stats.shard-1-of-2.jsonl.shard-1-of-2.22.tmp",
+    ];
+    let whole = [".frame_0003.png.33.tmp", ".index.html.33.tmp"];
+    let report = [".index.html.report.44.tmp", ".report.svg.report.44.tmp"];
+    for name in shard_1.iter().chain(&whole).chain(&report) {
+        std::fs::write(out.join(name), b"half").unwrap();
+    }
+    let left = || {
+        let mut names = common::farm::temporaries(&out);
+        names.sort();
+        names
+    };
+    let sorted = |names: &[&[&str]]| {
+        let mut all: Vec<String> = names.concat().iter().map(|n| n.to_string()).collect();
+        all.sort();
+        all
+    };
+    ok(render(&out, "0..4", "16x9", &["--resume"]));
+    assert_eq!(left(), sorted(&[&shard_1, &report]));
+    ok(render(
+        &out,
+        "0..4",
+        "16x9",
+        &["--shard", "1/2", "--resume"],
+    ));
+    assert_eq!(left(), sorted(&[&report]));
+    ok(mipray(&["report", out.to_str().unwrap()]));
+    assert_eq!(left(), Vec::<String>::new());
+}
+
+/// A copy of the default scene (`default.gltf`, its `.bin` and two textures) in `dir`.
+fn copy_default_scene(dir: &std::path::Path) -> std::path::PathBuf {
+    let animations = std::path::Path::new(SCENE).parent().unwrap();
+    std::fs::create_dir_all(dir).unwrap();
+    for name in [
+        "default.gltf",
+        "default.bin",
+        "default_box_brick.png",
+        "default_floor_checker.png",
+    ] {
+        std::fs::copy(animations.join(name), dir.join(name)).unwrap();
+    }
+    dir.join("default.gltf")
+}
+
+fn render_scene(
+    scene: &std::path::Path,
+    out: &std::path::Path,
+    extra: &[&str],
+) -> std::process::Output {
+    let (scene, out) = (scene.to_str().unwrap(), out.to_str().unwrap());
+    let mut args = vec![
+        "render", scene, "--frames", "0..3", "--size", "16x9", "--out", out,
+    ];
+    args.extend_from_slice(extra);
+    mipray(&args)
+}
+
+/// A run's identity covers every file the scene load read, not only the scene file: a
+/// resume after a texture or the buffer changed (the `.gltf` unchanged) is refused, naming
+/// `scene files`; with the files as they were, it resumes.
+#[test]
+fn a_changed_texture_or_buffer_is_another_run() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = copy_default_scene(&dir.path().join("scene"));
+    let out = dir.path().join("seq");
+    let first = render_scene(&scene, &out, &[]);
+    assert!(first.status.success(), "{}", stderr(&first));
+    let stats = std::fs::read_to_string(out.join("stats.jsonl")).unwrap();
+    assert!(stats.contains(r#""scene_files":"3 files#"#), "{stats}");
+    for name in ["default_floor_checker.png", "default.bin"] {
+        let path = scene.parent().unwrap().join(name);
+        let original = std::fs::read(&path).unwrap();
+        // One byte more: the PNG still decodes, the buffer still holds every view.
+        let mut changed = original.clone();
+        changed.push(0);
+        std::fs::write(&path, &changed).unwrap();
+        let refused = render_scene(&scene, &out, &["--resume"]);
+        assert_eq!(
+            refused.status.code(),
+            Some(1),
+            "{name}: {}",
+            stderr(&refused)
+        );
+        assert!(
+            stderr(&refused).contains("cannot resume") && stderr(&refused).contains("scene files"),
+            "{name}: {}",
+            stderr(&refused)
+        );
+        std::fs::write(&path, &original).unwrap();
+    }
+    let resumed = render_scene(&scene, &out, &["--resume"]);
+    assert!(resumed.status.success(), "{}", stderr(&resumed));
+}
+
+/// Records written before the identity covered the referenced files (the scene file's
+/// digest only) still resume, and a resume of them is still refused when the scene file
+/// changed.
+#[test]
+fn records_with_the_scene_file_digest_only_still_resume() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = copy_default_scene(&dir.path().join("scene"));
+    let out = dir.path().join("seq");
+    assert!(render_scene(&scene, &out, &[]).status.success());
+    let stats = out.join("stats.jsonl");
+    let older: Vec<String> = std::fs::read_to_string(&stats)
+        .unwrap()
+        .lines()
+        .map(|line| {
+            let mut record: serde_json::Value = serde_json::from_str(line).unwrap();
+            let object = record.as_object_mut().unwrap();
+            assert!(object.remove("scene_files").is_some());
+            assert!(
+                object["scene"]
+                    .as_str()
+                    .unwrap()
+                    .starts_with("default.gltf#")
+            );
+            record.to_string()
+        })
+        .collect();
+    std::fs::write(&stats, older.join("\n") + "\n").unwrap();
+    std::fs::remove_file(out.join("frame_0002.png")).unwrap();
+    let resumed = render_scene(&scene, &out, &["--resume"]);
+    assert!(resumed.status.success(), "{}", stderr(&resumed));
+    assert!(
+        String::from_utf8_lossy(&resumed.stdout).contains("2 of 3 frame(s) already complete"),
+        "{}",
+        String::from_utf8_lossy(&resumed.stdout)
+    );
+    let gltf = std::fs::read_to_string(&scene).unwrap();
+    std::fs::write(&scene, gltf + " ").unwrap();
+    let refused = render_scene(&scene, &out, &["--resume"]);
+    assert_eq!(refused.status.code(), Some(1), "{}", stderr(&refused));
+    assert!(
+        stderr(&refused).contains("scene default.gltf#"),
+        "{}",
+        stderr(&refused)
     );
 }

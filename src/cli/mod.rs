@@ -157,6 +157,18 @@ fn report(args: &ReportArgs) -> Result<()> {
         };
         folder.join("report.svg")
     });
+    // The temporaries an interrupted `mipray report` left for the files it writes here.
+    let page_dir = svg.parent().unwrap_or(Path::new("."));
+    let svg_name = svg.file_name().map(|n| n.to_string_lossy().into_owned());
+    crate::atomic_file::remove_stale_temporaries(
+        if page_dir.as_os_str().is_empty() {
+            Path::new(".")
+        } else {
+            page_dir
+        },
+        Some(crate::atomic_file::REPORT_OWNER),
+        |target| Some(target) == svg_name.as_deref() || target == crate::pages::PAGE_NAME,
+    );
     let summary = crate::report::report(&args.dirs, &svg)?;
     print!("{summary}");
     if let Some(mixed) = &summary.mixed_runs {
@@ -164,8 +176,12 @@ fn report(args: &ReportArgs) -> Result<()> {
         // claim fails on it below.
         eprintln!("warning: {mixed}");
     }
-    let page_dir = svg.parent().unwrap_or(Path::new("."));
-    let page = crate::pages::write_render_page(&args.dirs, page_dir, Some(&svg))?;
+    let page = crate::pages::write_render_page(
+        &args.dirs,
+        page_dir,
+        Some(&svg),
+        Some(crate::atomic_file::REPORT_OWNER),
+    )?;
     println!("page: {}", page.display());
     if let Some(expected) = expected {
         let sequence = crate::record::load_sequence(&args.dirs)?;

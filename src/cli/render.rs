@@ -17,7 +17,7 @@ use crate::anim::AnimationSelection;
 use crate::diff::{DiffOptions, Verdict};
 use crate::frame::{FrameClock, LevelImage, RenderSettings, Renderer};
 use crate::lod::LodMethod;
-use crate::record::{RunIdentity, scene_identity};
+use crate::record::{RunIdentity, scene_files_identity, scene_identity};
 use crate::run::{Check, FrameFormat, Resume, SequenceOutput, Shard, render_sequence};
 
 #[derive(Args, Debug, Clone)]
@@ -170,7 +170,7 @@ pub fn render(args: &RenderArgs) -> Result<ExitCode> {
 }
 
 /// What identifies this render's frames (see `crate::record::RunIdentity`): the scene's
-/// file name and digest, and by flag name every setting that changes the pixels, each as
+/// file name and digest, a digest of the other files its load read, and by flag name every setting that changes the pixels, each as
 /// resolved (the clip and camera chosen, not how they were named). Threads and `--bvh`
 /// change no pixel and are left out; so is anything that differs between machines.
 fn run_identity(
@@ -178,14 +178,28 @@ fn run_identity(
     settings: &RenderSettings,
     format: FrameFormat,
 ) -> Result<RunIdentity> {
-    let file = std::fs::File::open(&scene.path)
-        .with_context(|| format!("{}: cannot read the scene", scene.path.display()))?;
     let file_name = scene
         .path
         .file_name()
         .map_or(String::new(), |n| n.to_string_lossy().into_owned());
-    let scene_id = scene_identity(&file_name, std::io::BufReader::new(file))
-        .with_context(|| format!("{}: cannot read the scene", scene.path.display()))?;
+    // The load hashed every file as it read it; the scene file is read again only when the
+    // load did not note it.
+    let top = std::fs::canonicalize(&scene.path).unwrap_or_else(|_| scene.path.clone());
+    let scene_id = match scene.sources.iter().find(|f| f.path == top) {
+        Some(file) => format!("{file_name}#{:016x}", file.digest),
+        None => {
+            let file = std::fs::File::open(&scene.path)
+                .with_context(|| format!("{}: cannot read the scene", scene.path.display()))?;
+            scene_identity(&file_name, std::io::BufReader::new(file))
+                .with_context(|| format!("{}: cannot read the scene", scene.path.display()))?
+        }
+    };
+    let others: Vec<u64> = scene
+        .sources
+        .iter()
+        .filter(|f| f.path != top)
+        .map(|f| f.digest)
+        .collect();
     let entries = [
         ("size", format!("{}x{}", settings.width, settings.height)),
         ("camera", camera_in_use(&scene.desc)),
@@ -215,6 +229,7 @@ fn run_identity(
     ];
     Ok(RunIdentity {
         scene: scene_id,
+        scene_files: scene_files_identity(&others),
         settings: entries
             .into_iter()
             .map(|(name, value)| (name.to_string(), value))

@@ -10,6 +10,7 @@ use super::args::{SequenceArgs, parse_frames};
 use crate::anim::{AnimationSelection, select_animation};
 use crate::frame::FrameClock;
 use crate::scene::SceneDesc;
+use crate::scene::sources::SourceFile;
 
 pub use crate::scene::load as load_scene;
 
@@ -24,6 +25,8 @@ pub struct OpenedScene {
     pub frames: Range<u32>,
     /// Which clips play (`--animation`).
     pub animation: AnimationSelection,
+    /// Every file the load read, the scene file first, each with a digest of its bytes.
+    pub sources: Vec<SourceFile>,
 }
 
 /// Resolves, loads and clocks the scene of `args`; prints the loader's notes on stderr.
@@ -31,7 +34,7 @@ pub fn open_scene(args: &SequenceArgs) -> Result<OpenedScene> {
     // Cheap argument errors first, before a possibly long load.
     let asked_frames = args.frames.as_deref().map(parse_frames).transpose()?;
     let path = resolve_scene(&args.scene)?;
-    let mut desc = load_scene(&path)?;
+    let (mut desc, sources) = crate::scene::load_with_sources(&path)?;
     if let Some(name) = &args.camera {
         select_camera(&mut desc, name)
             .map_err(|e| anyhow::anyhow!("{}: --camera {name}: {e}", path.display()))?;
@@ -53,6 +56,7 @@ pub fn open_scene(args: &SequenceArgs) -> Result<OpenedScene> {
         clock,
         frames,
         animation,
+        sources,
     })
 }
 

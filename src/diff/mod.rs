@@ -295,8 +295,38 @@ pub struct DiffReport {
     pub stats_note: Option<String>,
 }
 
+/// Prepares `out` for a comparison's report before any frame is compared (else a long
+/// comparison would end in an error): creates it (and its parents) and makes sure a file
+/// can be written in it. Bad input, as a `--junit` path whose folder does not exist.
+///
+/// # Errors
+/// [`DiffInputError::Folder`] naming `out`: it is a file, cannot be created, or refuses a
+/// file.
+pub fn prepare_report_folder(out: &Path) -> Result<(), DiffInputError> {
+    let problem = if out.exists() && !out.is_dir() {
+        "exists and is not a folder (the report goes into a folder)".to_string()
+    } else if let Err(e) = std::fs::create_dir_all(out) {
+        format!("cannot create the report folder: {e}")
+    } else {
+        let probe = out.join(format!(".write-check.{}.tmp", std::process::id()));
+        match std::fs::File::create(&probe) {
+            Ok(_) => {
+                let _ = std::fs::remove_file(&probe);
+                return Ok(());
+            }
+            Err(e) => format!("cannot write the report there: {e}"),
+        }
+    };
+    Err(DiffInputError::Folder {
+        dir: out.to_path_buf(),
+        message: problem,
+    })
+}
+
 /// Compares every frame of `test_dir` with `reference_dir`; both must hold the same frame
 /// numbers.
+/// `options.out` is prepared ([`prepare_report_folder`]) before the first frame is
+/// compared.
 pub fn diff_dirs(
     reference_dir: &Path,
     test_dir: &Path,
@@ -333,6 +363,8 @@ pub fn diff_dirs(
             path: name,
         });
     }
+    // Failing frames write their heat maps there, and the reports follow.
+    prepare_report_folder(&options.out)?;
     let mut frames = Vec::with_capacity(reference.len());
     for (frame, path) in &reference {
         frames.push(diff_frame(*frame, path, &test[frame], options)?);

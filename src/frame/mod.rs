@@ -391,6 +391,7 @@ impl Renderer {
             nonfinite_samples: counters.nonfinite_samples,
             // The run's identity is the run layer's to stamp (`run::SequenceOutput`).
             scene: String::new(),
+            scene_files: String::new(),
             settings: Default::default(),
         }
     }

@@ -59,7 +59,7 @@ pub fn write_compare_page(dir: &Path) -> Result<PathBuf, PageError> {
         markdown_sections,
         json_data("compare-data", &data),
     );
-    write_page(dir, &document(&title, &body, COMPARE_JS))
+    write_page(dir, &document(&title, &body, COMPARE_JS), None)
 }
 
 /// The frame numbers of `compare_frames.csv`, ascending, without repeats.

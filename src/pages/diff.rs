@@ -111,7 +111,7 @@ pub fn write_diff_page(
         table("frames", &table_rows, 0),
         json_data("diff-data", &json!({ "frames": frames })),
     );
-    write_page(out, &document(&title, &body, DIFF_JS))
+    write_page(out, &document(&title, &body, DIFF_JS), None)
 }
 
 /// A CSV cell for people: fractions to 5 decimals below 1, 2 above (the CSV keeps every

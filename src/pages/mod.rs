@@ -54,21 +54,15 @@ impl PageError {
     }
 }
 
-/// Writes `html` as `dir/index.html` through a temporary file named after this process (so
-/// shards finishing at once in one folder never share a temporary file), then renames it.
-fn write_page(dir: &Path, html: &str) -> Result<PathBuf, PageError> {
+/// Writes `html` as `dir/index.html` atomically ([`crate::atomic_file`]: a temporary file
+/// named after this process and `owner`, so shards finishing at once in one folder never
+/// share one and a resumed shard knows its own, removed when the write fails), then
+/// renamed into place.
+fn write_page(dir: &Path, html: &str, owner: Option<&str>) -> Result<PathBuf, PageError> {
     let dir = non_empty(dir);
     let path = dir.join(PAGE_NAME);
-    let tmp = dir.join(format!(".{PAGE_NAME}.{}.tmp", std::process::id()));
-    let io = |source| PageError::Io {
-        path: path.clone(),
-        source,
-    };
-    std::fs::write(&tmp, html).map_err(io)?;
-    std::fs::rename(&tmp, &path).map_err(|source| {
-        let _ = std::fs::remove_file(&tmp);
-        io(source)
-    })?;
+    crate::atomic_file::write_bytes_atomically_as(&path, owner, html.as_bytes())
+        .map_err(|(path, source)| PageError::Io { path, source })?;
     Ok(path)
 }
 

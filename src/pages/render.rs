@@ -22,7 +22,8 @@ const RENDER_JS: &str = include_str!("assets/render.js");
 
 /// Writes `page_dir/index.html` for the sequence whose stats files and frames are in `dirs`
 /// (folders, or stats files whose folder holds the frames); frames are linked relative to
-/// `page_dir`, and `plot` (the `mipray report` SVG) is shown when given.
+/// `page_dir`, and `plot` (the `mipray report` SVG) is shown when given. `owner` names the
+/// page's temporary file (see [`crate::atomic_file::write_atomically_as`]).
 ///
 /// # Errors
 /// The stats files cannot be read (see [`crate::record::load_sequence`]: no stats file, a
@@ -32,6 +33,7 @@ pub fn write_render_page(
     dirs: &[PathBuf],
     page_dir: &Path,
     plot: Option<&Path>,
+    owner: Option<&str>,
 ) -> Result<PathBuf, PageError> {
     let page_dir = super::non_empty(page_dir);
     // A folder with no record yet (the first shard to finish had an empty block of the
@@ -76,7 +78,7 @@ pub fn write_render_page(
     data.insert("fps".into(), fps.into());
     let body = render_body(&title, &summary, plot.as_deref())
         + &json_data("render-data", &Value::Object(data));
-    write_page(page_dir, &document(&title, &body, RENDER_JS))
+    write_page(page_dir, &document(&title, &body, RENDER_JS), owner)
 }
 
 /// A folder given directly, or the folder of a stats file.
@@ -247,7 +249,7 @@ mod tests {
     fn a_bad_stats_line_names_the_file_and_line() {
         let dir = tempfile::tempdir().unwrap();
         std::fs::write(dir.path().join("stats.jsonl"), "[1]\n{\"frame\": 1}\n").unwrap();
-        let message = write_render_page(&[dir.path().to_path_buf()], dir.path(), None)
+        let message = write_render_page(&[dir.path().to_path_buf()], dir.path(), None, None)
             .unwrap_err()
             .to_string();
         assert!(
@@ -255,11 +257,14 @@ mod tests {
             "{message}"
         );
         let empty = tempfile::tempdir().unwrap();
-        assert!(write_render_page(&[empty.path().to_path_buf()], empty.path(), None).is_err());
+        assert!(
+            write_render_page(&[empty.path().to_path_buf()], empty.path(), None, None).is_err()
+        );
         // Stats files without a record (shards whose block of the range was empty): a page
         // of no frames.
         std::fs::write(empty.path().join("stats.shard-0-of-8.jsonl"), "").unwrap();
-        let page = write_render_page(&[empty.path().to_path_buf()], empty.path(), None).unwrap();
+        let page =
+            write_render_page(&[empty.path().to_path_buf()], empty.path(), None, None).unwrap();
         let html = std::fs::read_to_string(page).unwrap();
         assert!(html.contains("0 frame(s), no frames yet"), "{html}");
     }
@@ -275,7 +280,7 @@ mod tests {
         )
         .unwrap();
         std::fs::write(frames.join("preview_0003.png"), b"png").unwrap();
-        let page = write_render_page(&[frames.clone()], dir.path(), None).unwrap();
+        let page = write_render_page(&[frames.clone()], dir.path(), None, None).unwrap();
         let html = std::fs::read_to_string(page).unwrap();
         assert!(
             html.contains("\"image\":\"frames/preview_0003.png\""),

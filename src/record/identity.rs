@@ -1,5 +1,6 @@
 //! What identifies the run a record belongs to: the scene (its file name and a digest of
-//! its bytes) and every setting that changes the pixels, by its flag name. Two records
+//! its bytes, and a digest of the other files its load read: buffers, textures, layers,
+//! includes) and every setting that changes the pixels, by its flag name. Two records
 //! whose identities differ come from different renders, and their frames must not be
 //! mixed in one sequence (a resume, shards into one folder, a merge).
 //!
@@ -28,14 +29,15 @@ pub struct SettingDifference {
 /// The settings on which `kept` and `new` disagree, `scene` first, then the settings by
 /// name; a part either record lacks is unknown and left out.
 pub fn run_differences(kept: &FrameRecord, new: &FrameRecord) -> Vec<SettingDifference> {
-    let scene =
-        (!kept.scene.is_empty() && !new.scene.is_empty() && kept.scene != new.scene).then(|| {
-            SettingDifference {
-                name: "scene".into(),
-                kept: kept.scene.clone(),
-                new: new.scene.clone(),
-            }
-        });
+    let differ = |name: &str, kept: &String, new: &String| {
+        (!kept.is_empty() && !new.is_empty() && kept != new).then(|| SettingDifference {
+            name: name.into(),
+            kept: kept.clone(),
+            new: new.clone(),
+        })
+    };
+    let scene = differ("scene", &kept.scene, &new.scene);
+    let files = differ("scene files", &kept.scene_files, &new.scene_files);
     let settings = kept.settings.iter().filter_map(|(name, value)| {
         let other = new.settings.get(name)?;
         (other != value).then(|| SettingDifference {
@@ -44,7 +46,7 @@ pub fn run_differences(kept: &FrameRecord, new: &FrameRecord) -> Vec<SettingDiff
             new: other.clone(),
         })
     });
-    scene.into_iter().chain(settings).collect()
+    scene.into_iter().chain(files).chain(settings).collect()
 }
 
 /// The differences as one phrase, each side named: with `kept` = "there" and `new` = "now",
@@ -65,6 +67,8 @@ pub type Settings = BTreeMap<String, String>;
 pub struct RunIdentity {
     /// See [`scene_identity`].
     pub scene: String,
+    /// See [`scene_files_identity`].
+    pub scene_files: String,
     pub settings: Settings,
 }
 
@@ -72,6 +76,7 @@ impl RunIdentity {
     /// Writes this identity into `record`.
     pub fn stamp(&self, record: &mut FrameRecord) {
         record.scene.clone_from(&self.scene);
+        record.scene_files.clone_from(&self.scene_files);
         record.settings.clone_from(&self.settings);
     }
 
@@ -93,7 +98,7 @@ impl FrameRecord {
 
 /// The `scene` of a record: the file's name and the FNV-1a 64-bit digest of its bytes in
 /// hex (`default.gltf#9f3c0e5d1a2b4c6d`). Files the scene references (buffers, textures)
-/// are not part of it.
+/// are not part of it: see [`scene_files_identity`].
 ///
 /// # Errors
 /// The scene cannot be read.
@@ -108,6 +113,24 @@ pub fn scene_identity(file_name: &str, mut bytes: impl Read) -> std::io::Result<
         digest.update(&buffer[..n]);
     }
     Ok(format!("{file_name}#{:016x}", digest.0))
+}
+
+/// The `scene_files` of a record: how many other files the scene load read (besides the
+/// scene file) and the FNV-1a 64-bit digest of their digests, in the order the load read
+/// them (`3 files#0f1e2d3c4b5a6978`), or `none`. Their names are left out (an identity
+/// holds no path; the scene file, part of the identity, names them), so a changed byte in
+/// any of them changes it, a moved file does not.
+pub fn scene_files_identity(digests: &[u64]) -> String {
+    if digests.is_empty() {
+        return "none".into();
+    }
+    let mut digest = Fnv1a64::default();
+    for d in digests {
+        digest.update(&d.to_le_bytes());
+    }
+    let count = digests.len();
+    let files = if count == 1 { "file" } else { "files" };
+    format!("{count} {files}#{:016x}", digest.0)
 }
 
 /// FNV-1a, 64 bits: a digest defined by two constants, the same on every build.

@@ -24,7 +24,8 @@ mod load;
 mod read;
 
 pub use identity::{
-    RunIdentity, SettingDifference, Settings, describe_differences, run_differences, scene_identity,
+    RunIdentity, SettingDifference, Settings, describe_differences, run_differences,
+    scene_files_identity, scene_identity,
 };
 pub use load::{
     MixedRuns, Sequence, StatsFileError, is_stats_file_name, load_records, load_sequence,
@@ -70,6 +71,11 @@ pub struct FrameRecord {
     /// not written, when unknown (records written before it existed).
     #[serde(skip_serializing_if = "String::is_empty")]
     pub scene: String,
+    /// The other files the scene load read (buffers, textures, layers, includes): how
+    /// many and one digest of their bytes ([`scene_files_identity`]). Empty, and not
+    /// written, when unknown (records written before it existed).
+    #[serde(skip_serializing_if = "String::is_empty")]
+    pub scene_files: String,
     /// Every setting that changes the pixels, by flag name (`size`, `lod`, `max-depth`...).
     /// Empty, and not written, when unknown (records written before it existed).
     #[serde(skip_serializing_if = "Settings::is_empty")]
@@ -177,7 +183,7 @@ impl UpdateStats {
 
 impl FrameRecord {
     /// The `stats.jsonl` name of every field, in the order a line is written.
-    pub const FIELDS: [&'static str; 29] = [
+    pub const FIELDS: [&'static str; 30] = [
         "frame",
         "time_s",
         "width",
@@ -206,18 +212,20 @@ impl FrameRecord {
         "mip_histogram",
         "nonfinite_samples",
         "scene",
+        "scene_files",
         "settings",
     ];
 
     /// Fields that records written before they existed lack, and whose absence means their
     /// default (`lod_bias`: 0, no bias; `bvh_layout` and `instanced_meshes`: not recorded,
-    /// empty and 0; `scene` and `settings`: unknown, empty): a record without them is still
-    /// complete.
+    /// empty and 0; `scene`, `scene_files` and `settings`: unknown, empty): a record without
+    /// them is still complete.
     pub const DEFAULTED: &'static [&'static str] = &[
         "lod_bias",
         "bvh_layout",
         "instanced_meshes",
         "scene",
+        "scene_files",
         "settings",
     ];
 
@@ -263,6 +271,7 @@ mod tests {
     fn field_list_is_the_written_line_in_order() {
         let record = FrameRecord {
             scene: "s.gltf#0".into(),
+            scene_files: "none".into(),
             settings: Settings::from([("size".into(), "1x1".into())]),
             ..FrameRecord::default()
         };

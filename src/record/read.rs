@@ -125,6 +125,7 @@ impl Record {
             mip_histogram: f.counts("mip_histogram")?,
             nonfinite_samples: f.integer("nonfinite_samples")?,
             scene: f.string("scene")?,
+            scene_files: f.string("scene_files")?,
             settings: f.settings("settings")?,
         };
         let present = f.present;

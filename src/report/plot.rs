@@ -21,7 +21,7 @@ use plotters::prelude::*;
 
 use super::error::ReportError;
 use super::metrics::{Metric, PLOTTED_COUNTS, Quantities, TIMING_PHASES};
-use crate::atomic_file::write_bytes_atomically;
+use crate::atomic_file::{REPORT_OWNER, write_bytes_atomically_as};
 use crate::chart::{Run, chart_on, draw_legend, draw_runs, series_color, text};
 use crate::record::Record;
 
@@ -31,7 +31,8 @@ pub const SVG_SIZE: (u32, u32) = (1000, 900);
 /// Share of the time panel's height kept above the data for the legend.
 const LEGEND_HEADROOM: f64 = 0.4;
 
-/// Draws the plot of ascending `records` and writes it to `path` atomically.
+/// Draws the plot of ascending `records` and writes it to `path` atomically (its temporary
+/// file is `mipray report`'s, [`REPORT_OWNER`]).
 pub fn write_svg(records: &[Record], path: &Path) -> Result<(), ReportError> {
     let svg = render_svg(records).map_err(|message| ReportError::Plot {
         path: path.to_path_buf(),
@@ -40,7 +41,7 @@ pub fn write_svg(records: &[Record], path: &Path) -> Result<(), ReportError> {
     if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
         std::fs::create_dir_all(dir).map_err(ReportError::io(dir))?;
     }
-    write_bytes_atomically(path, svg.as_bytes())
+    write_bytes_atomically_as(path, Some(REPORT_OWNER), svg.as_bytes())
         .map_err(|(path, source)| ReportError::Io { path, source })
 }
 

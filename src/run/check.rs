@@ -23,11 +23,6 @@ pub struct CheckFinished {
     pub page: PathBuf,
 }
 
-/// Writes diff.md / diff.csv (and the JUnit XML when asked) and the diff page into `out`;
-/// returns the verdict and where they are.
-///
-/// # Errors
-/// A report file or the page cannot be written.
 /// Checks, before any work, that a JUnit report can be written at `path`: its folder exists
 /// and the path is not a folder (else a long run would end in an error after every frame
 /// passed). Bad input to the check, so the exit status is 2.
@@ -53,6 +48,11 @@ pub fn check_junit_path(path: &Path) -> Result<()> {
     .into())
 }
 
+/// Writes diff.md / diff.csv (and the JUnit XML when asked) and the diff page into `out`;
+/// returns the verdict and where they are.
+///
+/// # Errors
+/// A report file or the page cannot be written.
 pub fn finish_check(
     report: &DiffReport,
     out: &Path,

@@ -15,7 +15,7 @@ use anyhow::{Result, bail};
 use image::{ImageBuffer, ImageFormat, Rgb};
 
 use crate::atomic_file::{
-    FileWriteError, temporary_target, write_bytes_atomically, write_image_atomically,
+    FileWriteError, remove_stale_temporaries, write_bytes_atomically_as, write_image_atomically_as,
 };
 use crate::record::{
     FrameRecord, Record, RunIdentity, StatsFileError, describe_differences, is_stats_file_name,
@@ -58,6 +58,9 @@ pub struct OutputDir {
     stats_path: PathBuf,
     /// `summary.json`, or `summary.shard-I-of-N.json` for a shard.
     summary_path: PathBuf,
+    /// The shard's name (`shard-I-of-N`), which names its temporary files; `None` for a
+    /// whole render.
+    owner: Option<String>,
     stats: File,
 }
 
@@ -82,7 +85,8 @@ impl Shard {
         at(self.index)..at(self.index + 1)
     }
 
-    fn suffix(self) -> String {
+    /// `shard-I-of-N`: in its stats and summary file names and its temporary files'.
+    pub fn suffix(self) -> String {
         format!("shard-{}-of-{}", self.index, self.count)
     }
 }
@@ -121,6 +125,7 @@ impl OutputDir {
             ),
             None => ("stats.jsonl".to_string(), "summary.json".to_string()),
         };
+        let owner = shard.map(Shard::suffix);
         let stats_path = dir.join(&stats_name);
         refuse_other_runs_beside(dir, &stats_name, identity)?;
         let previous = if resume {
@@ -131,13 +136,11 @@ impl OutputDir {
             Vec::new()
         };
         if resume {
-            remove_stale_temporaries(dir, |target| match shard {
-                None => true,
-                Some(_) => {
-                    target == stats_name
-                        || target == summary_name
-                        || frame_of_file(target).is_some_and(|f| frames.contains(&f))
-                }
+            remove_stale_temporaries(dir, owner.as_deref(), |target| {
+                target == stats_name
+                    || target == summary_name
+                    || target == crate::pages::PAGE_NAME
+                    || frame_of_file(target).is_some_and(|f| frames.contains(&f))
             });
             // Rewrite without any torn tail before appending to it.
             let mut text = String::new();
@@ -148,7 +151,7 @@ impl OutputDir {
                 })?);
                 text.push('\n');
             }
-            write_bytes_atomically(&stats_path, text.as_bytes())
+            write_bytes_atomically_as(&stats_path, owner.as_deref(), text.as_bytes())
                 .map_err(|(path, source)| FileWriteError::Io { path, source })?;
         }
         let stats = OpenOptions::new()
@@ -165,6 +168,7 @@ impl OutputDir {
                 format,
                 stats_path,
                 summary_path,
+                owner,
                 stats,
             },
             previous,
@@ -175,6 +179,12 @@ impl OutputDir {
         &self.dir
     }
 
+    /// The owner named in this render's temporary files: the shard (`shard-I-of-N`), or
+    /// `None` for a whole render (see [`crate::atomic_file::write_atomically_as`]).
+    pub fn owner(&self) -> Option<&str> {
+        self.owner.as_deref()
+    }
+
     pub fn frame_path(&self, index: u32) -> PathBuf {
         self.dir.join(frame_file_name(index, self.format))
     }
@@ -182,11 +192,11 @@ impl OutputDir {
     /// Writes a frame atomically (temporary file, then rename); returns its path.
     pub fn write_frame(&self, index: u32, image: &LinearImage) -> Result<PathBuf, FileWriteError> {
         let path = self.frame_path(index);
-        write_frame_atomically(&path, image, self.format)?;
+        write_frame_atomically_as(&path, self.owner(), image, self.format)?;
         if self.format == FrameFormat::Exr {
             // Browsers cannot show EXR: the HTML page plays these sRGB previews instead.
             let preview = self.dir.join(format!("preview_{index:04}.png"));
-            write_frame_atomically(&preview, image, FrameFormat::Png)?;
+            write_frame_atomically_as(&preview, self.owner(), image, FrameFormat::Png)?;
         }
         Ok(path)
     }
@@ -214,23 +224,9 @@ impl OutputDir {
                 source: e.into(),
             }
         })?;
-        write_bytes_atomically(&path, text.as_bytes())
+        write_bytes_atomically_as(&path, self.owner(), text.as_bytes())
             .map_err(|(path, source)| FileWriteError::Io { path, source })?;
         Ok(path)
-    }
-}
-
-/// Removes the `.NAME.PID.tmp` (and older `.NAME.tmp`) files an interrupted run left behind
-/// whose `NAME` is `owned` (never complete outputs).
-fn remove_stale_temporaries(dir: &Path, owned: impl Fn(&str) -> bool) {
-    let Ok(entries) = fs::read_dir(dir) else {
-        return;
-    };
-    for entry in entries.flatten() {
-        let name = entry.file_name().to_string_lossy().into_owned();
-        if temporary_target(&name).is_some_and(&owned) {
-            let _ = fs::remove_file(entry.path());
-        }
     }
 }
 
@@ -351,12 +347,22 @@ pub fn write_frame_atomically(
     image: &LinearImage,
     format: FrameFormat,
 ) -> Result<(), FileWriteError> {
+    write_frame_atomically_as(path, None, image, format)
+}
+
+/// [`write_frame_atomically`], the temporary named after `owner`.
+fn write_frame_atomically_as(
+    path: &Path,
+    owner: Option<&str>,
+    image: &LinearImage,
+    format: FrameFormat,
+) -> Result<(), FileWriteError> {
     match format {
         FrameFormat::Png => {
             let buffer: ImageBuffer<Rgb<u8>, Vec<u8>> =
                 ImageBuffer::from_raw(image.width, image.height, image.to_srgb8())
                     .expect("buffer length matches the image size");
-            write_image_atomically(path, &buffer, ImageFormat::Png)
+            write_image_atomically_as(path, owner, &buffer, ImageFormat::Png)
         }
         FrameFormat::Exr => {
             let data: Vec<f32> = image
@@ -367,7 +373,7 @@ pub fn write_frame_atomically(
             let buffer: ImageBuffer<Rgb<f32>, Vec<f32>> =
                 ImageBuffer::from_raw(image.width, image.height, data)
                     .expect("buffer length matches the image size");
-            write_image_atomically(path, &buffer, ImageFormat::OpenExr)
+            write_image_atomically_as(path, owner, &buffer, ImageFormat::OpenExr)
         }
     }
 }
@@ -376,42 +382,62 @@ pub fn write_frame_atomically(
 mod tests {
     use super::*;
 
-    /// A shard resumed beside other shards in one folder removes only its own temporaries:
-    /// the others may be writing theirs at that moment.
-    #[test]
-    fn resumed_shard_removes_only_its_own_temporaries() {
-        let dir = tempfile::tempdir().unwrap();
-        let names = [
-            ".frame_0001.png.11.tmp",            // shard 0's frame
-            ".lod_0004.png.11.tmp",              // shard 0's level image
-            ".stats.shard-0-of-2.jsonl.11.tmp",  // shard 0's stats
-            ".frame_0005.png.22.tmp",            // shard 1's frame
-            ".stats.shard-1-of-2.jsonl.22.tmp",  // shard 1's stats
-            ".summary.shard-1-of-2.json.22.tmp", // shard 1's summary
-            ".index.html.22.tmp",                // the page every shard writes
-        ];
-        for name in names {
-            fs::write(dir.path().join(name), b"half").unwrap();
-        }
-        let shard = Some(Shard { index: 0, count: 2 });
-        let identity = RunIdentity::default();
-        OutputDir::open(dir.path(), FrameFormat::Png, shard, 0..5, true, &identity).unwrap();
-        let mut left: Vec<String> = fs::read_dir(dir.path())
+    fn temporaries_in(dir: &Path) -> Vec<String> {
+        let mut left: Vec<String> = fs::read_dir(dir)
             .unwrap()
             .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
             .filter(|n| n.ends_with(".tmp"))
             .collect();
         left.sort();
-        assert_eq!(left, [names[3], names[6], names[4], names[5]]);
-        // Alone in its folder (no shard), a resumed render removes every temporary.
-        OutputDir::open(dir.path(), FrameFormat::Png, None, 0..10, true, &identity).unwrap();
-        assert!(
-            fs::read_dir(dir.path()).unwrap().all(|e| !e
-                .unwrap()
-                .file_name()
-                .to_string_lossy()
-                .ends_with(".tmp"))
+        left
+    }
+
+    /// A render resumed beside shards in one folder (a shard, or a whole render) removes
+    /// only its own temporaries: the others may be writing theirs at that moment.
+    #[test]
+    fn resumes_remove_only_their_own_temporaries() {
+        let dir = tempfile::tempdir().unwrap();
+        let shard_0 = [
+            ".frame_0001.png.shard-0-of-2.11.tmp",
+            ".lod_0004.png.shard-0-of-2.11.tmp",
+            ".stats.shard-0-of-2.jsonl.shard-0-of-2.11.tmp",
+            ".index.html.shard-0-of-2.11.tmp",
+        ];
+        let shard_1 = [
+            ".frame_0005.png.shard-1-of-2.22.tmp",
+            ".index.html.shard-1-of-2.22.tmp",
+            ".stats.shard-1-of-2.jsonl.shard-1-of-2.22.tmp",
+            ".summary.shard-1-of-2.json.shard-1-of-2.22.tmp",
+        ];
+        // A whole render's (and an older version's, which named no owner).
+        let whole = [
+            ".frame_0005.png.33.tmp",
+            ".index.html.33.tmp",
+            ".stats.jsonl.33.tmp",
+            ".summary.json.tmp",
+        ];
+        let report = [".index.html.report.44.tmp", ".report.svg.report.44.tmp"];
+        for name in shard_0.iter().chain(&shard_1).chain(&whole).chain(&report) {
+            fs::write(dir.path().join(name), b"half").unwrap();
+        }
+        let sorted = |names: &[&[&str]]| {
+            let mut all: Vec<String> = names.concat().iter().map(|n| n.to_string()).collect();
+            all.sort();
+            all
+        };
+        let identity = RunIdentity::default();
+        let open = |shard: Option<Shard>, frames: std::ops::Range<u32>| {
+            OutputDir::open(dir.path(), FrameFormat::Png, shard, frames, true, &identity).unwrap();
+        };
+        open(Some(Shard { index: 0, count: 2 }), 0..5);
+        assert_eq!(
+            temporaries_in(dir.path()),
+            sorted(&[&shard_1, &whole, &report])
         );
+        open(None, 0..10);
+        assert_eq!(temporaries_in(dir.path()), sorted(&[&shard_1, &report]));
+        open(Some(Shard { index: 1, count: 2 }), 5..10);
+        assert_eq!(temporaries_in(dir.path()), sorted(&[&report]));
     }
 
     #[test]

@@ -19,13 +19,14 @@ use anyhow::{Context, Result};
 
 use super::check::{CheckFinished, finish_check};
 use super::output::{FrameFormat, OutputDir, Shard, frame_file_name};
-use crate::atomic_file::write_rgb8_atomically;
+use crate::atomic_file::write_image_atomically_as;
 use crate::diff::{
     DiffInputError, DiffOptions, DiffReport, FrameDiff, compare_stats, diff_frame, frame_file,
 };
 use crate::frame::{FrameClock, LevelImage, Renderer};
 use crate::record::{FrameRecord, RunIdentity};
 use crate::report::frame_file_problem;
+use image::ImageFormat;
 use rayon::prelude::*;
 
 /// Where and how a sequence is written.
@@ -204,7 +205,7 @@ pub fn render_sequence(
         let path = output.write_frame(frame, &image)?;
         if let Some(view) = view {
             let view_path = output.path().join(format!("lod_{frame:04}.png"));
-            write_rgb8_atomically(&view_path, &view)
+            write_image_atomically_as(&view_path, output.owner(), &view, ImageFormat::Png)
                 .with_context(|| format!("cannot write {}", view_path.display()))?;
         }
         output.append_record(&record)?;
@@ -225,7 +226,12 @@ pub fn render_sequence(
     records.sort_by_key(|r| r.frame);
     let summary = output.write_summary(&records)?;
     let elapsed = start.elapsed();
-    let page = crate::pages::write_render_page(std::slice::from_ref(&out.dir), &out.dir, None)?;
+    let page = crate::pages::write_render_page(
+        std::slice::from_ref(&out.dir),
+        &out.dir,
+        None,
+        output.owner(),
+    )?;
     let check = match check {
         None => None,
         Some(check) => Some(finish_sequence_check(check, &out.dir, checked)?),

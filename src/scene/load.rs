@@ -10,6 +10,23 @@ use anyhow::{Result, bail};
 /// # Errors
 /// An unsupported extension, or the loader's error (naming the file and the element).
 pub fn load(path: &Path) -> Result<super::SceneDesc> {
+    load_with_sources(path).map(|(scene, _)| scene)
+}
+
+/// [`load`], with every file the load read (the scene file, its buffers, textures, layers,
+/// includes, material and camera files), each with a digest of its bytes (see
+/// [`super::sources`]).
+///
+/// # Errors
+/// As [`load`].
+pub fn load_with_sources(
+    path: &Path,
+) -> Result<(super::SceneDesc, Vec<super::sources::SourceFile>)> {
+    let (scene, files) = super::sources::recording(|| load_by_extension(path));
+    Ok((scene?, files))
+}
+
+fn load_by_extension(path: &Path) -> Result<super::SceneDesc> {
     let ext = path
         .extension()
         .and_then(|e| e.to_str())

@@ -14,7 +14,10 @@
 //!   cache: it has one weight (the cache position) and its primitives no morph targets,
 //!   joints or skin, and every sample of a cache has one position (and normal) per vertex;
 //! - a primitive drawn by a node with a skin has every joint index below that skin's
-//!   joint count.
+//!   joint count;
+//! - every file a load reads (scene file, buffers, images, material libraries, layers,
+//!   includes) is read through [`sources`], which hashes it as it is read, so
+//!   [`load_with_sources`] can list them and a render's identity covers them.
 //!
 //! Geometry is the un-deformed base: morph targets (even with non-zero default weights)
 //! and skins are applied per frame by `anim::deform_primitive`.
@@ -24,9 +27,10 @@ pub mod camera_file;
 pub mod gltf;
 mod load;
 pub mod obj;
+pub mod sources;
 pub mod usd;
 
-pub use load::load;
+pub use load::{load, load_with_sources};
 
 use std::path::PathBuf;
 

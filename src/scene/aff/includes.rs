@@ -77,7 +77,7 @@ impl Files {
         if self.in_memory {
             return Err(format!("cannot read '{}': not found", path.display()));
         }
-        let bytes: Arc<[u8]> = std::fs::read(path)
+        let bytes: Arc<[u8]> = crate::scene::sources::read(path)
             .map_err(|e| format!("cannot read '{}': {e}", path.display()))?
             .into();
         self.cache.insert(key, bytes.clone());

@@ -102,7 +102,7 @@ pub(super) fn read_uri<'u>(
         .decode_utf8()
         .map_err(|_| format!("{what}: URI '{uri}' is not valid UTF-8 after percent-decoding"))?;
     let full = base_dir.join(relative.as_ref());
-    std::fs::read(&full)
+    crate::scene::sources::read(&full)
         .map(Cow::Owned)
         .map_err(|e| format!("{what}: cannot read '{uri}' ({}): {e}", full.display()))
 }

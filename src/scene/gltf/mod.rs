@@ -67,7 +67,7 @@ pub fn load_from_bytes(path: &Path, bytes: &[u8]) -> Result<SceneDesc, LoadError
 }
 
 fn load_scene(path: &Path) -> Result<SceneDesc, String> {
-    let bytes = std::fs::read(path).map_err(|e| format!("cannot read file: {e}"))?;
+    let bytes = crate::scene::sources::read(path).map_err(|e| format!("cannot read file: {e}"))?;
     scene_from_bytes(path, &bytes)
 }
 

@@ -66,7 +66,7 @@ pub(super) fn matrix_node(name: String, matrix: Mat4) -> NodeDesc {
 
 /// Adds the camera, lights and background of an export's camera file.
 pub(super) fn add_camera_file(scene: &mut SceneDesc, path: &Path) -> Result<(), ObjError> {
-    let text = std::fs::read_to_string(path)
+    let text = crate::scene::sources::read_to_string(path)
         .map_err(|e| error(path, None, format!("cannot read file: {e}")))?;
     let file: CameraFile = serde_json::from_str(&text)
         .map_err(|e| error(path, Some(e.line()), format!("bad camera file: {e}")))?;

@@ -72,7 +72,7 @@ fn error(path: &Path, line: Option<usize>, message: impl Into<String>) -> ObjErr
 /// An unreadable or malformed OBJ/MTL/JSON file, a missing or undecodable texture, or a
 /// non-finite number.
 pub fn load(path: &Path) -> Result<SceneDesc, ObjError> {
-    let text = std::fs::read_to_string(path)
+    let text = crate::scene::sources::read_to_string(path)
         .map_err(|e| error(path, None, format!("cannot read file: {e}")))?;
     load_from_text(path, &text)
 }

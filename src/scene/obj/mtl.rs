@@ -265,7 +265,7 @@ pub(super) fn texture(
     {
         return Ok(index);
     }
-    let bytes = std::fs::read(&texture_path).map_err(|e| {
+    let bytes = crate::scene::sources::read(&texture_path).map_err(|e| {
         error(
             &texture_path,
             None,
@@ -301,7 +301,7 @@ pub(super) type MaterialLibrary = <tobj::MTLLoadResult as IntoIterator>::Item;
 /// Reads and parses a material library, checking its lines first so a bad one is reported
 /// with its number (and never reaches the parser's own unchecked paths).
 pub(super) fn load_mtl(path: &Path) -> Result<MaterialLibrary, ObjError> {
-    let text = std::fs::read_to_string(path)
+    let text = crate::scene::sources::read_to_string(path)
         .map_err(|e| error(path, None, format!("cannot read material library: {e}")))?;
     if let Some((line, message)) = first_bad_mtl_line(&text) {
         return Err(error(path, Some(line), message));

@@ -41,7 +41,7 @@ const INTS_PER_BYTE: u64 = 4;
 /// # Errors
 /// A message saying what is wrong with the file.
 pub(super) fn check_file(path: &Path) -> Result<(), String> {
-    let bytes = std::fs::read(path).map_err(|e| format!("cannot read file: {e}"))?;
+    let bytes = crate::scene::sources::read(path).map_err(|e| format!("cannot read file: {e}"))?;
     check_bytes(&bytes)
 }
 
@@ -149,6 +149,7 @@ impl Resolver for CheckingResolver {
     fn open_asset(&self, resolved_path: &ResolvedPath) -> io::Result<Box<dyn Asset>> {
         let mut asset = self.inner.open_asset(resolved_path)?;
         let bytes = asset.read_all()?;
+        crate::scene::sources::note(resolved_path, &bytes);
         check_bytes(&bytes).map_err(|e| {
             io::Error::new(io::ErrorKind::InvalidData, format!("{resolved_path}: {e}"))
         })?;

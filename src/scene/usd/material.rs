@@ -463,6 +463,7 @@ fn decode(resolved: &str, raw: bool, shader: &str) -> Result<(MipPyramid, String
             Ok(bytes)
         })
         .map_err(|e| format!("{what}: cannot read it: {e}"))?;
+    crate::scene::sources::note(std::path::Path::new(resolved), &bytes);
     let encoding = if raw {
         ColorEncoding::Linear
     } else {
