@@ -17,6 +17,7 @@ use super::scene_geometry::SceneGeometry;
 use crate::anim::{Pose, VertexSpace, deform_primitive};
 use crate::geometry::{FrameTriangles, Placement};
 use crate::scene::SceneDesc;
+use crate::simd::prefetch;
 
 /// Where an instance's vertices come from.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -361,11 +362,36 @@ pub struct InstanceWriter<'a> {
 }
 
 impl InstanceWriter<'_> {
+    /// Source triangle `source`'s vertex indices in its primitive (as the index buffer
+    /// lists them).
+    #[inline]
+    pub fn vertices(&self, source: u32) -> [u32; 3] {
+        let at = (source - self.first) as usize * 3;
+        [self.indices[at], self.indices[at + 1], self.indices[at + 2]]
+    }
+
     /// Source triangle `source` (of this instance) placed: world-space vertices and normals.
     #[inline]
     fn placed(&self, source: u32) -> ([Vec3A; 3], [Vec3; 3]) {
-        let at = (source - self.first) as usize * 3;
-        let vertices = [self.indices[at], self.indices[at + 1], self.indices[at + 2]];
+        self.placed_vertices(self.vertices(source))
+    }
+
+    /// Hints the cache to load the world-space positions and normals of primitive vertices
+    /// `vertices` (the write in slot order gathers them from wherever the tree's order
+    /// leads: most of its time was the wait for these loads).
+    #[inline]
+    pub fn prefetch_vertices(&self, vertices: [u32; 3]) {
+        for v in vertices {
+            prefetch(self.positions, v as usize);
+            if let Some(normals) = self.normals {
+                prefetch(normals, v as usize);
+            }
+        }
+    }
+
+    /// The triangle of primitive vertices `vertices` placed.
+    #[inline]
+    fn placed_vertices(&self, vertices: [u32; 3]) -> ([Vec3A; 3], [Vec3; 3]) {
         self.writer.geometry.placed_triangle(
             vertices,
             self.placement.flips_winding,
@@ -385,12 +411,30 @@ impl InstanceWriter<'_> {
         normal: &mut [Vec3; 3],
         uv: &mut [Vec2; 3],
     ) -> Option<Motion> {
+        if self.rewrite == Rewrite::Keep {
+            return None;
+        }
+        self.write_vertices(self.vertices(source), source, position, normal, uv)
+    }
+
+    /// [`Self::write`] with the triangle's vertex indices already at hand (`vertices`, as
+    /// [`Self::vertices`] gives them): the write in slot order reads them from a copy in
+    /// slot order instead of the index buffer.
+    #[inline(always)]
+    pub fn write_vertices(
+        &self,
+        vertices: [u32; 3],
+        source: u32,
+        position: &mut [Vec3A; 3],
+        normal: &mut [Vec3; 3],
+        uv: &mut [Vec2; 3],
+    ) -> Option<Motion> {
         let all = match self.rewrite {
             Rewrite::Keep => return None,
             Rewrite::All(motion) => Some(motion),
             Rewrite::Changed => None,
         };
-        let (p, n) = self.placed(source);
+        let (p, n) = self.placed_vertices(vertices);
         *normal = n;
         let motion = all.or_else(|| (!same_bits(&p, position)).then_some(Motion::Deformed))?;
         if !p.iter().all(|v| v.is_finite()) {

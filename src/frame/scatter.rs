@@ -10,6 +10,10 @@
 //! the two-level BVH only the world tree's triangles have slots, and only they are
 //! written), and each source triangle is visited by exactly one task, so no two tasks ever
 //! touch the same slot (nor the same source's motion entry).
+//!
+//! The write in slot order (a frame that writes at least half the slots) is the other way
+//! round: each task writes its own run of slots, and records motions by source through
+//! [`SourceMotions`] on the same invariant.
 
 use glam::{Vec2, Vec3, Vec3A};
 
@@ -116,5 +120,43 @@ impl<'a> SlotScatter<'a> {
                 prefetch_ptr(self.uvs.add(s));
             }
         }
+    }
+}
+
+/// Each source triangle's motion, written from concurrent tasks that visit slots (the write
+/// in slot order records motions by source, for the listing in source order).
+pub struct SourceMotions<'a> {
+    motions: *mut Option<Motion>,
+    len: usize,
+    _array: std::marker::PhantomData<&'a mut [Option<Motion>]>,
+}
+
+// SAFETY: the pointer comes from an exclusive borrow held for 'a; `set`'s contract keeps
+// every source to one task.
+unsafe impl Sync for SourceMotions<'_> {}
+
+impl<'a> SourceMotions<'a> {
+    pub fn new(motions: &'a mut [Option<Motion>]) -> Self {
+        SourceMotions {
+            motions: motions.as_mut_ptr(),
+            len: motions.len(),
+            _array: std::marker::PhantomData,
+        }
+    }
+
+    /// Stores source triangle `source`'s motion.
+    ///
+    /// # Safety
+    /// No other call for the same `source` may run at the same time (each slot is visited
+    /// by one task, and slots map one-to-one onto their sources: module docs).
+    ///
+    /// # Panics
+    /// If `source` is out of range.
+    #[inline]
+    pub unsafe fn set(&self, source: u32, motion: Option<Motion>) {
+        let t = source as usize;
+        assert!(t < self.len, "source {t} of {}", self.len);
+        // SAFETY: in bounds (checked), and exclusive for this call by the caller's contract.
+        unsafe { *self.motions.add(t) = motion };
     }
 }

@@ -147,7 +147,11 @@ impl SceneGeometry {
     /// [`Self::triangle_vertices`]) from vertices already placed one by one (`positions` by
     /// [`Placement::place_point`], `normals` by [`Placement::place_normal`]): the same bits,
     /// with each shared vertex transformed once instead of once per triangle.
-    #[inline]
+    ///
+    /// Always inlined: left out of line (as it was in the write in slot order), the call
+    /// returned the triangle through memory, and reading it back stalled on store
+    /// forwarding (two fifths of that write's samples).
+    #[inline(always)]
     pub fn placed_triangle(
         &self,
         vertices: [u32; 3],
@@ -164,7 +168,7 @@ impl SceneGeometry {
     }
 
     /// A triangle from its placed vertices and normals (a zero normal: the geometric one).
-    #[inline]
+    #[inline(always)]
     fn assemble_triangle(
         &self,
         vertices: [u32; 3],

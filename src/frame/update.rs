@@ -8,9 +8,11 @@
 //! The dirty step has three parts, each split across rayon's threads when its work is large
 //! enough to pay ([`UpdateParallelism`]): pose the vertices of the instances that moved
 //! (skinned or morphed then placed, or rest vertices placed; each instance into its own
-//! world-space buffers), write their triangles into the BVH slots in source order
-//! (`scatter`; recording each triangle's motion), then list the marked slots in the dirty
-//! set in source-triangle order. Every written value is a pure function of the pose and its
+//! world-space buffers), write their triangles into the BVH slots (recording each
+//! triangle's motion), then list the marked slots in the dirty set in source-triangle
+//! order. The write goes in source order, scattering into the slots (`scatter`), unless at
+//! least half the slots are written: then it goes in slot order, the order of the tree's
+//! packs, reading each slot's vertex indices from a copy kept in slot order. Every written value is a pure function of the pose and its
 //! triangle, and the dirty order is fixed by source order, so the parallel update is
 //! bit-identical to the sequential one, dirty order included. Timing: classifying instances
 //! and listing the dirty set count as `dirty_ms`; posing and writing (including the
@@ -26,15 +28,16 @@ use super::dirty::FrameChanges;
 use super::layout::UsedLayout;
 use super::ms_since;
 use super::posed::{
-    PosedVertices, Rewrite, TriangleWriter, VertexSource, WRITE_CHUNK, pose_all_triangles,
-    same_deformation, write_slot_attributes,
+    InstanceWriter, PosedVertices, Rewrite, TriangleWriter, VertexSource, WRITE_CHUNK,
+    pose_all_triangles, same_deformation, write_slot_attributes,
 };
-use super::scatter::SlotScatter;
+use super::scatter::{SlotScatter, SourceMotions};
 use super::setup::FrameSetup;
 use super::two_level::{TwoLevel, Which};
 use crate::accel::{Accel, AccelError, TreeStep};
 use crate::anim::NodeShape;
 use crate::geometry::FrameTriangles;
+use glam::{Vec2, Vec3};
 
 /// Below this much work (triangles or vertices) an update step stays on the calling thread:
 /// rayon's split and join cost more than the work (tens of ns per item).
@@ -42,6 +45,9 @@ const PARALLEL_MIN_ITEMS: usize = 8192;
 
 /// How many source triangles ahead the scattered write prefetches its slot.
 const PREFETCH_AHEAD: usize = 16;
+
+/// Slots per task of the write in slot order.
+const SLOT_CHUNK: usize = 4096;
 
 /// Whether the frame update splits its steps across rayon's threads.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
@@ -92,6 +98,11 @@ pub(super) struct TreeState {
     pub triangles: FrameTriangles,
     /// Inverse of `triangles.source` (`u32::MAX` for sources without a slot).
     slot_of_source: Vec<u32>,
+    /// Per slot: its source triangle's instance and vertex indices (as the instance's index
+    /// buffer lists them), so a write in slot order reads them in order. Made by the first
+    /// such write after a build; empty until then (a scene that never writes most of its
+    /// triangles in one frame never pays for it).
+    slot_vertices: Vec<[u32; 4]>,
     pub accel: Accel,
     /// The shared meshes, placements and top-level tree under `--bvh two-level` (`None`
     /// for the flat tree, or before the first frame).
@@ -225,6 +236,7 @@ impl TreeState {
     /// Inverts `triangles.source` (sources without a slot, instances of shared meshes
     /// under the two-level BVH, map to `u32::MAX`).
     fn index_slots(&mut self, setup: &FrameSetup) {
+        self.slot_vertices.clear();
         self.slot_of_source.clear();
         self.slot_of_source
             .resize(setup.geometry.triangle_count(), u32::MAX);
@@ -349,6 +361,9 @@ impl TreeState {
     /// parallel, instances and chunks of their triangles run as separate tasks, writing
     /// distinct slots (`scatter`).
     fn write_planned(&mut self, setup: &FrameSetup, visited: usize) -> bool {
+        if visited * 2 >= self.triangles.len() {
+            return self.write_in_slot_order(setup, visited);
+        }
         let UpdateScratch {
             posed,
             plan,
@@ -414,6 +429,114 @@ impl TreeState {
                     source_motion[source as usize] = motion;
                 }
             }
+        }
+        let moved_nonfinite = writer.moved_nonfinite.into_inner();
+        for (i, rewrite) in plan.iter().enumerate() {
+            if *rewrite != Rewrite::Keep {
+                uv_flips[i] = Some(posed.placement(i).flips_winding);
+            }
+        }
+        moved_nonfinite
+    }
+
+    /// [`Self::write_planned`] visiting every slot in slot order, for a frame that rewrites
+    /// at least half of them: the tree's packs, the normals and the uvs are then written
+    /// in the order they lie in memory, and each slot's vertex indices are read from
+    /// `slot_vertices` (in slot order too) instead of the index buffers (in source order,
+    /// which slot order scatters). Writes the same values and motions as the write in
+    /// source order: each is a pure function of its triangle.
+    fn write_in_slot_order(&mut self, setup: &FrameSetup, visited: usize) -> bool {
+        let UpdateScratch {
+            posed,
+            plan,
+            source_motion,
+            uv_flips,
+            ..
+        } = &mut self.scratch;
+        let geometry = &setup.geometry;
+        source_motion.resize(geometry.triangle_count(), None);
+        let writer = TriangleWriter::new(&setup.scene, geometry, posed, plan, uv_flips);
+        let parallel = setup.parallelism.splits(visited);
+        let triangles = &mut self.triangles;
+        if self.slot_vertices.len() != triangles.len() {
+            let record = |&source: &u32| {
+                let i = geometry.triangle_instance[source as usize];
+                let [a, b, c] = writer.instance(i as usize).vertices(source);
+                [i, a, b, c]
+            };
+            self.slot_vertices.clear();
+            if parallel {
+                triangles
+                    .source
+                    .par_iter()
+                    .with_min_len(SLOT_CHUNK)
+                    .map(record)
+                    .collect_into_vec(&mut self.slot_vertices);
+            } else {
+                self.slot_vertices
+                    .extend(triangles.source.iter().map(record));
+            }
+        }
+        let lanes = self.accel.slot_lanes();
+        let motions = SourceMotions::new(source_motion);
+        let plan = &*plan;
+        let write_run = |first: usize,
+                         records: &[[u32; 4]],
+                         sources: &[u32],
+                         normals: &mut [[Vec3; 3]],
+                         uvs: &mut [[Vec2; 3]]| {
+            let mut current: Option<(u32, InstanceWriter)> = None;
+            for (k, &[i, a, b, c]) in records.iter().enumerate() {
+                if plan[i as usize] == Rewrite::Keep {
+                    continue;
+                }
+                let instance = match &current {
+                    Some((at, instance)) if *at == i => instance,
+                    _ => &current.insert((i, writer.instance(i as usize))).1,
+                };
+                if let Some(&[ahead, a, b, c]) = records.get(k + PREFETCH_AHEAD)
+                    && ahead == i
+                {
+                    instance.prefetch_vertices([a, b, c]);
+                }
+                let slot = (first + k) as u32;
+                let source = sources[k];
+                // SAFETY: each slot is in one run only, so no other task reads or writes
+                // its lane or its source's motion (`scatter`).
+                unsafe {
+                    let mut position = lanes.get(slot);
+                    let motion = instance.write_vertices(
+                        [a, b, c],
+                        source,
+                        &mut position,
+                        &mut normals[k],
+                        &mut uvs[k],
+                    );
+                    if motion.is_some() {
+                        lanes.set(slot, &position);
+                    }
+                    motions.set(source, motion);
+                }
+            }
+        };
+        let FrameTriangles {
+            normals,
+            uvs,
+            source,
+            ..
+        } = triangles;
+        if parallel {
+            self.slot_vertices
+                .par_chunks(SLOT_CHUNK)
+                .zip(source.par_chunks(SLOT_CHUNK))
+                .zip(normals.par_chunks_mut(SLOT_CHUNK))
+                .zip(uvs.par_chunks_mut(SLOT_CHUNK))
+                .enumerate()
+                .for_each(|(c, (((records, sources), normals), uvs))| {
+                    write_run(c * SLOT_CHUNK, records, sources, normals, uvs)
+                });
+        } else {
+            write_run(0, &self.slot_vertices, source, normals, uvs);
         }
         let moved_nonfinite = writer.moved_nonfinite.into_inner();
         for (i, rewrite) in plan.iter().enumerate() {
