@@ -21,6 +21,7 @@ mod scatter;
 mod scene_geometry;
 mod settings;
 mod setup;
+mod slot_vertices;
 mod two_level;
 mod update;
 

@@ -11,8 +11,9 @@
 //! world-space buffers), write their triangles into the BVH slots (recording each
 //! triangle's motion), then list the marked slots in the dirty set in source-triangle
 //! order. The write goes in source order, scattering into the slots (`scatter`), unless at
-//! least half the slots are written: then it goes in slot order, the order of the tree's
-//! packs, reading each slot's vertex indices from a copy kept in slot order. Every written value is a pure function of the pose and its
+//! least half the slots are written (and the tree is not rebuilt every frame): then it goes
+//! in slot order, the order of the tree's packs, reading each slot's vertex indices from a
+//! compact copy kept in slot order (`slot_vertices`). Every written value is a pure function of the pose and its
 //! triangle, and the dirty order is fixed by source order, so the parallel update is
 //! bit-identical to the sequential one, dirty order included. Timing: classifying instances
 //! and listing the dirty set count as `dirty_ms`; posing and writing (including the
@@ -33,8 +34,9 @@ use super::posed::{
 };
 use super::scatter::{SlotScatter, SourceMotions};
 use super::setup::FrameSetup;
+use super::slot_vertices::{self, SlotIndices, SlotVertices};
 use super::two_level::{TwoLevel, Which};
-use crate::accel::{Accel, AccelError, TreeStep};
+use crate::accel::{Accel, AccelError, BvhPolicy, TreeStep};
 use crate::anim::NodeShape;
 use crate::geometry::FrameTriangles;
 use glam::{Vec2, Vec3};
@@ -46,8 +48,15 @@ const PARALLEL_MIN_ITEMS: usize = 8192;
 /// How many source triangles ahead the scattered write prefetches its slot.
 const PREFETCH_AHEAD: usize = 16;
 
-/// Slots per task of the write in slot order.
-const SLOT_CHUNK: usize = 4096;
+thread_local! {
+    /// Per thread: the run of slot-order indices the write in slot order is working
+    /// through (64 KB, kept between runs and frames, not allocated per task).
+    static DECODED: std::cell::RefCell<Vec<SlotIndices>> =
+        const { std::cell::RefCell::new(Vec::new()) };
+}
+
+/// Slots per task of the write in slot order: a run of the slot-order indices.
+const SLOT_RUN: usize = slot_vertices::RUN;
 
 /// Whether the frame update splits its steps across rayon's threads.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
@@ -102,7 +111,7 @@ pub(super) struct TreeState {
     /// buffer lists them), so a write in slot order reads them in order. Made by the first
     /// such write after a build; empty until then (a scene that never writes most of its
     /// triangles in one frame never pays for it).
-    slot_vertices: Vec<[u32; 4]>,
+    slot_vertices: SlotVertices,
     pub accel: Accel,
     /// The shared meshes, placements and top-level tree under `--bvh two-level` (`None`
     /// for the flat tree, or before the first frame).
@@ -361,7 +370,10 @@ impl TreeState {
     /// parallel, instances and chunks of their triangles run as separate tasks, writing
     /// distinct slots (`scatter`).
     fn write_planned(&mut self, setup: &FrameSetup, visited: usize) -> bool {
-        if visited * 2 >= self.triangles.len() {
+        // Under the rebuild-every-frame policy the slot-order indices would be made again
+        // each frame, for one write.
+        let rebuilds = setup.settings.bvh == BvhPolicy::Rebuild;
+        if visited * 2 >= self.triangles.len() && !rebuilds {
             return self.write_in_slot_order(setup, visited);
         }
         let UpdateScratch {
@@ -459,34 +471,41 @@ impl TreeState {
         let parallel = setup.parallelism.splits(visited);
         let triangles = &mut self.triangles;
         if self.slot_vertices.len() != triangles.len() {
-            let record = |&source: &u32| {
-                let i = geometry.triangle_instance[source as usize];
-                let [a, b, c] = writer.instance(i as usize).vertices(source);
-                [i, a, b, c]
+            let sources = &triangles.source;
+            let indices = |slot: usize| {
+                let source = sources[slot];
+                let instance = geometry.triangle_instance[source as usize];
+                SlotIndices {
+                    instance,
+                    vertices: writer.instance(instance as usize).vertices(source),
+                }
             };
-            self.slot_vertices.clear();
-            if parallel {
-                triangles
-                    .source
-                    .par_iter()
-                    .with_min_len(SLOT_CHUNK)
-                    .map(record)
-                    .collect_into_vec(&mut self.slot_vertices);
-            } else {
-                self.slot_vertices
-                    .extend(triangles.source.iter().map(record));
-            }
+            self.slot_vertices
+                .encode(triangles.len(), indices, parallel);
         }
         let lanes = self.accel.slot_lanes();
         let motions = SourceMotions::new(source_motion);
-        let plan = &*plan;
-        let write_run = |first: usize,
-                         records: &[[u32; 4]],
+        let (plan, slot_vertices) = (&*plan, &self.slot_vertices);
+        let write_run = |run: usize,
                          sources: &[u32],
                          normals: &mut [[Vec3; 3]],
-                         uvs: &mut [[Vec2; 3]]| {
+                         uvs: &mut [[Vec2; 3]],
+                         decoded: &mut Vec<SlotIndices>| {
+            // An escaped slot's indices come from its instance's index buffer.
+            let escaped = |slot: usize, i: u32| {
+                let source = sources[slot - run * SLOT_RUN];
+                writer.instance(i as usize).vertices(source)
+            };
+            slot_vertices.decode_run(run, escaped, decoded);
             let mut current: Option<(u32, InstanceWriter)> = None;
-            for (k, &[i, a, b, c]) in records.iter().enumerate() {
+            for (
+                k,
+                &SlotIndices {
+                    instance: i,
+                    vertices,
+                },
+            ) in decoded.iter().enumerate()
+            {
                 if plan[i as usize] == Rewrite::Keep {
                     continue;
                 }
@@ -494,19 +513,19 @@ impl TreeState {
                     Some((at, instance)) if *at == i => instance,
                     _ => &current.insert((i, writer.instance(i as usize))).1,
                 };
-                if let Some(&[ahead, a, b, c]) = records.get(k + PREFETCH_AHEAD)
-                    && ahead == i
+                if let Some(ahead) = decoded.get(k + PREFETCH_AHEAD)
+                    && ahead.instance == i
                 {
-                    instance.prefetch_vertices([a, b, c]);
+                    instance.prefetch_vertices(ahead.vertices);
                 }
-                let slot = (first + k) as u32;
+                let slot = (run * SLOT_RUN + k) as u32;
                 let source = sources[k];
                 // SAFETY: each slot is in one run only, so no other task reads or writes
                 // its lane or its source's motion (`scatter`).
                 unsafe {
                     let mut position = lanes.get(slot);
                     let motion = instance.write_vertices(
-                        [a, b, c],
+                        vertices,
                         source,
                         &mut position,
                         &mut normals[k],
@@ -526,17 +545,25 @@ impl TreeState {
             ..
         } = triangles;
         if parallel {
-            self.slot_vertices
-                .par_chunks(SLOT_CHUNK)
-                .zip(source.par_chunks(SLOT_CHUNK))
-                .zip(normals.par_chunks_mut(SLOT_CHUNK))
-                .zip(uvs.par_chunks_mut(SLOT_CHUNK))
+            source
+                .par_chunks(SLOT_RUN)
+                .zip(normals.par_chunks_mut(SLOT_RUN))
+                .zip(uvs.par_chunks_mut(SLOT_RUN))
                 .enumerate()
-                .for_each(|(c, (((records, sources), normals), uvs))| {
-                    write_run(c * SLOT_CHUNK, records, sources, normals, uvs)
+                .for_each(|(run, ((sources, normals), uvs))| {
+                    DECODED
+                        .with_borrow_mut(|decoded| write_run(run, sources, normals, uvs, decoded))
                 });
         } else {
-            write_run(0, &self.slot_vertices, source, normals, uvs);
+            let runs = source
+                .chunks(SLOT_RUN)
+                .zip(normals.chunks_mut(SLOT_RUN))
+                .zip(uvs.chunks_mut(SLOT_RUN));
+            DECODED.with_borrow_mut(|decoded| {
+                for (run, ((sources, normals), uvs)) in runs.enumerate() {
+                    write_run(run, sources, normals, uvs, decoded);
+                }
+            });
         }
         let moved_nonfinite = writer.moved_nonfinite.into_inner();
         for (i, rewrite) in plan.iter().enumerate() {
