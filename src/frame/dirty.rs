@@ -80,13 +80,17 @@ impl DirtySet {
     /// motion, and clears those entries: the parallel counterpart of [`Self::mark`] called in
     /// that order. The ranges are cut into chunks that are counted, then filled at their
     /// offsets, on rayon's threads; every read is sequential. Precondition: the set was just
-    /// [`reset`](Self::reset) for every slot `slot_of_source` names. Fills `listed` with how
-    /// many entries each range gave, in order.
+    /// [`reset`](Self::reset) for every slot `slot_of_source` names; then either no bit is
+    /// set (`bits_set` false: the listed slots' bits are set here, in a serial pass), or the
+    /// bits of exactly the slots to be listed are (`bits_set` true: the write in slot order
+    /// sets them as it goes, each task in its own words). Fills `listed` with how many
+    /// entries each range gave, in order.
     pub fn assign_in_source_order(
         &mut self,
         visited: impl Iterator<Item = Range<u32>>,
         source_motion: &mut [Option<Motion>],
         slot_of_source: &[u32],
+        bits_set: bool,
         listed: &mut Vec<usize>,
     ) {
         debug_assert!(self.slots.is_empty());
@@ -142,9 +146,26 @@ impl DirtySet {
                     *out = motion;
                 }
             });
-        for &slot in &self.slots {
-            self.bits[slot as usize / 64] |= 1 << (slot % 64);
+        if bits_set {
+            debug_assert!(self.slots.iter().all(|&s| self.contains(s)));
+            debug_assert_eq!(
+                self.bits
+                    .iter()
+                    .map(|w| w.count_ones() as usize)
+                    .sum::<usize>(),
+                self.slots.len()
+            );
+        } else {
+            for &slot in &self.slots {
+                self.bits[slot as usize / 64] |= 1 << (slot % 64);
+            }
         }
+    }
+
+    /// The membership bits, to be set by a write that visits slots in order (see
+    /// [`Self::assign_in_source_order`]'s `bits_set`).
+    pub fn words_mut(&mut self) -> &mut [u64] {
+        &mut self.bits
     }
 
     /// The membership bits: bit `s % 64` of word `s / 64` is slot `s`.
@@ -217,6 +238,23 @@ mod tests {
             }
         }
         let mut motions: Vec<Option<Motion>> = (0..n).map(motion_at).collect();
+        // The same listing when a write in slot order has already set the bits.
+        let mut preset = DirtySet::default();
+        preset.reset(n as usize);
+        for &slot in &one_by_one.slots {
+            preset.words_mut()[slot as usize / 64] |= 1 << (slot % 64);
+        }
+        let mut preset_motions = motions.clone();
+        preset.assign_in_source_order(
+            visited.iter().cloned(),
+            &mut preset_motions,
+            &slot_of_source,
+            true,
+            &mut Vec::new(),
+        );
+        assert_eq!(preset.slots, one_by_one.slots);
+        assert_eq!(preset.motions, one_by_one.motions);
+        assert_eq!(preset.bits, one_by_one.bits);
         let mut listed = DirtySet::default();
         listed.reset(n as usize);
         let mut per_range = Vec::new();
@@ -224,6 +262,7 @@ mod tests {
             visited.iter().cloned(),
             &mut motions,
             &slot_of_source,
+            false,
             &mut per_range,
         );
         assert!(one_by_one.len() > LIST_CHUNK);

@@ -25,7 +25,7 @@ use rayon::prelude::*;
 
 use super::Motion;
 use super::animation::{AnimationState, InstanceState};
-use super::dirty::FrameChanges;
+use super::dirty::{DirtySet, FrameChanges};
 use super::layout::UsedLayout;
 use super::ms_since;
 use super::posed::{
@@ -293,11 +293,12 @@ impl TreeState {
 
         let t = Instant::now();
         self.pose_planned(setup, animation);
-        changes.moved_nonfinite = self.write_planned(setup, visited);
+        let (moved_nonfinite, bits_set) = self.write_planned(setup, visited, &mut changes.dirty);
+        changes.moved_nonfinite = moved_nonfinite;
         let write_ms = ms_since(t);
 
         let t = Instant::now();
-        self.list_dirty(setup, visited, changes);
+        self.list_dirty(setup, visited, bits_set, changes);
         dirty_ms += ms_since(t);
         DirtyTimes { dirty_ms, write_ms }
     }
@@ -369,12 +370,17 @@ impl TreeState {
     /// non-finite vertex. Triangles are visited in source order (reads stay sequential); in
     /// parallel, instances and chunks of their triangles run as separate tasks, writing
     /// distinct slots (`scatter`).
-    fn write_planned(&mut self, setup: &FrameSetup, visited: usize) -> bool {
+    fn write_planned(
+        &mut self,
+        setup: &FrameSetup,
+        visited: usize,
+        dirty: &mut DirtySet,
+    ) -> (bool, bool) {
         // Under the rebuild-every-frame policy the slot-order indices would be made again
         // each frame, for one write.
         let rebuilds = setup.settings.bvh == BvhPolicy::Rebuild;
         if visited * 2 >= self.triangles.len() && !rebuilds {
-            return self.write_in_slot_order(setup, visited);
+            return self.write_in_slot_order(setup, visited, dirty);
         }
         let UpdateScratch {
             posed,
@@ -448,7 +454,7 @@ impl TreeState {
                 uv_flips[i] = Some(posed.placement(i).flips_winding);
             }
         }
-        moved_nonfinite
+        (moved_nonfinite, false)
     }
 
     /// [`Self::write_planned`] visiting every slot in slot order, for a frame that rewrites
@@ -457,7 +463,16 @@ impl TreeState {
     /// `slot_vertices` (in slot order too) instead of the index buffers (in source order,
     /// which slot order scatters). Writes the same values and motions as the write in
     /// source order: each is a pure function of its triangle.
-    fn write_in_slot_order(&mut self, setup: &FrameSetup, visited: usize) -> bool {
+    ///
+    /// On rayon's threads it also sets the dirty bits of the slots it moves (each task owns
+    /// its run's words), so the listing need not set them one by one; returns whether the
+    /// write gave a moved triangle a non-finite vertex, and whether it set the bits.
+    fn write_in_slot_order(
+        &mut self,
+        setup: &FrameSetup,
+        visited: usize,
+        dirty: &mut DirtySet,
+    ) -> (bool, bool) {
         let UpdateScratch {
             posed,
             plan,
@@ -490,6 +505,7 @@ impl TreeState {
                          sources: &[u32],
                          normals: &mut [[Vec3; 3]],
                          uvs: &mut [[Vec2; 3]],
+                         mut words: Option<&mut [u64]>,
                          decoded: &mut Vec<SlotIndices>| {
             // An escaped slot's indices come from its instance's index buffer.
             let escaped = |slot: usize, i: u32| {
@@ -533,6 +549,9 @@ impl TreeState {
                     );
                     if motion.is_some() {
                         lanes.set(slot, &position);
+                        if let Some(words) = words.as_deref_mut() {
+                            words[k / 64] |= 1 << (k % 64);
+                        }
                     }
                     motions.set(source, motion);
                 }
@@ -549,10 +568,12 @@ impl TreeState {
                 .par_chunks(SLOT_RUN)
                 .zip(normals.par_chunks_mut(SLOT_RUN))
                 .zip(uvs.par_chunks_mut(SLOT_RUN))
+                .zip(dirty.words_mut().par_chunks_mut(SLOT_RUN / 64))
                 .enumerate()
-                .for_each(|(run, ((sources, normals), uvs))| {
-                    DECODED
-                        .with_borrow_mut(|decoded| write_run(run, sources, normals, uvs, decoded))
+                .for_each(|(run, (((sources, normals), uvs), words))| {
+                    DECODED.with_borrow_mut(|decoded| {
+                        write_run(run, sources, normals, uvs, Some(words), decoded)
+                    })
                 });
         } else {
             let runs = source
@@ -561,7 +582,7 @@ impl TreeState {
                 .zip(uvs.chunks_mut(SLOT_RUN));
             DECODED.with_borrow_mut(|decoded| {
                 for (run, ((sources, normals), uvs)) in runs.enumerate() {
-                    write_run(run, sources, normals, uvs, decoded);
+                    write_run(run, sources, normals, uvs, None, decoded);
                 }
             });
         }
@@ -571,13 +592,20 @@ impl TreeState {
                 uv_flips[i] = Some(posed.placement(i).flips_winding);
             }
         }
-        moved_nonfinite
+        (moved_nonfinite, parallel)
     }
 
     /// Lists the slots the write marked in the dirty set, in source-triangle order (the
     /// order of instances, then of their triangles), and clears the marks; notes which runs
     /// of the list the deforming instances gave.
-    fn list_dirty(&mut self, setup: &FrameSetup, visited: usize, changes: &mut FrameChanges) {
+    /// `bits_set`: the write already set the listed slots' dirty bits (in slot order).
+    fn list_dirty(
+        &mut self,
+        setup: &FrameSetup,
+        visited: usize,
+        bits_set: bool,
+        changes: &mut FrameChanges,
+    ) {
         let UpdateScratch {
             plan,
             source_motion,
@@ -602,6 +630,7 @@ impl TreeState {
                 visited_instances().map(|i| ranges[i].clone()),
                 source_motion,
                 &self.slot_of_source,
+                bits_set,
                 listed,
             );
         } else {
