@@ -494,7 +494,9 @@ impl ShearedRay {
         let t = (t_scaled * inverse).to_array();
         let (v, w) = ((v * inverse).to_array(), (w * inverse).to_array());
         // Lanes whose distance or determinant left f32's range (only for vertices beyond
-        // about 1e12 from the origin): decided in f64 instead.
+        // about 1e12 from the origin): decided in f64 instead. `x - x` is zero exactly when
+        // `x` is finite (infinity and NaN give NaN): one subtraction and compare per vector.
+        #[allow(clippy::eq_op)]
         let finite = ((det - det).cmpeq(zero) & (t_scaled - t_scaled).cmpeq(zero)).bitmask();
         let mut bits = inside;
         while bits != 0 {
