@@ -366,10 +366,10 @@ impl TreeState {
     }
 
     /// Writes the triangles of the planned instances into their slots and records each
-    /// written triangle's motion in `source_motion`; returns whether a moved triangle got a
-    /// non-finite vertex. Triangles are visited in source order (reads stay sequential); in
-    /// parallel, instances and chunks of their triangles run as separate tasks, writing
-    /// distinct slots (`scatter`).
+    /// written triangle's motion in `source_motion`, in slot order when the frame rewrites
+    /// at least half the slots, else in source order; then notes the winding each rewritten
+    /// instance's uvs now follow. Returns whether a moved triangle got a non-finite vertex,
+    /// and whether the write set the dirty bits of the slots it moved.
     fn write_planned(
         &mut self,
         setup: &FrameSetup,
@@ -379,9 +379,30 @@ impl TreeState {
         // Under the rebuild-every-frame policy the slot-order indices would be made again
         // each frame, for one write.
         let rebuilds = setup.settings.bvh == BvhPolicy::Rebuild;
-        if visited * 2 >= self.triangles.len() && !rebuilds {
-            return self.write_in_slot_order(setup, visited, dirty);
+        let written = if visited * 2 >= self.triangles.len() && !rebuilds {
+            self.write_in_slot_order(setup, visited, dirty)
+        } else {
+            (self.write_in_source_order(setup, visited), false)
+        };
+        let UpdateScratch {
+            posed,
+            plan,
+            uv_flips,
+            ..
+        } = &mut self.scratch;
+        for (i, rewrite) in plan.iter().enumerate() {
+            if *rewrite != Rewrite::Keep {
+                uv_flips[i] = Some(posed.placement(i).flips_winding);
+            }
         }
+        written
+    }
+
+    /// [`Self::write_planned`] visiting the moved triangles in source order (reads stay
+    /// sequential); in parallel, instances and chunks of their triangles run as separate
+    /// tasks, writing distinct slots (`scatter`). Returns whether a moved triangle got a
+    /// non-finite vertex.
+    fn write_in_source_order(&mut self, setup: &FrameSetup, visited: usize) -> bool {
         let UpdateScratch {
             posed,
             plan,
@@ -448,13 +469,7 @@ impl TreeState {
                 }
             }
         }
-        let moved_nonfinite = writer.moved_nonfinite.into_inner();
-        for (i, rewrite) in plan.iter().enumerate() {
-            if *rewrite != Rewrite::Keep {
-                uv_flips[i] = Some(posed.placement(i).flips_winding);
-            }
-        }
-        (moved_nonfinite, false)
+        writer.moved_nonfinite.into_inner()
     }
 
     /// [`Self::write_planned`] visiting every slot in slot order, for a frame that rewrites
@@ -586,13 +601,7 @@ impl TreeState {
                 }
             });
         }
-        let moved_nonfinite = writer.moved_nonfinite.into_inner();
-        for (i, rewrite) in plan.iter().enumerate() {
-            if *rewrite != Rewrite::Keep {
-                uv_flips[i] = Some(posed.placement(i).flips_winding);
-            }
-        }
-        (moved_nonfinite, parallel)
+        (writer.moved_nonfinite.into_inner(), parallel)
     }
 
     /// Lists the slots the write marked in the dirty set, in source-triangle order (the
