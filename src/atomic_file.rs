@@ -224,8 +224,12 @@ where
     [P::Subpixel]: image::EncodableLayout,
     C: std::ops::Deref<Target = [P::Subpixel]>,
 {
-    // PNG and EXR encoders seek; a device or pipe cannot, so they get the bytes whole.
+    // PNG and EXR encoders seek: into a temporary (a regular file) they write directly; a
+    // device or pipe cannot seek, so it gets the bytes whole, encoded in memory first.
     let encode = |w: &mut BufWriter<File>| -> Result<(), image::ImageError> {
+        if w.get_ref().metadata()?.is_file() {
+            return image.write_to(w, format);
+        }
         let mut bytes = io::Cursor::new(Vec::new());
         image.write_to(&mut bytes, format)?;
         w.write_all(bytes.get_ref())
