@@ -70,6 +70,14 @@ fn dirty_only_update_equals_a_full_recompute_bit_for_bit() {
                 bits(pf[other]),
                 "frame {frame}, triangle {source} vertices"
             );
+            // Shading normals too: the skinned strip's are read from the posed vertices,
+            // which must be this frame's wherever its slots are.
+            let normal_bits = |n: [glam::Vec3; 3]| n.map(|v| v.to_array().map(f32::to_bits));
+            assert_eq!(
+                normal_bits(sequential.slot_normals(slot)),
+                normal_bits(fresh.slot_normals(other)),
+                "frame {frame}, triangle {source} normals"
+            );
         }
         let (a, b) = (by_source(&sequential), by_source(&fresh));
         for (source, (x, y)) in a.iter().zip(&b).enumerate() {
@@ -87,6 +95,56 @@ fn dirty_only_update_equals_a_full_recompute_bit_for_bit() {
             assert_eq!(update.lod_shifted, 2, "frame {frame}");
         }
     }
+}
+
+/// Slots store shading normals only for instances that do not deform: a scene where every
+/// instance deforms keeps none (the array is empty), a mixed one keeps one entry per slot;
+/// either way the normals shading reads are those of the posed vertices, under every
+/// tree policy and after a rebuild.
+#[test]
+fn only_slots_of_undeformed_instances_store_normals() {
+    let policy = BvhPolicy::Refit {
+        rebuild_threshold: BvhPolicy::DEFAULT_REBUILD_THRESHOLD,
+    };
+    let mut skinned = Renderer::new(
+        common::deform_scenes::skinned_strip_scene(1.3),
+        settings(policy),
+    );
+    let mut mixed = Renderer::new(skinned_dynamic_scene(), settings(policy));
+    for frame in [0, 3, 7] {
+        let time = frame as f32 / FPS;
+        skinned.prepare(frame, time).unwrap();
+        mixed.prepare(frame, time).unwrap();
+        assert!(skinned.triangles().normals.is_empty(), "frame {frame}");
+        assert_eq!(
+            mixed.triangles().normals.len(),
+            mixed.triangles().len(),
+            "frame {frame}"
+        );
+        for r in [&skinned, &mixed] {
+            for slot in 0..r.triangles().len() {
+                let n = r.slot_normals(slot);
+                assert!(
+                    n.iter().all(|v| (v.length() - 1.0).abs() < 1e-5),
+                    "frame {frame}, slot {slot}: {n:?}"
+                );
+            }
+        }
+    }
+    // Rebuilt every frame: the same normals as refitted.
+    let mut rebuilt = Renderer::new(skinned_dynamic_scene(), settings(BvhPolicy::Rebuild));
+    rebuilt.prepare(7, 7.0 / FPS).unwrap();
+    let by_source = |r: &Renderer| {
+        let mut out: Vec<_> = (0..r.triangles().len())
+            .map(|s| {
+                let n = r.slot_normals(s).map(|v| v.to_array().map(f32::to_bits));
+                (r.triangles().source[s], n)
+            })
+            .collect();
+        out.sort();
+        out
+    };
+    assert_eq!(by_source(&rebuilt), by_source(&mixed));
 }
 
 /// Over 8,192 deformed triangles the `log2 P_b` update runs on several threads: every
@@ -160,9 +218,8 @@ fn frame_bits(r: &Renderer) -> Vec<u32> {
             .map(f32::to_bits),
     );
     out.extend(
-        t.normals
-            .iter()
-            .flatten()
+        (0..t.len())
+            .flat_map(|slot| r.slot_normals(slot))
             .flat_map(|v| v.to_array())
             .map(f32::to_bits),
     );

@@ -279,7 +279,7 @@ pub(crate) fn write_obj(
             for uv in &t.uvs[slot] {
                 writeln!(w, "vt {} {}", uv.x, 1.0 - uv.y as f64)?;
             }
-            for n in &t.normals[slot] {
+            for n in &renderer.slot_normals(slot) {
                 writeln!(w, "vn {} {} {}", n.x, n.y, n.z)?;
             }
             let (a, b, c) = (next, next + 1, next + 2);

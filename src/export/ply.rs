@@ -53,8 +53,9 @@ pub(crate) fn write_ply(
         let mut vertex = [0u8; 32];
         for slot in 0..n {
             let positions = renderer.accel().triangle(slot as u32);
+            let normals = renderer.slot_normals(slot);
             for (k, p) in positions.iter().enumerate() {
-                let nn = t.normals[slot][k];
+                let nn = normals[k];
                 let uv = t.uvs[slot][k];
                 let values = [p.x, p.y, p.z, nn.x, nn.y, nn.z, uv.x, uv.y];
                 for (chunk, v) in vertex.chunks_exact_mut(4).zip(values) {

@@ -42,7 +42,7 @@ use std::time::Instant;
 use glam::{Vec3, Vec3A};
 
 use crate::accel::{Accel, AccelError};
-use crate::geometry::FrameTriangles;
+use crate::geometry::{FrameTriangles, VertexNormals};
 use crate::lod::LodCamera;
 use crate::record::{FrameRecord, UpdateStats};
 use crate::render::{
@@ -52,6 +52,7 @@ use crate::scene::SceneDesc;
 use animation::AnimationState;
 use dirty::FrameChanges;
 use log2_pb::Log2PbState;
+use posed::VertexSource;
 use setup::FrameSetup;
 use update::TreeState;
 
@@ -107,6 +108,22 @@ pub struct Renderer {
     log2_pb: Log2PbState,
 }
 
+/// The normals of the slots of deforming instances, read from the posed vertices their
+/// slots were written from.
+impl VertexNormals for Renderer {
+    #[inline]
+    fn normals(&self, source: u32, positions: &[Vec3A; 3]) -> Option<[Vec3; 3]> {
+        let setup = &self.setup;
+        self.tree.posed().deformed_normals(
+            &setup.scene,
+            &setup.geometry,
+            &setup.deforms,
+            source,
+            positions,
+        )
+    }
+}
+
 impl Renderer {
     pub fn new(scene: SceneDesc, settings: RenderSettings) -> Renderer {
         let (setup, rest_pose) = FrameSetup::new(scene, settings);
@@ -141,6 +158,17 @@ impl Renderer {
     /// of them copied by [`Renderer::world_positions`].
     pub fn triangles(&self) -> &FrameTriangles {
         &self.tree.triangles
+    }
+
+    /// Slot `slot`'s world-space shading normals (valid after `prepare`): stored in
+    /// [`Renderer::triangles`] for most instances, read through the vertex indices from the
+    /// posed vertices for skinned and morphed ones (`geometry::VertexNormals`).
+    pub fn slot_normals(&self, slot: usize) -> [Vec3; 3] {
+        let positions = self.tree.accel.triangle(slot as u32);
+        self.tree
+            .triangles
+            .hit_triangle(slot, positions, Some(self))
+            .normals
     }
 
     /// The vertices of [`Renderer::triangles`], slot by slot (a copy, read from the tree).
@@ -333,14 +361,21 @@ impl Renderer {
     /// What the integrator reads for a prepared frame (valid until the next `prepare`).
     pub fn frame_scene<'a>(&'a self, prepared: &'a PreparedFrame) -> FrameScene<'a> {
         let (setup, tree) = (&self.setup, &self.tree);
+        // Only a scene with deforming instances has slots without stored normals.
+        let by_vertex = setup
+            .deforms
+            .contains(&VertexSource::Deformed)
+            .then_some(self as &dyn VertexNormals);
         let bvh = match &tree.two_level {
             None => SceneBvh::Flat {
                 triangles: &tree.triangles,
                 accel: &tree.accel,
+                by_vertex,
             },
             Some(two) => SceneBvh::TwoLevel(Instanced {
                 world_triangles: &tree.triangles,
                 world: &tree.accel,
+                by_vertex,
                 accel: &two.accel,
                 instances: &two.shading,
                 footprint: setup.footprint,

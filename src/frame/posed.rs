@@ -121,6 +121,32 @@ impl PosedVertices {
         &self.placements[i]
     }
 
+    /// Source triangle `source`'s shading normals when its instance deforms (`None`
+    /// otherwise: its slot stores them), in the winding of its slot, whose vertices are
+    /// `positions`: the same bits the write would have stored (`geometry::VertexNormals`).
+    /// Valid for every instance with slots: a deforming instance's vertices here are the
+    /// ones its slots were last written from (every frame that poses it writes it).
+    #[inline]
+    pub fn deformed_normals(
+        &self,
+        scene: &SceneDesc,
+        geometry: &SceneGeometry,
+        deforms: &[VertexSource],
+        source: u32,
+        positions: &[Vec3A; 3],
+    ) -> Option<[Vec3; 3]> {
+        let i = geometry.triangle_instance[source as usize] as usize;
+        if deforms[i] != VertexSource::Deformed {
+            return None;
+        }
+        Some(geometry.placed_normals(
+            geometry.triangle_vertices(scene, source),
+            self.placements[i].flips_winding,
+            positions,
+            self.world_arrays(i).1,
+        ))
+    }
+
     /// Instance `i`'s world-space positions and normals (valid for the instances this frame
     /// rewrites).
     #[inline]
@@ -250,9 +276,9 @@ pub enum Rewrite {
     Keep,
     /// Every triangle rewritten and marked with this motion.
     All(Motion),
-    /// A deforming instance whose inputs changed: normals rewritten (they turn with a
-    /// neighbour's vertex), positions and uvs only where a vertex changed, those marked
-    /// deformed.
+    /// A deforming instance whose inputs changed: positions and uvs rewritten only where a
+    /// vertex changed, those marked deformed (its normals are not stored by slot: they are
+    /// read from the posed vertices, see [`PosedVertices::deformed_normals`]).
     Changed,
 }
 
@@ -268,6 +294,9 @@ pub struct TriangleWriter<'a> {
     /// (`None`: never written; empty: none were). Uvs depend only on that, so a write under
     /// the same winding leaves them alone.
     pub uv_flips: &'a [Option<bool>],
+    /// Per instance: where its vertices come from (a deforming instance's slots do not
+    /// store normals).
+    pub deforms: &'a [VertexSource],
     /// Set when a triangle written with new vertices has a non-finite one (so the ordered
     /// search for the first such triangle runs only then).
     pub moved_nonfinite: AtomicBool,
@@ -283,6 +312,7 @@ impl<'a> TriangleWriter<'a> {
         posed: &'a PosedVertices,
         plan: &'a [Rewrite],
         uv_flips: &'a [Option<bool>],
+        deforms: &'a [VertexSource],
     ) -> Self {
         let indices = (0..geometry.instances.len())
             .map(|i| {
@@ -296,6 +326,7 @@ impl<'a> TriangleWriter<'a> {
             posed,
             plan,
             uv_flips,
+            deforms,
             moved_nonfinite: AtomicBool::new(false),
             indices,
         }
@@ -306,7 +337,8 @@ impl<'a> TriangleWriter<'a> {
     #[inline]
     pub fn position(&self, source: u32) -> [Vec3A; 3] {
         let i = self.geometry.triangle_instance[source as usize] as usize;
-        self.instance(i).placed(source).0
+        let instance = self.instance(i);
+        instance.placed_positions(instance.vertices(source))
     }
 
     /// What writing instance `i`'s triangles reads, looked up once: the update writes an
@@ -325,6 +357,7 @@ impl<'a> TriangleWriter<'a> {
             first,
             indices,
             rewrites_uvs: self.uv_flips.get(i) != Some(&Some(placement.flips_winding)),
+            stores_normals: self.deforms[i] != VertexSource::Deformed,
             placement,
         }
     }
@@ -357,6 +390,8 @@ pub struct InstanceWriter<'a> {
     indices: &'a [u32],
     /// Whether its slots' uvs were last written under another winding (or never).
     rewrites_uvs: bool,
+    /// Whether its slots store their normals (all but deforming instances').
+    stores_normals: bool,
     /// Its placement (its winding decides the vertex order).
     placement: &'a Placement,
 }
@@ -370,12 +405,6 @@ impl InstanceWriter<'_> {
         [self.indices[at], self.indices[at + 1], self.indices[at + 2]]
     }
 
-    /// Source triangle `source` (of this instance) placed: world-space vertices and normals.
-    #[inline]
-    fn placed(&self, source: u32) -> ([Vec3A; 3], [Vec3; 3]) {
-        self.placed_vertices(self.vertices(source))
-    }
-
     /// Hints the cache to load the world-space positions and normals of primitive vertices
     /// `vertices` (the write in slot order gathers them from wherever the tree's order
     /// leads: most of its time was the wait for these loads).
@@ -383,10 +412,20 @@ impl InstanceWriter<'_> {
     pub fn prefetch_vertices(&self, vertices: [u32; 3]) {
         for v in vertices {
             prefetch(self.positions, v as usize);
-            if let Some(normals) = self.normals {
+            if let Some(normals) = self.normals.filter(|_| self.stores_normals) {
                 prefetch(normals, v as usize);
             }
         }
+    }
+
+    /// The vertices alone of the triangle of primitive vertices `vertices` placed.
+    #[inline(always)]
+    fn placed_positions(&self, vertices: [u32; 3]) -> [Vec3A; 3] {
+        self.writer.geometry.placed_positions(
+            vertices,
+            self.placement.flips_winding,
+            self.positions,
+        )
     }
 
     /// The triangle of primitive vertices `vertices` placed.
@@ -401,7 +440,8 @@ impl InstanceWriter<'_> {
     }
 
     /// Writes source triangle `source` (of this instance) into its slot's `position`,
-    /// `normal` and `uv` as the instance's [`Rewrite`] says; returns the slot's motion
+    /// `normal` (unless the instance deforms: `normal` is then left alone) and `uv` as the
+    /// instance's [`Rewrite`] says; returns the slot's motion
     /// (`None`: unmoved).
     #[inline]
     pub fn write(
@@ -434,8 +474,13 @@ impl InstanceWriter<'_> {
             Rewrite::All(motion) => Some(motion),
             Rewrite::Changed => None,
         };
-        let (p, n) = self.placed_vertices(vertices);
-        *normal = n;
+        let p = if self.stores_normals {
+            let (p, n) = self.placed_vertices(vertices);
+            *normal = n;
+            p
+        } else {
+            self.placed_positions(vertices)
+        };
         let motion = all.or_else(|| (!same_bits(&p, position)).then_some(Motion::Deformed))?;
         if !p.iter().all(|v| v.is_finite()) {
             self.writer.moved_nonfinite.store(true, Ordering::Relaxed);
@@ -535,7 +580,7 @@ pub fn pose_all_triangles(
             sources.extend(range.clone());
         }
     }
-    let writer = TriangleWriter::new(scene, geometry, posed, plan, &[]);
+    let writer = TriangleWriter::new(scene, geometry, posed, plan, &[], deforms);
     let position = |&source: &u32| writer.position(source);
     let positions = if parallel {
         sources
@@ -553,17 +598,26 @@ pub fn pose_all_triangles(
 /// lists (tree order), from the pose [`pose_all_triangles`] left in `posed` and `plan`: the
 /// same values a write in source order gives, written in slot order, on rayon's threads
 /// when `parallel`. The positions are the tree's (built from the same pose).
+#[allow(clippy::too_many_arguments)]
 pub fn write_slot_attributes(
     scene: &SceneDesc,
     geometry: &SceneGeometry,
     posed: &PosedVertices,
     plan: &[Rewrite],
+    deforms: &[VertexSource],
     parallel: bool,
     out: &mut FrameTriangles,
 ) {
     let n = out.source.len();
+    // Only the slots of instances that do not deform store normals; with none, the
+    // array stays empty (a skinned character's frame keeps no 36 bytes a triangle for it).
+    let stores_normals = |&s: &u32| {
+        deforms[geometry.triangle_instance[s as usize] as usize] != VertexSource::Deformed
+    };
     out.normals.clear();
-    out.normals.resize(n, [Vec3::ZERO; 3]);
+    if out.source.iter().any(stores_normals) {
+        out.normals.resize(n, [Vec3::ZERO; 3]);
+    }
     out.uvs.clear();
     out.uvs.resize(n, [Vec2::ZERO; 3]);
     out.log2_pb.clear();
@@ -574,22 +628,35 @@ pub fn write_slot_attributes(
             .iter()
             .map(|&s| geometry.instances[geometry.triangle_instance[s as usize] as usize].material),
     );
-    let writer = TriangleWriter::new(scene, geometry, posed, plan, &[]);
-    let write = |(normal, uv, &source): (_, _, &u32)| {
+    let writer = TriangleWriter::new(scene, geometry, posed, plan, &[], deforms);
+    let write = |normal: &mut [Vec3; 3], uv, source| {
         writer.write(source, &mut [Vec3A::ZERO; 3], normal, uv);
     };
-    let slots = (&mut out.normals, &mut out.uvs, &out.source);
-    if parallel {
-        slots
-            .into_par_iter()
+    // Without stored normals the write leaves its `normal` alone: it gets a spare.
+    let write_without = |(uv, &source): (_, &u32)| write(&mut [Vec3::ZERO; 3], uv, source);
+    let write_with = |(normal, (uv, &source)): (_, (_, &u32))| write(normal, uv, source);
+    let FrameTriangles {
+        normals,
+        uvs,
+        source,
+        ..
+    } = out;
+    match (parallel, normals.is_empty()) {
+        (true, false) => normals
+            .par_iter_mut()
+            .zip(uvs.par_iter_mut().zip(source.par_iter()))
             .with_min_len(WRITE_CHUNK)
-            .for_each(write);
-    } else {
-        let (n, uv, s) = slots;
-        n.iter_mut()
-            .zip(uv.iter_mut())
-            .zip(s.iter())
-            .for_each(|((n, uv), s)| write((n, uv, s)));
+            .for_each(write_with),
+        (true, true) => uvs
+            .par_iter_mut()
+            .zip(source.par_iter())
+            .with_min_len(WRITE_CHUNK)
+            .for_each(write_without),
+        (false, false) => normals
+            .iter_mut()
+            .zip(uvs.iter_mut().zip(source.iter()))
+            .for_each(write_with),
+        (false, true) => uvs.iter_mut().zip(source.iter()).for_each(write_without),
     }
 }
 

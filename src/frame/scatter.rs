@@ -26,6 +26,7 @@ use crate::simd::prefetch_ptr;
 /// the positions), handed to concurrent tasks.
 pub struct SlotScatter<'a> {
     positions: SlotLanes<'a>,
+    /// Null when no slot stores normals (every instance deforms: the write leaves them).
     normals: *mut [Vec3; 3],
     uvs: *mut [Vec2; 3],
     /// By source triangle.
@@ -44,7 +45,7 @@ impl<'a> SlotScatter<'a> {
     /// array (by source triangle).
     ///
     /// # Panics
-    /// If the triangles' arrays and the packs differ in length.
+    /// If the triangles' arrays and the packs differ in length (`normals` may be empty).
     pub fn new(
         triangles: &'a mut FrameTriangles,
         positions: SlotLanes<'a>,
@@ -52,13 +53,17 @@ impl<'a> SlotScatter<'a> {
     ) -> Self {
         let len = triangles.len();
         assert!(
-            triangles.normals.len() == len
+            (triangles.normals.len() == len || triangles.normals.is_empty())
                 && triangles.uvs.len() == len
                 && positions.slots() == len
         );
         SlotScatter {
             positions,
-            normals: triangles.normals.as_mut_ptr(),
+            normals: if triangles.normals.is_empty() {
+                std::ptr::null_mut()
+            } else {
+                triangles.normals.as_mut_ptr()
+            },
             uvs: triangles.uvs.as_mut_ptr(),
             sources: motions.len(),
             motions: motions.as_mut_ptr(),
@@ -94,11 +99,13 @@ impl<'a> SlotScatter<'a> {
         // SAFETY: in bounds (checked), and exclusive for this call by the caller's contract.
         unsafe {
             let mut position = self.positions.get(slot);
-            let motion = write(
-                &mut position,
-                &mut *self.normals.add(s),
-                &mut *self.uvs.add(s),
-            );
+            let mut spare = [Vec3::ZERO; 3];
+            let normal = if self.normals.is_null() {
+                &mut spare
+            } else {
+                &mut *self.normals.add(s)
+            };
+            let motion = write(&mut position, normal, &mut *self.uvs.add(s));
             if motion.is_some() {
                 self.positions.set(slot, &position);
             }
@@ -116,7 +123,9 @@ impl<'a> SlotScatter<'a> {
             self.positions.prefetch(slot);
             // SAFETY: in bounds; a prefetch reads nothing and writes nothing.
             unsafe {
-                prefetch_ptr(self.normals.add(s));
+                if !self.normals.is_null() {
+                    prefetch_ptr(self.normals.add(s));
+                }
                 prefetch_ptr(self.uvs.add(s));
             }
         }

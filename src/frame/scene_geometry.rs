@@ -16,7 +16,7 @@
 use glam::{Vec2, Vec3, Vec3A};
 
 use super::appearance::Appearance;
-use crate::geometry::Placement;
+use crate::geometry::{Placement, shading_normals};
 use crate::render::{LightSource, Material};
 use crate::scene::{PrimitiveDesc, SceneDesc};
 use crate::texture::WrapMode;
@@ -167,6 +167,39 @@ impl SceneGeometry {
         )
     }
 
+    /// The vertices of [`Self::placed_triangle`] alone: the write of a deforming instance,
+    /// whose slots do not store normals (`geometry::VertexNormals`).
+    #[inline(always)]
+    pub fn placed_positions(
+        &self,
+        vertices: [u32; 3],
+        flips_winding: bool,
+        positions: &[Vec3],
+    ) -> [Vec3A; 3] {
+        let v = oriented(vertices, flips_winding);
+        [
+            Vec3A::from(positions[v[0] as usize]),
+            Vec3A::from(positions[v[1] as usize]),
+            Vec3A::from(positions[v[2] as usize]),
+        ]
+    }
+
+    /// The shading normals [`Self::placed_triangle`] gives a triangle of primitive vertices
+    /// `vertices` whose placed vertices are `p` (read back from its slot): what shading
+    /// reads for the triangles of a deforming instance.
+    #[inline]
+    pub fn placed_normals(
+        &self,
+        vertices: [u32; 3],
+        flips_winding: bool,
+        p: &[Vec3A; 3],
+        normals: Option<&[Vec3]>,
+    ) -> [Vec3; 3] {
+        let v = oriented(vertices, flips_winding);
+        let n = normals.map(|n| [n[v[0] as usize], n[v[1] as usize], n[v[2] as usize]]);
+        shading_normals(n, p)
+    }
+
     /// A triangle from its placed vertices and normals (a zero normal: the geometric one).
     #[inline(always)]
     fn assemble_triangle(
@@ -184,20 +217,10 @@ impl SceneGeometry {
             Vec3A::from(position(v[1])),
             Vec3A::from(position(v[2])),
         ];
-        // Computed only when a vertex needs it (a sqrt and a division: most of the cost of
-        // writing a deformed triangle that has its own normals).
-        let geometric = || Vec3::from((p[1] - p[0]).cross(p[2] - p[0]).normalize_or_zero());
-        let normals = match normal {
-            Some(normal) => {
-                let n = [normal(v[0]), normal(v[1]), normal(v[2])];
-                if n.contains(&Vec3::ZERO) {
-                    n.map(|n| if n == Vec3::ZERO { geometric() } else { n })
-                } else {
-                    n
-                }
-            }
-            None => [geometric(); 3],
-        };
+        let normals = normal.map(|normal| [normal(v[0]), normal(v[1]), normal(v[2])]);
+        // The geometric normal is computed only where a vertex needs it: a sqrt and a
+        // division, most of the cost of writing a deformed triangle that has its own normals.
+        let normals = shading_normals(normals, &p);
         (p, normals)
     }
 
@@ -373,6 +396,13 @@ mod tests {
                         [Vec2::ZERO; 3],
                     );
                     assert_eq!(bits(direct), bits((p, n)), "placed at a hit: {source}");
+                    // A deforming instance's path: the vertices written alone, the normals
+                    // read back at a hit from the placed vertices and the slot's vertices.
+                    let v = geometry.triangle_vertices(&scene, source);
+                    let flips = placement.flips_winding;
+                    let p = geometry.placed_positions(v, flips, &placed);
+                    let n = geometry.placed_normals(v, flips, &p, pn);
+                    assert_eq!(bits(once), bits((p, n)), "by vertex: {source}");
                 }
             }
         }

@@ -157,6 +157,12 @@ impl TreeState {
         self.carried
     }
 
+    /// Every instance's posed vertices (a deforming instance's: those its slots were last
+    /// written from, which shading reads its normals from).
+    pub fn posed(&self) -> &PosedVertices {
+        &self.scratch.posed
+    }
+
     /// Drops the carried state (after a frame that failed half way).
     pub fn reset(&mut self) {
         self.carried = false;
@@ -219,6 +225,7 @@ impl TreeState {
             &setup.geometry,
             posed,
             plan,
+            &setup.deforms,
             parallel,
             &mut self.triangles,
         );
@@ -412,7 +419,14 @@ impl TreeState {
         } = &mut self.scratch;
         let geometry = &setup.geometry;
         source_motion.resize(geometry.triangle_count(), None);
-        let writer = TriangleWriter::new(&setup.scene, geometry, posed, plan, uv_flips);
+        let writer = TriangleWriter::new(
+            &setup.scene,
+            geometry,
+            posed,
+            plan,
+            uv_flips,
+            &setup.deforms,
+        );
         let ranges = &geometry.instance_triangles;
         let slot_of_source = &self.slot_of_source;
         if setup.parallelism.splits(visited) {
@@ -450,18 +464,17 @@ impl TreeState {
                 .iter()
                 .enumerate()
                 .filter(|(_, r)| **r != Rewrite::Keep);
+            // A tree whose slots store no normals (every instance deforms) writes none.
+            let mut spare = [Vec3::ZERO; 3];
             for (i, _) in visited_instances {
                 let instance = writer.instance(i);
                 for source in ranges[i].clone() {
                     let slot = slot_of_source[source as usize];
                     let s = slot as usize;
                     let mut position = accel.triangle(slot);
-                    let motion = instance.write(
-                        source,
-                        &mut position,
-                        &mut triangles.normals[s],
-                        &mut triangles.uvs[s],
-                    );
+                    let normal = triangles.normals.get_mut(s).unwrap_or(&mut spare);
+                    let motion =
+                        instance.write(source, &mut position, normal, &mut triangles.uvs[s]);
                     if motion.is_some() {
                         accel.set_triangle(slot, &position);
                     }
@@ -497,7 +510,14 @@ impl TreeState {
         } = &mut self.scratch;
         let geometry = &setup.geometry;
         source_motion.resize(geometry.triangle_count(), None);
-        let writer = TriangleWriter::new(&setup.scene, geometry, posed, plan, uv_flips);
+        let writer = TriangleWriter::new(
+            &setup.scene,
+            geometry,
+            posed,
+            plan,
+            uv_flips,
+            &setup.deforms,
+        );
         let parallel = setup.parallelism.splits(visited);
         let triangles = &mut self.triangles;
         if self.slot_vertices.len() != triangles.len() {
@@ -516,6 +536,8 @@ impl TreeState {
         let lanes = self.accel.slot_lanes();
         let motions = SourceMotions::new(source_motion);
         let (plan, slot_vertices) = (&*plan, &self.slot_vertices);
+        // `normals`: the run's stored normals, empty when no slot stores them (every
+        // instance deforms, so the write leaves them alone).
         let write_run = |run: usize,
                          sources: &[u32],
                          normals: &mut [[Vec3; 3]],
@@ -528,6 +550,7 @@ impl TreeState {
                 writer.instance(i as usize).vertices(source)
             };
             slot_vertices.decode_run(run, escaped, decoded);
+            let mut spare = [Vec3::ZERO; 3];
             let mut current: Option<(u32, InstanceWriter)> = None;
             for (
                 k,
@@ -559,7 +582,7 @@ impl TreeState {
                         vertices,
                         source,
                         &mut position,
-                        &mut normals[k],
+                        normals.get_mut(k).unwrap_or(&mut spare),
                         &mut uvs[k],
                     );
                     if motion.is_some() {
@@ -578,10 +601,17 @@ impl TreeState {
             source,
             ..
         } = triangles;
+        // Each run's stored normals: none (empty runs) when no slot stores them.
+        let runs = source.len().div_ceil(SLOT_RUN);
+        let normal_runs: Vec<&mut [[Vec3; 3]]> = if normals.is_empty() {
+            (0..runs).map(|_| Default::default()).collect()
+        } else {
+            normals.chunks_mut(SLOT_RUN).collect()
+        };
         if parallel {
             source
                 .par_chunks(SLOT_RUN)
-                .zip(normals.par_chunks_mut(SLOT_RUN))
+                .zip(normal_runs)
                 .zip(uvs.par_chunks_mut(SLOT_RUN))
                 .zip(dirty.words_mut().par_chunks_mut(SLOT_RUN / 64))
                 .enumerate()
@@ -593,7 +623,7 @@ impl TreeState {
         } else {
             let runs = source
                 .chunks(SLOT_RUN)
-                .zip(normals.chunks_mut(SLOT_RUN))
+                .zip(normal_runs)
                 .zip(uvs.chunks_mut(SLOT_RUN));
             DECODED.with_borrow_mut(|decoded| {
                 for (run, ((sources, normals), uvs)) in runs.enumerate() {

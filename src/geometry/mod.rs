@@ -10,7 +10,9 @@
 //!
 //! Invariants: all arrays of a `FrameTriangles` have the same length, except `positions`,
 //! which is either as long (before a tree is built) or empty (once a tree is built over
-//! them: its packs hold the only copy, read by slot through `Accel::triangle`); triangles
+//! them: its packs hold the only copy, read by slot through `Accel::triangle`), and
+//! `normals`, which is either as long or empty (no slot stores its normals: every
+//! triangle's are read through its vertex indices, see `VertexNormals`); triangles
 //! are wound
 //! counter-clockwise about their geometric normal in world space (a node with a negative
 //! determinant has its winding flipped, as glTF requires). This module imports nothing
@@ -26,7 +28,10 @@ pub struct FrameTriangles {
     /// tree's packs (the hit test's layout) and leaves this empty, so a frame keeps one copy
     /// of each position, not two (48 bytes a triangle).
     pub positions: Vec<[Vec3A; 3]>,
-    /// World-space shading normals (unit length; the geometric normal where the mesh has none).
+    /// World-space shading normals (unit length; the geometric normal where the mesh has
+    /// none), for the slots that store them: a slot of a skinned or morphed instance does
+    /// not (its entry is left as it was), and shading reads its normals through its vertex
+    /// indices ([`VertexNormals`]); empty when no slot stores them.
     pub normals: Vec<[Vec3; 3]>,
     pub uvs: Vec<[Vec2; 3]>,
     pub material: Vec<u32>,
@@ -68,17 +73,54 @@ pub struct HitTriangle {
     pub source: u32,
 }
 
+/// Shading normals kept by vertex rather than by slot: a skinned or morphed mesh's normals
+/// change every frame, and writing three of them into each slot (36 bytes a triangle) was
+/// a third of what its update wrote. The frame keeps the posed vertices anyway; a hit reads
+/// its three normals from them through the triangle's vertex indices instead.
+pub trait VertexNormals: Sync {
+    /// Source triangle `source`'s world-space shading normals in the winding its slot holds
+    /// (`positions`: its vertices, read from the tree), the same bits its slot would have
+    /// stored; `None` when its slot stores them.
+    fn normals(&self, source: u32, positions: &[Vec3A; 3]) -> Option<[Vec3; 3]>;
+}
+
+/// A triangle's shading normals from its vertices' (`None`: the mesh has none), in its
+/// slot's winding: a zero vertex normal, or all three where the mesh has none, become the
+/// geometric normal of `p` (computed only then: a sqrt and a division).
+#[inline(always)]
+pub fn shading_normals(normals: Option<[Vec3; 3]>, p: &[Vec3A; 3]) -> [Vec3; 3] {
+    let geometric = || Vec3::from((p[1] - p[0]).cross(p[2] - p[0]).normalize_or_zero());
+    match normals {
+        Some(n) if n.contains(&Vec3::ZERO) => {
+            n.map(|n| if n == Vec3::ZERO { geometric() } else { n })
+        }
+        Some(n) => n,
+        None => [geometric(); 3],
+    }
+}
+
 impl FrameTriangles {
-    /// Slot `slot` as shading reads it, with its vertices (`positions`, read from the tree).
+    /// Slot `slot` as shading reads it, with its vertices (`positions`, read from the tree);
+    /// `by_vertex`: where the slots of deforming instances get their normals.
     #[inline]
-    pub fn hit_triangle(&self, slot: usize, positions: [Vec3A; 3]) -> HitTriangle {
+    pub fn hit_triangle(
+        &self,
+        slot: usize,
+        positions: [Vec3A; 3],
+        by_vertex: Option<&dyn VertexNormals>,
+    ) -> HitTriangle {
+        let source = self.source[slot];
+        let normals = match by_vertex.and_then(|v| v.normals(source, &positions)) {
+            Some(normals) => normals,
+            None => self.normals[slot],
+        };
         HitTriangle {
             positions,
-            normals: self.normals[slot],
+            normals,
             uvs: self.uvs[slot],
             material: self.material[slot],
             log2_pb: self.log2_pb[slot],
-            source: self.source[slot],
+            source,
         }
     }
 
@@ -101,7 +143,9 @@ impl FrameTriangles {
         if !self.positions.is_empty() {
             apply(&mut self.positions, order);
         }
-        apply(&mut self.normals, order);
+        if !self.normals.is_empty() {
+            apply(&mut self.normals, order);
+        }
         apply(&mut self.uvs, order);
         apply(&mut self.material, order);
         apply(&mut self.log2_pb, order);

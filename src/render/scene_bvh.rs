@@ -14,7 +14,7 @@
 use glam::{Vec2, Vec3A};
 
 use crate::accel::{Accel, Hit, TriangleRef, TwoLevelAccel, intersect};
-use crate::geometry::{FrameTriangles, HitTriangle, Placement};
+use crate::geometry::{FrameTriangles, HitTriangle, Placement, VertexNormals};
 use crate::lod::{PixelFootprint, log2_pb, shift_log2_pb};
 
 /// The acceleration structure of a frame, with the triangles its hits refer to.
@@ -23,6 +23,9 @@ pub enum SceneBvh<'a> {
     Flat {
         triangles: &'a FrameTriangles,
         accel: &'a Accel,
+        /// Where the slots of deforming instances get their normals (`None`: every slot
+        /// stores its own).
+        by_vertex: Option<&'a dyn VertexNormals>,
     },
     TwoLevel(Instanced<'a>),
 }
@@ -34,6 +37,8 @@ pub struct Instanced<'a> {
     /// ones merged into it (see `frame/two_level.rs`).
     pub world_triangles: &'a FrameTriangles,
     pub world: &'a Accel,
+    /// Where the world tree's slots of deforming instances get their normals.
+    pub by_vertex: Option<&'a dyn VertexNormals>,
     pub accel: &'a TwoLevelAccel,
     /// Per instance of `accel` (the index a hit reports): how its triangles are shaded.
     pub instances: &'a [InstanceShading],
@@ -132,12 +137,12 @@ impl SceneBvh<'_> {
         mut visit: impl FnMut(f32, u32, u32) -> bool,
     ) -> bool {
         match self {
-            SceneBvh::Flat { triangles, accel } => {
-                accel.visit_hits(origin, direction, t_max, |slot, t| {
-                    let s = slot as usize;
-                    visit(t, triangles.material[s], triangles.source[s])
-                })
-            }
+            SceneBvh::Flat {
+                triangles, accel, ..
+            } => accel.visit_hits(origin, direction, t_max, |slot, t| {
+                let s = slot as usize;
+                visit(t, triangles.material[s], triangles.source[s])
+            }),
             SceneBvh::TwoLevel(i) => {
                 i.accel
                     .visit_hits(i.world, origin, direction, t_max, |instance, slot, t| {
@@ -160,12 +165,12 @@ impl SceneBvh<'_> {
         mut visit: impl FnMut(usize, f32, u32, u32) -> bool,
     ) -> u64 {
         match self {
-            SceneBvh::Flat { triangles, accel } => {
-                accel.visit_hits_packet(rays, t_max, |r, slot, t| {
-                    let s = slot as usize;
-                    visit(r, t, triangles.material[s], triangles.source[s])
-                })
-            }
+            SceneBvh::Flat {
+                triangles, accel, ..
+            } => accel.visit_hits_packet(rays, t_max, |r, slot, t| {
+                let s = slot as usize;
+                visit(r, t, triangles.material[s], triangles.source[s])
+            }),
             SceneBvh::TwoLevel(i) => {
                 i.accel
                     .visit_hits_packet(i.world, rays, t_max, |r, instance, slot, t| {
@@ -202,13 +207,19 @@ impl SceneBvh<'_> {
     pub fn triangle(&self, at: TriangleRef) -> HitTriangle {
         let slot = at.slot as usize;
         let i = match self {
-            SceneBvh::Flat { triangles, accel } => {
-                return triangles.hit_triangle(slot, accel.triangle(at.slot));
+            SceneBvh::Flat {
+                triangles,
+                accel,
+                by_vertex,
+            } => {
+                return triangles.hit_triangle(slot, accel.triangle(at.slot), *by_vertex);
             }
             SceneBvh::TwoLevel(i) if at.instance == Hit::WORLD => {
-                return i
-                    .world_triangles
-                    .hit_triangle(slot, i.world.triangle(at.slot));
+                return i.world_triangles.hit_triangle(
+                    slot,
+                    i.world.triangle(at.slot),
+                    i.by_vertex,
+                );
             }
             SceneBvh::TwoLevel(i) => i,
         };
