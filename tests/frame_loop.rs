@@ -147,6 +147,95 @@ fn only_slots_of_undeformed_instances_store_normals() {
     assert_eq!(by_source(&rebuilt), by_source(&mixed));
 }
 
+/// Copies of one mesh stretched alike share their `log2 P_b` constants (computed once for
+/// the group): each copy's must equal what it gets rendered alone, where it has no group,
+/// whether it is turned or not; a copy stretched differently keeps its own.
+#[test]
+fn copies_stretched_alike_get_the_constants_each_gets_alone() {
+    use mipray::scene::{
+        ChannelDesc, ChannelTarget, Interpolation, MeshDesc, NodeDesc, SceneDesc, Trs,
+    };
+    // (translation, turn about z, stretch at t = 1)
+    let copies = [
+        (glam::Vec3::new(-3.0, 0.0, -8.0), 0.0, [1.5, 0.8, 1.0]),
+        (glam::Vec3::new(-1.0, 0.0, -8.0), 0.0, [1.5, 0.8, 1.0]),
+        (glam::Vec3::new(1.0, 0.0, -8.0), 0.7, [1.5, 0.8, 1.0]),
+        (glam::Vec3::new(3.0, 0.0, -8.0), 0.0, [0.6, 1.9, 1.0]),
+        (glam::Vec3::new(0.0, 2.0, -8.0), 0.0, [0.6, 1.9, 1.0]),
+    ];
+    let scene_of = |which: &[usize]| -> SceneDesc {
+        let mut scene = generated::textured_scene();
+        scene.meshes.push(MeshDesc {
+            name: "patch".into(),
+            primitives: vec![generated::patch(4, 3, 1.0, 1.0)],
+            ..Default::default()
+        });
+        for &c in which {
+            let (translation, turn, stretch) = copies[c];
+            scene.nodes.push(NodeDesc {
+                local: Trs {
+                    translation,
+                    rotation: glam::Quat::from_rotation_z(turn),
+                    ..Default::default()
+                },
+                mesh: Some(0),
+                ..Default::default()
+            });
+            let node = scene.nodes.len() - 1;
+            scene.roots.push(node);
+            scene.animations[0].channels.push(ChannelDesc {
+                node,
+                target: ChannelTarget::Scale,
+                interpolation: Interpolation::Linear,
+                times: vec![0.0, 1.0],
+                values: [[1.0; 3], stretch].concat(),
+                components: 3,
+            });
+        }
+        generated::add_camera(&mut scene, glam::Vec3::new(0.0, 0.0, 2.0), 1.0);
+        scene
+    };
+    // Per node (in `which` order), its triangles' constants by local triangle.
+    let constants = |which: &[usize], time: f32| -> Vec<Vec<u32>> {
+        let policy = BvhPolicy::Refit {
+            rebuild_threshold: BvhPolicy::DEFAULT_REBUILD_THRESHOLD,
+        };
+        let flat = RenderSettings {
+            layout: BvhLayout::Flat,
+            ..settings(policy)
+        };
+        let mut r = Renderer::new(scene_of(which), flat);
+        r.prepare(0, 0.0).unwrap();
+        r.prepare(1, time).unwrap();
+        assert_eq!(r.triangles().len(), r.geometry().triangle_count());
+        let (g, t) = (r.geometry(), r.triangles());
+        let mut out: Vec<Vec<u32>> = g
+            .instance_triangles
+            .iter()
+            .map(|range| vec![0; range.len()])
+            .collect();
+        for (slot, &source) in t.source.iter().enumerate() {
+            let i = g.triangle_instance[source as usize] as usize;
+            let local = (source - g.instance_triangles[i].start) as usize;
+            out[i][local] = t.log2_pb[slot].to_bits();
+        }
+        out
+    };
+    for time in [0.5, 1.0] {
+        let all = constants(&[0, 1, 2, 3, 4], time);
+        for c in 0..copies.len() {
+            let alone = constants(&[c], time);
+            assert_eq!(all[c], alone[0], "copy {c} at {time} s");
+        }
+        assert_ne!(all[0], all[3], "different stretches, different constants");
+        assert_eq!(
+            all[0], all[2],
+            "a turn does not change a stretched constant"
+        );
+        assert!(all[0].iter().all(|&v| v != 0), "textured: a constant each");
+    }
+}
+
 /// Over 8,192 deformed triangles the `log2 P_b` update runs on several threads: every
 /// value must equal the constant of the triangle's world vertices computed here, one by
 /// one (the texel-term form deforming triangles get, within one f32 step of `log2_pb`),

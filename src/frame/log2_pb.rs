@@ -10,6 +10,9 @@
 //! sequential run equals a frame rendered alone (`tests/frame_loop.rs`, `tests/deform.rs`
 //! check it against a full recompute).
 
+use std::collections::HashMap;
+use std::sync::OnceLock;
+
 use glam::{Mat4, Vec3};
 use rayon::prelude::*;
 
@@ -249,7 +252,7 @@ struct Pass<'a> {
     /// was 1.17x slower fetching them for nothing).
     reads_vertices: bool,
     /// Per instance, see [`stretches`].
-    stretches: Vec<Option<Stretch>>,
+    stretches: Stretches,
 }
 
 impl Pass<'_> {
@@ -312,10 +315,17 @@ impl Pass<'_> {
         }
         let instance = geometry.triangle_instance[source] as usize;
         Some(
-            match (self.states[instance].shape, &self.stretches[instance]) {
+            match (
+                self.states[instance].shape,
+                &self.stretches.per_instance[instance],
+            ) {
                 // Stretch: the object-space triangle under the exact diagonal (a canonical value,
-                // whatever rotation the frame adds).
-                (_, Some(stretch)) => self.stretched_log2_pb(source, stretch),
+                // whatever rotation the frame adds), shared by the instances with the same
+                // primitive, material and stretch.
+                (_, Some(stretch)) => match stretch.shared {
+                    Some(group) => self.shared_stretched_log2_pb(source, instance, group),
+                    None => self.stretched_log2_pb(source, stretch),
+                },
                 // Similarity: the object-space constant plus log2 s.
                 (Some(NodeShape { scale, .. }), None) => shift_log2_pb(object, scale.log2()),
                 // Deforming (or sheared): from its world vertices. A deforming triangle's texel
@@ -340,6 +350,25 @@ impl Pass<'_> {
                 },
             },
         )
+    }
+
+    /// [`Self::stretched_log2_pb`] of source triangle `source` of instance `instance`, read
+    /// from the constants of its group of instances (computed by the first to ask, on its
+    /// thread, for the group's first instance: the same primitive, material and stretch,
+    /// so the same bits).
+    fn shared_stretched_log2_pb(&self, source: usize, instance: usize, group: u32) -> f32 {
+        let ranges = &self.setup.geometry.instance_triangles;
+        let (first, values) = &self.stretches.shared[group as usize];
+        let values = values.get_or_init(|| {
+            let stretch = self.stretches.per_instance[*first]
+                .as_ref()
+                .expect("a group's instances are stretched");
+            ranges[*first]
+                .clone()
+                .map(|s| self.stretched_log2_pb(s as usize, stretch))
+                .collect()
+        });
+        values[source - ranges[instance].start as usize]
     }
 
     /// `log2 P_b` of a source triangle's rest vertices under its instance's stretch.
@@ -367,9 +396,12 @@ impl Pass<'_> {
 
 /// Per instance: the stretch of its shape key as the placement [`Pass::stretched_log2_pb`]
 /// applies (`None` unless the key has a stretch), made once per frame instead of once per
-/// triangle (a 1M stretched crowd's pass spent most of its time inverting the same matrix).
-fn stretches(setup: &FrameSetup, states: &[InstanceState]) -> Vec<Option<Stretch>> {
-    states
+/// triangle (a 1M stretched crowd's pass spent most of its time inverting the same matrix);
+/// instances that draw the same primitive with the same material under the same stretch
+/// are grouped, so their constants are computed once (`Stretches`).
+fn stretches(setup: &FrameSetup, states: &[InstanceState]) -> Stretches {
+    let geometry = &setup.geometry;
+    let mut per_instance: Vec<Option<Stretch>> = states
         .iter()
         .enumerate()
         .map(|(instance, state)| {
@@ -379,9 +411,51 @@ fn stretches(setup: &FrameSetup, states: &[InstanceState]) -> Vec<Option<Stretch
             Some(Stretch {
                 placement: Placement::new(stretch),
                 texture_size: setup.instance_texture_size(instance).unwrap_or((1, 1)),
+                shared: None,
             })
         })
-        .collect()
+        .collect();
+    // Group by what a constant depends on: the primitive (vertices, indices, uvs), the
+    // material (texture size and wrap modes) and the stretch as applied (its f32 diagonal).
+    type Key = (u32, u32, u32, [u32; 3]);
+    let mut members: HashMap<Key, (usize, usize)> = HashMap::new();
+    let key = |instance: usize, stretch: &Stretch| -> Key {
+        let i = geometry.instances[instance];
+        let m = stretch.placement.world_from_object;
+        let diagonal = [m.x_axis.x, m.y_axis.y, m.z_axis.z].map(f32::to_bits);
+        (i.mesh, i.primitive, i.material, diagonal)
+    };
+    for (instance, stretch) in per_instance.iter().enumerate() {
+        if let Some(stretch) = stretch {
+            members
+                .entry(key(instance, stretch))
+                .and_modify(|(_, n)| *n += 1)
+                .or_insert((instance, 1));
+        }
+    }
+    let mut shared = Vec::new();
+    let mut group_of: HashMap<Key, u32> = HashMap::new();
+    for instance in 0..per_instance.len() {
+        let Some(stretch) = &per_instance[instance] else {
+            continue;
+        };
+        let k = key(instance, stretch);
+        let (first, count) = members[&k];
+        if count < 2 {
+            continue; // alone: computed triangle by triangle, across threads
+        }
+        let group = *group_of.entry(k).or_insert_with(|| {
+            shared.push((first, OnceLock::new()));
+            (shared.len() - 1) as u32
+        });
+        if let Some(stretch) = &mut per_instance[instance] {
+            stretch.shared = Some(group);
+        }
+    }
+    Stretches {
+        per_instance,
+        shared,
+    }
 }
 
 /// `log2 P_b` of every source triangle from its rest vertices in object space; NaN where the
@@ -421,6 +495,20 @@ fn object_space_log2_pb(
 struct Stretch {
     placement: Placement,
     texture_size: (u32, u32),
+    /// Index of the instances drawing the same primitive with the same material under the
+    /// same stretch (in [`Stretches::shared`]), when there are several: their triangles'
+    /// constants are the same, computed once for all of them.
+    shared: Option<u32>,
+}
+
+/// Per instance: its stretch (`None` unless its shape key has one); and the constants of
+/// each group of instances that share a primitive, a material and a stretch (a crowd of
+/// copies squashed and stretched by the same animation), made by the first triangle of the
+/// group that asks, in the order of the primitive's triangles.
+struct Stretches {
+    per_instance: Vec<Option<Stretch>>,
+    /// Per group: its first instance and, once asked, its triangles' constants.
+    shared: Vec<(usize, OnceLock<Vec<f32>>)>,
 }
 
 /// Per BVH slot, the [`texel_term`] of a textured triangle of a deforming instance, made
