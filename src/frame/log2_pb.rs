@@ -435,10 +435,8 @@ fn stretches(setup: &FrameSetup, states: &[InstanceState]) -> Stretches {
     }
     let mut shared = Vec::new();
     let mut group_of: HashMap<Key, u32> = HashMap::new();
-    for instance in 0..per_instance.len() {
-        let Some(stretch) = &per_instance[instance] else {
-            continue;
-        };
+    for (instance, stretch) in per_instance.iter_mut().enumerate() {
+        let Some(stretch) = stretch else { continue };
         let k = key(instance, stretch);
         let (first, count) = members[&k];
         if count < 2 {
@@ -448,9 +446,7 @@ fn stretches(setup: &FrameSetup, states: &[InstanceState]) -> Stretches {
             shared.push((first, OnceLock::new()));
             (shared.len() - 1) as u32
         });
-        if let Some(stretch) = &mut per_instance[instance] {
-            stretch.shared = Some(group);
-        }
+        stretch.shared = Some(group);
     }
     Stretches {
         per_instance,
