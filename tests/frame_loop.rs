@@ -243,9 +243,23 @@ fn copies_stretched_alike_get_the_constants_each_gets_alone() {
 #[test]
 fn parallel_log2_pb_update_equals_the_constant_computed_one_by_one() {
     // Every vertex lifted: all 10,368 triangles deform on every frame.
+    // Rebuilt every frame, the write goes in source order and the `log2 P_b` step walks the
+    // deformed slots; refitted, every slot is rewritten in slot order and the write takes
+    // their constants itself.
     let lifted: Vec<u32> = (0..73 * 73).collect();
     let triangles = 2 * 72 * 72;
-    let mut r = Renderer::new(morph_grid_scene(72, &lifted), settings(BvhPolicy::Rebuild));
+    let refit = BvhPolicy::Refit {
+        rebuild_threshold: f32::INFINITY,
+    };
+    for policy in [BvhPolicy::Rebuild, refit] {
+        constants_equal_those_computed_one_by_one(
+            Renderer::new(morph_grid_scene(72, &lifted), settings(policy)),
+            triangles,
+        );
+    }
+}
+
+fn constants_equal_those_computed_one_by_one(mut r: Renderer, triangles: usize) {
     // The grid's camera has yfov 0.8; frames are 48 pixels high; the checker is 64x64.
     let footprint = PixelFootprint::new(0.8, 48);
     for frame in [0, 3, 9] {

@@ -27,8 +27,8 @@ use crate::anim::NodeShape;
 use crate::geometry::{FrameTriangles, Placement};
 use crate::lod::log2::log2_in_place;
 use crate::lod::{
-    PixelFootprint, cross_squared, log2_pb, log2_pb_from_parts, log2_pb_with_texel_term,
-    shift_log2_pb, texel_area, texel_term, uv_area,
+    PixelFootprint, log2_pb, log2_pb_from_parts, log2_pb_with_texel_term, shift_log2_pb,
+    texel_area, texel_term, uv_area,
 };
 use crate::scene::SceneDesc;
 use crate::simd::prefetch;
@@ -198,6 +198,9 @@ impl Log2PbState {
             let mut terms = [0f64; 64];
             let mut cc = [0f64; 64];
             let mut logs = [0f64; 64];
+            // The squared cross products of the last pack read, four lanes at once: a pack
+            // holds consecutive slots, which the walk visits in order.
+            let mut pack: Option<(std::ops::Range<usize>, [f64; 4])> = None;
             for (w, &word) in words.iter().enumerate() {
                 let mut bits = word;
                 let mut n = 0;
@@ -205,9 +208,17 @@ impl Log2PbState {
                     let s = base + w * 64 + bits.trailing_zeros() as usize;
                     bits &= bits - 1;
                     let Some(term) = table.of(s) else { continue };
+                    let (held, lanes) = match &pack {
+                        Some((held, lanes)) if held.contains(&s) => (held.start, *lanes),
+                        _ => {
+                            let (held, lanes) = accel.pack_cross_squared(s as u32);
+                            let held = held.start as usize..held.end as usize;
+                            (held.start, pack.insert((held, lanes)).1)
+                        }
+                    };
                     slots[n] = s;
                     terms[n] = term;
-                    cc[n] = cross_squared(accel.triangle(s as u32));
+                    cc[n] = lanes[s - held];
                     n += 1;
                 }
                 logs[..n].copy_from_slice(&cc[..n]);

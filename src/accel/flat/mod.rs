@@ -171,6 +171,14 @@ impl Accel {
         self.triangles.triangle(slot)
     }
 
+    /// `lod::cross_squared` of the triangles of slot `slot`'s hit-test pack, four lanes at
+    /// once, with the slots its live lanes hold (lane `i` holds slot `slots.start + i`; the
+    /// lanes past them are padding).
+    #[inline]
+    pub fn pack_cross_squared(&self, slot: u32) -> (std::ops::Range<u32>, [f64; 4]) {
+        self.triangles.pack_cross_squared(slot)
+    }
+
     /// Every slot's triangle, in slot order (a copy: for exports, rebuilds and tests).
     pub fn triangles_in_slot_order(&self) -> Vec<[Vec3A; 3]> {
         self.triangles.triangles_in_slot_order()

@@ -14,6 +14,8 @@
 //! Each leaf's triangles fill whole packs (a leaf of 5 takes two packs, the second with one
 //! live lane), so a leaf is a run of packs and no pack straddles two leaves.
 
+use std::ops::Range;
+
 use glam::{Vec2, Vec3A, Vec4};
 use obvhs::aabb::Aabb;
 
@@ -46,6 +48,29 @@ impl TrianglePack {
                 self.v[vertex][axis][lane] = p[axis];
             }
         }
+    }
+
+    /// `|e1 x e2|^2` of every lane's triangle in `f64` (padding lanes too), the bits
+    /// `lod::cross_squared` gives each: the same operations in the same order, four lanes
+    /// side by side so the compiler can take them in vectors (the `log2 P_b` pass of a
+    /// deforming mesh was bound by this arithmetic, one triangle at a time).
+    #[inline]
+    pub fn cross_squared(&self) -> [f64; LANES] {
+        let c = |vertex: usize, axis: usize| self.v[vertex][axis].map(f64::from);
+        let (x0, y0, z0) = (c(0, 0), c(0, 1), c(0, 2));
+        let (x1, y1, z1) = (c(1, 0), c(1, 1), c(1, 2));
+        let (x2, y2, z2) = (c(2, 0), c(2, 1), c(2, 2));
+        let mut out = [0.0; LANES];
+        for l in 0..LANES {
+            // e1 = p1 - p0, e2 = p2 - p0; cross as glam's `DVec3::cross`, dot as `dot`.
+            let (ax, ay, az) = (x1[l] - x0[l], y1[l] - y0[l], z1[l] - z0[l]);
+            let (bx, by, bz) = (x2[l] - x0[l], y2[l] - y0[l], z2[l] - z0[l]);
+            let cx = ay * bz - by * az;
+            let cy = az * bx - bz * ax;
+            let cz = ax * by - bx * ay;
+            out[l] = (cx * cx) + (cy * cy) + (cz * cz);
+        }
+        out
     }
 
     /// The union of its live lanes' padded boxes (a leaf's box is the union over its packs).
@@ -176,6 +201,16 @@ impl PackedTriangles {
     pub fn triangle(&self, slot: u32) -> [Vec3A; 3] {
         let at = self.lane_of_slot[slot as usize] as usize;
         self.packs[at / LANES].get(at % LANES)
+    }
+
+    /// [`TrianglePack::cross_squared`] of slot `slot`'s pack, with the slots its live lanes
+    /// hold: lane `i` holds slot `slots.start + i` (a pack's live lanes are consecutive
+    /// slots).
+    #[inline]
+    pub fn pack_cross_squared(&self, slot: u32) -> (Range<u32>, [f64; LANES]) {
+        let pack = &self.packs[self.lane_of_slot[slot as usize] as usize / LANES];
+        let slots = pack.first_slot..pack.first_slot + pack.live;
+        (slots, pack.cross_squared())
     }
 
     /// Hints the cache to load slot `slot`'s pack (no effect when out of range).
@@ -577,6 +612,48 @@ mod tests {
 
     fn tri(a: [f32; 3], b: [f32; 3], c: [f32; 3]) -> [Vec3A; 3] {
         [a, b, c].map(Vec3A::from)
+    }
+
+    /// A pack's four squared cross products are the bits `lod::cross_squared` gives each
+    /// lane's triangle alone: ordinary, degenerate, tiny, huge and mixed-magnitude ones.
+    #[test]
+    fn pack_cross_squared_equals_the_per_triangle_value_bit_for_bit() {
+        let mut state = 0x9e37_79b9_7f4a_7c15u64;
+        let mut next = move || {
+            state ^= state << 13;
+            state ^= state >> 7;
+            state ^= state << 17;
+            (state >> 40) as f32 / (1u64 << 24) as f32 - 0.5
+        };
+        let mut triangles = vec![
+            tri([0.0; 3], [0.0; 3], [0.0; 3]),
+            tri([1.0, 2.0, 3.0], [2.0, 4.0, 6.0], [3.0, 6.0, 9.0]),
+            tri([1e-30, 0.0, 0.0], [0.0, 1e-30, 0.0], [0.0, 0.0, 1e-30]),
+            tri([3e38, -3e38, 1.0], [-3e38, 3e38, 2.0], [1e20, 1e-20, -3e38]),
+            tri(
+                [1e7, 1e7, 1e7],
+                [1e7 + 1.0, 1e7, 1e7],
+                [1e7, 1e7 + 1.0, 1e7],
+            ),
+        ];
+        for scale in [1e-6, 1.0, 1e6] {
+            for _ in 0..40 {
+                let mut v = || [next() * scale, next() * scale, next() * scale];
+                let (a, b, c) = (v(), v(), v());
+                triangles.push(tri(a, b, c));
+            }
+        }
+        let packed = PackedTriangles::pack(&triangles, [(0, triangles.len() as u32)].into_iter());
+        for slot in 0..triangles.len() as u32 {
+            let (held, lanes) = packed.pack_cross_squared(slot);
+            assert!(held.contains(&slot));
+            let expected = crate::lod::cross_squared(triangles[slot as usize]);
+            assert_eq!(
+                lanes[(slot - held.start) as usize].to_bits(),
+                expected.to_bits(),
+                "triangle {slot}"
+            );
+        }
     }
 
     #[test]
