@@ -14,10 +14,11 @@ Usage (needs `perf` and binutils' `addr2line`; the binary must carry line tables
 `bench` profile's does):
 
     perf record -F 2000 -o perf.data target/release/mipray render SCENE ...
-    tools/profile/shares.py perf.data target/release/mipray [--files N]
+    tools/profile/shares.py perf.data target/release/mipray [--files N] [--lines FILE]
 
 Prints the share of all samples (every DSO, the kernel included) per module
-(`src/<module>/`), then the N busiest project files. Samples outside the binary are
+(`src/<module>/`), then the N busiest project files (and with `--lines`, the busiest lines
+of the matching files). Samples outside the binary are
 counted as `outside the binary` (libm's `powf`, the kernel's page faults, ...); samples in
 the binary with no project frame (a standard-library or dependency function that was not
 inlined) as `not in src/`.
@@ -90,6 +91,11 @@ def main():
     parser.add_argument("data", help="perf.data recorded from the binary")
     parser.add_argument("binary", help="the binary the profile was recorded from")
     parser.add_argument("--files", type=int, default=15, help="how many files to list")
+    parser.add_argument(
+        "--lines",
+        metavar="FILE",
+        help="also list the busiest lines of the project files whose path contains FILE",
+    )
     args = parser.parse_args()
     for path, what in ((args.data, "perf data"), (args.binary, "binary")):
         if not os.path.isfile(path):
@@ -137,6 +143,7 @@ def main():
 
     modules = collections.Counter()
     files = collections.Counter()
+    lines = collections.Counter()
     for address, count in in_binary.items():
         project = [loc for _, loc in frames[address] if is_project_file(loc)]
         if not project:
@@ -146,6 +153,10 @@ def main():
         parts = path.split("/")
         modules[parts[0] if len(parts) > 1 else path] += count
         files[path] += count
+        if args.lines and args.lines in path:
+            line = project[0].rsplit(SRC, 1)[1].split(" ", 1)[0]
+            function = next(f for f, loc in frames[address] if loc == project[0])
+            lines[(line, function)] += count
     modules["outside the binary"] = total - sum(in_binary.values())
 
     print(f"{total} samples, {sum(in_binary.values())} in {args.binary}")
@@ -159,6 +170,12 @@ def main():
     print("|---|---:|---:|")
     for path, count in files.most_common(args.files):
         print(f"| {path} | {count} | {100 * count / total:.1f}% |")
+    if args.lines:
+        print()
+        print("| line | function | samples | share |")
+        print("|---|---|---:|---:|")
+        for (line, function), count in lines.most_common(args.files):
+            print(f"| {line} | `{function[:60]}` | {count} | {100 * count / total:.1f}% |")
 
 
 if __name__ == "__main__":
