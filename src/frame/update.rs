@@ -419,14 +419,7 @@ impl TreeState {
         } = &mut self.scratch;
         let geometry = &setup.geometry;
         source_motion.resize(geometry.triangle_count(), None);
-        let writer = TriangleWriter::new(
-            &setup.scene,
-            geometry,
-            posed,
-            plan,
-            uv_flips,
-            &setup.deforms,
-        );
+        let writer = frame_writer(setup, posed, plan, uv_flips);
         let ranges = &geometry.instance_triangles;
         let slot_of_source = &self.slot_of_source;
         if setup.parallelism.splits(visited) {
@@ -510,14 +503,7 @@ impl TreeState {
         } = &mut self.scratch;
         let geometry = &setup.geometry;
         source_motion.resize(geometry.triangle_count(), None);
-        let writer = TriangleWriter::new(
-            &setup.scene,
-            geometry,
-            posed,
-            plan,
-            uv_flips,
-            &setup.deforms,
-        );
+        let writer = frame_writer(setup, posed, plan, uv_flips);
         let parallel = setup.parallelism.splits(visited);
         let triangles = &mut self.triangles;
         if self.slot_vertices.len() != triangles.len() {
@@ -780,6 +766,17 @@ impl TreeState {
         }
         Ok(ms_since(t))
     }
+}
+
+/// What writing this frame's planned instances reads (both write orders use it).
+fn frame_writer<'a>(
+    setup: &'a FrameSetup,
+    posed: &'a PosedVertices,
+    plan: &'a [Rewrite],
+    uv_flips: &'a [Option<bool>],
+) -> TriangleWriter<'a> {
+    let (scene, geometry) = (&setup.scene, &setup.geometry);
+    TriangleWriter::new(scene, geometry, posed, plan, uv_flips, &setup.deforms)
 }
 
 /// How a placed instance's triangles moved between two placements: the same shape key
