@@ -370,7 +370,7 @@ impl<'a> TriangleWriter<'a> {
         &self,
         source: u32,
         position: &mut [Vec3A; 3],
-        normal: &mut [Vec3; 3],
+        normal: Option<&mut [Vec3; 3]>,
         uv: &mut [Vec2; 3],
     ) -> Option<Motion> {
         let i = self.geometry.triangle_instance[source as usize] as usize;
@@ -440,15 +440,16 @@ impl InstanceWriter<'_> {
     }
 
     /// Writes source triangle `source` (of this instance) into its slot's `position`,
-    /// `normal` (unless the instance deforms: `normal` is then left alone) and `uv` as the
-    /// instance's [`Rewrite`] says; returns the slot's motion
-    /// (`None`: unmoved).
+    /// `normal` and `uv` as the instance's [`Rewrite`] says; returns the slot's motion
+    /// (`None`: unmoved). `normal` is the slot's stored normals: `None` where the tree
+    /// stores none, which only a tree of deforming instances does, whose writes never
+    /// store them.
     #[inline]
     pub fn write(
         &self,
         source: u32,
         position: &mut [Vec3A; 3],
-        normal: &mut [Vec3; 3],
+        normal: Option<&mut [Vec3; 3]>,
         uv: &mut [Vec2; 3],
     ) -> Option<Motion> {
         if self.rewrite == Rewrite::Keep {
@@ -466,7 +467,7 @@ impl InstanceWriter<'_> {
         vertices: [u32; 3],
         source: u32,
         position: &mut [Vec3A; 3],
-        normal: &mut [Vec3; 3],
+        normal: Option<&mut [Vec3; 3]>,
         uv: &mut [Vec2; 3],
     ) -> Option<Motion> {
         let all = match self.rewrite {
@@ -476,7 +477,10 @@ impl InstanceWriter<'_> {
         };
         let p = if self.stores_normals {
             let (p, n) = self.placed_vertices(vertices);
-            *normal = n;
+            debug_assert!(normal.is_some(), "a slot that stores normals has an entry");
+            if let Some(normal) = normal {
+                *normal = n;
+            }
             p
         } else {
             self.placed_positions(vertices)
@@ -629,12 +633,11 @@ pub fn write_slot_attributes(
             .map(|&s| geometry.instances[geometry.triangle_instance[s as usize] as usize].material),
     );
     let writer = TriangleWriter::new(scene, geometry, posed, plan, &[], deforms);
-    let write = |normal: &mut [Vec3; 3], uv, source| {
+    let write = |normal, uv, source| {
         writer.write(source, &mut [Vec3A::ZERO; 3], normal, uv);
     };
-    // Without stored normals the write leaves its `normal` alone: it gets a spare.
-    let write_without = |(uv, &source): (_, &u32)| write(&mut [Vec3::ZERO; 3], uv, source);
-    let write_with = |(normal, (uv, &source)): (_, (_, &u32))| write(normal, uv, source);
+    let write_without = |(uv, &source): (_, &u32)| write(None, uv, source);
+    let write_with = |(normal, (uv, &source)): (_, (_, &u32))| write(Some(normal), uv, source);
     let FrameTriangles {
         normals,
         uvs,

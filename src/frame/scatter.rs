@@ -87,7 +87,7 @@ impl<'a> SlotScatter<'a> {
         &self,
         slot: u32,
         source: u32,
-        write: impl FnOnce(&mut [Vec3A; 3], &mut [Vec3; 3], &mut [Vec2; 3]) -> Option<Motion>,
+        write: impl FnOnce(&mut [Vec3A; 3], Option<&mut [Vec3; 3]>, &mut [Vec2; 3]) -> Option<Motion>,
     ) {
         let (s, t) = (slot as usize, source as usize);
         assert!(
@@ -99,12 +99,7 @@ impl<'a> SlotScatter<'a> {
         // SAFETY: in bounds (checked), and exclusive for this call by the caller's contract.
         unsafe {
             let mut position = self.positions.get(slot);
-            let mut spare = [Vec3::ZERO; 3];
-            let normal = if self.normals.is_null() {
-                &mut spare
-            } else {
-                &mut *self.normals.add(s)
-            };
+            let normal = (!self.normals.is_null()).then(|| &mut *self.normals.add(s));
             let motion = write(&mut position, normal, &mut *self.uvs.add(s));
             if motion.is_some() {
                 self.positions.set(slot, &position);

@@ -457,15 +457,14 @@ impl TreeState {
                 .iter()
                 .enumerate()
                 .filter(|(_, r)| **r != Rewrite::Keep);
-            // A tree whose slots store no normals (every instance deforms) writes none.
-            let mut spare = [Vec3::ZERO; 3];
             for (i, _) in visited_instances {
                 let instance = writer.instance(i);
                 for source in ranges[i].clone() {
                     let slot = slot_of_source[source as usize];
                     let s = slot as usize;
                     let mut position = accel.triangle(slot);
-                    let normal = triangles.normals.get_mut(s).unwrap_or(&mut spare);
+                    // None where the tree stores no normals (every instance deforms).
+                    let normal = triangles.normals.get_mut(s);
                     let motion =
                         instance.write(source, &mut position, normal, &mut triangles.uvs[s]);
                     if motion.is_some() {
@@ -536,7 +535,6 @@ impl TreeState {
                 writer.instance(i as usize).vertices(source)
             };
             slot_vertices.decode_run(run, escaped, decoded);
-            let mut spare = [Vec3::ZERO; 3];
             let mut current: Option<(u32, InstanceWriter)> = None;
             for (
                 k,
@@ -568,7 +566,7 @@ impl TreeState {
                         vertices,
                         source,
                         &mut position,
-                        normals.get_mut(k).unwrap_or(&mut spare),
+                        normals.get_mut(k),
                         &mut uvs[k],
                     );
                     if motion.is_some() {
