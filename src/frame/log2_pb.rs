@@ -334,7 +334,7 @@ impl Pass<'_> {
                 // whatever rotation the frame adds), shared by the instances with the same
                 // primitive, material and stretch.
                 (_, Some(stretch)) => match stretch.shared {
-                    Some(group) => self.shared_stretched_log2_pb(source, instance, group),
+                    Some(group) => self.shared_stretched_log2_pb(source, instance, stretch, group),
                     None => self.stretched_log2_pb(source, stretch),
                 },
                 // Similarity: the object-space constant plus log2 s.
@@ -363,17 +363,21 @@ impl Pass<'_> {
         )
     }
 
-    /// [`Self::stretched_log2_pb`] of source triangle `source` of instance `instance`, read
-    /// from the constants of its group of instances (computed by the first to ask, on its
-    /// thread, for the group's first instance: the same primitive, material and stretch,
-    /// so the same bits).
-    fn shared_stretched_log2_pb(&self, source: usize, instance: usize, group: u32) -> f32 {
+    /// [`Self::stretched_log2_pb`] of source triangle `source` of instance `instance` (under
+    /// its `stretch`), read from the constants of its group of instances: computed by the
+    /// first to ask, on its thread, over the group's first instance's triangles with its
+    /// own stretch, which every member shares (the same primitive, material and stretch, so
+    /// the same bits).
+    fn shared_stretched_log2_pb(
+        &self,
+        source: usize,
+        instance: usize,
+        stretch: &Stretch,
+        group: u32,
+    ) -> f32 {
         let ranges = &self.setup.geometry.instance_triangles;
         let (first, values) = &self.stretches.shared[group as usize];
         let values = values.get_or_init(|| {
-            let stretch = self.stretches.per_instance[*first]
-                .as_ref()
-                .expect("a group's instances are stretched");
             ranges[*first]
                 .clone()
                 .map(|s| self.stretched_log2_pb(s as usize, stretch))
