@@ -38,6 +38,8 @@ pub struct Accel {
     /// walk over every node, which a frame that moved nothing (a static scene) must not pay,
     /// and which the refit's time should include.
     pub(in crate::accel) cost: f32,
+    /// The cut of the tree the parallel full refit works in, made by the first such refit.
+    pub(in crate::accel) refit_split: std::sync::OnceLock<Option<refit::RefitSplit>>,
 }
 
 /// A leaf of the tree: its triangle slots and where the wide tree keeps its box.
@@ -158,6 +160,7 @@ impl Accel {
             leaf_of_slot,
             build_cost: 0.0,
             cost: 0.0,
+            refit_split: Default::default(),
         };
         accel.build_cost = accel.sah_cost();
         accel.cost = accel.build_cost;

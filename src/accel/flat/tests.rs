@@ -460,8 +460,8 @@ fn an_occlusion_packet_meets_what_each_of_its_rays_meets_alone() {
     );
 }
 
-/// The parallel full refit (leaf boxes written into their lanes from several tasks)
-/// leaves the tree bit for bit as the sequential one does.
+/// The parallel full refit (subtree by subtree, leaf boxes and inner lanes written from
+/// several tasks) leaves the tree and its SAH cost bit for bit as the sequential one does.
 #[test]
 fn parallel_full_refit_equals_sequential() {
     let mut rng = Rng(0x51f15eed);
@@ -481,7 +481,7 @@ fn parallel_full_refit_equals_sequential() {
         }
     };
     write(&mut accel, &moved);
-    accel.refit_full(false);
+    let sequential_cost = accel.refit_full(false);
     let sequential = accel.wide.bounds_bits();
     // Back to the original boxes, sequentially (so a lane the parallel refit skipped
     // would keep one and show), then the moved triangles again, in parallel.
@@ -489,8 +489,12 @@ fn parallel_full_refit_equals_sequential() {
     accel.refit_full(false);
     assert_ne!(accel.wide.bounds_bits(), sequential);
     write(&mut accel, &moved);
-    accel.refit_full(true);
+    let parallel_cost = accel.refit_full(true);
     assert_eq!(accel.wide.bounds_bits(), sequential);
+    assert_eq!(parallel_cost.to_bits(), sequential_cost.to_bits());
+    // It went subtree by subtree.
+    let parts = accel.refit_split.get().and_then(Option::as_ref);
+    assert!(parts.is_some_and(|p| p.part_count() > 4));
     // And the refitted tree finds what a fresh build over the moved triangles finds.
     let mut fresh = tris.clone();
     fresh.positions = moved;
@@ -500,6 +504,35 @@ fn parallel_full_refit_equals_sequential() {
         let hit = |a: &Accel| a.closest_hit(o, d, f32::INFINITY).map(|h| h.t.to_bits());
         assert_eq!(hit(&accel), hit(&fresh));
     }
+}
+
+/// The same for a tree built in chunks (as past 131,072 triangles), whose leaves' slots
+/// follow the chunks: every subtree is still one run of nodes, so the parallel refit cuts
+/// it and gives the sequential refit's bits.
+#[test]
+fn parallel_full_refit_of_a_chunked_build_equals_sequential() {
+    let mut rng = Rng(0xc0ffee);
+    let (_, mut tris) = random_soup(&mut rng, 6000);
+    let mut accel = Accel::build_in_chunks(&mut tris, 700).unwrap();
+    for slot in 0..accel.slots() as u32 {
+        let shift = rng.point(2.0);
+        let tri = accel.triangle(slot).map(|v| v * 0.7 + shift);
+        accel.set_triangle(slot, &tri);
+    }
+    let mut copy = Accel {
+        wide: accel.wide.clone(),
+        triangles: accel.triangles.clone(),
+        leaves: accel.leaves.clone(),
+        leaf_of_slot: accel.leaf_of_slot.clone(),
+        build_cost: accel.build_cost,
+        cost: accel.cost,
+        refit_split: Default::default(),
+    };
+    let sequential = accel.refit_full(false);
+    let parallel = copy.refit_full(true);
+    assert!(copy.refit_split.get().and_then(Option::as_ref).is_some());
+    assert_eq!(parallel.to_bits(), sequential.to_bits());
+    assert_eq!(copy.wide.bounds_bits(), accel.wide.bounds_bits());
 }
 
 #[test]

@@ -37,6 +37,7 @@ mod walk;
 pub use crate::simd::F32x8 as Lanes;
 pub use node::WideNode;
 pub use packet::{GatheredLeaf, RayPacket};
+pub use refit::{LeafLanes, Parts};
 pub use walk::{LeafVisit, RayBoxes};
 
 /// Children per node.

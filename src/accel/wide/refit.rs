@@ -5,6 +5,8 @@
 //! first; a partial refit walks up from one leaf and stops at the first ancestor whose box
 //! comes out unchanged. A tree of one leaf keeps no box.
 
+use std::ops::Range;
+
 use obvhs::aabb::Aabb;
 
 use rayon::prelude::*;
@@ -103,6 +105,136 @@ impl WideBvh {
         self.cost_of_runs(&runs, traversal)
     }
 
+    /// The tree cut into subtrees of at most `most_nodes` nodes each, which a full refit
+    /// can take side by side ([`WideBvh::refit_in_parts`]); `None` for a tree of one node
+    /// or less, or one whose subtrees are not laid out in runs (never from `collapse`).
+    pub fn parts(&self, most_nodes: usize) -> Option<Parts> {
+        let n = self.nodes.len();
+        if self.root_leaf.is_some() || n < 2 {
+            return None;
+        }
+        // Per node: the least and one past the greatest index of its descendants, and how
+        // many there are, from its children's (children come after their parents).
+        let mut first = vec![u32::MAX; n];
+        let mut end = vec![0u32; n];
+        let mut count = vec![0u32; n];
+        for index in (0..n).rev() {
+            let (mut f, mut e, mut c) = (u32::MAX, 0, 0);
+            for &child in self.inner_children(index) {
+                let k = child as usize;
+                f = f.min(child).min(first[k]);
+                e = e.max(child + 1).max(end[k]);
+                c += 1 + count[k];
+            }
+            (first[index], end[index], count[index]) = (f, e, c);
+        }
+        let descendants = |node: usize| -> Option<Range<u32>> {
+            match count[node] {
+                0 => Some(0..0),
+                c => (end[node] - first[node] == c).then_some(first[node]..end[node]),
+            }
+        };
+        // From the root down: a node with more descendants than `most_nodes` is opened
+        // (its inner children become candidates, it stays above the parts).
+        let mut parts = Vec::new();
+        let mut top = vec![0u32];
+        let mut pending: Vec<u32> = self.inner_children(0).copied().collect();
+        while let Some(node) = pending.pop() {
+            if count[node as usize] as usize >= most_nodes {
+                top.push(node);
+                pending.extend(self.inner_children(node as usize).copied());
+            } else {
+                parts.push((node, descendants(node as usize)?));
+                top.push(node);
+            }
+        }
+        top.sort_unstable_by(|a, b| b.cmp(a));
+        let mut owner = vec![EMPTY; n];
+        for (p, (root, range)) in parts.iter().enumerate() {
+            owner[*root as usize] = p as u32;
+            owner[range.start as usize..range.end as usize].fill(p as u32);
+        }
+        Some(Parts { parts, top, owner })
+    }
+
+    /// How many nodes the tree has.
+    pub fn node_count(&self) -> usize {
+        self.nodes.len()
+    }
+
+    /// The inner children of node `index` (its lanes that hold a node).
+    fn inner_children(&self, index: usize) -> impl Iterator<Item = &u32> + '_ {
+        let node = &self.nodes[index];
+        node.child.iter().filter(|&&c| c != EMPTY && c & LEAF == 0)
+    }
+
+    /// [`WideBvh::refit_inner`] with the leaf boxes set as it goes, a part at a time on
+    /// rayon's threads: `set_leaves(Some(p), lanes)` sets the boxes of the leaves in part
+    /// `p`'s nodes, then the part's inner lanes are refitted, children first, while its
+    /// nodes are in the task's cache; then `set_leaves(None, lanes)` sets the leaves of the
+    /// nodes above the parts and those are refitted. Every lane is a pure function of its
+    /// children's, and each node's SAH share is summed in the order `refit_inner` sums it,
+    /// so the tree and its cost are the same bits.
+    pub fn refit_in_parts(
+        &mut self,
+        parts: &Parts,
+        set_leaves: impl Fn(Option<usize>, &LeafLanes) + Sync,
+        traversal: f32,
+        intersection: f32,
+    ) -> Option<f32> {
+        let n = self.nodes.len();
+        assert_eq!(parts.owner.len(), n, "parts of another tree");
+        let mut weighted = vec![0.0f64; n];
+        {
+            let lanes = LeafLanes {
+                nodes: self.nodes.as_mut_ptr(),
+                len: n,
+                one_leaf: false,
+                _nodes: std::marker::PhantomData,
+            };
+            let shares = SharePtr(weighted.as_mut_ptr());
+            let parent = &self.parent;
+            parts
+                .parts
+                .par_iter()
+                .enumerate()
+                .for_each(|(p, (root, range))| {
+                    set_leaves(Some(p), &lanes);
+                    for index in range.clone().rev() {
+                        let index = index as usize;
+                        // SAFETY: a part's nodes (its root and its root's descendants, which
+                        // `parts` checked lie in `range`) are read and written by its task
+                        // alone: every node's parent lane is in the same part or is its root's.
+                        unsafe {
+                            let node = &*lanes.nodes.add(index);
+                            *shares.at(index) = node.weighted_area(traversal, intersection);
+                            let aabb = node.bounds_union();
+                            let at = parent[index] as usize;
+                            debug_assert!(
+                                parts.owner[at / WIDTH] == p as u32 || at / WIDTH == *root as usize
+                            );
+                            (*lanes.nodes.add(at / WIDTH)).set_box(at % WIDTH, &aabb);
+                        }
+                    }
+                });
+            set_leaves(None, &lanes);
+        }
+        for &index in &parts.top {
+            let index = index as usize;
+            let node = &self.nodes[index];
+            weighted[index] = node.weighted_area(traversal, intersection);
+            if index > 0 {
+                let aabb = node.bounds_union();
+                self.set_lane(self.parent[index], &aabb);
+            }
+        }
+        let mut runs = vec![0.0f64; n.div_ceil(SAH_CHUNK)];
+        for (index, share) in weighted.iter().enumerate().rev() {
+            runs[index / SAH_CHUNK] += share;
+        }
+        self.cost_of_runs(&runs, traversal)
+    }
+
     /// Refits the leaf in lane `at` (`node * WIDTH + lane`) to `aabb`, then its ancestors
     /// up to the first whose box comes out unchanged (its own ancestors cannot change).
     pub fn refit_leaf(&mut self, at: u32, aabb: &Aabb) {
@@ -158,6 +290,45 @@ impl WideBvh {
         let root_area = f64::from(root.half_area().max(f32::MIN_POSITIVE));
         let weighted = runs.iter().fold(0.0f64, |a, &b| a + b);
         Some((f64::from(traversal) + weighted / root_area) as f32)
+    }
+}
+
+/// The wide tree cut into subtrees ([`WideBvh::parts`]), for a refit that takes them side
+/// by side; made once per build (refits keep the topology).
+#[derive(Clone, Debug)]
+pub struct Parts {
+    /// Per part: its root node and the range of its root's descendants (`collapse` lays a
+    /// node's descendants out in one run, depth first).
+    parts: Vec<(u32, Range<u32>)>,
+    /// The nodes in no part's range, in decreasing order (children first): the parts' roots
+    /// and the nodes above them.
+    top: Vec<u32>,
+    /// Per node: the part it is the root or a descendant of (`EMPTY` above the parts).
+    owner: Vec<u32>,
+}
+
+impl Parts {
+    /// How many parts there are.
+    pub fn len(&self) -> usize {
+        self.parts.len()
+    }
+
+    /// The part whose nodes hold lane `at` (`node * WIDTH + lane`), `None` above the parts.
+    pub fn part_of_lane(&self, at: u32) -> Option<usize> {
+        let owner = self.owner[at as usize / WIDTH];
+        (owner != EMPTY).then_some(owner as usize)
+    }
+}
+
+/// Per-node SAH shares written by the parts' tasks (each its own nodes').
+struct SharePtr(*mut f64);
+
+// SAFETY: each task writes only the entries of its own part's nodes (`refit_in_parts`).
+unsafe impl Sync for SharePtr {}
+
+impl SharePtr {
+    fn at(&self, index: usize) -> *mut f64 {
+        self.0.wrapping_add(index)
     }
 }
 
@@ -240,5 +411,83 @@ mod tests {
         for (a, b) in full.nodes.iter().zip(&wide.nodes) {
             assert_eq!(a.bounds, b.bounds);
         }
+    }
+
+    /// Cutting a tree into parts: every node is above the parts or in exactly one part
+    /// (its root or one of the root's descendants, which lie in the part's range), every
+    /// part but the leaf-only ones keeps within its bound, the nodes above come children
+    /// first, and a refit in parts gives the serial refit's bits.
+    #[test]
+    fn parts_cover_every_node_once_and_refit_alike() {
+        // A row of boxes and two far away: the far ones become leaves of the nodes above
+        // the parts, which the refit sets after the parts.
+        let mut row = boxes(3000);
+        for x in [1e6f32, -1e6] {
+            row.push(Aabb::new(
+                Vec3A::new(x, 0.0, 0.0),
+                Vec3A::new(x + 1.0, 1.0, 1.0),
+            ));
+        }
+        let mut params = obvhs::BvhBuildParams::medium_build();
+        params.max_prims_per_leaf = 1;
+        let binary = obvhs::bvh2::builder::build_bvh2(&row, params, &mut Default::default());
+        let mut wide = WideBvh::collapse(&binary, |first, _| first);
+        for most in [1, 8, 40, 10_000] {
+            let parts = wide.parts(most).unwrap();
+            let mut seen = vec![0; wide.nodes.len()];
+            for (p, (root, range)) in parts.parts.iter().enumerate() {
+                assert!(range.len() < most.max(1) || range.is_empty());
+                seen[*root as usize] += 1;
+                for index in range.clone() {
+                    seen[index as usize] += 1;
+                    assert_eq!(parts.owner[index as usize], p as u32);
+                    // Its parent is in the same part.
+                    let up = wide.parent[index as usize] as usize / WIDTH;
+                    assert!(up == *root as usize || range.contains(&(up as u32)));
+                }
+            }
+            for &index in &parts.top {
+                let index = index as usize;
+                // Above the parts (a part's root is counted there and as its part's).
+                seen[index] += usize::from(parts.owner[index] == EMPTY);
+            }
+            assert!(seen.iter().all(|&s| s == 1), "{most}: {seen:?}");
+            assert!(parts.top.windows(2).all(|w| w[0] > w[1]));
+            assert_eq!(parts.top.last(), Some(&0));
+        }
+        // Move every leaf, then refit serially and in parts.
+        let leaf_boxes: Vec<Aabb> = (0..wide.leaf_lanes.len())
+            .map(|i| {
+                let x = (i * 7919 % 3002) as f32;
+                Aabb::new(Vec3A::new(x, -x, 0.5), Vec3A::new(x + 2.0, 1.0 - x, 3.0))
+            })
+            .collect();
+        let mut serial = wide.clone();
+        for (i, aabb) in leaf_boxes.iter().enumerate() {
+            serial.set_leaf_box(serial.leaf_lanes[i], aabb);
+        }
+        let serial_cost = serial.refit_inner(1.0, 1.0);
+        let parts = wide.parts(40).unwrap();
+        let leaf_lanes = wide.leaf_lanes.clone();
+        assert!(
+            leaf_lanes
+                .iter()
+                .any(|&at| parts.part_of_lane(at).is_none())
+        );
+        let cost = wide.refit_in_parts(
+            &parts,
+            |part, lanes| {
+                for (i, &at) in leaf_lanes.iter().enumerate() {
+                    if parts.part_of_lane(at) == part {
+                        // SAFETY: each leaf is set by the one call for its part.
+                        unsafe { lanes.set_leaf_box(at, &leaf_boxes[i]) };
+                    }
+                }
+            },
+            1.0,
+            1.0,
+        );
+        assert_eq!(cost.map(f32::to_bits), serial_cost.map(f32::to_bits));
+        assert_eq!(wide.bounds_bits(), serial.bounds_bits());
     }
 }
