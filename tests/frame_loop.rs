@@ -777,6 +777,69 @@ fn untextured_deforming_triangles_are_neither_recomputed_nor_counted() {
     }
 }
 
+/// Two skinned grids over the same area, one textured and one not, both bending every
+/// frame: their slots interleave, so the dirty set's words are full and mixed, and the
+/// `log2 P_b` step takes such words whole. Only the textured triangles are recomputed and
+/// counted, each equal to a fresh renderer's value; the untextured keep 0.
+#[test]
+fn whole_dirty_words_of_textured_and_untextured_deforming_triangles() {
+    let scene = || {
+        let mut scene = generated::textured_scene();
+        // In one plane, the second half a quad across from the first.
+        for shift in [0.0, 1.0 / 32.0] {
+            let origin = glam::Vec3::new(-2.0 + shift, -1.0 + shift, -6.0);
+            generated::add_skinned_grid(&mut scene, 64, 40, (4.0, 2.0), 4, origin);
+        }
+        scene.materials.push(mipray::scene::MaterialDesc::default());
+        let plain = scene.materials.len() - 1;
+        scene.meshes.last_mut().unwrap().primitives[0].material = Some(plain);
+        generated::add_camera(&mut scene, glam::Vec3::new(0.0, 0.0, 2.0), 1.0);
+        scene
+    };
+    let per_grid = 2 * 64 * 40;
+    let policy = BvhPolicy::Refit {
+        rebuild_threshold: f32::INFINITY,
+    };
+    for parallelism in [UpdateParallelism::Sequential, UpdateParallelism::Parallel] {
+        let mut r = Renderer::new(scene(), settings(policy));
+        r.set_update_parallelism(parallelism);
+        for frame in 0..5 {
+            let time = frame as f32 / FPS;
+            let update = r.prepare(frame, time).unwrap().update;
+            let what = format!("{parallelism:?}, frame {frame}");
+            // The second grid's sources come after the first's.
+            let t = r.triangles();
+            let textured = |slot: usize| (t.source[slot] as usize) < per_grid;
+            let mixed_words = (0..t.source.len() / 64)
+                .filter(|w| {
+                    let kinds = (w * 64..w * 64 + 64).map(textured);
+                    let count = kinds.filter(|&k| k).count();
+                    count > 0 && count < 64
+                })
+                .count();
+            assert!(mixed_words > 10, "{what}: {mixed_words} mixed words");
+            if frame > 0 {
+                assert_eq!(update.deformed_triangles, 2 * per_grid, "{what}");
+                assert_eq!(update.lod_recomputed, per_grid, "{what}");
+            }
+            let mut fresh = Renderer::new(scene(), settings(policy));
+            fresh.prepare(frame, time).unwrap();
+            let expected = by_source(&fresh);
+            for (slot, &source) in t.source.iter().enumerate() {
+                let value = t.log2_pb[slot];
+                if !textured(slot) {
+                    assert_eq!(value, 0.0, "{what}: untextured triangle {source}");
+                }
+                assert!(
+                    value.to_bits() == expected[source as usize].to_bits(),
+                    "{what}: triangle {source}: {value} vs fresh {}",
+                    expected[source as usize]
+                );
+            }
+        }
+    }
+}
+
 /// A card whose node mirrors and unmirrors mid-sequence (x scale +1, -1, +1, stepped) beside
 /// the skinned strip: the slots' uvs (which follow the winding, and which a write under an
 /// unchanged winding leaves alone) equal a fresh renderer's on every frame.

@@ -204,8 +204,29 @@ impl Log2PbState {
             for (w, &word) in words.iter().enumerate() {
                 let mut bits = word;
                 let mut n = 0;
+                let first = base + w * 64;
+                // Every slot of the word dirty (a whole mesh deforming): taken pack by pack,
+                // a slot of another instance or untextured (a NaN term) left out below.
+                if word == u64::MAX
+                    && let Some(run) = table.run(first..first + 64)
+                {
+                    let mut s = first;
+                    while s < first + 64 {
+                        let (held, lanes) = accel.pack_cross_squared(s as u32);
+                        let (held, stop) =
+                            (held.start as usize, (held.end as usize).min(first + 64));
+                        for t in s..stop {
+                            slots[n] = t;
+                            terms[n] = run[t - first];
+                            cc[n] = lanes[t - held];
+                            n += 1;
+                        }
+                        s = stop;
+                    }
+                    bits = 0;
+                }
                 while bits != 0 {
-                    let s = base + w * 64 + bits.trailing_zeros() as usize;
+                    let s = first + bits.trailing_zeros() as usize;
                     bits &= bits - 1;
                     let Some(term) = table.of(s) else { continue };
                     let (held, lanes) = match &pack {
@@ -224,9 +245,12 @@ impl Log2PbState {
                 logs[..n].copy_from_slice(&cc[..n]);
                 log2_in_place(&mut logs[..n]);
                 for k in 0..n {
+                    if terms[k].is_nan() {
+                        continue;
+                    }
                     out[slots[k] - base] = log2_pb_from_parts(cc[k], logs[k], terms[k], footprint);
+                    written += 1;
                 }
-                written += n;
             }
             written
         };
@@ -561,6 +585,12 @@ impl DeformingTexelTerms {
 
     fn is_empty(&self) -> bool {
         self.per_slot.is_empty()
+    }
+
+    /// The terms of slots `slots` (NaN where [`Self::of`] gives none), if they all exist.
+    #[inline]
+    fn run(&self, slots: std::ops::Range<usize>) -> Option<&[f64]> {
+        self.per_slot.get(slots)
     }
 
     /// Slot `s`'s texel term, if it belongs to a deforming instance and is textured.
