@@ -26,6 +26,16 @@ pub enum Motion {
     Deformed,
 }
 
+/// How [`DirtySet::assign_in_source_order`] finds a range's moved sources.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Listed {
+    /// By their motion in `source_motion` (taken from it).
+    ByMotion,
+    /// By their slot's bit, every one as [`Motion::Deformed`] (a deforming instance whose
+    /// write set the bits of exactly the slots it moved and recorded no motions).
+    DeformedByBit,
+}
+
 /// What moved this frame: the output of the dirty step, read by the tree step (what to
 /// refit, and the marks a rebuild carries into the new slot order) and by the `log2 P_b`
 /// step (which constants to recompute or shift).
@@ -77,7 +87,8 @@ impl DirtySet {
 
     /// Lists the source triangles of `visited` (increasing, disjoint ranges) whose entry in
     /// `source_motion` is set, in source order, as their slots (`slot_of_source`) with that
-    /// motion, and clears those entries: the parallel counterpart of [`Self::mark`] called in
+    /// motion, and clears those entries (a range [`Listed::DeformedByBit`]: those whose
+    /// slot's bit is set, as deformed; only with `bits_set`): the parallel counterpart of [`Self::mark`] called in
     /// that order. The ranges are cut into chunks that are counted, then filled at their
     /// offsets, on rayon's threads; every read is sequential. Precondition: the set was just
     /// [`reset`](Self::reset) for every slot `slot_of_source` names; then either no bit is
@@ -87,33 +98,42 @@ impl DirtySet {
     /// entries each range gave, in order.
     pub fn assign_in_source_order(
         &mut self,
-        visited: impl Iterator<Item = Range<u32>>,
+        visited: impl Iterator<Item = (Range<u32>, Listed)>,
         source_motion: &mut [Option<Motion>],
         slot_of_source: &[u32],
         bits_set: bool,
         listed: &mut Vec<usize>,
     ) {
         debug_assert!(self.slots.is_empty());
-        // Each chunk with the index of the range it comes from.
-        let visited: Vec<Range<u32>> = visited.collect();
-        let chunks: Vec<(usize, Range<usize>)> = visited
+        // Each chunk with the index of the range it comes from and how it is listed.
+        let visited: Vec<(Range<u32>, Listed)> = visited.collect();
+        debug_assert!(bits_set || visited.iter().all(|(_, l)| *l == Listed::ByMotion));
+        let chunks: Vec<(usize, Range<usize>, Listed)> = visited
             .iter()
             .cloned()
             .enumerate()
-            .flat_map(|(index, r)| {
+            .flat_map(|(index, (r, how))| {
                 let (start, end) = (r.start as usize, r.end as usize);
                 (start..end)
                     .step_by(LIST_CHUNK)
-                    .map(move |a| (index, a..(a + LIST_CHUNK).min(end)))
+                    .map(move |a| (index, a..(a + LIST_CHUNK).min(end), how))
             })
             .collect();
+        let bits = &self.bits;
+        let marked = |source: usize| {
+            let slot = slot_of_source[source] as usize;
+            bits[slot / 64] & (1 << (slot % 64)) != 0
+        };
         let counts: Vec<usize> = chunks
             .par_iter()
-            .map(|(_, c)| source_motion[c.clone()].iter().flatten().count())
+            .map(|(_, c, how)| match how {
+                Listed::ByMotion => source_motion[c.clone()].iter().flatten().count(),
+                Listed::DeformedByBit => c.clone().filter(|&s| marked(s)).count(),
+            })
             .collect();
         listed.clear();
         listed.resize(visited.len(), 0);
-        for ((index, _), &count) in chunks.iter().zip(&counts) {
+        for ((index, ..), &count) in chunks.iter().zip(&counts) {
             listed[*index] += count;
         }
         let total = counts.iter().sum();
@@ -123,7 +143,7 @@ impl DirtySet {
         let mut jobs = Vec::with_capacity(chunks.len());
         let (mut input, mut consumed) = (source_motion, 0);
         let (mut slots, mut motions) = (&mut self.slots[..], &mut self.motions[..]);
-        for ((_, chunk), &count) in chunks.iter().zip(&counts) {
+        for ((_, chunk, how), &count) in chunks.iter().zip(&counts) {
             let (_, rest) = std::mem::take(&mut input).split_at_mut(chunk.start - consumed);
             let (here, rest) = rest.split_at_mut(chunk.len());
             (input, consumed) = (rest, chunk.end);
@@ -131,19 +151,29 @@ impl DirtySet {
             slots = rest;
             let (chunk_motions, rest) = std::mem::take(&mut motions).split_at_mut(count);
             motions = rest;
-            jobs.push((chunk.start, here, chunk_slots, chunk_motions));
+            jobs.push((chunk.start, *how, here, chunk_slots, chunk_motions));
         }
         jobs.into_par_iter()
-            .for_each(|(first, input, slots, motions)| {
-                let marked = input
-                    .iter_mut()
-                    .enumerate()
-                    .filter_map(|(k, m)| Some((first + k, m.take()?)));
-                for ((source, motion), (slot, out)) in
-                    marked.zip(slots.iter_mut().zip(motions.iter_mut()))
-                {
-                    *slot = slot_of_source[source];
-                    *out = motion;
+            .for_each(|(first, how, input, slots, motions)| {
+                let out = slots.iter_mut().zip(motions.iter_mut());
+                let fill = |listed: &mut dyn Iterator<Item = (usize, Motion)>| {
+                    for ((source, motion), (slot, out)) in listed.zip(out) {
+                        *slot = slot_of_source[source];
+                        *out = motion;
+                    }
+                };
+                match how {
+                    Listed::ByMotion => fill(
+                        &mut input
+                            .iter_mut()
+                            .enumerate()
+                            .filter_map(|(k, m)| Some((first + k, m.take()?))),
+                    ),
+                    Listed::DeformedByBit => fill(
+                        &mut (first..first + input.len())
+                            .filter(|&s| marked(s))
+                            .map(|s| (s, Motion::Deformed)),
+                    ),
                 }
             });
         if bits_set {
@@ -246,7 +276,7 @@ mod tests {
         }
         let mut preset_motions = motions.clone();
         preset.assign_in_source_order(
-            visited.iter().cloned(),
+            visited.iter().map(|r| (r.clone(), Listed::ByMotion)),
             &mut preset_motions,
             &slot_of_source,
             true,
@@ -255,11 +285,66 @@ mod tests {
         assert_eq!(preset.slots, one_by_one.slots);
         assert_eq!(preset.motions, one_by_one.motions);
         assert_eq!(preset.bits, one_by_one.bits);
+        // A range of deformed sources listed from the preset bits alone (no motions
+        // recorded for it), beside ranges listed by motion: the same list.
+        let deformed_only = |source: u32| motion_at(source).filter(|m| *m == Motion::Deformed);
+        let mut mixed_motions: Vec<Option<Motion>> = (0..n)
+            .map(|s| {
+                if s < visited[1].start {
+                    motion_at(s)
+                } else {
+                    deformed_only(s)
+                }
+            })
+            .collect();
+        let mut one_by_one_mixed = DirtySet::default();
+        one_by_one_mixed.reset(n as usize);
+        for source in visited.iter().cloned().flatten() {
+            if let Some(m) = mixed_motions[source as usize] {
+                one_by_one_mixed.mark(slot_of_source[source as usize], m);
+            }
+        }
+        let mut by_bit = DirtySet::default();
+        by_bit.reset(n as usize);
+        for &slot in &one_by_one_mixed.slots {
+            by_bit.words_mut()[slot as usize / 64] |= 1 << (slot % 64);
+        }
+        // The write records no motion for the sources it lists by bit.
+        for source in visited[1].start..n {
+            mixed_motions[source as usize] = None;
+        }
+        let mut per_range = Vec::new();
+        by_bit.assign_in_source_order(
+            visited.iter().enumerate().map(|(k, r)| {
+                let how = if k == 0 {
+                    Listed::ByMotion
+                } else {
+                    Listed::DeformedByBit
+                };
+                (r.clone(), how)
+            }),
+            &mut mixed_motions,
+            &slot_of_source,
+            true,
+            &mut per_range,
+        );
+        assert!(one_by_one_mixed.len() > LIST_CHUNK / 4);
+        assert_eq!(by_bit.slots, one_by_one_mixed.slots);
+        assert_eq!(by_bit.motions, one_by_one_mixed.motions);
+        assert_eq!(by_bit.bits, one_by_one_mixed.bits);
+        // Every visited source's motion was taken.
+        assert!(
+            visited
+                .iter()
+                .cloned()
+                .flatten()
+                .all(|s| mixed_motions[s as usize].is_none())
+        );
         let mut listed = DirtySet::default();
         listed.reset(n as usize);
         let mut per_range = Vec::new();
         listed.assign_in_source_order(
-            visited.iter().cloned(),
+            visited.iter().map(|r| (r.clone(), Listed::ByMotion)),
             &mut motions,
             &slot_of_source,
             false,

@@ -397,6 +397,13 @@ pub struct InstanceWriter<'a> {
 }
 
 impl InstanceWriter<'_> {
+    /// Whether the instance is a deforming one whose changed triangles the write marks
+    /// ([`Rewrite::Changed`]): every slot it moves moves as [`Motion::Deformed`].
+    #[inline]
+    pub fn deforms_by_change(&self) -> bool {
+        self.rewrite == Rewrite::Changed
+    }
+
     /// Source triangle `source`'s vertex indices in its primitive (as the index buffer
     /// lists them).
     #[inline]

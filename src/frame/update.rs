@@ -25,7 +25,7 @@ use rayon::prelude::*;
 
 use super::Motion;
 use super::animation::{AnimationState, InstanceState};
-use super::dirty::{DirtySet, FrameChanges};
+use super::dirty::{DirtySet, FrameChanges, Listed};
 use super::layout::UsedLayout;
 use super::ms_since;
 use super::posed::{
@@ -535,6 +535,7 @@ impl TreeState {
                 writer.instance(i as usize).vertices(source)
             };
             slot_vertices.decode_run(run, escaped, decoded);
+            let deformed_by_bit = words.is_some();
             let mut current: Option<(u32, InstanceWriter)> = None;
             for (
                 k,
@@ -575,7 +576,12 @@ impl TreeState {
                             words[k / 64] |= 1 << (k % 64);
                         }
                     }
-                    motions.set(source, motion);
+                    // A deforming instance's moved slots are listed from their dirty bits
+                    // when the write sets them (`Listed::DeformedByBit`): no motion to
+                    // record, by source, scattered.
+                    if !(deformed_by_bit && instance.deforms_by_change()) {
+                        motions.set(source, motion);
+                    }
                 }
             }
         };
@@ -648,9 +654,15 @@ impl TreeState {
                 .filter(|(_, r)| **r != Rewrite::Keep)
                 .map(|(i, _)| i)
         };
-        if setup.parallelism.splits(visited) {
+        // The write in slot order set the bits (it does when it splits, as this does) and
+        // recorded no motions for the slots of deforming instances.
+        let listed_as = |i: usize| match plan[i] {
+            Rewrite::Changed if bits_set => Listed::DeformedByBit,
+            _ => Listed::ByMotion,
+        };
+        if bits_set || setup.parallelism.splits(visited) {
             dirty.assign_in_source_order(
-                visited_instances().map(|i| ranges[i].clone()),
+                visited_instances().map(|i| (ranges[i].clone(), listed_as(i))),
                 source_motion,
                 &self.slot_of_source,
                 bits_set,

@@ -150,9 +150,11 @@ impl RefitSplit {
     fn new(wide: &WideBvh, leaves: &[Leaf]) -> Option<RefitSplit> {
         let parts = wide.parts((wide.node_count() / 64).max(PART_MIN_NODES))?;
         // The leaves grouped by part (a counting sort; in slot order within each part),
-        // those above the parts last.
+        // those above the parts last: group `parts.len()`. Group g's count goes to
+        // `starts[g + 2]`, its cursor is `starts[g + 1]`, and its run ends up
+        // `starts[g]..starts[g + 1]`.
         let part_of = |leaf: &Leaf| parts.part_of_lane(leaf.lane).unwrap_or(parts.len());
-        let mut starts = vec![0usize; parts.len() + 2];
+        let mut starts = vec![0usize; parts.len() + 3];
         for leaf in leaves {
             starts[part_of(leaf) + 2] += 1;
         }
@@ -182,7 +184,7 @@ impl RefitSplit {
 
     /// The leaves of part `p` (`None`: of the nodes above the parts), as indices into
     /// `Accel::leaves`.
-    fn leaves(&self, part: Option<usize>) -> &[u32] {
+    pub(in crate::accel) fn leaves(&self, part: Option<usize>) -> &[u32] {
         let range = self.leaf_ranges[part.unwrap_or(self.parts.len())].clone();
         &self.by_part[range]
     }

@@ -507,13 +507,27 @@ fn parallel_full_refit_equals_sequential() {
 }
 
 /// The same for a tree built in chunks (as past 131,072 triangles), whose leaves' slots
-/// follow the chunks: every subtree is still one run of nodes, so the parallel refit cuts
-/// it and gives the sequential refit's bits.
+/// follow the chunks, and for a tree with two triangles far from the rest, whose leaves
+/// hang from the nodes above the parts: every subtree is still one run of nodes, so the
+/// parallel refit cuts both and gives the sequential refit's bits.
 #[test]
-fn parallel_full_refit_of_a_chunked_build_equals_sequential() {
+fn parallel_full_refit_of_chunked_and_lopsided_trees_equals_sequential() {
     let mut rng = Rng(0xc0ffee);
-    let (_, mut tris) = random_soup(&mut rng, 6000);
-    let mut accel = Accel::build_in_chunks(&mut tris, 700).unwrap();
+    let (positions, mut tris) = random_soup(&mut rng, 6000);
+    let chunked = Accel::build_in_chunks(&mut tris, 700).unwrap();
+    parallel_refit_equals_sequential(chunked, &mut rng);
+    let mut lopsided = positions;
+    for x in [1e5f32, -1e5] {
+        let c = Vec3A::new(x, 0.0, 0.0);
+        lopsided.push([c, c + Vec3A::X, c + Vec3A::Y]);
+    }
+    let lopsided = Accel::build(&mut soup(&lopsided)).unwrap();
+    assert!(parallel_refit_equals_sequential(lopsided, &mut rng) > 0);
+}
+
+/// Moves every triangle of `accel`, refits a copy sequentially and the tree in parallel,
+/// checks the two are the same bits; returns how many leaves hang above the parts.
+fn parallel_refit_equals_sequential(mut accel: Accel, rng: &mut Rng) -> usize {
     for slot in 0..accel.slots() as u32 {
         let shift = rng.point(2.0);
         let tri = accel.triangle(slot).map(|v| v * 0.7 + shift);
@@ -528,11 +542,15 @@ fn parallel_full_refit_of_a_chunked_build_equals_sequential() {
         cost: accel.cost,
         refit_split: Default::default(),
     };
-    let sequential = accel.refit_full(false);
-    let parallel = copy.refit_full(true);
-    assert!(copy.refit_split.get().and_then(Option::as_ref).is_some());
+    let sequential = copy.refit_full(false);
+    let parallel = accel.refit_full(true);
     assert_eq!(parallel.to_bits(), sequential.to_bits());
-    assert_eq!(copy.wide.bounds_bits(), accel.wide.bounds_bits());
+    assert_eq!(accel.wide.bounds_bits(), copy.wide.bounds_bits());
+    let split = accel.refit_split.get().and_then(Option::as_ref);
+    split
+        .expect("the tree is cut into parts")
+        .leaves(None)
+        .len()
 }
 
 #[test]
