@@ -36,9 +36,10 @@ use super::scatter::{SlotScatter, SourceMotions};
 use super::setup::FrameSetup;
 use super::slot_vertices::{self, SlotIndices, SlotVertices};
 use super::two_level::{TwoLevel, Which};
-use crate::accel::{Accel, AccelError, BvhPolicy, TreeStep};
+use crate::accel::{Accel, AccelError, BvhPolicy, SlotLanes, TreeStep};
 use crate::anim::NodeShape;
 use crate::geometry::FrameTriangles;
+use crate::simd;
 use glam::{Vec2, Vec3};
 
 /// Below this much work (triangles or vertices) an update step stays on the calling thread:
@@ -527,63 +528,21 @@ impl TreeState {
                          sources: &[u32],
                          normals: &mut [[Vec3; 3]],
                          uvs: &mut [[Vec2; 3]],
-                         mut words: Option<&mut [u64]>,
+                         words: Option<&mut [u64]>,
                          decoded: &mut Vec<SlotIndices>| {
-            // An escaped slot's indices come from its instance's index buffer.
-            let escaped = |slot: usize, i: u32| {
-                let source = sources[slot - run * SLOT_RUN];
-                writer.instance(i as usize).vertices(source)
-            };
-            slot_vertices.decode_run(run, escaped, decoded);
-            let deformed_by_bit = words.is_some();
-            let mut current: Option<(u32, InstanceWriter)> = None;
-            for (
-                k,
-                &SlotIndices {
-                    instance: i,
-                    vertices,
-                },
-            ) in decoded.iter().enumerate()
-            {
-                if plan[i as usize] == Rewrite::Keep {
-                    continue;
-                }
-                let instance = match &current {
-                    Some((at, instance)) if *at == i => instance,
-                    _ => &current.insert((i, writer.instance(i as usize))).1,
-                };
-                if let Some(ahead) = decoded.get(k + PREFETCH_AHEAD)
-                    && ahead.instance == i
-                {
-                    instance.prefetch_vertices(ahead.vertices);
-                }
-                let slot = (run * SLOT_RUN + k) as u32;
-                let source = sources[k];
-                // SAFETY: each slot is in one run only, so no other task reads or writes
-                // its lane or its source's motion (`scatter`).
-                unsafe {
-                    let mut position = lanes.get(slot);
-                    let motion = instance.write_vertices(
-                        vertices,
-                        source,
-                        &mut position,
-                        normals.get_mut(k),
-                        &mut uvs[k],
-                    );
-                    if motion.is_some() {
-                        lanes.set(slot, &position);
-                        if let Some(words) = words.as_deref_mut() {
-                            words[k / 64] |= 1 << (k % 64);
-                        }
-                    }
-                    // A deforming instance's moved slots are listed from their dirty bits
-                    // when the write sets them (`Listed::DeformedByBit`): no motion to
-                    // record, by source, scattered.
-                    if !(deformed_by_bit && instance.deforms_by_change()) {
-                        motions.set(source, motion);
-                    }
-                }
-            }
+            simd::dispatch(SlotRunWrite {
+                writer: &writer,
+                plan,
+                slot_vertices,
+                lanes: &lanes,
+                motions: &motions,
+                run,
+                sources,
+                normals,
+                uvs,
+                words,
+                decoded,
+            })
         };
         let FrameTriangles {
             normals,
@@ -775,6 +734,104 @@ impl TreeState {
             dirty.mark(self.slot_of_source[source as usize], motion);
         }
         Ok(ms_since(t))
+    }
+}
+
+/// One run of [`TreeState::write_in_slot_order`]: its slots' indices decoded, then each
+/// planned slot's triangle written into its pack lane, its motion recorded and (with
+/// `words`) its dirty bit set. A [`simd::Kernel`] so the loop is compiled once per SIMD
+/// copy: the AVX2 copy encodes the gathers, compares and lane stores with fewer
+/// instructions.
+struct SlotRunWrite<'a, 'r> {
+    writer: &'a TriangleWriter<'a>,
+    plan: &'a [Rewrite],
+    slot_vertices: &'a SlotVertices,
+    lanes: &'a SlotLanes<'a>,
+    motions: &'a SourceMotions<'a>,
+    run: usize,
+    /// The run's slots' source triangles.
+    sources: &'r [u32],
+    /// The run's stored normals (empty when no slot stores them).
+    normals: &'r mut [[Vec3; 3]],
+    uvs: &'r mut [[Vec2; 3]],
+    /// The run's dirty words, when the write sets the bits.
+    words: Option<&'r mut [u64]>,
+    decoded: &'r mut Vec<SlotIndices>,
+}
+
+impl simd::Kernel for SlotRunWrite<'_, '_> {
+    type Output = ();
+
+    #[inline(always)]
+    fn run<const AVX2: bool>(self) {
+        let SlotRunWrite {
+            writer,
+            plan,
+            slot_vertices,
+            lanes,
+            motions,
+            run,
+            sources,
+            normals,
+            uvs,
+            mut words,
+            decoded,
+        } = self;
+        // An escaped slot's indices come from its instance's index buffer.
+        let escaped = |slot: usize, i: u32| {
+            let source = sources[slot - run * SLOT_RUN];
+            writer.instance(i as usize).vertices(source)
+        };
+        slot_vertices.decode_run(run, escaped, decoded);
+        let deformed_by_bit = words.is_some();
+        let mut current: Option<(u32, InstanceWriter)> = None;
+        for (
+            k,
+            &SlotIndices {
+                instance: i,
+                vertices,
+            },
+        ) in decoded.iter().enumerate()
+        {
+            if plan[i as usize] == Rewrite::Keep {
+                continue;
+            }
+            let instance = match &current {
+                Some((at, instance)) if *at == i => instance,
+                _ => &current.insert((i, writer.instance(i as usize))).1,
+            };
+            if let Some(ahead) = decoded.get(k + PREFETCH_AHEAD)
+                && ahead.instance == i
+            {
+                instance.prefetch_vertices(ahead.vertices);
+            }
+            let slot = (run * SLOT_RUN + k) as u32;
+            let source = sources[k];
+            // SAFETY: each slot is in one run only, so no other task reads or writes
+            // its lane or its source's motion (`scatter`).
+            unsafe {
+                let mut position = lanes.get(slot);
+                let motion = instance.write_vertices(
+                    vertices,
+                    source,
+                    &mut position,
+                    normals.get_mut(k),
+                    &mut uvs[k],
+                );
+                if motion.is_some() {
+                    lanes.set(slot, &position);
+                    if let Some(words) = words.as_deref_mut() {
+                        words[k / 64] |= 1 << (k % 64);
+                    }
+                }
+                // A deforming instance's moved slots are listed from their dirty bits
+                // when the write sets them (`Listed::DeformedByBit`): no motion to
+                // record, by source, scattered.
+                if !(deformed_by_bit && instance.deforms_by_change()) {
+                    motions.set(source, motion);
+                }
+            }
+        }
     }
 }
 
