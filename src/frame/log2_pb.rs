@@ -31,7 +31,7 @@ use crate::lod::{
     texel_area, texel_term, uv_area,
 };
 use crate::scene::SceneDesc;
-use crate::simd::prefetch;
+use crate::simd::{self, prefetch};
 
 /// How many entries ahead the `log2 P_b` pass prefetches its slots.
 const PREFETCH_AHEAD: usize = 16;
@@ -192,67 +192,14 @@ impl Log2PbState {
         // one batch (vectorised: `lod::log2`), then the constants; the same bits as
         // `log2_pb_with_texel_term` one slot at a time.
         let walk = |first_word: usize, words: &[u64], out: &mut [f32]| {
-            let base = first_word * 64;
-            let mut written = 0;
-            let mut slots = [0usize; 64];
-            let mut terms = [0f64; 64];
-            let mut cc = [0f64; 64];
-            let mut logs = [0f64; 64];
-            // The squared cross products of the last pack read, four lanes at once: a pack
-            // holds consecutive slots, which the walk visits in order.
-            let mut pack: Option<(std::ops::Range<usize>, [f64; 4])> = None;
-            for (w, &word) in words.iter().enumerate() {
-                let mut bits = word;
-                let mut n = 0;
-                let first = base + w * 64;
-                // Every slot of the word dirty (a whole mesh deforming): taken pack by pack,
-                // a slot of another instance or untextured (a NaN term) left out below.
-                if word == u64::MAX
-                    && let Some(run) = table.run(first..first + 64)
-                {
-                    let mut s = first;
-                    while s < first + 64 {
-                        let (held, lanes) = accel.pack_cross_squared(s as u32);
-                        let (held, stop) =
-                            (held.start as usize, (held.end as usize).min(first + 64));
-                        for t in s..stop {
-                            slots[n] = t;
-                            terms[n] = run[t - first];
-                            cc[n] = lanes[t - held];
-                            n += 1;
-                        }
-                        s = stop;
-                    }
-                    bits = 0;
-                }
-                while bits != 0 {
-                    let s = first + bits.trailing_zeros() as usize;
-                    bits &= bits - 1;
-                    let Some(term) = table.of(s) else { continue };
-                    let (held, lanes) = match &pack {
-                        Some((held, lanes)) if held.contains(&s) => (held.start, *lanes),
-                        _ => {
-                            let (held, lanes) = accel.pack_cross_squared(s as u32);
-                            let held = held.start as usize..held.end as usize;
-                            (held.start, pack.insert((held, lanes)).1)
-                        }
-                    };
-                    slots[n] = s;
-                    terms[n] = term;
-                    cc[n] = lanes[s - held];
-                    n += 1;
-                }
-                logs[..n].copy_from_slice(&cc[..n]);
-                log2_in_place(&mut logs[..n]);
-                for k in 0..n {
-                    if terms[k].is_nan() {
-                        continue;
-                    }
-                    out[slots[k] - base] = log2_pb_from_parts(cc[k], logs[k], terms[k], footprint);
-                    written += 1;
-                }
-            }
-            written
+            simd::dispatch(DeformingWalk {
+                table,
+                footprint,
+                accel,
+                first_word,
+                words,
+                out,
+            })
         };
         let words = changes.dirty.words();
         let log2_pb = &mut triangles.log2_pb;
@@ -267,6 +214,98 @@ impl Log2PbState {
         } else {
             walk(0, words, log2_pb)
         }
+    }
+}
+
+/// The walk of [`Log2PbState::update_deforming`] over `words` (the dirty bitset's words
+/// from `first_word` on), writing the constants of their textured slots into `out` (the
+/// slots from `first_word * 64` on); returns how many it wrote. Per bitset word: the squared
+/// cross products of its slots, then their logarithms in one batch (vectorised:
+/// `lod::log2`), then the constants; the same bits as `log2_pb_with_texel_term` one slot
+/// at a time. A [`simd::Kernel`]: in the AVX2 copy a pack's four cross products in `f64`
+/// take one vector per operation instead of two.
+struct DeformingWalk<'a> {
+    table: &'a DeformingTexelTerms,
+    footprint: PixelFootprint,
+    accel: &'a Accel,
+    first_word: usize,
+    words: &'a [u64],
+    out: &'a mut [f32],
+}
+
+impl simd::Kernel for DeformingWalk<'_> {
+    type Output = usize;
+
+    #[inline(always)]
+    fn run<const AVX2: bool>(self) -> usize {
+        let DeformingWalk {
+            table,
+            footprint,
+            accel,
+            first_word,
+            words,
+            out,
+        } = self;
+        let base = first_word * 64;
+        let mut written = 0;
+        let mut slots = [0usize; 64];
+        let mut terms = [0f64; 64];
+        let mut cc = [0f64; 64];
+        let mut logs = [0f64; 64];
+        // The squared cross products of the last pack read, four lanes at once: a pack
+        // holds consecutive slots, which the walk visits in order.
+        let mut pack: Option<(std::ops::Range<usize>, [f64; 4])> = None;
+        for (w, &word) in words.iter().enumerate() {
+            let mut bits = word;
+            let mut n = 0;
+            let first = base + w * 64;
+            // Every slot of the word dirty (a whole mesh deforming): taken pack by pack,
+            // a slot of another instance or untextured (a NaN term) left out below.
+            if word == u64::MAX
+                && let Some(run) = table.run(first..first + 64)
+            {
+                let mut s = first;
+                while s < first + 64 {
+                    let (held, lanes) = accel.pack_cross_squared(s as u32);
+                    let (held, stop) = (held.start as usize, (held.end as usize).min(first + 64));
+                    for t in s..stop {
+                        slots[n] = t;
+                        terms[n] = run[t - first];
+                        cc[n] = lanes[t - held];
+                        n += 1;
+                    }
+                    s = stop;
+                }
+                bits = 0;
+            }
+            while bits != 0 {
+                let s = first + bits.trailing_zeros() as usize;
+                bits &= bits - 1;
+                let Some(term) = table.of(s) else { continue };
+                let (held, lanes) = match &pack {
+                    Some((held, lanes)) if held.contains(&s) => (held.start, *lanes),
+                    _ => {
+                        let (held, lanes) = accel.pack_cross_squared(s as u32);
+                        let held = held.start as usize..held.end as usize;
+                        (held.start, pack.insert((held, lanes)).1)
+                    }
+                };
+                slots[n] = s;
+                terms[n] = term;
+                cc[n] = lanes[s - held];
+                n += 1;
+            }
+            logs[..n].copy_from_slice(&cc[..n]);
+            log2_in_place(&mut logs[..n]);
+            for k in 0..n {
+                if terms[k].is_nan() {
+                    continue;
+                }
+                out[slots[k] - base] = log2_pb_from_parts(cc[k], logs[k], terms[k], footprint);
+                written += 1;
+            }
+        }
+        written
     }
 }
 

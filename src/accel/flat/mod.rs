@@ -177,7 +177,7 @@ impl Accel {
     /// `lod::cross_squared` of the triangles of slot `slot`'s hit-test pack, four lanes at
     /// once, with the slots its live lanes hold (lane `i` holds slot `slots.start + i`; the
     /// lanes past them are padding).
-    #[inline]
+    #[inline(always)]
     pub fn pack_cross_squared(&self, slot: u32) -> (std::ops::Range<u32>, [f64; 4]) {
         self.triangles.pack_cross_squared(slot)
     }

@@ -54,7 +54,7 @@ impl TrianglePack {
     /// `lod::cross_squared` gives each: the same operations in the same order, four lanes
     /// side by side so the compiler can take them in vectors (the `log2 P_b` pass of a
     /// deforming mesh was bound by this arithmetic, one triangle at a time).
-    #[inline]
+    #[inline(always)]
     pub fn cross_squared(&self) -> [f64; LANES] {
         let c = |vertex: usize, axis: usize| self.v[vertex][axis].map(f64::from);
         let (x0, y0, z0) = (c(0, 0), c(0, 1), c(0, 2));
@@ -206,7 +206,7 @@ impl PackedTriangles {
     /// [`TrianglePack::cross_squared`] of slot `slot`'s pack, with the slots its live lanes
     /// hold: lane `i` holds slot `slots.start + i` (a pack's live lanes are consecutive
     /// slots).
-    #[inline]
+    #[inline(always)]
     pub fn pack_cross_squared(&self, slot: u32) -> (Range<u32>, [f64; LANES]) {
         let pack = &self.packs[self.lane_of_slot[slot as usize] as usize / LANES];
         let slots = pack.first_slot..pack.first_slot + pack.live;
