@@ -1,8 +1,8 @@
 //! Which SIMD copy of a hot loop runs: the one place that decides.
 //!
 //! The release binary is built for the x86-64 baseline (SSE2), so it runs on any x86-64
-//! CPU; the hot loops (BVH walks, packets, the batched `log2`, texture filtering) are
-//! compiled a second time with AVX2 enabled and the copy is chosen at run time, once per
+//! CPU; the hot loops (BVH walks, packets, the batched `log2`, texture filtering, and the frame
+//! update's skinning, slot-order write and `log2 P_b` walk) are compiled a second time with AVX2 enabled and the copy is chosen at run time, once per
 //! process ([`Isa::current`]). A loop takes part by implementing [`Kernel`]: its `run` is
 //! generic over `AVX2` and `#[inline(always)]`, so [`dispatch`] inlines it whole into a
 //! function compiled with AVX2 (where `AVX2` is true) or into the baseline caller. Code
