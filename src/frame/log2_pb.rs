@@ -188,9 +188,7 @@ impl Log2PbState {
         accel: &Accel,
     ) -> usize {
         let (table, footprint) = (&self.texel_terms, setup.footprint);
-        // Per bitset word: the squared cross products of its slots, then their logarithms in
-        // one batch (vectorised: `lod::log2`), then the constants; the same bits as
-        // `log2_pb_with_texel_term` one slot at a time.
+        // The walk over a run of bitset words: `DeformingWalk`.
         let walk = |first_word: usize, words: &[u64], out: &mut [f32]| {
             simd::dispatch(DeformingWalk {
                 table,
