@@ -358,25 +358,25 @@ impl WideNode {
             );
             *half_area = (dx + dy) * dz + dx * dy;
         }
-        let mut sum = 0.0f64;
-        for (lane, &half_area) in half_areas.iter().enumerate() {
-            let child = self.child[lane];
-            if child == EMPTY {
-                continue;
-            }
-            let step = if child & LEAF != 0 {
-                self.count[lane] as f32 * intersection
-            } else {
-                traversal
-            };
-            sum += f64::from(half_area) * f64::from(step);
-        }
-        sum
+        self.weighted_sum(traversal, intersection, |lane| half_areas[lane])
     }
 
     /// [`Self::weighted_area`] one lane box at a time (the reference its tests hold it to).
     #[cfg(test)]
     fn weighted_area_by_lane_box(&self, traversal: f32, intersection: f32) -> f64 {
+        self.weighted_sum(traversal, intersection, |lane| {
+            self.lane_box(lane).half_area()
+        })
+    }
+
+    /// The sum in lane order over used lanes of `half_area(lane)` times the lane's cost.
+    #[inline(always)]
+    fn weighted_sum(
+        &self,
+        traversal: f32,
+        intersection: f32,
+        half_area: impl Fn(usize) -> f32,
+    ) -> f64 {
         let mut sum = 0.0f64;
         for lane in 0..WIDTH {
             let child = self.child[lane];
@@ -388,7 +388,7 @@ impl WideNode {
             } else {
                 traversal
             };
-            sum += f64::from(self.lane_box(lane).half_area()) * f64::from(step);
+            sum += f64::from(half_area(lane)) * f64::from(step);
         }
         sum
     }
