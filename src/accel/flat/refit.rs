@@ -9,6 +9,7 @@ use rayon::prelude::*;
 use std::ops::Range;
 
 use super::{Accel, Leaf, PARALLEL_REFIT_MIN, SAH_INTERSECTION_COST, SAH_TRAVERSAL_COST};
+use crate::accel::triangles::PackedTriangles;
 use crate::accel::wide::{LeafLanes, Parts, WideBvh};
 
 /// Leaves per parallel task of a full refit (a leaf takes ~20 ns).
@@ -75,14 +76,14 @@ impl Accel {
         if let Some(split) = split {
             let (leaves, packs) = (&self.leaves, &self.triangles);
             let set_leaves = |part: Option<usize>, lanes: &LeafLanes| {
-                let set = |leaf: &Leaf| {
+                let order = split.leaves(part);
+                for (k, &index) in order.iter().enumerate() {
+                    prefetch_leaf_ahead(order, k, leaves, packs);
+                    let leaf = &leaves[index as usize];
                     let aabb = packs.leaf_box(leaf.first, leaf.count);
                     // SAFETY: every leaf has its own lane, and each leaf is in one part (or
                     // above them all), which one task sets.
                     unsafe { lanes.set_leaf_box(leaf.lane, &aabb) };
-                };
-                for &leaf in split.leaves(part) {
-                    set(&leaves[leaf as usize]);
                 }
             };
             let cost = self.wide.refit_in_parts(
@@ -127,6 +128,26 @@ impl Accel {
             let aabb = self.leaf_box(&leaf);
             self.wide.refit_leaf(leaf.lane, &aabb);
         }
+    }
+}
+
+/// How many leaves apart the parallel refit's hints go (see [`prefetch_leaf_ahead`]).
+const LEAF_AHEAD: usize = 8;
+
+/// Hints what the leaf pass of a part will read for the leaves further down its list
+/// `order` (from `k`): a part's leaves lie in subtree order, so each of its three dependent
+/// reads (the leaf, where its first pack is, the pack) would miss. Each is hinted one step
+/// after the read it depends on was hinted, [`LEAF_AHEAD`] leaves apart.
+#[inline(always)]
+fn prefetch_leaf_ahead(order: &[u32], k: usize, leaves: &[Leaf], packs: &PackedTriangles) {
+    if let Some(&far) = order.get(k + 3 * LEAF_AHEAD) {
+        crate::simd::prefetch(leaves, far as usize);
+    }
+    if let Some(&mid) = order.get(k + 2 * LEAF_AHEAD) {
+        packs.prefetch_pack_index(leaves[mid as usize].first);
+    }
+    if let Some(&near) = order.get(k + LEAF_AHEAD) {
+        packs.prefetch_slot_pack(leaves[near as usize].first);
     }
 }
 

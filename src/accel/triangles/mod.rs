@@ -221,6 +221,29 @@ impl PackedTriangles {
         }
     }
 
+    /// Hints the cache to load where slot `slot`'s pack is (its `lane_of_slot` entry), the
+    /// read [`Self::prefetch_slot_pack`] depends on (no effect when out of range).
+    #[inline(always)]
+    pub fn prefetch_pack_index(&self, slot: u32) {
+        crate::simd::prefetch(&self.lane_of_slot, slot as usize);
+    }
+
+    /// Hints the cache to load all the lines of slot `slot`'s pack (no effect when out of
+    /// range): what a leaf box reads.
+    #[inline(always)]
+    pub fn prefetch_slot_pack(&self, slot: u32) {
+        if let Some(&at) = self.lane_of_slot.get(slot as usize)
+            && let Some(pack) = self.packs.get(at as usize / LANES)
+        {
+            // 176 bytes from a 16-byte boundary: three or four lines, its first and last
+            // bytes' and those 64 and 128 bytes on.
+            let start = (pack as *const TrianglePack).cast::<u8>();
+            for offset in [0, 64, 128, size_of::<TrianglePack>() - 1] {
+                crate::simd::prefetch_ptr(start.wrapping_add(offset));
+            }
+        }
+    }
+
     /// Every slot's triangle, in slot order.
     pub fn triangles_in_slot_order(&self) -> Vec<[Vec3A; 3]> {
         (0..self.slots() as u32).map(|s| self.triangle(s)).collect()
