@@ -78,7 +78,7 @@ impl Accel {
             let set_leaves = |part: Option<usize>, lanes: &LeafLanes| {
                 let order = split.leaves(part);
                 for (k, &index) in order.iter().enumerate() {
-                    prefetch_leaf_ahead(order, k, leaves, packs);
+                    prefetch_leaf_ahead(order, k, leaves, packs, lanes);
                     let leaf = &leaves[index as usize];
                     let aabb = packs.leaf_box(leaf.first, leaf.count);
                     // SAFETY: every leaf has its own lane, and each leaf is in one part (or
@@ -134,17 +134,25 @@ impl Accel {
 /// How many leaves apart the parallel refit's hints go (see [`prefetch_leaf_ahead`]).
 const LEAF_AHEAD: usize = 8;
 
-/// Hints what the leaf pass of a part will read for the leaves further down its list
-/// `order` (from `k`): a part's leaves lie in subtree order, so each of its three dependent
-/// reads (the leaf, where its first pack is, the pack) would miss. Each is hinted one step
-/// after the read it depends on was hinted, [`LEAF_AHEAD`] leaves apart.
+/// Hints what the leaf pass of a part will read and write for the leaves further down its
+/// list `order` (from `k`): a part's leaves lie in subtree order, so each of its dependent
+/// accesses (the leaf, where its first pack is, the pack; the leaf's lane) would miss. Each
+/// is hinted one step after the read it depends on was hinted, [`LEAF_AHEAD`] leaves apart.
 #[inline(always)]
-fn prefetch_leaf_ahead(order: &[u32], k: usize, leaves: &[Leaf], packs: &PackedTriangles) {
+fn prefetch_leaf_ahead(
+    order: &[u32],
+    k: usize,
+    leaves: &[Leaf],
+    packs: &PackedTriangles,
+    lanes: &LeafLanes,
+) {
     if let Some(&far) = order.get(k + 3 * LEAF_AHEAD) {
         crate::simd::prefetch(leaves, far as usize);
     }
     if let Some(&mid) = order.get(k + 2 * LEAF_AHEAD) {
-        packs.prefetch_pack_index(leaves[mid as usize].first);
+        let leaf = &leaves[mid as usize];
+        packs.prefetch_pack_index(leaf.first);
+        lanes.prefetch_leaf_lane(leaf.lane);
     }
     if let Some(&near) = order.get(k + LEAF_AHEAD) {
         packs.prefetch_slot_pack(leaves[near as usize].first);

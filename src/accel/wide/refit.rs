@@ -56,6 +56,21 @@ impl LeafLanes<'_> {
     }
 }
 
+impl LeafLanes<'_> {
+    /// Hints the cache to load the lines [`Self::set_leaf_box`] writes for lane `at` (its
+    /// node's three lines of bounds; nothing when `at` names no node).
+    #[inline(always)]
+    pub fn prefetch_leaf_lane(&self, at: u32) {
+        let node = at as usize / WIDTH;
+        if node < self.len {
+            let start = self.nodes.wrapping_add(node).cast::<u8>();
+            for line in 0..3 {
+                crate::simd::prefetch_ptr(start.wrapping_add(64 * line));
+            }
+        }
+    }
+}
+
 impl WideBvh {
     /// Sets the box of the leaf in lane `at` (`node * WIDTH + lane`); a full refit sets
     /// every leaf's, then calls [`WideBvh::refit_inner`]. A tree of one leaf keeps no box
