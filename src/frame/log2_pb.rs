@@ -250,6 +250,7 @@ impl simd::Kernel for DeformingWalk<'_> {
         let mut terms = [0f64; 64];
         let mut cc = [0f64; 64];
         let mut logs = [0f64; 64];
+        let mut values = [0f32; 64];
         // The squared cross products of the last pack read, four lanes at once: a pack
         // holds consecutive slots, which the walk visits in order.
         let mut pack: Option<(std::ops::Range<usize>, [f64; 4])> = None;
@@ -295,11 +296,16 @@ impl simd::Kernel for DeformingWalk<'_> {
             }
             logs[..n].copy_from_slice(&cc[..n]);
             log2_in_place(&mut logs[..n]);
+            // The constants side by side (the branch-free form compiles to vectors here),
+            // then stored where a slot has a texel term.
+            for k in 0..n {
+                values[k] = log2_pb_from_parts(cc[k], logs[k], terms[k], footprint);
+            }
             for k in 0..n {
                 if terms[k].is_nan() {
                     continue;
                 }
-                out[slots[k] - base] = log2_pb_from_parts(cc[k], logs[k], terms[k], footprint);
+                out[slots[k] - base] = values[k];
                 written += 1;
             }
         }

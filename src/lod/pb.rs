@@ -130,25 +130,44 @@ pub fn cross_squared(p: [Vec3A; 3]) -> f64 {
 /// [`log2_pb_with_texel_term`] from its parts: `cc` ([`cross_squared`]) and its `log2`
 /// (`lod::log2`, perhaps taken in a batch: the same bits), so a pass over many triangles can
 /// take the logarithms together.
-#[inline]
+///
+/// Degenerate inputs give a limit: a non-finite `cc` or an infinite texel term (no area in
+/// uv, or none at all) `LOG2_PB_LIMIT`; a triangle of no area (`cc <= 0`) its negative. The
+/// value is computed for every input and the limits chosen after it, without branches, so
+/// a loop over a batch compiles to vector code (a NaN texel term, which callers leave out,
+/// gives NaN, as `f32::clamp` passes it on).
+#[inline(always)]
 pub fn log2_pb_from_parts(
     cc: f64,
     log2_cc: f64,
     texel_term: f64,
     footprint: PixelFootprint,
 ) -> f32 {
-    if !(cc.is_finite() && texel_term != f64::INFINITY) {
-        return LOG2_PB_LIMIT;
-    }
-    if cc <= 0.0 {
-        return -LOG2_PB_LIMIT;
-    }
-    if texel_term == f64::NEG_INFINITY {
-        return LOG2_PB_LIMIT;
-    }
     // 0.5 log2(A / T) with A = 0.5 sqrt(cc): 0.25 log2(cc) - 0.5 - 0.5 log2(T).
-    let value = 0.25 * log2_cc - texel_term - footprint.log2_k;
-    (value as f32).clamp(-LOG2_PB_LIMIT, LOG2_PB_LIMIT)
+    let value = (0.25 * log2_cc - texel_term - footprint.log2_k) as f32;
+    // `f32::clamp`'s comparisons, as selects.
+    let value = if value < -LOG2_PB_LIMIT {
+        -LOG2_PB_LIMIT
+    } else {
+        value
+    };
+    let value = if value > LOG2_PB_LIMIT {
+        LOG2_PB_LIMIT
+    } else {
+        value
+    };
+    // The degenerate cases, the first that holds deciding (so taken last to first).
+    let value = if texel_term == f64::NEG_INFINITY {
+        LOG2_PB_LIMIT
+    } else {
+        value
+    };
+    let value = if cc <= 0.0 { -LOG2_PB_LIMIT } else { value };
+    if cc.is_finite() && texel_term != f64::INFINITY {
+        value
+    } else {
+        LOG2_PB_LIMIT
+    }
 }
 
 /// `log2 P_b` of a similarity-placed triangle: the object-space constant plus `log2 s`
@@ -164,6 +183,86 @@ pub fn shift_log2_pb(object: f32, log2_scale: f64) -> f32 {
 mod tests {
     use super::*;
     use glam::{Mat3, Vec3};
+
+    /// The first-written form of [`log2_pb_from_parts`], one early return per degenerate case.
+    fn log2_pb_from_parts_by_branches(
+        cc: f64,
+        log2_cc: f64,
+        texel_term: f64,
+        footprint: PixelFootprint,
+    ) -> f32 {
+        if !(cc.is_finite() && texel_term != f64::INFINITY) {
+            return LOG2_PB_LIMIT;
+        }
+        if cc <= 0.0 {
+            return -LOG2_PB_LIMIT;
+        }
+        if texel_term == f64::NEG_INFINITY {
+            return LOG2_PB_LIMIT;
+        }
+        let value = 0.25 * log2_cc - texel_term - footprint.log2_k;
+        (value as f32).clamp(-LOG2_PB_LIMIT, LOG2_PB_LIMIT)
+    }
+
+    /// The branch-free form gives the first-written form's bits on every combination of hard
+    /// parts: zero, negative, subnormal, tiny, huge, infinite and NaN squared cross products
+    /// (with their true `log2` where there is one, and garbage where there is none: a
+    /// degenerate case must not read it), texel terms of every such kind, and footprints
+    /// that push the value past either limit.
+    #[test]
+    fn log2_pb_from_parts_gives_the_branching_form_s_bits() {
+        let specials = [
+            0.0,
+            -0.0,
+            -1.0,
+            f64::MIN_POSITIVE / 8.0,
+            f64::MIN_POSITIVE,
+            1e-300,
+            1e-12,
+            0.25,
+            1.0,
+            3.5,
+            1e12,
+            1e300,
+            f64::MAX,
+            f64::INFINITY,
+            f64::NEG_INFINITY,
+            f64::NAN,
+            -f64::NAN,
+        ];
+        let terms = [
+            0.0,
+            -0.0,
+            -3.0,
+            7.5,
+            2000.0,
+            -2000.0,
+            1e300,
+            -1e300,
+            f64::INFINITY,
+            f64::NEG_INFINITY,
+            f64::NAN,
+        ];
+        let footprints = [-9.3, 0.0, 5000.0, -5000.0].map(|log2_k| PixelFootprint { log2_k });
+        let mut compared = 0;
+        for &cc in &specials {
+            for log2_cc in [super::super::log2::log2(cc), f64::NAN, 1e308, -1e308] {
+                for &term in &terms {
+                    for footprint in footprints {
+                        let want = log2_pb_from_parts_by_branches(cc, log2_cc, term, footprint);
+                        let got = log2_pb_from_parts(cc, log2_cc, term, footprint);
+                        assert!(
+                            got.to_bits() == want.to_bits() || (got.is_nan() && want.is_nan()),
+                            "cc {cc:e}, log2 {log2_cc:e}, term {term:e}, k {}: {got} against {want}",
+                            footprint.log2_k
+                        );
+                        compared += 1;
+                    }
+                }
+            }
+        }
+        assert_eq!(compared, 17 * 4 * 11 * 4);
+    }
 
     const FOV: f32 = std::f32::consts::FRAC_PI_3;
 
