@@ -54,9 +54,7 @@ impl LeafLanes<'_> {
             }
         }
     }
-}
 
-impl LeafLanes<'_> {
     /// Hints the cache to load the lines [`Self::set_leaf_box`] writes for lane `at` (its
     /// node's three lines of bounds; nothing when `at` names no node).
     #[inline(always)]
