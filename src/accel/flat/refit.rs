@@ -132,7 +132,7 @@ impl Accel {
 }
 
 /// How many leaves apart the parallel refit's hints go (see [`prefetch_leaf_ahead`]).
-const LEAF_AHEAD: usize = 8;
+const LEAF_AHEAD: usize = 16;
 
 /// Hints what the leaf pass of a part will read and write for the leaves further down its
 /// list `order` (from `k`): a part's leaves lie in subtree order, so each of its dependent

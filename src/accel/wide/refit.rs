@@ -349,7 +349,7 @@ impl Parts {
 }
 
 /// How many nodes ahead the refit in parts hints a node's lane kinds and counts.
-const CHILD_LINE_AHEAD: usize = 8;
+const CHILD_LINE_AHEAD: usize = 16;
 
 /// Where in a node its lane kinds and counts start (its fourth cache line).
 const CHILD_LINE: usize = std::mem::offset_of!(WideNode, child);
