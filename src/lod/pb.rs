@@ -134,8 +134,8 @@ pub fn cross_squared(p: [Vec3A; 3]) -> f64 {
 /// Degenerate inputs give a limit: a non-finite `cc` or an infinite texel term (no area in
 /// uv, or none at all) `LOG2_PB_LIMIT`; a triangle of no area (`cc <= 0`) its negative. The
 /// value is computed for every input and the limits chosen after it, without branches, so
-/// a loop over a batch compiles to vector code (a NaN texel term, which callers leave out,
-/// gives NaN, as `f32::clamp` passes it on).
+/// a loop over a batch compiles to vector code. A NaN texel term (callers leave such slots
+/// out) gives NaN for a triangle with area, as `f32::clamp` passes it on.
 #[inline(always)]
 pub fn log2_pb_from_parts(
     cc: f64,
@@ -246,7 +246,7 @@ mod tests {
         let footprints = [-9.3, 0.0, 5000.0, -5000.0].map(|log2_k| PixelFootprint { log2_k });
         let mut compared = 0;
         for &cc in &specials {
-            for log2_cc in [super::super::log2::log2(cc), f64::NAN, 1e308, -1e308] {
+            for log2_cc in [crate::lod::log2::log2(cc), f64::NAN, 1e308, -1e308] {
                 for &term in &terms {
                     for footprint in footprints {
                         let want = log2_pb_from_parts_by_branches(cc, log2_cc, term, footprint);
