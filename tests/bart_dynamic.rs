@@ -32,12 +32,11 @@ fn subtree_triangles(r: &Renderer, node: usize) -> BTreeSet<u32> {
 }
 
 fn deformed_sources(r: &Renderer) -> BTreeSet<u32> {
-    let d = r.dirty();
-    d.slots
-        .iter()
-        .zip(&d.motions)
-        .filter(|(_, m)| **m == Motion::Deformed)
-        .map(|(&s, _)| r.triangles().source[s as usize])
+    r.dirty()
+        .moved()
+        .into_iter()
+        .filter(|&(_, m)| m == Motion::Deformed)
+        .map(|(s, _)| r.triangles().source[s as usize])
         .collect()
 }
 

@@ -562,10 +562,8 @@ fn ply_parses_from_its_header_with_exact_log2_pb_and_deformed_flags() {
             let deformed = check.dirty().contains(slot as u32)
                 && check
                     .dirty()
-                    .slots
-                    .iter()
-                    .zip(&check.dirty().motions)
-                    .any(|(&s, &m)| s == slot as u32 && m == Motion::Deformed);
+                    .moved()
+                    .contains(&(slot as u32, Motion::Deformed));
             assert_eq!(
                 int(row, "deformed") == 1,
                 deformed,

@@ -375,8 +375,11 @@ fn parallel_update_equals_the_sequential_update_bit_for_bit() {
             for r in &mut split {
                 let update = r.prepare(frame, time).unwrap().update;
                 let what = format!("frame {frame}, {policy:?}");
-                assert_eq!(r.dirty().slots, one.dirty().slots, "{what}: dirty slots");
-                assert_eq!(r.dirty().motions, one.dirty().motions, "{what}: motions");
+                assert_eq!(
+                    r.dirty().moved(),
+                    one.dirty().moved(),
+                    "{what}: dirty slots"
+                );
                 assert!(
                     frame_bits(r) == frame_bits(&one),
                     "{what}: triangles differ"
@@ -416,8 +419,7 @@ fn forced_parallel_update_equals_the_sequential_update_on_a_small_scene() {
         let time = frame as f32 / FPS;
         one.prepare(frame, time).unwrap();
         split.prepare(frame, time).unwrap();
-        assert_eq!(split.dirty().slots, one.dirty().slots, "frame {frame}");
-        assert_eq!(split.dirty().motions, one.dirty().motions, "frame {frame}");
+        assert_eq!(split.dirty().moved(), one.dirty().moved(), "frame {frame}");
         assert!(frame_bits(&split) == frame_bits(&one), "frame {frame}");
     }
 }
@@ -740,11 +742,10 @@ fn untextured_deforming_triangles_are_neither_recomputed_nor_counted() {
             };
             let deformed: Vec<u32> = r
                 .dirty()
-                .slots
-                .iter()
-                .zip(&r.dirty().motions)
-                .filter(|(_, m)| **m == mipray::frame::Motion::Deformed)
-                .map(|(&s, _)| s)
+                .moved()
+                .into_iter()
+                .filter(|&(_, m)| m == mipray::frame::Motion::Deformed)
+                .map(|(s, _)| s)
                 .collect();
             let what = format!("{parallelism:?}, frame {frame}");
             if frame > 0 {

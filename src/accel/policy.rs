@@ -5,6 +5,7 @@
 //! tree decay as things move apart; the surface-area-heuristic cost measured against its
 //! value right after the last build says when the decay is worth a rebuild.
 
+use std::borrow::Cow;
 use std::time::Instant;
 
 use super::{Accel, RefitKind};
@@ -97,7 +98,18 @@ impl Accel {
     /// moved -> unchanged; `Rebuild` policy -> rebuild; otherwise refit, then rebuild when
     /// the refitted tree's SAH ratio passes the policy's threshold.
     pub fn refit_or_rebuild(&mut self, moved_slots: &[u32], policy: BvhPolicy) -> TreeStep {
-        if moved_slots.is_empty() {
+        self.refit_or_rebuild_listing(moved_slots.len(), || moved_slots.into(), policy)
+    }
+
+    /// [`Accel::refit_or_rebuild`] for `moved` moved triangles that `list` lists (any
+    /// order, each once) when the refit needs them: only a partial refit does.
+    pub fn refit_or_rebuild_listing<'a>(
+        &mut self,
+        moved: usize,
+        list: impl FnOnce() -> Cow<'a, [u32]>,
+        policy: BvhPolicy,
+    ) -> TreeStep {
+        if moved == 0 {
             return TreeStep::Unchanged;
         }
         if policy == BvhPolicy::Rebuild {
@@ -106,7 +118,7 @@ impl Accel {
         // Timed with the tree's new SAH ratio, which the refit computes (a walk over every
         // node: part of deciding whether to rebuild).
         let t = Instant::now();
-        let kind = self.refit(moved_slots);
+        let kind = self.refit_listing(moved, list);
         let refit_ms = t.elapsed().as_secs_f64() * 1e3;
         debug_assert_ne!(kind, RefitKind::None);
         if policy.wants_rebuild(self.sah_ratio()) {

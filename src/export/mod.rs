@@ -126,10 +126,9 @@ pub(crate) fn write_atomically(
 
 /// Per-slot bitset of the triangles the last `prepare` marked [`Motion::Deformed`].
 pub(crate) fn deformed_slots(renderer: &Renderer) -> Vec<u64> {
-    let dirty = renderer.dirty();
     let mut bits = vec![0u64; renderer.triangles().len().div_ceil(64)];
-    for (&slot, &motion) in dirty.slots.iter().zip(&dirty.motions) {
-        if motion == Motion::Deformed && dirty.contains(slot) {
+    for (slot, motion) in renderer.dirty().moved() {
+        if motion == Motion::Deformed {
             bits[slot as usize / 64] |= 1 << (slot % 64);
         }
     }

@@ -26,13 +26,14 @@ pub enum Motion {
     Deformed,
 }
 
-/// How [`DirtySet::assign_in_source_order`] finds a range's moved sources.
+/// How [`DirtySet::assign_in_source_order`] takes a range's moved sources.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Listed {
-    /// By their motion in `source_motion` (taken from it).
+    /// Listed by their motion in `source_motion` (taken from it).
     ByMotion,
-    /// By their slot's bit, every one as [`Motion::Deformed`] (a deforming instance whose
-    /// write set the bits of exactly the slots it moved and recorded no motions).
+    /// Left unlisted: a deforming instance whose write in slot order set the bits of
+    /// exactly the slots it moved (every one [`Motion::Deformed`]) and recorded no motions.
+    /// Its slots are in the set by their bits alone (see [`DirtySet`]).
     DeformedByBit,
 }
 
@@ -42,9 +43,9 @@ pub enum Listed {
 #[derive(Debug, Default)]
 pub(super) struct FrameChanges {
     pub dirty: DirtySet,
-    /// The runs of the dirty list (entry indices, increasing) whose slots belong to deforming
-    /// instances: the `log2 P_b` step walks those slots in slot order instead.
-    pub deformed_entries: Vec<Range<usize>>,
+    /// How many moved slots belong to deforming instances: the `log2 P_b` step walks
+    /// those slots by their bits, in slot order.
+    pub deformed: usize,
     /// The runs of placed instances that scaled or changed shape: the entries the `log2
     /// P_b` step visits one by one (rigid runs keep their constants and are skipped whole).
     pub reshaped_entries: Vec<Range<usize>>,
@@ -54,15 +55,24 @@ pub(super) struct FrameChanges {
     pub placed: PlacedChanges,
 }
 
-/// The moved triangles of one frame: a bitset for membership and a compact list in the
-/// order they were marked, with their motion.
+/// The moved triangles of one frame: a bitset for membership, and a compact list of the
+/// listed ones in the order they were marked, with their motion.
+///
+/// Invariant: every listed slot's bit is set, and the set bits no listed entry has are
+/// the `unlisted` slots, all [`Motion::Deformed`]. Those are the slots of deforming
+/// instances that the write in slot order marked by their bits alone: a frame that
+/// deforms a million triangles does not build a list of them (which took about a
+/// millisecond of its update) when the refit, the `log2 P_b` step and the record need
+/// only the bits and the count. [`DirtySet::moved`] lists everything on demand.
 #[derive(Debug, Default, Clone)]
 pub struct DirtySet {
     bits: Vec<u64>,
-    /// Moved slots, each once.
-    pub slots: Vec<u32>,
+    /// Listed moved slots, each once.
+    slots: Vec<u32>,
     /// Motion of each entry of `slots`.
-    pub motions: Vec<Motion>,
+    motions: Vec<Motion>,
+    /// Moved slots set in `bits` and not listed (all deformed).
+    unlisted: usize,
 }
 
 impl DirtySet {
@@ -72,6 +82,7 @@ impl DirtySet {
         self.bits.resize(slots.div_ceil(64), 0);
         self.slots.clear();
         self.motions.clear();
+        self.unlisted = 0;
     }
 
     /// Marks a slot as moved (a slot marked twice keeps its first motion).
@@ -87,15 +98,16 @@ impl DirtySet {
 
     /// Lists the source triangles of `visited` (increasing, disjoint ranges) whose entry in
     /// `source_motion` is set, in source order, as their slots (`slot_of_source`) with that
-    /// motion, and clears those entries (a range [`Listed::DeformedByBit`]: those whose
-    /// slot's bit is set, as deformed; only with `bits_set`): the parallel counterpart of [`Self::mark`] called in
-    /// that order. The ranges are cut into chunks that are counted, then filled at their
-    /// offsets, on rayon's threads; every read is sequential. Precondition: the set was just
+    /// motion, and clears those entries: the parallel counterpart of [`Self::mark`] called
+    /// in that order. A range [`Listed::DeformedByBit`] is not listed: its moved slots are
+    /// the set bits no listed entry has (only with `bits_set`), counted as unlisted.
+    /// The listed ranges are cut into chunks that are counted, then filled at their offsets,
+    /// on rayon's threads; every read is sequential. Precondition: the set was just
     /// [`reset`](Self::reset) for every slot `slot_of_source` names; then either no bit is
     /// set (`bits_set` false: the listed slots' bits are set here, in a serial pass), or the
-    /// bits of exactly the slots to be listed are (`bits_set` true: the write in slot order
-    /// sets them as it goes, each task in its own words). Fills `listed` with how many
-    /// entries each range gave, in order.
+    /// bits of exactly the moved slots of every range are (`bits_set` true: the write in
+    /// slot order sets them as it goes, each task in its own words). Fills `listed` with how
+    /// many entries each range gave to the list, in order (0 for a range left unlisted).
     pub fn assign_in_source_order(
         &mut self,
         visited: impl Iterator<Item = (Range<u32>, Listed)>,
@@ -104,36 +116,29 @@ impl DirtySet {
         bits_set: bool,
         listed: &mut Vec<usize>,
     ) {
-        debug_assert!(self.slots.is_empty());
-        // Each chunk with the index of the range it comes from and how it is listed.
+        debug_assert!(self.slots.is_empty() && self.unlisted == 0);
+        // Each chunk of a listed range, with the index of the range it comes from.
         let visited: Vec<(Range<u32>, Listed)> = visited.collect();
         debug_assert!(bits_set || visited.iter().all(|(_, l)| *l == Listed::ByMotion));
-        let chunks: Vec<(usize, Range<usize>, Listed)> = visited
+        let chunks: Vec<(usize, Range<usize>)> = visited
             .iter()
             .cloned()
             .enumerate()
-            .flat_map(|(index, (r, how))| {
+            .filter(|(_, (_, how))| *how == Listed::ByMotion)
+            .flat_map(|(index, (r, _))| {
                 let (start, end) = (r.start as usize, r.end as usize);
                 (start..end)
                     .step_by(LIST_CHUNK)
-                    .map(move |a| (index, a..(a + LIST_CHUNK).min(end), how))
+                    .map(move |a| (index, a..(a + LIST_CHUNK).min(end)))
             })
             .collect();
-        let bits = &self.bits;
-        let marked = |source: usize| {
-            let slot = slot_of_source[source] as usize;
-            bits[slot / 64] & (1 << (slot % 64)) != 0
-        };
         let counts: Vec<usize> = chunks
             .par_iter()
-            .map(|(_, c, how)| match how {
-                Listed::ByMotion => source_motion[c.clone()].iter().flatten().count(),
-                Listed::DeformedByBit => c.clone().filter(|&s| marked(s)).count(),
-            })
+            .map(|(_, c)| source_motion[c.clone()].iter().flatten().count())
             .collect();
         listed.clear();
         listed.resize(visited.len(), 0);
-        for ((index, ..), &count) in chunks.iter().zip(&counts) {
+        for ((index, _), &count) in chunks.iter().zip(&counts) {
             listed[*index] += count;
         }
         let total = counts.iter().sum();
@@ -143,7 +148,7 @@ impl DirtySet {
         let mut jobs = Vec::with_capacity(chunks.len());
         let (mut input, mut consumed) = (source_motion, 0);
         let (mut slots, mut motions) = (&mut self.slots[..], &mut self.motions[..]);
-        for ((_, chunk, how), &count) in chunks.iter().zip(&counts) {
+        for ((_, chunk), &count) in chunks.iter().zip(&counts) {
             let (_, rest) = std::mem::take(&mut input).split_at_mut(chunk.start - consumed);
             let (here, rest) = rest.split_at_mut(chunk.len());
             (input, consumed) = (rest, chunk.end);
@@ -151,39 +156,25 @@ impl DirtySet {
             slots = rest;
             let (chunk_motions, rest) = std::mem::take(&mut motions).split_at_mut(count);
             motions = rest;
-            jobs.push((chunk.start, *how, here, chunk_slots, chunk_motions));
+            jobs.push((chunk.start, here, chunk_slots, chunk_motions));
         }
         jobs.into_par_iter()
-            .for_each(|(first, how, input, slots, motions)| {
-                let out = slots.iter_mut().zip(motions.iter_mut());
-                let fill = |listed: &mut dyn Iterator<Item = (usize, Motion)>| {
-                    for ((source, motion), (slot, out)) in listed.zip(out) {
-                        *slot = slot_of_source[source];
-                        *out = motion;
-                    }
-                };
-                match how {
-                    Listed::ByMotion => fill(
-                        &mut input
-                            .iter_mut()
-                            .enumerate()
-                            .filter_map(|(k, m)| Some((first + k, m.take()?))),
-                    ),
-                    Listed::DeformedByBit => fill(
-                        &mut (first..first + input.len())
-                            .filter(|&s| marked(s))
-                            .map(|s| (s, Motion::Deformed)),
-                    ),
+            .for_each(|(first, input, slots, motions)| {
+                let listed = input
+                    .iter_mut()
+                    .enumerate()
+                    .filter_map(|(k, m)| Some((first + k, m.take()?)));
+                for ((source, motion), (slot, out)) in listed.zip(slots.iter_mut().zip(motions)) {
+                    *slot = slot_of_source[source];
+                    *out = motion;
                 }
             });
         if bits_set {
             debug_assert!(self.slots.iter().all(|&s| self.contains(s)));
-            debug_assert_eq!(
-                self.bits
-                    .iter()
-                    .map(|w| w.count_ones() as usize)
-                    .sum::<usize>(),
-                self.slots.len()
+            let set: usize = self.bits.iter().map(|w| w.count_ones() as usize).sum();
+            self.unlisted = set - self.slots.len();
+            debug_assert!(
+                self.unlisted == 0 || visited.iter().any(|(_, l)| *l == Listed::DeformedByBit)
             );
         } else {
             for &slot in &self.slots {
@@ -210,17 +201,96 @@ impl DirtySet {
             .is_some_and(|w| w & (1 << (slot % 64)) != 0)
     }
 
+    /// How many slots moved (listed or not).
     pub fn len(&self) -> usize {
-        self.slots.len()
+        self.slots.len() + self.unlisted
     }
 
     pub fn is_empty(&self) -> bool {
-        self.slots.is_empty()
+        self.len() == 0
     }
 
-    /// How many entries have motion `m`.
+    /// How many moved slots have motion `m`.
     pub fn count(&self, m: Motion) -> usize {
-        self.motions.iter().filter(|&&x| x == m).count()
+        let listed = self.motions.iter().filter(|&&x| x == m).count();
+        if m == Motion::Deformed {
+            listed + self.unlisted
+        } else {
+            listed
+        }
+    }
+
+    /// How many moved slots are in the set by their bits alone (all deformed).
+    pub(super) fn unlisted(&self) -> usize {
+        self.unlisted
+    }
+
+    /// The listed entries, in the order they were marked: what the `log2 P_b` step's
+    /// entry runs index.
+    pub(super) fn listed(&self) -> (&[u32], &[Motion]) {
+        (&self.slots, &self.motions)
+    }
+
+    /// Every moved slot, increasing.
+    pub fn slots_in_order(&self) -> impl Iterator<Item = u32> + '_ {
+        self.bits.iter().enumerate().flat_map(|(w, &word)| {
+            let mut bits = word;
+            std::iter::from_fn(move || {
+                (bits != 0).then(|| {
+                    let b = bits.trailing_zeros();
+                    bits &= bits - 1;
+                    (w * 64) as u32 + b
+                })
+            })
+        })
+    }
+
+    /// Every moved slot: the listed ones as they are when nothing is unlisted (no copy),
+    /// else all of them, increasing.
+    pub fn all_slots(&self) -> std::borrow::Cow<'_, [u32]> {
+        if self.unlisted == 0 {
+            std::borrow::Cow::Borrowed(&self.slots)
+        } else {
+            std::borrow::Cow::Owned(self.slots_in_order().collect())
+        }
+    }
+
+    /// The unlisted moved slots (all deformed), increasing.
+    pub(super) fn unlisted_slots(&self) -> Vec<u32> {
+        if self.unlisted == 0 {
+            return Vec::new();
+        }
+        let mut bits = self.bits.clone();
+        for &slot in &self.slots {
+            bits[slot as usize / 64] &= !(1 << (slot % 64));
+        }
+        let only = DirtySet {
+            bits,
+            ..Default::default()
+        };
+        only.slots_in_order().collect()
+    }
+
+    /// Every moved slot with its motion, increasing by slot: what moved, whichever way the
+    /// frame's update listed it (sequential and parallel updates give the same).
+    pub fn moved(&self) -> Vec<(u32, Motion)> {
+        let mut listed: Vec<(u32, Motion)> = self
+            .slots
+            .iter()
+            .copied()
+            .zip(self.motions.iter().copied())
+            .collect();
+        listed.sort_unstable_by_key(|&(slot, _)| slot);
+        let mut next = listed.iter().peekable();
+        self.slots_in_order()
+            .map(|slot| match next.peek() {
+                Some(&&(s, motion)) if s == slot => {
+                    next.next();
+                    (slot, motion)
+                }
+                _ => (slot, Motion::Deformed),
+            })
+            .collect()
     }
 }
 
@@ -329,9 +399,25 @@ mod tests {
             &mut per_range,
         );
         assert!(one_by_one_mixed.len() > LIST_CHUNK / 4);
-        assert_eq!(by_bit.slots, one_by_one_mixed.slots);
-        assert_eq!(by_bit.motions, one_by_one_mixed.motions);
+        // Only the range listed by motion is in the list (it comes first, so its entries
+        // are the marked list's first); the rest are in the set by their bits.
+        let first_range = per_range[0];
+        assert!(first_range > 0 && per_range[1..].iter().all(|&c| c == 0));
+        assert_eq!(by_bit.slots, one_by_one_mixed.slots[..first_range]);
+        assert_eq!(by_bit.motions, one_by_one_mixed.motions[..first_range]);
         assert_eq!(by_bit.bits, one_by_one_mixed.bits);
+        assert_eq!(by_bit.len(), one_by_one_mixed.len());
+        for m in [Motion::Rigid, Motion::Scaled, Motion::Deformed] {
+            assert_eq!(by_bit.count(m), one_by_one_mixed.count(m), "{m:?}");
+        }
+        assert_eq!(by_bit.moved(), one_by_one_mixed.moved());
+        let mut all = one_by_one_mixed.slots.clone();
+        all.sort_unstable();
+        assert_eq!(by_bit.all_slots().into_owned(), all);
+        assert_eq!(by_bit.slots_in_order().collect::<Vec<_>>(), all);
+        let mut unlisted = one_by_one_mixed.slots[first_range..].to_vec();
+        unlisted.sort_unstable();
+        assert_eq!(by_bit.unlisted_slots(), unlisted);
         // Every visited source's motion was taken.
         assert!(
             visited

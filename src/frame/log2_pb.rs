@@ -132,7 +132,7 @@ impl Log2PbState {
         // once and splits across threads by their total (a scene that interleaves reshaped
         // and rigid instances has a run per instance).
         // (The table is empty only when nothing deforms: then there are no deformed runs.)
-        debug_assert!(walked || changes.deformed_entries.is_empty());
+        debug_assert!(walked || changes.deformed == 0);
         let entries = &mut self.entries;
         entries.clear();
         for run in &changes.reshaped_entries {
@@ -154,7 +154,7 @@ impl Log2PbState {
             reads_vertices,
             stretches: stretches(setup, states),
         };
-        let (slots, motions) = (&changes.dirty.slots, &changes.dirty.motions);
+        let (slots, motions) = changes.dirty.listed();
         pass.values_into(
             entries.len(),
             |j| {
@@ -201,8 +201,7 @@ impl Log2PbState {
         };
         let words = changes.dirty.words();
         let log2_pb = &mut triangles.log2_pb;
-        let deformed: usize = changes.deformed_entries.iter().map(|r| r.len()).sum();
-        if setup.parallelism.splits(deformed) {
+        if setup.parallelism.splits(changes.deformed) {
             log2_pb
                 .par_chunks_mut(WALK_WORDS * 64)
                 .zip(words.par_chunks(WALK_WORDS))

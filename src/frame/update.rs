@@ -602,7 +602,7 @@ impl TreeState {
         } = &mut self.scratch;
         let FrameChanges {
             dirty,
-            deformed_entries,
+            deformed,
             reshaped_entries,
             ..
         } = changes;
@@ -614,7 +614,7 @@ impl TreeState {
                 .map(|(i, _)| i)
         };
         // The write in slot order set the bits (it does when it splits, as this does) and
-        // recorded no motions for the slots of deforming instances.
+        // recorded no motions for the slots of deforming instances: those stay unlisted.
         let listed_as = |i: usize| match plan[i] {
             Rewrite::Changed if bits_set => Listed::DeformedByBit,
             _ => Listed::ByMotion,
@@ -639,20 +639,20 @@ impl TreeState {
                 listed.push(dirty.len() - before);
             }
         }
-        deformed_entries.clear();
+        // The deforming instances' moved slots: the unlisted ones and those listed by motion.
+        *deformed = dirty.unlisted();
         reshaped_entries.clear();
         let mut start = 0;
         for (i, &count) in visited_instances().zip(listed.iter()) {
             let end = start + count;
-            let runs = match plan[i] {
-                Rewrite::Changed => Some(&mut *deformed_entries),
-                Rewrite::All(Motion::Rigid) | Rewrite::Keep => None,
-                Rewrite::All(_) => Some(&mut *reshaped_entries),
-            };
-            if let Some(runs) = runs.filter(|_| count > 0) {
-                match runs.last_mut() {
+            if plan[i] == Rewrite::Changed {
+                *deformed += count;
+            }
+            let reshaped = matches!(plan[i], Rewrite::All(Motion::Scaled | Motion::Deformed));
+            if reshaped && count > 0 {
+                match reshaped_entries.last_mut() {
                     Some(run) if run.end == start => run.end = end,
-                    _ => runs.push(start..end),
+                    _ => reshaped_entries.push(start..end),
                 }
             }
             start = end;
@@ -660,20 +660,28 @@ impl TreeState {
     }
 
     /// A moved vertex that came out NaN or infinite stops the frame (never a NaN pixel).
+    /// The error names the lowest such source triangle, so every update path (whatever
+    /// its slot order, listed or not) names the same one.
     pub fn check_moved_finite(&self, changes: &FrameChanges) -> Result<(), AccelError> {
         if !changes.moved_nonfinite {
             return Ok(()); // the write saw none: skip the scan
         }
-        for &slot in &changes.dirty.slots {
-            let tri = self.accel.triangle(slot);
-            if let Some(v) = tri.iter().find(|v| !v.is_finite()) {
-                return Err(AccelError::NonFiniteVertex {
-                    triangle: self.triangles.source[slot as usize] as usize,
-                    vertex: v.to_array(),
-                });
-            }
+        let first = changes
+            .dirty
+            .slots_in_order()
+            .filter_map(|slot| {
+                let tri = self.accel.triangle(slot);
+                let v = tri.iter().find(|v| !v.is_finite())?;
+                Some((self.triangles.source[slot as usize], v.to_array()))
+            })
+            .min_by_key(|&(source, _)| source);
+        match first {
+            Some((source, vertex)) => Err(AccelError::NonFiniteVertex {
+                triangle: source as usize,
+                vertex,
+            }),
+            None => Ok(()),
         }
-        Ok(())
     }
 
     /// The refit-or-rebuild step: refits the tree to the dirty triangles, or rebuilds it
@@ -687,9 +695,12 @@ impl TreeState {
         changes: &mut FrameChanges,
     ) -> Result<TreeUpdate, AccelError> {
         let mut update = TreeUpdate::default();
-        let step = self
-            .accel
-            .refit_or_rebuild(&changes.dirty.slots, setup.settings.bvh);
+        let dirty = &changes.dirty;
+        let step = self.accel.refit_or_rebuild_listing(
+            dirty.len(),
+            || dirty.all_slots(),
+            setup.settings.bvh,
+        );
         match step {
             TreeStep::Unchanged => {}
             TreeStep::Refitted { refit_ms } => update.refit_ms = refit_ms,
@@ -716,11 +727,20 @@ impl TreeState {
     ) -> Result<f64, AccelError> {
         let t = Instant::now();
         let dirty = &mut changes.dirty;
-        let moved: Vec<(u32, Motion)> = dirty
-            .slots
+        // The listed entries first, in their order (the `log2 P_b` step's entry runs index
+        // them), then the unlisted ones.
+        let (slots, motions) = dirty.listed();
+        let unlisted = dirty.unlisted_slots();
+        let source = |slot: u32| self.triangles.source[slot as usize];
+        let moved: Vec<(u32, Motion)> = slots
             .iter()
-            .zip(&dirty.motions)
-            .map(|(&slot, &m)| (self.triangles.source[slot as usize], m))
+            .zip(motions)
+            .map(|(&slot, &m)| (source(slot), m))
+            .chain(
+                unlisted
+                    .into_iter()
+                    .map(|slot| (source(slot), Motion::Deformed)),
+            )
             .collect();
         // The positions come out of the old tree's packs, and the old tree goes before the
         // build: kept until the new one is built, its 110 bytes or so per triangle would sit

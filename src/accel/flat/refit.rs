@@ -6,6 +6,7 @@
 
 use rayon::prelude::*;
 
+use std::borrow::Cow;
 use std::ops::Range;
 
 use super::{Accel, Leaf, PARALLEL_REFIT_MIN, SAH_INTERSECTION_COST, SAH_TRAVERSAL_COST};
@@ -35,16 +36,27 @@ impl Accel {
     /// vertices were written ([`Accel::set_triangle`], [`Accel::slot_lanes`]). The tree's
     /// topology is kept.
     pub fn refit(&mut self, moved_slots: &[u32]) -> RefitKind {
-        if moved_slots.is_empty() || self.leaves.is_empty() {
+        self.refit_listing(moved_slots.len(), || moved_slots.into())
+    }
+
+    /// [`Accel::refit`] for `moved` moved triangles that `list` lists (any order, each
+    /// once) when a partial refit needs them; a full refit does not call it.
+    pub fn refit_listing<'a>(
+        &mut self,
+        moved: usize,
+        list: impl FnOnce() -> Cow<'a, [u32]>,
+    ) -> RefitKind {
+        if moved == 0 || self.leaves.is_empty() {
             return RefitKind::None;
         }
-        let kind = if moved_slots.len() as f64 > PARTIAL_REFIT_MAX_SHARE * self.leaves.len() as f64
-        {
+        let kind = if moved as f64 > PARTIAL_REFIT_MAX_SHARE * self.leaves.len() as f64 {
             // The full refit takes the cost on its way up.
             self.cost = self.refit_full(self.slots() >= PARALLEL_REFIT_MIN);
             RefitKind::Full
         } else {
-            self.refit_partial(moved_slots);
+            let moved_slots = list();
+            debug_assert_eq!(moved_slots.len(), moved);
+            self.refit_partial(&moved_slots);
             self.cost = self.sah_cost();
             RefitKind::Partial
         };
