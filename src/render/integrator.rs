@@ -204,11 +204,18 @@ struct Step {
 }
 
 impl Combine {
+    /// A vertex with no radiance yet (a child's place before its hit is finished).
+    pub(super) const EMPTY: Combine = Combine::leaf(Vec3A::ZERO);
+
     /// A vertex whose radiance is `radiance` alone (a miss: the background).
-    pub(super) fn leaf(radiance: Vec3A) -> Combine {
+    pub(super) const fn leaf(radiance: Vec3A) -> Combine {
+        const NO_STEP: Step = Step {
+            weight: Vec3A::ZERO,
+            child: 0,
+        };
         Combine {
             radiance,
-            steps: [Step::default(); 3],
+            steps: [NO_STEP; 3],
             count: 0,
             group_from: 0,
             has_group: false,
@@ -307,7 +314,8 @@ impl FrameScene<'_> {
             request.transmittance = self.shadow_transmittance(!clear, &mut glass[..met]);
         }
         let mut spawned = Vec::new();
-        let combine = self.finish(&arrival, &requests, 0, &mut spawned);
+        let mut combine = Combine::EMPTY;
+        self.finish(&arrival, &requests, 0, &mut spawned, &mut combine);
         let children: Vec<Vec3A> = spawned
             .iter()
             .map(|s| self.radiance_depth_first(s.origin, s.direction, s.lod, depth + 1, counters))
@@ -392,8 +400,8 @@ impl FrameScene<'_> {
     }
 
     /// Sums the hit's own light (its shadow rays traced, `requests` as `arrive` appended
-    /// them) and spawns the reflected and refracted rays: returns the vertex's [`Combine`],
-    /// whose steps name the spawned rays as `first_child`, `first_child + 1`, ... in the
+    /// them) and spawns the reflected and refracted rays: writes the vertex's [`Combine`]
+    /// into `combine` (in place, where the caller keeps it), whose steps name the spawned rays as `first_child`, `first_child + 1`, ... in the
     /// order they are pushed to `spawned`.
     pub(super) fn finish<L: RayLod>(
         &self,
@@ -401,7 +409,8 @@ impl FrameScene<'_> {
         requests: &[ShadowRequest],
         first_child: u32,
         spawned: &mut Vec<Spawned<L>>,
-    ) -> Combine {
+        combine: &mut Combine,
+    ) {
         let material = &self.materials[arrival.material as usize];
         let surface = &arrival.surface;
         let direction = arrival.direction;
@@ -420,9 +429,9 @@ impl FrameScene<'_> {
                     color += direct_light(surface, direction, diffuse, material, opaque, requests);
                     color += AMBIENT * diffuse;
                 }
-                let mut combine = Combine::leaf(color);
+                *combine = Combine::leaf(color);
                 if arrival.depth >= self.max_depth {
-                    return combine;
+                    return;
                 }
                 let mirror = opaque * material.reflectance;
                 if mirror > MIN_WEIGHT {
@@ -432,16 +441,8 @@ impl FrameScene<'_> {
                     combine.add(albedo * mirror, child);
                 }
                 if material.transmission > MIN_WEIGHT {
-                    self.transmit(
-                        &lod_hit,
-                        arrival,
-                        albedo,
-                        material,
-                        &mut children,
-                        &mut combine,
-                    );
+                    self.transmit(&lod_hit, arrival, albedo, material, &mut children, combine);
                 }
-                combine
             }
             ShadingModel::Additive { ambient } => {
                 let texel = self.texel(&arrival.lookup);
@@ -449,9 +450,9 @@ impl FrameScene<'_> {
                 let ambient = Vec3A::from(ambient) * texel;
                 let mut color = self.additive_ambient * ambient;
                 color += direct_light(surface, direction, diffuse, material, 1.0, requests);
-                let mut combine = Combine::leaf(color);
+                *combine = Combine::leaf(color);
                 if arrival.depth >= self.max_depth {
-                    return combine;
+                    return;
                 }
                 if material.reflectance > MIN_WEIGHT {
                     let reflected = reflect(direction, surface.shading_normal, surface.face_normal);
@@ -476,7 +477,6 @@ impl FrameScene<'_> {
                     };
                     combine.add(Vec3A::splat(material.transmission), child);
                 }
-                combine
             }
         }
     }

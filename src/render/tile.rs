@@ -113,7 +113,7 @@ pub(super) fn trace_tile<L: RayLod>(
             .flat_map(|(x, y)| (0..spp).map(move |i| (x, y, i))),
     );
     vertices.clear();
-    vertices.resize(samples.len(), Combine::leaf(Vec3A::ZERO));
+    vertices.resize(samples.len(), Combine::EMPTY);
     primary_bounce::<L>(scene, camera, spp, samples, counters, bounce);
     while !bounce.is_empty() {
         // Arrive at every hit; a miss is the background.
@@ -149,17 +149,25 @@ pub(super) fn trace_tile<L: RayLod>(
         for w in waiting.iter() {
             spawned.clear();
             let first_child = vertices.len() as u32;
-            let combine = scene.finish(&w.arrival, &requests[w.first..w.end], first_child, spawned);
-            vertices[w.vertex as usize] = combine;
-            for (k, ray) in spawned.iter().enumerate() {
-                vertices.push(Combine::leaf(Vec3A::ZERO));
-                next.push(Pending {
-                    ray: *ray,
-                    vertex: first_child + k as u32,
-                    pixel: w.pixel,
-                    depth: w.arrival.depth() + 1,
-                });
-            }
+            // Written in place: a combine made on the stack and then copied stalled on
+            // reading its small fields' fresh stores back as 16-byte loads.
+            scene.finish(
+                &w.arrival,
+                &requests[w.first..w.end],
+                first_child,
+                spawned,
+                &mut vertices[w.vertex as usize],
+            );
+            // The children's vertices, filled when their hits are finished; one resize and
+            // one extend each (a push per child rebuilt the empty combine on the stack
+            // around the push's possible growth and copied it).
+            vertices.resize(vertices.len() + spawned.len(), Combine::EMPTY);
+            next.extend(spawned.iter().enumerate().map(|(k, ray)| Pending {
+                ray: *ray,
+                vertex: first_child + k as u32,
+                pixel: w.pixel,
+                depth: w.arrival.depth() + 1,
+            }));
         }
         trace_bounce(scene, next, counters, bounce);
     }
