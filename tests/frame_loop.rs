@@ -338,8 +338,9 @@ fn frame_bits(r: &Renderer) -> Vec<u32> {
 }
 
 /// The parallel update (past the thresholds with `Auto`, and forced with `Parallel`) leaves
-/// the same triangles, `log2 P_b`, dirty slots in the same order with the same motions,
-/// and the same counts as the update on one thread, on every frame, refitting and
+/// the same triangles, `log2 P_b`, dirty slots with the same motions (the parallel write
+/// leaves a deforming instance's slots unlisted, so they are compared as `moved` lists
+/// them) and the same counts as the update on one thread, on every frame, refitting and
 /// rebuilding.
 #[test]
 fn parallel_update_equals_the_sequential_update_bit_for_bit() {
