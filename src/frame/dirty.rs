@@ -233,16 +233,7 @@ impl DirtySet {
 
     /// Every moved slot, increasing.
     pub fn slots_in_order(&self) -> impl Iterator<Item = u32> + '_ {
-        self.bits.iter().enumerate().flat_map(|(w, &word)| {
-            let mut bits = word;
-            std::iter::from_fn(move || {
-                (bits != 0).then(|| {
-                    let b = bits.trailing_zeros();
-                    bits &= bits - 1;
-                    (w * 64) as u32 + b
-                })
-            })
-        })
+        set_bits(&self.bits)
     }
 
     /// Every moved slot: the listed ones as they are when nothing is unlisted (no copy),
@@ -264,11 +255,7 @@ impl DirtySet {
         for &slot in &self.slots {
             bits[slot as usize / 64] &= !(1 << (slot % 64));
         }
-        let only = DirtySet {
-            bits,
-            ..Default::default()
-        };
-        only.slots_in_order().collect()
+        set_bits(&bits).collect()
     }
 
     /// Every moved slot with its motion, increasing by slot: what moved, whichever way the
@@ -292,6 +279,20 @@ impl DirtySet {
             })
             .collect()
     }
+}
+
+/// The indices of the set bits of `words` (bit `i % 64` of word `i / 64`), increasing.
+fn set_bits(words: &[u64]) -> impl Iterator<Item = u32> + '_ {
+    words.iter().enumerate().flat_map(|(w, &word)| {
+        let mut bits = word;
+        std::iter::from_fn(move || {
+            (bits != 0).then(|| {
+                let b = bits.trailing_zeros();
+                bits &= bits - 1;
+                (w * 64) as u32 + b
+            })
+        })
+    })
 }
 
 #[cfg(test)]

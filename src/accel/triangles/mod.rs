@@ -213,11 +213,18 @@ impl PackedTriangles {
         (slots, pack.cross_squared())
     }
 
+    /// Slot `slot`'s pack, or `None` when out of range.
+    #[inline(always)]
+    fn pack_of_slot(&self, slot: u32) -> Option<&TrianglePack> {
+        let &at = self.lane_of_slot.get(slot as usize)?;
+        self.packs.get(at as usize / LANES)
+    }
+
     /// Hints the cache to load slot `slot`'s pack (no effect when out of range).
     #[inline]
     pub fn prefetch_slot(&self, slot: u32) {
-        if let Some(&at) = self.lane_of_slot.get(slot as usize) {
-            crate::simd::prefetch(&self.packs, at as usize / LANES);
+        if let Some(pack) = self.pack_of_slot(slot) {
+            crate::simd::prefetch_ptr(pack);
         }
     }
 
@@ -232,9 +239,7 @@ impl PackedTriangles {
     /// range): what a leaf box reads.
     #[inline(always)]
     pub fn prefetch_slot_pack(&self, slot: u32) {
-        if let Some(&at) = self.lane_of_slot.get(slot as usize)
-            && let Some(pack) = self.packs.get(at as usize / LANES)
-        {
+        if let Some(pack) = self.pack_of_slot(slot) {
             // 176 bytes from a 16-byte boundary: three or four lines, its first and last
             // bytes' and those 64 and 128 bytes on.
             let start = (pack as *const TrianglePack).cast::<u8>();
