@@ -28,7 +28,7 @@ mod query;
 mod triangles;
 mod wide;
 
-pub use flat::{Accel, AccelError, BUILD_CHUNK_TRIANGLES, RefitKind, padded_box};
+pub use flat::{Accel, AccelError, BUILD_CHUNK_TRIANGLES, RefitKind, RunLeafBoxes, padded_box};
 pub use instanced::{TlasInstance, TwoLevelAccel};
 pub use policy::{BvhLayout, BvhPolicy, TreeStep};
 pub use query::{Hit, TriangleRef};

@@ -109,6 +109,11 @@ impl Accel {
         list: impl FnOnce() -> Cow<'a, [u32]>,
         policy: BvhPolicy,
     ) -> TreeStep {
+        if moved == 0 || policy == BvhPolicy::Rebuild {
+            // No refit follows the last write: the leaf boxes a run writer set (the same as
+            // before, or replaced by the rebuild) need no note.
+            self.leaf_boxes_written = None;
+        }
         if moved == 0 {
             return TreeStep::Unchanged;
         }

@@ -36,7 +36,7 @@ use super::scatter::{SlotScatter, SourceMotions};
 use super::setup::FrameSetup;
 use super::slot_vertices::{self, SlotIndices, SlotVertices};
 use super::two_level::{TwoLevel, Which};
-use crate::accel::{Accel, AccelError, BvhPolicy, SlotLanes, TreeStep};
+use crate::accel::{Accel, AccelError, BvhPolicy, RunLeafBoxes, SlotLanes, TreeStep};
 use crate::anim::NodeShape;
 use crate::geometry::FrameTriangles;
 use crate::simd;
@@ -519,7 +519,7 @@ impl TreeState {
             self.slot_vertices
                 .encode(triangles.len(), indices, parallel);
         }
-        let lanes = self.accel.slot_lanes();
+        let (lanes, leaf_boxes) = self.accel.slot_lanes_and_leaf_boxes(SLOT_RUN as u32);
         let motions = SourceMotions::new(source_motion);
         let (plan, slot_vertices) = (&*plan, &self.slot_vertices);
         // `normals`: the run's stored normals, empty when no slot stores them (every
@@ -535,6 +535,7 @@ impl TreeState {
                 plan,
                 slot_vertices,
                 lanes: &lanes,
+                leaf_boxes: &leaf_boxes,
                 motions: &motions,
                 run,
                 sources,
@@ -767,6 +768,8 @@ struct SlotRunWrite<'a, 'r> {
     plan: &'a [Rewrite],
     slot_vertices: &'a SlotVertices,
     lanes: &'a SlotLanes<'a>,
+    /// Where the run sets its leaves' boxes once their slots are written.
+    leaf_boxes: &'a RunLeafBoxes<'a>,
     motions: &'a SourceMotions<'a>,
     run: usize,
     /// The run's slots' source triangles.
@@ -789,6 +792,7 @@ impl simd::Kernel for SlotRunWrite<'_, '_> {
             plan,
             slot_vertices,
             lanes,
+            leaf_boxes,
             motions,
             run,
             sources,
@@ -852,6 +856,13 @@ impl simd::Kernel for SlotRunWrite<'_, '_> {
                 }
             }
         }
+        // The boxes of the run's leaves, while its packs are in this task's cache: the
+        // refit's leaf pass read every pack again from memory (a million skinned
+        // triangles' refit was mostly that pass).
+        let first = (run * SLOT_RUN) as u32;
+        // SAFETY: the run's slots are this task's alone (as above), and so are the lanes
+        // of the leaves inside them.
+        unsafe { leaf_boxes.set_inside(lanes, first..first + sources.len() as u32) };
     }
 }
 

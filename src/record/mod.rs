@@ -85,11 +85,13 @@ pub struct FrameRecord {
 /// What the per-frame update did and cost (flattened into each `stats.jsonl` line).
 #[derive(Debug, Clone, Copy, Default, PartialEq, Serialize)]
 pub struct UpdateStats {
-    /// Animation evaluated at the frame time and moved vertices written.
+    /// Animation evaluated at the frame time and moved vertices written (by a write in
+    /// slot order, with the leaf boxes of the tree: see `Accel::slot_lanes_and_leaf_boxes`).
     pub animate_ms: f64,
     /// Classifying instances and triangles into the dirty set.
     pub dirty_ms: f64,
-    /// Refitting the BVH to the moved triangles (0 when nothing moved or it was rebuilt).
+    /// Refitting the BVH to the moved triangles (0 when nothing moved or it was rebuilt):
+    /// the leaf boxes the write did not set, and the boxes above them.
     pub refit_ms: f64,
     /// Building the BVH (first frame, or a rebuild), including the reorder into BVH order.
     pub build_ms: f64,

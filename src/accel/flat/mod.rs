@@ -40,6 +40,12 @@ pub struct Accel {
     pub(in crate::accel) cost: f32,
     /// The cut of the tree the parallel full refit works in, made by the first such refit.
     pub(in crate::accel) refit_split: std::sync::OnceLock<Option<refit::RefitSplit>>,
+    /// `Some(run)`: the packs were last written through [`Accel::slot_lanes_and_leaf_boxes`],
+    /// whose writer set the box of every leaf that lies inside one run of `run` slots
+    /// (`k * run..(k + 1) * run`) after writing its slots, so the next full refit sets only
+    /// the leaves that straddle two runs. Any other access that writes the packs clears it,
+    /// and the next refit (or the decision not to refit) takes it.
+    pub(in crate::accel) leaf_boxes_written: Option<u32>,
 }
 
 /// A leaf of the tree: its triangle slots and where the wide tree keeps its box.
@@ -161,6 +167,7 @@ impl Accel {
             build_cost: 0.0,
             cost: 0.0,
             refit_split: Default::default(),
+            leaf_boxes_written: None,
         };
         accel.build_cost = accel.sah_cost();
         accel.cost = accel.build_cost;
@@ -189,12 +196,34 @@ impl Accel {
 
     /// Writes a moved triangle into slot `slot`; [`Accel::refit`] then takes the boxes.
     pub fn set_triangle(&mut self, slot: u32, tri: &[Vec3A; 3]) {
+        self.leaf_boxes_written = None;
         self.triangles.set_triangle(slot, tri);
     }
 
     /// Slot access for concurrent writers of moved triangles ([`SlotLanes`]).
     pub fn slot_lanes(&mut self) -> SlotLanes<'_> {
+        self.leaf_boxes_written = None;
         self.triangles.slot_lanes()
+    }
+
+    /// [`Accel::slot_lanes`] for a writer that goes through the slots in runs of `run`
+    /// slots (`k * run..(k + 1) * run`, one task per run) and, after writing a run, sets
+    /// the boxes of the leaves inside it ([`RunLeafBoxes::set_inside`]) while its packs are
+    /// in cache: the next full refit then reads the packs only of the leaves that straddle
+    /// two runs, instead of all of them again.
+    ///
+    /// The caller must call [`RunLeafBoxes::set_inside`] for every run it writes, and the
+    /// packs of runs it does not write must not have changed since the last refit; the
+    /// tree's inner boxes stay stale until the next refit, as after any write.
+    pub fn slot_lanes_and_leaf_boxes(&mut self, run: u32) -> (SlotLanes<'_>, RunLeafBoxes<'_>) {
+        assert!(run > 0, "runs of no slots");
+        self.leaf_boxes_written = Some(run);
+        let boxes = RunLeafBoxes {
+            leaves: &self.leaves,
+            leaf_of_slot: &self.leaf_of_slot,
+            lanes: self.wide.leaf_lanes_writer(),
+        };
+        (self.triangles.slot_lanes(), boxes)
     }
 
     /// Hints the cache to load slot `slot`'s triangle (no effect when out of range).
@@ -300,4 +329,4 @@ mod refit;
 pub(crate) mod tests;
 
 pub use binary::CHUNK_TRIANGLES as BUILD_CHUNK_TRIANGLES;
-pub use refit::RefitKind;
+pub use refit::{RefitKind, RunLeafBoxes};

@@ -10,7 +10,7 @@ use std::borrow::Cow;
 use std::ops::Range;
 
 use super::{Accel, Leaf, PARALLEL_REFIT_MIN, SAH_INTERSECTION_COST, SAH_TRAVERSAL_COST};
-use crate::accel::triangles::PackedTriangles;
+use crate::accel::triangles::{PackedTriangles, SlotLanes};
 use crate::accel::wide::{LeafLanes, Parts, WideBvh};
 
 /// Leaves per parallel task of a full refit (a leaf takes ~20 ns).
@@ -46,14 +46,26 @@ impl Accel {
         moved: usize,
         list: impl FnOnce() -> Cow<'a, [u32]>,
     ) -> RefitKind {
+        let written = self.leaf_boxes_written.take();
         if moved == 0 || self.leaves.is_empty() {
             return RefitKind::None;
         }
         let kind = if moved as f64 > PARTIAL_REFIT_MAX_SHARE * self.leaves.len() as f64 {
             // The full refit takes the cost on its way up.
-            self.cost = self.refit_full(self.slots() >= PARALLEL_REFIT_MIN);
+            if let Some(run) = written {
+                self.set_straddling_leaf_boxes(run);
+            }
+            let leaves = if written.is_some() {
+                LeafPass::Set
+            } else {
+                LeafPass::FromPacks
+            };
+            self.cost = self.refit_full(self.slots() >= PARALLEL_REFIT_MIN, leaves);
             RefitKind::Full
         } else {
+            // A writer that set leaf boxes set them to what this recomputes; the walk up
+            // from each moved leaf compares the ancestors' boxes, not the leaf's, so it
+            // still goes up from a leaf whose box was set already.
             let moved_slots = list();
             debug_assert_eq!(moved_slots.len(), moved);
             self.refit_partial(&moved_slots);
@@ -77,7 +89,12 @@ impl Accel {
     /// Sequentially, leaves in slot order, then the inner lanes. Either way the inner pass
     /// takes the SAH cost on the way (a second walk over the nodes was ~2 ms of a million
     /// triangles' refit).
-    pub(in crate::accel) fn refit_full(&mut self, parallel: bool) -> f32 {
+    ///
+    /// With [`LeafPass::Set`] the leaf boxes are left as they are (all set already).
+    pub(in crate::accel) fn refit_full(&mut self, parallel: bool, leaves: LeafPass) -> f32 {
+        if leaves == LeafPass::Set {
+            return self.refit_inner_only(parallel);
+        }
         let split = parallel
             .then(|| {
                 self.refit_split
@@ -132,6 +149,45 @@ impl Accel {
         cost.unwrap_or_else(|| self.one_leaf_cost())
     }
 
+    /// The inner boxes of a full refit whose leaf boxes are all set: in parallel, subtree
+    /// by subtree as [`Accel::refit_full`] takes them, with no leaf to set.
+    fn refit_inner_only(&mut self, parallel: bool) -> f32 {
+        let split = parallel
+            .then(|| {
+                self.refit_split
+                    .get_or_init(|| RefitSplit::new(&self.wide, &self.leaves))
+                    .as_ref()
+            })
+            .flatten();
+        let cost = match split {
+            Some(split) => self.wide.refit_in_parts(
+                &split.parts,
+                |_, _: &LeafLanes| {},
+                SAH_TRAVERSAL_COST,
+                SAH_INTERSECTION_COST,
+            ),
+            None => self
+                .wide
+                .refit_inner(SAH_TRAVERSAL_COST, SAH_INTERSECTION_COST),
+        };
+        cost.unwrap_or_else(|| self.one_leaf_cost())
+    }
+
+    /// Sets the box of every leaf that straddles two runs of `run` slots (the leaves a
+    /// run writer could not set: their slots were written by two tasks).
+    fn set_straddling_leaf_boxes(&mut self, run: u32) {
+        let lanes = self.wide.leaf_lanes_writer();
+        let slots = self.leaf_of_slot.len() as u32;
+        for boundary in (run..slots).step_by(run as usize) {
+            let leaf = &self.leaves[self.leaf_of_slot[boundary as usize] as usize];
+            if leaf.first < boundary {
+                let aabb = self.triangles.leaf_box(leaf.first, leaf.count);
+                // SAFETY: one task (this one) sets lanes here.
+                unsafe { lanes.set_leaf_box(leaf.lane, &aabb) };
+            }
+        }
+    }
+
     /// Updates each moved triangle's leaf box, then the leaf's ancestors up to the first
     /// whose box comes out unchanged.
     pub(in crate::accel) fn refit_partial(&mut self, moved_slots: &[u32]) {
@@ -142,6 +198,72 @@ impl Accel {
         }
     }
 }
+
+/// Where a full refit's leaf boxes come from.
+#[derive(Clone, Copy, PartialEq, Eq)]
+pub(in crate::accel) enum LeafPass {
+    /// Each leaf's packs.
+    FromPacks,
+    /// Already set: a run writer set those inside its runs, the refit those between them.
+    Set,
+}
+
+/// Sets leaf boxes from concurrent writers of runs of slots, each while its run's packs are
+/// in its cache ([`Accel::slot_lanes_and_leaf_boxes`]).
+pub struct RunLeafBoxes<'a> {
+    pub(in crate::accel) leaves: &'a [Leaf],
+    pub(in crate::accel) leaf_of_slot: &'a [u32],
+    pub(in crate::accel) lanes: LeafLanes<'a>,
+}
+
+impl RunLeafBoxes<'_> {
+    /// Sets the box of every leaf whose slots all lie in `slots`, from `packs` (the same
+    /// bits a refit takes from them); a leaf that begins before `slots` or ends after it
+    /// is left to the refit.
+    ///
+    /// # Safety
+    /// No other task may write the slots in `slots`, or set the boxes of leaves inside
+    /// them, at the same time; `packs` must be the lanes handed out with these boxes.
+    pub unsafe fn set_inside(&self, packs: &SlotLanes, slots: Range<u32>) {
+        let end = slots.end.min(self.leaf_of_slot.len() as u32);
+        // A scout runs `LANE_AHEAD` leaves ahead, hinting the lines of their lanes: the
+        // lanes lie in tree order, scattered over the nodes, and each store would miss.
+        let mut scout = slots.start;
+        for _ in 0..LANE_AHEAD {
+            scout = self.hint_lane(scout, end);
+        }
+        let mut slot = slots.start;
+        while slot < end {
+            scout = self.hint_lane(scout, end);
+            let leaf = &self.leaves[self.leaf_of_slot[slot as usize] as usize];
+            let leaf_end = leaf.first + leaf.count;
+            if leaf.first >= slots.start && leaf_end <= end {
+                // SAFETY: the leaf's slots lie in `slots`, which no other task writes, and
+                // its lane is set by the one task that owns them.
+                unsafe {
+                    self.lanes
+                        .set_leaf_box(leaf.lane, &packs.leaf_box(leaf.first, leaf.count))
+                };
+            }
+            slot = leaf_end;
+        }
+    }
+
+    /// Hints the lines of the lane of the leaf at `slot` (before `end`); returns the slot
+    /// after that leaf.
+    #[inline(always)]
+    fn hint_lane(&self, slot: u32, end: u32) -> u32 {
+        if slot >= end {
+            return slot;
+        }
+        let leaf = &self.leaves[self.leaf_of_slot[slot as usize] as usize];
+        self.lanes.prefetch_leaf_lane(leaf.lane);
+        leaf.first + leaf.count
+    }
+}
+
+/// How many leaves ahead [`RunLeafBoxes::set_inside`] hints lanes.
+const LANE_AHEAD: usize = 8;
 
 /// How many leaves apart the parallel refit's hints go (see [`prefetch_leaf_ahead`]).
 const LEAF_AHEAD: usize = 16;

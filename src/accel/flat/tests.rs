@@ -6,9 +6,11 @@ use bytemuck::TransparentWrapper;
 use glam::{Vec2, Vec3, Vec3A};
 use obvhs::{BvhBuildParams, bvh2::builder::build_bvh2};
 
+use super::refit::LeafPass;
 use super::*;
 use crate::accel::triangles::intersect;
 use crate::accel::wide::PACKET;
+use crate::accel::{BvhPolicy, TreeStep};
 use crate::geometry::FrameTriangles;
 
 /// Triangles with placeholder shading data, source ids in order.
@@ -481,15 +483,15 @@ fn parallel_full_refit_equals_sequential() {
         }
     };
     write(&mut accel, &moved);
-    let sequential_cost = accel.refit_full(false);
+    let sequential_cost = accel.refit_full(false, LeafPass::FromPacks);
     let sequential = accel.wide.bounds_bits();
     // Back to the original boxes, sequentially (so a lane the parallel refit skipped
     // would keep one and show), then the moved triangles again, in parallel.
     write(&mut accel, &original);
-    accel.refit_full(false);
+    accel.refit_full(false, LeafPass::FromPacks);
     assert_ne!(accel.wide.bounds_bits(), sequential);
     write(&mut accel, &moved);
-    let parallel_cost = accel.refit_full(true);
+    let parallel_cost = accel.refit_full(true, LeafPass::FromPacks);
     assert_eq!(accel.wide.bounds_bits(), sequential);
     assert_eq!(parallel_cost.to_bits(), sequential_cost.to_bits());
     // It went subtree by subtree.
@@ -541,9 +543,10 @@ fn parallel_refit_equals_sequential(mut accel: Accel, rng: &mut Rng) -> usize {
         build_cost: accel.build_cost,
         cost: accel.cost,
         refit_split: Default::default(),
+        leaf_boxes_written: None,
     };
-    let sequential = copy.refit_full(false);
-    let parallel = accel.refit_full(true);
+    let sequential = copy.refit_full(false, LeafPass::FromPacks);
+    let parallel = accel.refit_full(true, LeafPass::FromPacks);
     assert_eq!(parallel.to_bits(), sequential.to_bits());
     assert_eq!(accel.wide.bounds_bits(), copy.wide.bounds_bits());
     let split = accel.refit_split.get().and_then(Option::as_ref);
@@ -551,6 +554,99 @@ fn parallel_refit_equals_sequential(mut accel: Accel, rng: &mut Rng) -> usize {
         .expect("the tree is cut into parts")
         .leaves(None)
         .len()
+}
+
+/// Leaf boxes set by a writer of runs of slots (on two threads, each run's leaves after
+/// its slots) leave the tree as writing the slots and refitting from the packs does, bit
+/// for bit with its SAH cost: for a full refit (the leaves that straddle two runs set by
+/// the refit), for a partial one (which still walks up from a leaf whose box is set), and
+/// for run lengths that cut leaves and that do not. A frame that moved nothing leaves no
+/// note behind: the next write through the plain lanes refits every leaf from the packs.
+#[test]
+fn leaf_boxes_set_by_a_run_writer_refit_as_the_packs_do() {
+    let mut rng = Rng(0x1eaf_b0c5);
+    let (_, mut tris) = random_soup(&mut rng, 3000);
+    let built = Accel::build_in_chunks(&mut tris, 700).unwrap();
+    let copy = |a: &Accel| Accel {
+        wide: a.wide.clone(),
+        triangles: a.triangles.clone(),
+        leaves: a.leaves.clone(),
+        leaf_of_slot: a.leaf_of_slot.clone(),
+        build_cost: a.build_cost,
+        cost: a.cost,
+        refit_split: Default::default(),
+        leaf_boxes_written: None,
+    };
+    let slots = built.slots() as u32;
+    let (mut straddled, mut kinds) = (0, Vec::new());
+    for (run, share) in [(64u32, 1.0), (7, 1.0), (1, 1.0), (4096, 1.0), (64, 0.02)] {
+        let mut moved: Vec<(u32, [Vec3A; 3])> = Vec::new();
+        for slot in 0..slots {
+            if rng.next() < share {
+                let shift = rng.point(1.0);
+                moved.push((slot, built.triangle(slot).map(|v| v * 1.3 + shift)));
+            }
+        }
+        let mut by_packs = copy(&built);
+        for (slot, tri) in &moved {
+            by_packs.set_triangle(*slot, tri);
+        }
+        let by_packs_kind = by_packs.refit(&moved.iter().map(|m| m.0).collect::<Vec<_>>());
+        let mut by_runs = copy(&built);
+        {
+            let (lanes, boxes) = by_runs.slot_lanes_and_leaf_boxes(run);
+            let runs: Vec<std::ops::Range<u32>> = (0..slots)
+                .step_by(run as usize)
+                .map(|start| start..(start + run).min(slots))
+                .collect();
+            std::thread::scope(|scope| {
+                for half in runs.chunks(runs.len().div_ceil(2)) {
+                    let (lanes, boxes, moved) = (&lanes, &boxes, &moved);
+                    scope.spawn(move || {
+                        for slots in half {
+                            for (slot, tri) in moved.iter().filter(|m| slots.contains(&m.0)) {
+                                // SAFETY: each run (so each slot) is one task's.
+                                unsafe { lanes.set(*slot, tri) };
+                            }
+                            // SAFETY: as above.
+                            unsafe { boxes.set_inside(lanes, slots.clone()) };
+                        }
+                    });
+                }
+            });
+        }
+        let kind = by_runs.refit(&moved.iter().map(|m| m.0).collect::<Vec<_>>());
+        assert_eq!(kind, by_packs_kind);
+        kinds.push(kind);
+        assert_eq!(
+            by_runs.wide.bounds_bits(),
+            by_packs.wide.bounds_bits(),
+            "runs of {run}"
+        );
+        assert_eq!(by_runs.cost.to_bits(), by_packs.cost.to_bits());
+        assert_ne!(by_runs.wide.bounds_bits(), built.wide.bounds_bits());
+        straddled += by_runs
+            .leaves
+            .iter()
+            .filter(|l| l.first / run != (l.first + l.count - 1) / run)
+            .count();
+    }
+    assert!(straddled > 100, "{straddled}");
+    assert!(kinds.contains(&RefitKind::Full) && kinds.contains(&RefitKind::Partial));
+    // The run writer's note does not outlive a frame that moved nothing.
+    let mut accel = copy(&built);
+    let _ = accel.slot_lanes_and_leaf_boxes(64);
+    assert_eq!(
+        accel.refit_or_rebuild_listing(
+            0,
+            || unreachable!(),
+            BvhPolicy::Refit {
+                rebuild_threshold: 1.5
+            }
+        ),
+        TreeStep::Unchanged
+    );
+    assert_eq!(accel.leaf_boxes_written, None);
 }
 
 #[test]
