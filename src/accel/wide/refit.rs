@@ -219,16 +219,16 @@ impl WideBvh {
                         // nothing else of the refit touches: hinted a few nodes ahead, or it
                         // missed on nearly every node (the hottest load of a million skinned
                         // triangles' refit).
+                        // Its bound lines too: when the leaf boxes were set before the
+                        // refit (by a writer of runs of slots, on whichever thread), the
+                        // part's nodes are not in this task's cache.
                         if let Some(ahead) = index.checked_sub(CHILD_LINE_AHEAD)
                             && ahead >= range.start as usize
                         {
-                            crate::simd::prefetch_ptr(
-                                lanes
-                                    .nodes
-                                    .wrapping_add(ahead)
-                                    .cast::<u8>()
-                                    .wrapping_add(CHILD_LINE),
-                            );
+                            let node = lanes.nodes.wrapping_add(ahead).cast::<u8>();
+                            for line in [0, 64, 128, CHILD_LINE] {
+                                crate::simd::prefetch_ptr(node.wrapping_add(line));
+                            }
                         }
                         // SAFETY: a part's nodes (its root and its root's descendants, which
                         // `parts` checked lie in `range`) are read and written by its task
