@@ -263,7 +263,7 @@ impl RunLeafBoxes<'_> {
 }
 
 /// How many leaves ahead [`RunLeafBoxes::set_inside`] hints lanes.
-const LANE_AHEAD: usize = 8;
+const LANE_AHEAD: usize = 16;
 
 /// How many leaves apart the parallel refit's hints go (see [`prefetch_leaf_ahead`]).
 const LEAF_AHEAD: usize = 16;
