@@ -95,14 +95,7 @@ impl Accel {
         if leaves == LeafPass::Set {
             return self.refit_inner_only(parallel);
         }
-        let split = parallel
-            .then(|| {
-                self.refit_split
-                    .get_or_init(|| RefitSplit::new(&self.wide, &self.leaves))
-                    .as_ref()
-            })
-            .flatten();
-        if let Some(split) = split {
+        if let Some(split) = split_for(&self.refit_split, &self.wide, &self.leaves, parallel) {
             let (leaves, packs) = (&self.leaves, &self.triangles);
             let set_leaves = |part: Option<usize>, lanes: &LeafLanes| {
                 let order = split.leaves(part);
@@ -152,14 +145,7 @@ impl Accel {
     /// The inner boxes of a full refit whose leaf boxes are all set: in parallel, subtree
     /// by subtree as [`Accel::refit_full`] takes them, with no leaf to set.
     fn refit_inner_only(&mut self, parallel: bool) -> f32 {
-        let split = parallel
-            .then(|| {
-                self.refit_split
-                    .get_or_init(|| RefitSplit::new(&self.wide, &self.leaves))
-                    .as_ref()
-            })
-            .flatten();
-        let cost = match split {
+        let cost = match split_for(&self.refit_split, &self.wide, &self.leaves, parallel) {
             Some(split) => self.wide.refit_in_parts(
                 &split.parts,
                 |_, _: &LeafLanes| {},
@@ -197,6 +183,20 @@ impl Accel {
             self.wide.refit_leaf(leaf.lane, &aabb);
         }
     }
+}
+
+/// The cut of the tree a parallel full refit works in (`cell`, made by the first such
+/// refit), or `None` for a sequential refit or a tree too small to cut. A function of the
+/// fields, not of the accel, so the tree can be refitted while the cut is borrowed.
+fn split_for<'a>(
+    cell: &'a std::sync::OnceLock<Option<RefitSplit>>,
+    wide: &WideBvh,
+    leaves: &[Leaf],
+    parallel: bool,
+) -> Option<&'a RefitSplit> {
+    parallel
+        .then(|| cell.get_or_init(|| RefitSplit::new(wide, leaves)).as_ref())
+        .flatten()
 }
 
 /// Where a full refit's leaf boxes come from.
