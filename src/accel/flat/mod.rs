@@ -299,6 +299,9 @@ pub(in crate::accel) fn check_finite(
 
 /// A triangle's box grown by a few ulps of its own magnitude on every axis, so that a flat
 /// box still has volume and slab tests cannot miss it by rounding.
+///
+/// `TrianglePack::live_box` computes the same boxes four triangles at once: a change here
+/// is a change there (a test holds the two to the same bits).
 pub fn padded_box(tri: &[Vec3A; 3]) -> Aabb {
     let min = tri[0].min(tri[1]).min(tri[2]);
     let max = tri[0].max(tri[1]).max(tri[2]);

@@ -52,13 +52,12 @@ impl Accel {
         }
         let kind = if moved as f64 > PARTIAL_REFIT_MAX_SHARE * self.leaves.len() as f64 {
             // The full refit takes the cost on its way up.
-            if let Some(run) = written {
-                self.set_straddling_leaf_boxes(run);
-            }
-            let leaves = if written.is_some() {
-                LeafPass::Set
-            } else {
-                LeafPass::FromPacks
+            let leaves = match written {
+                Some(run) => {
+                    self.set_straddling_leaf_boxes(run);
+                    LeafPass::Set
+                }
+                None => LeafPass::FromPacks,
             };
             self.cost = self.refit_full(self.slots() >= PARALLEL_REFIT_MIN, leaves);
             RefitKind::Full

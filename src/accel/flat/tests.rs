@@ -527,15 +527,10 @@ fn parallel_full_refit_of_chunked_and_lopsided_trees_equals_sequential() {
     assert!(parallel_refit_equals_sequential(lopsided, &mut rng) > 0);
 }
 
-/// Moves every triangle of `accel`, refits a copy sequentially and the tree in parallel,
-/// checks the two are the same bits; returns how many leaves hang above the parts.
-fn parallel_refit_equals_sequential(mut accel: Accel, rng: &mut Rng) -> usize {
-    for slot in 0..accel.slots() as u32 {
-        let shift = rng.point(2.0);
-        let tri = accel.triangle(slot).map(|v| v * 0.7 + shift);
-        accel.set_triangle(slot, &tri);
-    }
-    let mut copy = Accel {
+/// A copy of `accel`'s tree and packs, without the parallel refit's cut (made again by the
+/// copy's first parallel refit) or a run writer's note.
+fn copy_of(accel: &Accel) -> Accel {
+    Accel {
         wide: accel.wide.clone(),
         triangles: accel.triangles.clone(),
         leaves: accel.leaves.clone(),
@@ -544,7 +539,18 @@ fn parallel_refit_equals_sequential(mut accel: Accel, rng: &mut Rng) -> usize {
         cost: accel.cost,
         refit_split: Default::default(),
         leaf_boxes_written: None,
-    };
+    }
+}
+
+/// Moves every triangle of `accel`, refits a copy sequentially and the tree in parallel,
+/// checks the two are the same bits; returns how many leaves hang above the parts.
+fn parallel_refit_equals_sequential(mut accel: Accel, rng: &mut Rng) -> usize {
+    for slot in 0..accel.slots() as u32 {
+        let shift = rng.point(2.0);
+        let tri = accel.triangle(slot).map(|v| v * 0.7 + shift);
+        accel.set_triangle(slot, &tri);
+    }
+    let mut copy = copy_of(&accel);
     let sequential = copy.refit_full(false, LeafPass::FromPacks);
     let parallel = accel.refit_full(true, LeafPass::FromPacks);
     assert_eq!(parallel.to_bits(), sequential.to_bits());
@@ -567,16 +573,6 @@ fn leaf_boxes_set_by_a_run_writer_refit_as_the_packs_do() {
     let mut rng = Rng(0x1eaf_b0c5);
     let (_, mut tris) = random_soup(&mut rng, 3000);
     let built = Accel::build_in_chunks(&mut tris, 700).unwrap();
-    let copy = |a: &Accel| Accel {
-        wide: a.wide.clone(),
-        triangles: a.triangles.clone(),
-        leaves: a.leaves.clone(),
-        leaf_of_slot: a.leaf_of_slot.clone(),
-        build_cost: a.build_cost,
-        cost: a.cost,
-        refit_split: Default::default(),
-        leaf_boxes_written: None,
-    };
     let slots = built.slots() as u32;
     let (mut straddled, mut kinds) = (0, Vec::new());
     for (run, share) in [(64u32, 1.0), (7, 1.0), (1, 1.0), (4096, 1.0), (64, 0.02)] {
@@ -587,12 +583,12 @@ fn leaf_boxes_set_by_a_run_writer_refit_as_the_packs_do() {
                 moved.push((slot, built.triangle(slot).map(|v| v * 1.3 + shift)));
             }
         }
-        let mut by_packs = copy(&built);
+        let mut by_packs = copy_of(&built);
         for (slot, tri) in &moved {
             by_packs.set_triangle(*slot, tri);
         }
         let by_packs_kind = by_packs.refit(&moved.iter().map(|m| m.0).collect::<Vec<_>>());
-        let mut by_runs = copy(&built);
+        let mut by_runs = copy_of(&built);
         {
             let (lanes, boxes) = by_runs.slot_lanes_and_leaf_boxes(run);
             let runs: Vec<std::ops::Range<u32>> = (0..slots)
@@ -634,7 +630,7 @@ fn leaf_boxes_set_by_a_run_writer_refit_as_the_packs_do() {
     assert!(straddled > 100, "{straddled}");
     assert!(kinds.contains(&RefitKind::Full) && kinds.contains(&RefitKind::Partial));
     // The run writer's note does not outlive a frame that moved nothing.
-    let mut accel = copy(&built);
+    let mut accel = copy_of(&built);
     let _ = accel.slot_lanes_and_leaf_boxes(64);
     assert_eq!(
         accel.refit_or_rebuild_listing(
