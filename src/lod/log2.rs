@@ -59,6 +59,13 @@ pub fn log2_in_place(values: &mut [f64]) {
     simd::dispatch(Log2InPlace(values))
 }
 
+/// [`log2_in_place`] in the SIMD copy `AVX2` of a caller that is one already (a
+/// [`simd::Kernel`]'s `run`): inlined there, without dispatching again.
+#[inline(always)]
+pub fn log2_in_place_in<const AVX2: bool>(values: &mut [f64]) {
+    simd::Kernel::run::<AVX2>(Log2InPlace(values))
+}
+
 /// [`log2_in_place`] as a [`simd::Kernel`]: the loop compiles to vector code in each copy,
 /// with the same operations.
 struct Log2InPlace<'a>(&'a mut [f64]);
