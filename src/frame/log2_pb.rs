@@ -277,9 +277,8 @@ impl simd::Kernel for DeformingWalk<'_> {
                         // live slots are overwritten by the next pack, or unused).
                         cc[s - first..s - first + 4].copy_from_slice(&lanes);
                     } else {
-                        for t in s..stop {
-                            cc[t - first] = lanes[t - held];
-                        }
+                        // It started in the word before.
+                        cc[s - first..stop - first].copy_from_slice(&lanes[s - held..stop - held]);
                     }
                     s = stop;
                 }
