@@ -256,17 +256,10 @@ impl WideBvh {
                 self.set_lane(self.parent[index], &aabb);
             }
         }
-        // Each run's shares summed from its last node back, as `sah_cost` sums them, in a
-        // register: summed into the runs' array one node at a time, each add waited on the
-        // store of the one before (about a quarter of a million skinned triangles' inner
-        // refit, serial after the parallel part).
-        let run = |shares: &[f64]| shares.iter().rev().fold(0.0f64, |sum, share| sum + share);
-        let runs: Vec<f64> = if n >= PARALLEL_SAH_MIN_NODES {
-            weighted.par_chunks(SAH_CHUNK).map(run).collect()
-        } else {
-            weighted.chunks(SAH_CHUNK).map(run).collect()
-        };
-        self.cost_of_runs(&runs, traversal)
+        // Summed into the runs' array one node at a time, each add waited on the store of
+        // the one before (about a quarter of a million skinned triangles' inner refit,
+        // serial after the parallel part): `run_sums` folds each run in a register.
+        self.cost_of_runs(&run_sums(&weighted, |&share| share), traversal)
     }
 
     /// Refits the leaf in lane `at` (`node * WIDTH + lane`) to `aabb`, then its ancestors
@@ -305,16 +298,9 @@ impl WideBvh {
     /// [`WideBvh::refit_inner`] meets them), then over the runs in order, so the value is
     /// the same whether the runs are summed on one thread or several.
     pub fn sah_cost(&self, traversal: f32, intersection: f32) -> Option<f32> {
-        let run = |nodes: &[WideNode]| {
-            nodes.iter().rev().fold(0.0f64, |sum, node| {
-                sum + node.weighted_area(traversal, intersection)
-            })
-        };
-        let runs: Vec<f64> = if self.nodes.len() >= PARALLEL_SAH_MIN_NODES {
-            self.nodes.par_chunks(SAH_CHUNK).map(run).collect()
-        } else {
-            self.nodes.chunks(SAH_CHUNK).map(run).collect()
-        };
+        let runs = run_sums(&self.nodes, |node| {
+            node.weighted_area(traversal, intersection)
+        });
         self.cost_of_runs(&runs, traversal)
     }
 
@@ -374,6 +360,18 @@ impl SharePtr {
 
 /// Nodes per run of the SAH sum (fixed, so the sum's rounding does not depend on threads).
 const SAH_CHUNK: usize = 1024;
+
+/// Per run of [`SAH_CHUNK`] nodes, the sum of `share` over its nodes from its last back
+/// (the order [`WideBvh::refit_inner`] meets them), in a register; the runs side by side
+/// on large trees (the same bits: each run is summed alone).
+fn run_sums<T: Sync>(nodes: &[T], share: impl Fn(&T) -> f64 + Sync) -> Vec<f64> {
+    let run = |run: &[T]| run.iter().rev().fold(0.0f64, |sum, node| sum + share(node));
+    if nodes.len() >= PARALLEL_SAH_MIN_NODES {
+        nodes.par_chunks(SAH_CHUNK).map(run).collect()
+    } else {
+        nodes.chunks(SAH_CHUNK).map(run).collect()
+    }
+}
 
 /// Past this many nodes the SAH runs are summed on rayon's threads.
 const PARALLEL_SAH_MIN_NODES: usize = 8 * SAH_CHUNK;
