@@ -358,45 +358,59 @@ impl Frustum {
             return None;
         }
         let (mut low, mut high) = (Vec3A::INFINITY, Vec3A::NEG_INFINITY);
-        let mut scale = 0.0f32;
+        // Per component, the largest magnitude of the origins, of the ends and of the reaches.
+        // `x.max(largest)` keeps `largest` where `x` is NaN (as `f32::max` and SSE's `maxps`
+        // both do), so each stays free of NaN; three of them make three short chains, where
+        // one scalar `max` per value through a single `scale` was the function's hottest path.
+        let mut largest = [Vec3A::ZERO; 3];
         for (&(origin, direction), &t) in rays[..len].iter().zip(t_max) {
             let reach = direction * t;
             let end = origin + reach;
             low = low.min(end);
             high = high.max(end);
-            // The ray's own largest magnitude first, then one `max` into the packet's: a
-            // chain of three per ray through `scale` was the function's hottest path.
-            // (`f32::max` of magnitudes ignores NaN in any order, so the result is the
-            // same whatever the grouping.)
-            let own = origin.abs().max_element();
-            let own = own
-                .max(end.abs().max_element())
-                .max(reach.abs().max_element());
-            scale = scale.max(own);
+            largest[0] = origin.abs().max(largest[0]);
+            largest[1] = end.abs().max(largest[1]);
+            largest[2] = reach.abs().max(largest[2]);
         }
-        // Catches NaN and infinite ends (a directional light's rays have no end).
+        let scale = largest[0].max(largest[1]).max(largest[2]).max_element();
+        // Catches infinite ends (a directional light's rays have no end). A NaN origin is
+        // caught below: its row inverts to NaN, which `over_inverses` refuses.
         if !(scale < f32::MAX) {
             return None;
         }
         let apex = (low + high) * 0.5;
         let margin = (high - low).max_element() * 0.5 + scale * CONVERGING_SLACK;
+        // The reversed segments' directions, `origin - apex`, as rows; the slots of the last
+        // group of four past `len` repeat ray 0, so the groups below see only the packet's.
         let mut backwards = [[0.0f32; PACKET]; 3];
-        let (mut spread_low, mut spread_high) = (Vec3A::INFINITY, Vec3A::NEG_INFINITY);
-        let mut shortest = f32::INFINITY;
         for (r, &(origin, _)) in rays[..len].iter().enumerate() {
-            let back = origin - apex;
-            let length = back.length();
-            shortest = shortest.min(length);
-            let unit = back / length;
-            spread_low = spread_low.min(unit);
-            spread_high = spread_high.max(unit);
-            for (row, value) in backwards.iter_mut().zip(back.to_array()) {
+            for (row, value) in backwards.iter_mut().zip((origin - apex).to_array()) {
                 row[r] = value;
             }
         }
+        for row in &mut backwards {
+            let first = row[0];
+            row[len..len.next_multiple_of(4)].fill(first);
+        }
+        // Four rays at a time: the shortest segment, and the spread of the unit directions.
+        let (mut spread_low, mut spread_high) = ([Vec4::INFINITY; 3], [Vec4::NEG_INFINITY; 3]);
+        let mut shortest = Vec4::INFINITY;
+        for at in (0..len).step_by(4) {
+            let b = [0, 1, 2].map(|axis| Vec4::from_slice(&backwards[axis][at..at + 4]));
+            let length = (b[0] * b[0] + b[1] * b[1] + b[2] * b[2]).sqrt();
+            shortest = shortest.min(length);
+            for axis in 0..3 {
+                let unit = b[axis] / length;
+                spread_low[axis] = spread_low[axis].min(unit);
+                spread_high[axis] = spread_high[axis].max(unit);
+            }
+        }
+        let shortest = shortest.min_element();
+        let spread =
+            [0, 1, 2].map(|axis| spread_high[axis].max_element() - spread_low[axis].min_element());
         // Rays whose far ends scatter (directional lights, rays from several bounces) or
         // whose directions fan out: their bounds would keep nearly every box.
-        let fans_out = (spread_high - spread_low).max_element() > CONVERGING_SPREAD_MAX;
+        let fans_out = spread.into_iter().fold(0.0f32, f32::max) > CONVERGING_SPREAD_MAX;
         if !(margin <= shortest * CONVERGING_MARGIN_MAX) || fans_out {
             return None;
         }
