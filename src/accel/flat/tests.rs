@@ -460,6 +460,50 @@ fn an_occlusion_packet_meets_what_each_of_its_rays_meets_alone() {
         met > 200 && stopped_rays > 20,
         "{met} hits met, {stopped_rays} rays stopped"
     );
+    // Degenerate rays among converging ones (a NaN or zero direction, a NaN or huge origin,
+    // a NaN or infinite limit): whether the packet gets bounds or not, every ray meets what
+    // it meets alone, and the sound rays still meet triangles.
+    let mut sound_met = 0;
+    for (ray, broken) in [
+        (5, (Vec3A::ZERO, f32::NAN, None)),
+        (5, (Vec3A::ZERO, 0.0, Some(Vec3A::ZERO))),
+        (9, (Vec3A::NAN, 0.0, None)),
+        (9, (Vec3A::splat(3e38), 0.0, None)),
+        (17, (Vec3A::ZERO, f32::NAN, Some(Vec3A::NAN))),
+        (17, (Vec3A::ZERO, f32::INFINITY, None)),
+    ] {
+        let (shift, limit, direction) = broken;
+        let mut rays = converging.clone();
+        rays[ray].0 += shift;
+        if limit != 0.0 {
+            rays[ray].2 = limit;
+        }
+        if let Some(d) = direction {
+            rays[ray].1 = d;
+        }
+        let pairs: Vec<(Vec3A, Vec3A)> = rays.iter().map(|&(o, d, _)| (o, d)).collect();
+        let limits: Vec<f32> = rays.iter().map(|r| r.2).collect();
+        let mut seen = vec![Vec::new(); rays.len()];
+        accel.visit_hits_packet(&pairs, &limits, |r, slot, t| {
+            seen[r].push((slot, t.to_bits()));
+            true
+        });
+        for (r, &(o, d, t_max)) in rays.iter().enumerate() {
+            let mut alone = Vec::new();
+            accel.visit_hits(o, d, t_max, |slot, t| {
+                alone.push((slot, t.to_bits()));
+                true
+            });
+            seen[r].sort_unstable();
+            alone.sort_unstable();
+            assert_eq!(
+                seen[r], alone,
+                "ray {r} with ray {ray} broken by {broken:?}"
+            );
+            sound_met += if r == ray { 0 } else { alone.len() };
+        }
+    }
+    assert!(sound_met > 100, "{sound_met} hits of sound rays");
 }
 
 /// The parallel full refit (subtree by subtree, leaf boxes and inner lanes written from
