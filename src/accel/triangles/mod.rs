@@ -495,7 +495,7 @@ impl ShearedRay {
         let kx = next ^ ((next ^ after) * down);
         let ky = after ^ ((next ^ after) * down);
         // The three quotients in one vector division (the same IEEE quotients as three
-        // scalar ones; those were most of the cost of making a packet's rays).
+        // scalar ones, which were the hottest line of making a packet's rays).
         let quotients = Vec4::new(d[kx], d[ky], 1.0, 1.0) / Vec4::new(d[kz], d[kz], d[kz], 1.0);
         let shear = [quotients.x, quotients.y, quotients.z];
         ShearedRay {
