@@ -409,22 +409,20 @@ fn trace_records(kernel: FileKernel, bvh: &SceneBvh, rays: &[&RayRecord]) -> Vec
 
 /// [`trace_records`] of one chunk of rays, into `out` (as long as `rays`).
 fn trace_chunk(kernel: FileKernel, bvh: &SceneBvh, rays: &[&RayRecord], out: &mut [Answer]) {
-    let closest = |h: Option<crate::accel::Hit>| h.map(|h| (h.triangle, h.t));
     match kernel {
         FileKernel::ClosestPackets => closest_in_packets(bvh, rays, false, out),
         FileKernel::ClosestScattered => closest_in_packets(bvh, rays, true, out),
         FileKernel::ClosestSingle => {
             for (answer, r) in out.iter_mut().zip(rays) {
-                *answer = closest(bvh.closest_hit(r.origin, r.direction, r.t_max));
+                *answer = closest_answer(bvh.closest_hit(r.origin, r.direction, r.t_max));
             }
         }
         FileKernel::OcclusionPackets => {
             for (out, packet) in out.chunks_mut(PACKET).zip(rays.chunks(PACKET)) {
-                let mut pairs = [(Vec3A::ZERO, Vec3A::ZERO); PACKET];
+                let pairs = packet_rays(packet);
                 let mut limits = [0.0f32; PACKET];
-                for (k, r) in packet.iter().enumerate() {
-                    pairs[k] = (r.origin, r.direction);
-                    limits[k] = r.t_max;
+                for (limit, r) in limits.iter_mut().zip(packet) {
+                    *limit = r.t_max;
                 }
                 let n = packet.len();
                 let stopped = bvh.visit_hits_packet(&pairs[..n], &limits[..n], |_, _, _, _| false);
@@ -447,10 +445,7 @@ fn trace_chunk(kernel: FileKernel, bvh: &SceneBvh, rays: &[&RayRecord], out: &mu
 /// `scattered` from any origins by the masked walk (a bounce's rays).
 fn closest_in_packets(bvh: &SceneBvh, rays: &[&RayRecord], scattered: bool, out: &mut [Answer]) {
     for (out, packet) in out.chunks_mut(PACKET).zip(rays.chunks(PACKET)) {
-        let mut pairs = [(Vec3A::ZERO, Vec3A::ZERO); PACKET];
-        for (pair, r) in pairs.iter_mut().zip(packet) {
-            *pair = (r.origin, r.direction);
-        }
+        let pairs = packet_rays(packet);
         let mut hits = [None; PACKET];
         let n = packet.len();
         if scattered {
@@ -458,10 +453,25 @@ fn closest_in_packets(bvh: &SceneBvh, rays: &[&RayRecord], scattered: bool, out:
         } else {
             bvh.closest_hits(&pairs[..n], f32::INFINITY, &mut hits[..n]);
         }
-        for (answer, hit) in out.iter_mut().zip(&hits[..n]) {
-            *answer = hit.map(|h| (h.triangle, h.t));
+        for (answer, &hit) in out.iter_mut().zip(&hits[..n]) {
+            *answer = closest_answer(hit);
         }
     }
+}
+
+/// The `(origin, direction)` of each record of `packet` (at most [`PACKET`]; the slots past
+/// it are zero).
+fn packet_rays(packet: &[&RayRecord]) -> [(Vec3A, Vec3A); PACKET] {
+    let mut pairs = [(Vec3A::ZERO, Vec3A::ZERO); PACKET];
+    for (pair, r) in pairs.iter_mut().zip(packet) {
+        *pair = (r.origin, r.direction);
+    }
+    pairs
+}
+
+/// A closest-hit query's answer: the hit slot and distance.
+fn closest_answer(hit: Option<crate::accel::Hit>) -> Answer {
+    hit.map(|h| (h.triangle, h.t))
 }
 
 /// Whether `answer` is what record `r` holds (the same face and distance bits, or the same

@@ -465,18 +465,19 @@ fn an_occlusion_packet_meets_what_each_of_its_rays_meets_alone() {
     // it meets alone, and the sound rays still meet triangles.
     let mut sound_met = 0;
     for (ray, broken) in [
-        (5, (Vec3A::ZERO, f32::NAN, None)),
-        (5, (Vec3A::ZERO, 0.0, Some(Vec3A::ZERO))),
-        (9, (Vec3A::NAN, 0.0, None)),
-        (9, (Vec3A::splat(3e38), 0.0, None)),
-        (17, (Vec3A::ZERO, f32::NAN, Some(Vec3A::NAN))),
-        (17, (Vec3A::ZERO, f32::INFINITY, None)),
+        (5, (Vec3A::ZERO, Some(f32::NAN), None)),
+        (5, (Vec3A::ZERO, None, Some(Vec3A::ZERO))),
+        (9, (Vec3A::NAN, None, None)),
+        (9, (Vec3A::splat(3e38), None, None)),
+        (17, (Vec3A::ZERO, Some(f32::NAN), Some(Vec3A::NAN))),
+        (17, (Vec3A::ZERO, Some(f32::INFINITY), None)),
     ] {
+        // The ray's origin shifted, and its limit and direction replaced where given.
         let (shift, limit, direction) = broken;
         let mut rays = converging.clone();
         rays[ray].0 += shift;
-        if limit != 0.0 {
-            rays[ray].2 = limit;
+        if let Some(t) = limit {
+            rays[ray].2 = t;
         }
         if let Some(d) = direction {
             rays[ray].1 = d;
