@@ -6,9 +6,8 @@ use glam::Vec3A;
 
 use super::Accel;
 use crate::accel::query::{Closest, Hit, PacketQuery, Within};
-use crate::accel::triangles::{RAYS, ShearedLanes, ShearedRay};
+use crate::accel::triangles::{RAYS, ShearedLanes, ShearedRay, lanes_of, runs_by_permutation};
 use crate::accel::wide::{GatheredLeaf, LeafVisit, PACKET, RayBoxes};
-use crate::simd::F32x8;
 
 impl Accel {
     /// The closest hit with `t` in `[0, t_max)`. Among hits at exactly the same distance
@@ -139,23 +138,17 @@ impl Accel {
         limits: &mut [f32; PACKET],
         best: &mut [Closest; PACKET],
     ) {
-        let mut groups = [[0u8; PACKET]; PERMUTATIONS];
-        let mut sizes = [0usize; PERMUTATIONS];
-        for &r in rays {
-            let p = sheared[r as usize].permutation();
-            groups[p][sizes[p]] = r;
-            sizes[p] += 1;
-        }
-        for (group, &size) in groups.iter().zip(&sizes) {
-            for chunk in group[..size].chunks(RAYS) {
-                let lanes = ShearedLanes::gather(chunk.iter().map(|&r| &sheared[r as usize]));
+        let mut buffer = [0u8; PACKET];
+        let (order, runs) = runs_by_permutation(sheared, rays, &mut buffer);
+        let mut at = 0;
+        for run in runs {
+            for chunk in order[at..at + run].chunks(RAYS) {
+                let lanes = &ShearedLanes::of_rays::<AVX>(sheared, chunk);
                 // Every triangle of the leaf is cut at the limit the ray entered it with.
-                let cut = F32x8(std::array::from_fn(|l| {
-                    limits[chunk[l.min(chunk.len() - 1)] as usize]
-                }));
+                let cut = lanes_of::<AVX>(limits, chunk);
                 let mut improved = 0u32;
                 self.triangles.hits_in_leaf_across::<AVX>(
-                    &lanes,
+                    lanes,
                     first,
                     count,
                     &cut,
@@ -171,11 +164,12 @@ impl Accel {
                     improved &= improved - 1;
                     let r = chunk[l] as usize;
                     let t = best[r].hit.map_or(f32::INFINITY, |h| h.t);
-                    // Keep visiting boxes that start at `t` (up to rounding), where a tie
-                    // may hide.
+                    // Keep visiting boxes that start at `t` (up to rounding), where a tie may
+                    // hide.
                     limits[r] = sheared[r].tie_limit(t);
                 }
             }
+            at += run;
         }
     }
 
@@ -307,9 +301,6 @@ impl LeafVisit for ClosestLeaf<'_> {
 /// the rays; below it, each ray tests the leaf's packs alone (the answers are the same).
 const ACROSS_RAYS_MIN: usize = 4;
 
-/// The six axis permutations of a sheared ray (`ShearedRay::permutation`).
-const PERMUTATIONS: usize = 6;
-
 /// Keeps the hit `(slot, source, t, bary)` in `best` when it is closer, or as close with a
 /// lower source triangle (the tie rule); returns whether it was kept.
 #[inline(always)]
@@ -424,23 +415,17 @@ impl<F: FnMut(usize, u32, f32) -> bool> GatheredLeaf for &mut AnyHitPacketLeaf<'
             }
             return;
         }
-        let mut groups = [[0u8; PACKET]; PERMUTATIONS];
-        let mut sizes = [0usize; PERMUTATIONS];
-        for &r in rays {
-            let p = self.sheared[r as usize].permutation();
-            groups[p][sizes[p]] = r;
-            sizes[p] += 1;
-        }
-        for (group, &size) in groups.iter().zip(&sizes) {
-            for chunk in group[..size].chunks(RAYS) {
-                let lanes = ShearedLanes::gather(chunk.iter().map(|&r| &self.sheared[r as usize]));
-                let cut = F32x8(std::array::from_fn(|l| {
-                    self.t_max[chunk[l.min(chunk.len() - 1)] as usize]
-                }));
+        let mut buffer = [0u8; PACKET];
+        let (order, runs) = runs_by_permutation(self.sheared, rays, &mut buffer);
+        let visit = &mut self.visit;
+        let mut at = 0;
+        for run in runs {
+            for chunk in order[at..at + run].chunks(RAYS) {
+                let lanes = &ShearedLanes::of_rays::<AVX>(self.sheared, chunk);
+                let cut = lanes_of::<AVX>(self.t_max, chunk);
                 let mut alive = (1u32 << chunk.len()) - 1;
-                let visit = &mut self.visit;
                 self.accel.triangles.hits_in_leaf_across::<AVX>(
-                    &lanes,
+                    lanes,
                     first,
                     count,
                     &cut,
@@ -459,6 +444,7 @@ impl<F: FnMut(usize, u32, f32) -> bool> GatheredLeaf for &mut AnyHitPacketLeaf<'
                     self.stopped |= 1 << r;
                 }
             }
+            at += run;
         }
     }
 }

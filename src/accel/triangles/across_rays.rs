@@ -18,6 +18,7 @@
 use glam::Vec2;
 
 use super::{ShearedRay, TrianglePack, intersect_beyond_f32};
+use crate::accel::wide::PACKET;
 use crate::simd::F32x8;
 
 /// Rays per group.
@@ -79,6 +80,37 @@ impl ShearedLanes {
             group.fill_lane(lane, last);
         }
         group
+    }
+
+    /// The rays `chunk` of `sheared` (indices, 1 to [`RAYS`] of them, sharing one
+    /// permutation) as a group, the same lanes [`ShearedLanes::gather`] makes. In the AVX2
+    /// copy each ray's 32 bytes are loaded whole and the eight are transposed in registers:
+    /// built lane by lane, the rows were written as scalars and read back as vectors, which
+    /// stalls on store forwarding (the hottest lines of a primary packet's leaf test).
+    #[inline(always)]
+    pub fn of_rays<const AVX: bool>(sheared: &[ShearedRay], chunk: &[u8]) -> ShearedLanes {
+        #[cfg(target_arch = "x86_64")]
+        if AVX {
+            assert!(
+                (1..=RAYS).contains(&chunk.len()),
+                "{} rays in a lane group",
+                chunk.len()
+            );
+            let last = chunk[chunk.len() - 1] as usize;
+            let rays: [&ShearedRay; RAYS] =
+                std::array::from_fn(|l| &sheared[chunk.get(l).map_or(last, |&r| r as usize)]);
+            debug_assert!(rays.iter().all(|r| r.k == rays[0].k), "one permutation");
+            // SAFETY: `AVX` is true only in a kernel copy `simd::dispatch` runs where the CPU
+            // has AVX2.
+            let (origin, shear) = unsafe { transposed::rows(&rays) };
+            return ShearedLanes {
+                k: rays[0].k.map(usize::from),
+                origin,
+                shear,
+                live: (1u32 << chunk.len()) - 1,
+            };
+        }
+        ShearedLanes::gather(chunk.iter().map(|&r| &sheared[r as usize]))
     }
 
     #[inline(always)]
@@ -187,6 +219,141 @@ impl ShearedLanes {
             }
         }
         hits
+    }
+}
+
+/// The rays `rays` (indices into `sheared`) in runs that share an axis permutation: the
+/// rays in that order (`rays` itself when they all share one, as a packet's rays mostly do;
+/// else sorted into `buffer`) and each run's length. Callers cut each run into groups of
+/// [`RAYS`] for [`ShearedLanes::of_rays`]. (Data, not a callback: a closure is compiled
+/// without the AVX2 copy's target features and could not inline the tests it would run.)
+#[inline(always)]
+pub fn runs_by_permutation<'a>(
+    sheared: &[ShearedRay; PACKET],
+    rays: &'a [u8],
+    buffer: &'a mut [u8; PACKET],
+) -> (&'a [u8], [usize; PERMUTATIONS]) {
+    let mut sizes = [0usize; PERMUTATIONS];
+    let Some(&r0) = rays.first() else {
+        return (rays, sizes);
+    };
+    let k = sheared[r0 as usize].k;
+    if rays.iter().all(|&r| sheared[r as usize].k == k) {
+        sizes[0] = rays.len();
+        return (rays, sizes);
+    }
+    let mut groups = [[0u8; PACKET]; PERMUTATIONS];
+    for &r in rays {
+        let p = sheared[r as usize].permutation();
+        groups[p][sizes[p]] = r;
+        sizes[p] += 1;
+    }
+    let mut at = 0;
+    for (group, &size) in groups.iter().zip(&sizes) {
+        buffer[at..at + size].copy_from_slice(&group[..size]);
+        at += size;
+    }
+    (&buffer[..at], sizes)
+}
+
+/// `values[chunk[l]]` in lane `l` (the last one repeated past the chunk's end): a ray
+/// group's limits. In the AVX2 copy, one gather instruction (the lanes built one by one were
+/// read back as a vector, the store-forwarding stall [`ShearedLanes::of_rays`] avoids).
+#[inline(always)]
+pub fn lanes_of<const AVX: bool>(values: &[f32; PACKET], chunk: &[u8]) -> F32x8 {
+    let last = chunk[chunk.len() - 1];
+    let index: [u8; RAYS] = std::array::from_fn(|l| chunk.get(l).copied().unwrap_or(last));
+    #[cfg(target_arch = "x86_64")]
+    if AVX {
+        // SAFETY: as in `ShearedLanes::of_rays`.
+        return unsafe { transposed::gather(values, index) };
+    }
+    F32x8(index.map(|r| values[r as usize]))
+}
+
+/// The six axis permutations of a sheared ray ([`ShearedRay::permutation`]).
+const PERMUTATIONS: usize = 6;
+
+/// Register transposes and gathers of ray constants (AVX2).
+#[cfg(target_arch = "x86_64")]
+mod transposed {
+    use std::arch::x86_64::*;
+
+    use super::super::ShearedRay;
+    use super::{PACKET, RAYS};
+    use crate::simd::F32x8;
+
+    /// The origins and shears of eight rays as rows (`origin[axis]` lane `l` is ray `l`'s).
+    ///
+    /// # Safety
+    /// The CPU must have AVX2.
+    #[inline]
+    #[target_feature(enable = "avx2")]
+    pub(super) unsafe fn rows(rays: &[&ShearedRay; RAYS]) -> ([F32x8; 3], [F32x8; 3]) {
+        // SAFETY: a `ShearedRay` is 32 bytes, 32-byte aligned (`repr(C, align(32))`), its
+        // first six floats its origin and shear; the last two lanes (the tie offset, the
+        // permutation bytes) are loaded and dropped.
+        let r = rays.map(|ray| unsafe { _mm256_load_ps((ray as *const ShearedRay).cast()) });
+        // The textbook 8 x 8 transpose: pairs, quads, then halves.
+        let t0 = _mm256_unpacklo_ps(r[0], r[1]);
+        let t1 = _mm256_unpackhi_ps(r[0], r[1]);
+        let t2 = _mm256_unpacklo_ps(r[2], r[3]);
+        let t3 = _mm256_unpackhi_ps(r[2], r[3]);
+        let t4 = _mm256_unpacklo_ps(r[4], r[5]);
+        let t5 = _mm256_unpackhi_ps(r[4], r[5]);
+        let t6 = _mm256_unpacklo_ps(r[6], r[7]);
+        let t7 = _mm256_unpackhi_ps(r[6], r[7]);
+        let u0 = _mm256_shuffle_ps::<0x44>(t0, t2);
+        let u1 = _mm256_shuffle_ps::<0xEE>(t0, t2);
+        let u2 = _mm256_shuffle_ps::<0x44>(t1, t3);
+        let u3 = _mm256_shuffle_ps::<0xEE>(t1, t3);
+        let u4 = _mm256_shuffle_ps::<0x44>(t4, t6);
+        let u5 = _mm256_shuffle_ps::<0xEE>(t4, t6);
+        let u6 = _mm256_shuffle_ps::<0x44>(t5, t7);
+        let u7 = _mm256_shuffle_ps::<0xEE>(t5, t7);
+        let column = [
+            _mm256_permute2f128_ps::<0x20>(u0, u4),
+            _mm256_permute2f128_ps::<0x20>(u1, u5),
+            _mm256_permute2f128_ps::<0x20>(u2, u6),
+            _mm256_permute2f128_ps::<0x20>(u3, u7),
+            _mm256_permute2f128_ps::<0x31>(u0, u4),
+            _mm256_permute2f128_ps::<0x31>(u1, u5),
+        ];
+        let row = |c: usize| {
+            let mut out = F32x8::default();
+            // SAFETY: `F32x8` is 32 bytes, 32-byte aligned.
+            unsafe { _mm256_store_ps(out.0.as_mut_ptr(), column[c]) };
+            out
+        };
+        ([row(0), row(1), row(2)], [row(3), row(4), row(5)])
+    }
+
+    /// `values[index[l]]` in lane `l`.
+    ///
+    /// # Safety
+    /// The CPU must have AVX2.
+    #[inline]
+    #[target_feature(enable = "avx2")]
+    pub(super) unsafe fn gather(values: &[f32; PACKET], index: [u8; RAYS]) -> F32x8 {
+        const _: () = assert!(PACKET.is_power_of_two());
+        // Wrapped into `values` (a no-op for a packet's ray numbers), so that no index can
+        // read outside it.
+        // SAFETY: `index` is 8 bytes, what the load reads.
+        let bytes = unsafe { _mm_loadl_epi64(index.as_ptr().cast()) };
+        let index = _mm256_and_si256(
+            _mm256_cvtepu8_epi32(bytes),
+            _mm256_set1_epi32(PACKET as i32 - 1),
+        );
+        let mut out = F32x8::default();
+        // SAFETY: every index is below `PACKET` (wrapped above), so each gathered float lies
+        // in `values`; `out` is 32 bytes, 32-byte aligned.
+        unsafe {
+            _mm256_store_ps(
+                out.0.as_mut_ptr(),
+                _mm256_i32gather_ps::<4>(values.as_ptr(), index),
+            )
+        };
+        out
     }
 }
 
@@ -343,6 +510,107 @@ mod tests {
             compared > 10_000 && hit > 1_000 && edges > 100,
             "{compared} compared, {hit} hits"
         );
+    }
+
+    /// Runs `of_rays` and `lanes_of` on one chunk in one copy (a kernel, so the AVX2 copy
+    /// runs where there is one).
+    struct OfRays<'a> {
+        sheared: &'a [ShearedRay; PACKET],
+        values: &'a [f32; PACKET],
+        chunk: &'a [u8],
+    }
+
+    impl simd::Kernel for OfRays<'_> {
+        type Output = (ShearedLanes, F32x8);
+        #[inline(always)]
+        fn run<const AVX2: bool>(self) -> (ShearedLanes, F32x8) {
+            (
+                ShearedLanes::of_rays::<AVX2>(self.sheared, self.chunk),
+                lanes_of::<AVX2>(self.values, self.chunk),
+            )
+        }
+    }
+
+    /// A packet's rays of mixed permutations, any subset of them: the runs hold every ray
+    /// once, each run one permutation, in ray order within it; and every chunk's lanes and
+    /// limits, in each copy (the transposed and gathered ones in the AVX2 copy), are the
+    /// bits `gather` and a lane-by-lane read give.
+    #[test]
+    fn lane_groups_from_a_packet_equal_the_lane_by_lane_ones() {
+        let mut s = 0x51a7_3c2d_9e11_04b7u64;
+        let mut next = || xorshift(&mut s);
+        let mut chunks = 0;
+        for round in 0..300 {
+            let sheared: [ShearedRay; PACKET] = std::array::from_fn(|_| {
+                // Mostly one way (one permutation), sometimes any way.
+                let d = if round % 2 == 0 {
+                    Vec3A::new(next() * 0.3, next() * 0.3, -1.0)
+                } else {
+                    Vec3A::new(next(), next(), next())
+                };
+                ShearedRay::new(Vec3A::new(next(), next(), next()) * 10.0, d)
+            });
+            let values: [f32; PACKET] = std::array::from_fn(|_| next() * 100.0);
+            let rays: Vec<u8> = (0..PACKET as u8)
+                .filter(|_| round % 5 == 0 || next() > 0.0)
+                .collect();
+            let mut buffer = [0u8; PACKET];
+            let (order, runs) = runs_by_permutation(&sheared, &rays, &mut buffer);
+            let mut sorted = order.to_vec();
+            sorted.sort_unstable();
+            assert_eq!(sorted, rays, "round {round}: every ray once");
+            let mut at = 0;
+            for run in runs {
+                let run_rays = &order[at..at + run];
+                at += run;
+                assert!(
+                    run_rays.windows(2).all(|w| w[0] < w[1]),
+                    "ray order in a run"
+                );
+                assert!(
+                    run_rays
+                        .iter()
+                        .all(|&r| sheared[r as usize].k == sheared[run_rays[0] as usize].k),
+                    "one permutation per run"
+                );
+                for chunk in run_rays.chunks(RAYS) {
+                    let expected =
+                        ShearedLanes::gather(chunk.iter().map(|&r| &sheared[r as usize]));
+                    let limit = |l: usize| values[chunk[l.min(chunk.len() - 1)] as usize];
+                    let kernel = || OfRays {
+                        sheared: &sheared,
+                        values: &values,
+                        chunk,
+                    };
+                    let copies = [
+                        Some(simd::run_baseline(kernel())),
+                        simd::run_avx2_if_available(kernel()),
+                    ];
+                    for (lanes, limits) in copies.into_iter().flatten() {
+                        assert_eq!(lanes.k, expected.k);
+                        assert_eq!(lanes.live, expected.live);
+                        for axis in 0..3 {
+                            for l in 0..RAYS {
+                                assert_eq!(
+                                    lanes.origin[axis].0[l].to_bits(),
+                                    expected.origin[axis].0[l].to_bits()
+                                );
+                                assert_eq!(
+                                    lanes.shear[axis].0[l].to_bits(),
+                                    expected.shear[axis].0[l].to_bits()
+                                );
+                            }
+                        }
+                        for l in 0..RAYS {
+                            assert_eq!(limits.0[l].to_bits(), limit(l).to_bits(), "lane {l}");
+                        }
+                    }
+                    chunks += 1;
+                }
+            }
+            assert_eq!(at, rays.len());
+        }
+        assert!(chunks > 1_000, "{chunks} chunks");
     }
 
     /// Triangles so large and far (1e13 to 1e37) that the f32 edge functions or distance

@@ -21,7 +21,7 @@ use obvhs::aabb::Aabb;
 
 mod across_rays;
 
-pub use across_rays::{RAYS, ShearedLanes};
+pub use across_rays::{RAYS, ShearedLanes, lanes_of, runs_by_permutation};
 
 /// Triangles per pack.
 pub const LANES: usize = 4;
