@@ -257,8 +257,9 @@ pub fn runs_by_permutation<'a>(
 }
 
 /// `values[chunk[l]]` in lane `l` (the last one repeated past the chunk's end): a ray
-/// group's limits. In the AVX2 copy, one gather instruction (the lanes built one by one were
-/// read back as a vector, the store-forwarding stall [`ShearedLanes::of_rays`] avoids).
+/// group's limits. In the AVX2 copy the vector is built in a register (written lane by lane
+/// to memory and read back whole, it stalls on store forwarding, as [`ShearedLanes::of_rays`]
+/// explains; a gather instruction was slower still).
 #[inline(always)]
 pub fn lanes_of<const AVX: bool>(values: &[f32; PACKET], chunk: &[u8]) -> F32x8 {
     let last = chunk[chunk.len() - 1];
@@ -328,29 +329,22 @@ mod transposed {
         ([row(0), row(1), row(2)], [row(3), row(4), row(5)])
     }
 
-    /// `values[index[l]]` in lane `l`.
+    /// `values[index[l]]` in lane `l`, built in a register.
     ///
     /// # Safety
     /// The CPU must have AVX2.
     #[inline]
     #[target_feature(enable = "avx2")]
     pub(super) unsafe fn gather(values: &[f32; PACKET], index: [u8; RAYS]) -> F32x8 {
+        // Wrapped into `values` (a no-op for a packet's ray numbers): no bounds checks.
         const _: () = assert!(PACKET.is_power_of_two());
-        // Wrapped into `values` (a no-op for a packet's ray numbers), so that no index can
-        // read outside it.
-        // SAFETY: `index` is 8 bytes, what the load reads.
-        let bytes = unsafe { _mm_loadl_epi64(index.as_ptr().cast()) };
-        let index = _mm256_and_si256(
-            _mm256_cvtepu8_epi32(bytes),
-            _mm256_set1_epi32(PACKET as i32 - 1),
-        );
+        let v = index.map(|r| values[r as usize & (PACKET - 1)]);
         let mut out = F32x8::default();
-        // SAFETY: every index is below `PACKET` (wrapped above), so each gathered float lies
-        // in `values`; `out` is 32 bytes, 32-byte aligned.
+        // SAFETY: `out` is 32 bytes, 32-byte aligned.
         unsafe {
             _mm256_store_ps(
                 out.0.as_mut_ptr(),
-                _mm256_i32gather_ps::<4>(values.as_ptr(), index),
+                _mm256_setr_ps(v[0], v[1], v[2], v[3], v[4], v[5], v[6], v[7]),
             )
         };
         out
