@@ -13,7 +13,8 @@
 //! every CPU, in the baseline copy and the AVX2 copy where there is one.
 //!
 //! The rays of a group must share the axis permutation of Woop et al. (the axis where the
-//! direction is largest, and its sign): [`ShearedRay::permutation`] groups them.
+//! direction is largest, and its sign): [`runs_by_permutation`] orders a leaf's rays so, and
+//! [`ShearedLanes::of_rays`] makes a group's lanes.
 
 use glam::Vec2;
 
@@ -267,7 +268,7 @@ pub fn lanes_of<const AVX: bool>(values: &[f32; PACKET], chunk: &[u8]) -> F32x8 
     #[cfg(target_arch = "x86_64")]
     if AVX {
         // SAFETY: as in `ShearedLanes::of_rays`.
-        return unsafe { transposed::gather(values, index) };
+        return unsafe { transposed::from_indices(values, index) };
     }
     F32x8(index.map(|r| values[r as usize]))
 }
@@ -275,7 +276,7 @@ pub fn lanes_of<const AVX: bool>(values: &[f32; PACKET], chunk: &[u8]) -> F32x8 
 /// The six axis permutations of a sheared ray ([`ShearedRay::permutation`]).
 const PERMUTATIONS: usize = 6;
 
-/// Register transposes and gathers of ray constants (AVX2).
+/// Ray constants moved into vectors in registers (AVX2).
 #[cfg(target_arch = "x86_64")]
 mod transposed {
     use std::arch::x86_64::*;
@@ -291,9 +292,9 @@ mod transposed {
     #[inline]
     #[target_feature(enable = "avx2")]
     pub(super) unsafe fn rows(rays: &[&ShearedRay; RAYS]) -> ([F32x8; 3], [F32x8; 3]) {
-        // SAFETY: a `ShearedRay` is 32 bytes, 32-byte aligned (`repr(C, align(32))`), its
-        // first six floats its origin and shear; the last two lanes (the tie offset, the
-        // permutation bytes) are loaded and dropped.
+        // SAFETY: a `ShearedRay` is 32 initialised bytes (no padding: its `filler`), 32-byte
+        // aligned (`repr(C, align(32))`), its first six floats its origin and shear; the
+        // last two lanes (the tie offset; the axes and the filler) are loaded and dropped.
         let r = rays.map(|ray| unsafe { _mm256_load_ps((ray as *const ShearedRay).cast()) });
         // The textbook 8 x 8 transpose: pairs, quads, then halves.
         let t0 = _mm256_unpacklo_ps(r[0], r[1]);
@@ -335,7 +336,7 @@ mod transposed {
     /// The CPU must have AVX2.
     #[inline]
     #[target_feature(enable = "avx2")]
-    pub(super) unsafe fn gather(values: &[f32; PACKET], index: [u8; RAYS]) -> F32x8 {
+    pub(super) unsafe fn from_indices(values: &[f32; PACKET], index: [u8; RAYS]) -> F32x8 {
         // Wrapped into `values` (a no-op for a packet's ray numbers): no bounds checks.
         const _: () = assert!(PACKET.is_power_of_two());
         let v = index.map(|r| values[r as usize & (PACKET - 1)]);

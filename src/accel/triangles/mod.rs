@@ -458,6 +458,9 @@ pub struct ShearedRay {
     tie_offset: f32,
     /// Axes: `kx`, `ky`, `kz` (chosen so that the winding is kept).
     k: [u8; 3],
+    /// Zero. It fills the last byte, so that the struct has no padding and its 32 bytes can
+    /// be loaded as one vector ([`ShearedLanes::of_rays`]).
+    filler: u8,
 }
 
 const _: () = assert!(std::mem::size_of::<ShearedRay>() == 32);
@@ -503,6 +506,7 @@ impl ShearedRay {
             k: [kx, ky, kz].map(|axis| axis as u8),
             shear,
             tie_offset: origin.abs().max_element() * TIE_MARGIN,
+            filler: 0,
         }
     }
 
