@@ -203,20 +203,26 @@ impl ShearedLanes {
         while bits != 0 {
             let l = bits.trailing_zeros() as usize;
             bits &= bits - 1;
-            let found = if finite & (1 << l) != 0 {
+            // Each path writes its own answer: an `Option` of both paths' answers went
+            // through the stack and stalled on reading its pieces back.
+            if finite & (1 << l) != 0 {
                 let t = t.0[l];
-                (t >= 0.0 && t < t_max.0[l] && t.is_finite())
-                    .then(|| (t, Vec2::new(v.0[l], w.0[l])))
+                if t >= 0.0 && t < t_max.0[l] && t.is_finite() {
+                    hits.mask |= 1 << l;
+                    hits.t[l] = t;
+                    hits.bary[l] = Vec2::new(v.0[l], w.0[l]);
+                }
             } else {
                 let origin = self.origin.map(|axis| axis.0[l]);
                 let shear = self.shear.map(|axis| axis.0[l]);
                 let k = self.k.map(|axis| axis as u8);
-                intersect_beyond_f32(origin, shear, k, pack, lane, t_max.0[l])
-            };
-            if let Some((t, bary)) = found {
-                hits.mask |= 1 << l;
-                hits.t[l] = t;
-                hits.bary[l] = bary;
+                if let Some((t, bary)) =
+                    intersect_beyond_f32(origin, shear, k, pack, lane, t_max.0[l])
+                {
+                    hits.mask |= 1 << l;
+                    hits.t[l] = t;
+                    hits.bary[l] = bary;
+                }
             }
         }
         hits
@@ -349,6 +355,224 @@ mod transposed {
             )
         };
         out
+    }
+}
+
+/// The test across sixteen rays at once where the CPU has AVX-512: per lane the operations
+/// of [`ShearedLanes::intersect`] in the same order on the same operands, so the same bits.
+/// A whole leaf is tested in one call (a call per triangle, or 16-lane values passed
+/// through memory, cost more than the wider test saved).
+#[cfg(target_arch = "x86_64")]
+pub mod sixteen {
+    use std::arch::x86_64::*;
+
+    use glam::Vec2;
+
+    use super::super::{LANES, PackedTriangles, ShearedRay, TrianglePack, intersect_beyond_f32};
+    use super::{PACKET, RAYS, edge_function_f64};
+    use crate::simd::F32x8;
+
+    /// Rays per group.
+    pub const WIDE: usize = 2 * RAYS;
+
+    /// Tests each triangle of the leaf `first_pack`, `count` against the rays `chunk`
+    /// (indices into `sheared`, 1 to [`WIDE`] of them, sharing one permutation), ray `l`
+    /// of the chunk cut at `t_max[chunk[l]]`; calls `hit(l, slot, source, t, bary)` for
+    /// every ray and triangle that cross.
+    ///
+    /// # Safety
+    /// The CPU must have AVX-512F.
+    #[inline]
+    #[target_feature(enable = "avx512f")]
+    pub unsafe fn hits_in_leaf(
+        triangles: &PackedTriangles,
+        sheared: &[ShearedRay; PACKET],
+        chunk: &[u8],
+        t_max: &[f32; PACKET],
+        first_pack: u32,
+        count: u32,
+        mut hit: impl FnMut(usize, u32, u32, f32, Vec2),
+    ) {
+        assert!(
+            (1..=WIDE).contains(&chunk.len()),
+            "{} rays in a lane group",
+            chunk.len()
+        );
+        let last = chunk[chunk.len() - 1] as usize;
+        let index = |l: usize| chunk.get(l).map_or(last, |&r| r as usize);
+        let ray = |l: usize| &sheared[index(l)];
+        let k = ray(0).k.map(usize::from);
+        debug_assert!((0..WIDE).all(|l| ray(l).k == ray(0).k), "one permutation");
+        // Two groups of eight, each transposed in registers (`ShearedLanes::of_rays`), then
+        // joined: built lane by lane through memory, the rows stall on store forwarding.
+        let half = |from: usize| std::array::from_fn::<_, RAYS, _>(|l| ray(from + l));
+        // SAFETY: AVX-512F implies AVX2.
+        let (low, high) = unsafe {
+            (
+                super::transposed::rows(&half(0)),
+                super::transposed::rows(&half(RAYS)),
+            )
+        };
+        let join = |lo: &F32x8, hi: &F32x8| {
+            // SAFETY: `F32x8` is 32 bytes, 32-byte aligned.
+            let (lo, hi) =
+                unsafe { (_mm256_load_ps(lo.0.as_ptr()), _mm256_load_ps(hi.0.as_ptr())) };
+            _mm512_castpd_ps(_mm512_insertf64x4::<1>(
+                _mm512_castpd256_pd512(_mm256_castps_pd(lo)),
+                _mm256_castps_pd(hi),
+            ))
+        };
+        let cut_half = |from: usize| {
+            let v: [f32; RAYS] = std::array::from_fn(|l| t_max[index(from + l)]);
+            _mm256_setr_ps(v[0], v[1], v[2], v[3], v[4], v[5], v[6], v[7])
+        };
+        let cut = _mm512_castpd_ps(_mm512_insertf64x4::<1>(
+            _mm512_castpd256_pd512(_mm256_castps_pd(cut_half(0))),
+            _mm256_castps_pd(cut_half(RAYS)),
+        ));
+        let group = Group {
+            k,
+            origin: [0, 1, 2].map(|axis| join(&low.0[axis], &high.0[axis])),
+            shear: [0, 1, 2].map(|axis| join(&low.1[axis], &high.1[axis])),
+            cut,
+            live: ((1u32 << chunk.len()) - 1) as u16,
+        };
+        let first_pack = first_pack as usize;
+        let packs = (count as usize).div_ceil(LANES);
+        for pack in &triangles.packs[first_pack..first_pack + packs] {
+            for lane in 0..pack.live as usize {
+                group.intersect(pack, lane, &mut hit);
+            }
+        }
+    }
+
+    /// Up to sixteen rays of one permutation as vector rows, and their limits.
+    struct Group {
+        k: [usize; 3],
+        origin: [__m512; 3],
+        shear: [__m512; 3],
+        cut: __m512,
+        live: u16,
+    }
+
+    impl Group {
+        #[inline]
+        #[target_feature(enable = "avx512f")]
+        fn sheared_vertex(&self, pack: &TrianglePack, i: usize, lane: usize) -> [__m512; 3] {
+            let [kx, ky, kz] = self.k;
+            let v = &pack.v[i];
+            let z = _mm512_sub_ps(_mm512_set1_ps(v[kz][lane]), self.origin[kz]);
+            let x = _mm512_sub_ps(
+                _mm512_sub_ps(_mm512_set1_ps(v[kx][lane]), self.origin[kx]),
+                _mm512_mul_ps(self.shear[0], z),
+            );
+            let y = _mm512_sub_ps(
+                _mm512_sub_ps(_mm512_set1_ps(v[ky][lane]), self.origin[ky]),
+                _mm512_mul_ps(self.shear[1], z),
+            );
+            [x, y, z]
+        }
+
+        #[inline]
+        #[target_feature(enable = "avx512f")]
+        fn intersect(
+            &self,
+            pack: &TrianglePack,
+            lane: usize,
+            hit: &mut impl FnMut(usize, u32, u32, f32, Vec2),
+        ) {
+            let [ax, ay, az] = self.sheared_vertex(pack, 0, lane);
+            let [bx, by, bz] = self.sheared_vertex(pack, 1, lane);
+            let [cx, cy, cz] = self.sheared_vertex(pack, 2, lane);
+            let edge = |p: __m512, q: __m512, r: __m512, s: __m512| {
+                _mm512_sub_ps(_mm512_mul_ps(p, q), _mm512_mul_ps(r, s))
+            };
+            let mut u = edge(cx, by, cy, bx);
+            let mut v = edge(ax, cy, ay, cx);
+            let mut w = edge(bx, ay, by, ax);
+            let zero = _mm512_setzero_ps();
+            let is_zero = |x: __m512| _mm512_cmp_ps_mask::<_CMP_EQ_OQ>(x, zero);
+            let on_edge = (is_zero(u) | is_zero(v) | is_zero(w)) & self.live;
+            if on_edge != 0 {
+                // Exactly on an edge in f32: decided in f64 (rare), as the pack test does.
+                let row = |x: __m512| {
+                    let mut out = [0.0f32; WIDE];
+                    // SAFETY: `out` holds sixteen floats.
+                    unsafe { _mm512_storeu_ps(out.as_mut_ptr(), x) };
+                    out
+                };
+                let [ax, ay, bx, by, cx, cy] = [ax, ay, bx, by, cx, cy].map(row);
+                let (mut ur, mut vr, mut wr) = (row(u), row(v), row(w));
+                let mut bits = on_edge;
+                while bits != 0 {
+                    let l = bits.trailing_zeros() as usize;
+                    bits &= bits - 1;
+                    ur[l] = edge_function_f64(cx[l], by[l], cy[l], bx[l]);
+                    vr[l] = edge_function_f64(ax[l], cy[l], ay[l], cx[l]);
+                    wr[l] = edge_function_f64(bx[l], ay[l], by[l], ax[l]);
+                }
+                // SAFETY: sixteen floats each.
+                unsafe {
+                    u = _mm512_loadu_ps(ur.as_ptr());
+                    v = _mm512_loadu_ps(vr.as_ptr());
+                    w = _mm512_loadu_ps(wr.as_ptr());
+                }
+            }
+            let lt = |x: __m512| _mm512_cmp_ps_mask::<_CMP_LT_OQ>(x, zero);
+            let gt = |x: __m512| _mm512_cmp_ps_mask::<_CMP_GT_OQ>(x, zero);
+            let negative = lt(u) | lt(v) | lt(w);
+            let positive = gt(u) | gt(v) | gt(w);
+            let det = _mm512_add_ps(_mm512_add_ps(u, v), w);
+            let inside =
+                !(negative & positive) & _mm512_cmp_ps_mask::<_CMP_NEQ_UQ>(det, zero) & self.live;
+            if inside == 0 {
+                return;
+            }
+            let sz = self.shear[2];
+            let t_scaled = _mm512_add_ps(
+                _mm512_add_ps(
+                    _mm512_mul_ps(u, _mm512_mul_ps(sz, az)),
+                    _mm512_mul_ps(v, _mm512_mul_ps(sz, bz)),
+                ),
+                _mm512_mul_ps(w, _mm512_mul_ps(sz, cz)),
+            );
+            let inverse = _mm512_div_ps(_mm512_set1_ps(1.0), det);
+            let t = _mm512_mul_ps(t_scaled, inverse);
+            let (bv, bw) = (_mm512_mul_ps(v, inverse), _mm512_mul_ps(w, inverse));
+            let finite = _mm512_cmp_ps_mask::<_CMP_EQ_OQ>(_mm512_sub_ps(det, det), zero)
+                & _mm512_cmp_ps_mask::<_CMP_EQ_OQ>(_mm512_sub_ps(t_scaled, t_scaled), zero);
+            let row = |x: __m512| {
+                let mut out = [0.0f32; WIDE];
+                // SAFETY: `out` holds sixteen floats.
+                unsafe { _mm512_storeu_ps(out.as_mut_ptr(), x) };
+                out
+            };
+            let (t, bv, bw, cut) = (row(t), row(bv), row(bw), row(self.cut));
+            let mut bits = inside;
+            while bits != 0 {
+                let l = bits.trailing_zeros() as usize;
+                bits &= bits - 1;
+                let t_max = cut[l];
+                let (slot, source) = (pack.first_slot + lane as u32, pack.source[lane]);
+                // Two calls rather than one on an `Option` of both paths' answers: that
+                // went through the stack and stalled on reading its pieces back.
+                if finite & (1 << l) != 0 {
+                    let t = t[l];
+                    if t >= 0.0 && t < t_max && t.is_finite() {
+                        hit(l, slot, source, t, Vec2::new(bv[l], bw[l]));
+                    }
+                } else {
+                    let origin = self.origin.map(|axis| row(axis)[l]);
+                    let shear = self.shear.map(|axis| row(axis)[l]);
+                    let k = self.k.map(|axis| axis as u8);
+                    if let Some((t, bary)) =
+                        intersect_beyond_f32(origin, shear, k, pack, lane, t_max)
+                    {
+                        hit(l, slot, source, t, bary);
+                    }
+                }
+            }
+        }
     }
 }
 
@@ -606,6 +830,122 @@ mod tests {
             assert_eq!(at, rays.len());
         }
         assert!(chunks > 1_000, "{chunks} chunks");
+    }
+
+    /// The test across sixteen rays (AVX-512) against each ray alone, on leaves of three
+    /// packs: fans around a shared vertex (exact edges, the f64 recomputation), random
+    /// triangles, and triangles so far that f32 overflows (the f64 fallback); groups of 1 to
+    /// 16 rays of one permutation, some cut short. Every hit (ray, slot, source, distance and
+    /// barycentric bits) and no other.
+    #[test]
+    #[cfg(target_arch = "x86_64")]
+    fn sixteen_rays_at_once_equal_each_ray_alone() {
+        if !simd::Isa::cpu_has_avx512() {
+            eprintln!("skipped: this CPU has no AVX-512");
+            return;
+        }
+        let mut s = 0x7f4a_7c15_9e37_79b9u64;
+        let mut next = || xorshift(&mut s);
+        let (mut compared, mut hit, mut beyond) = (0usize, 0usize, 0usize);
+        for round in 0..400 {
+            let scale = [1.0f32, 1.0, 1.0, 1e20][round % 4];
+            let centre = Vec3A::new(next(), next(), -3.0 + next()) * scale;
+            let triangles: Vec<[Vec3A; 3]> = (0..12)
+                .map(|i| {
+                    let a = centre + Vec3A::new(next(), next(), next()) * 2.0 * scale;
+                    let b = centre + Vec3A::new(next(), next(), next()) * 2.0 * scale;
+                    let first = if i % 2 == 0 { centre } else { a - b * 0.1 };
+                    [first, a, b]
+                })
+                .collect();
+            let packed = super::super::PackedTriangles::pack(&triangles, std::iter::once((0, 12)));
+            let origin = Vec3A::new(next(), next(), next()) * 0.5;
+            let sheared: [ShearedRay; PACKET] = std::array::from_fn(|i| {
+                let target = if round % 3 == 0 && i % 2 == 0 {
+                    centre
+                } else {
+                    centre + Vec3A::new(next(), next(), next()) * 1.5 * scale
+                };
+                let o = if round % 2 == 0 {
+                    origin
+                } else {
+                    origin + Vec3A::new(next(), next(), next())
+                };
+                ShearedRay::new(o, target - o)
+            });
+            let limits: [f32; PACKET] = std::array::from_fn(|i| {
+                if i % 3 == 0 {
+                    2.5 * scale
+                } else {
+                    f32::INFINITY
+                }
+            });
+            let rays: Vec<u8> = (0..PACKET as u8).collect();
+            let mut buffer = [0u8; PACKET];
+            let (order, runs) = runs_by_permutation(&sheared, &rays, &mut buffer);
+            let mut at = 0;
+            for run in runs {
+                let run_rays = &order[at..at + run];
+                at += run;
+                let size = 1 + round % sixteen::WIDE;
+                for chunk in run_rays.chunks(size) {
+                    let mut found = Vec::new();
+                    // SAFETY: the CPU has AVX-512F (checked above).
+                    unsafe {
+                        sixteen::hits_in_leaf(
+                            &packed,
+                            &sheared,
+                            chunk,
+                            &limits,
+                            0,
+                            12,
+                            |l, slot, source, t, bary| {
+                                found.push((
+                                    l,
+                                    slot,
+                                    source,
+                                    t.to_bits(),
+                                    bary.x.to_bits(),
+                                    bary.y.to_bits(),
+                                ))
+                            },
+                        )
+                    };
+                    let mut expected = Vec::new();
+                    for (l, &r) in chunk.iter().enumerate() {
+                        let r = r as usize;
+                        for pack in &packed.packs {
+                            let alone =
+                                sheared[r].intersect_pack(pack, pack.live as usize, limits[r]);
+                            for lane in 0..pack.live as usize {
+                                if alone.mask & (1 << lane) != 0 {
+                                    expected.push((
+                                        l,
+                                        pack.first_slot + lane as u32,
+                                        pack.source[lane],
+                                        alone.t[lane].to_bits(),
+                                        alone.bary[lane].x.to_bits(),
+                                        alone.bary[lane].y.to_bits(),
+                                    ));
+                                    beyond += usize::from(
+                                        !(alone.t[lane] * 0.0).is_finite() || scale > 1.0,
+                                    );
+                                }
+                                compared += 1;
+                            }
+                        }
+                    }
+                    found.sort_unstable();
+                    expected.sort_unstable();
+                    assert_eq!(found, expected, "round {round}");
+                    hit += expected.len();
+                }
+            }
+        }
+        assert!(
+            compared > 100_000 && hit > 5_000 && beyond > 500,
+            "{compared} compared, {hit} hits, {beyond} far"
+        );
     }
 
     /// Triangles so large and far (1e13 to 1e37) that the f32 edge functions or distance

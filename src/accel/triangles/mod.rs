@@ -21,6 +21,8 @@ use obvhs::aabb::Aabb;
 
 mod across_rays;
 
+#[cfg(target_arch = "x86_64")]
+pub use across_rays::sixteen;
 pub use across_rays::{RAYS, ShearedLanes, lanes_of, runs_by_permutation};
 
 /// Triangles per pack.
