@@ -1,7 +1,8 @@
 //! The watertight test of one triangle against up to eight rays at once: the rays of a
 //! packet that reach a leaf together, side by side in the lanes of [`F32x8`] (eight per AVX
 //! instruction where the CPU has AVX2), instead of one ray against the four triangles of a
-//! pack.
+//! pack; and against sixteen at once where the CPU has AVX-512 ([`sixteen`], for leaves
+//! handed more than eight rays, as primary packets' leaves mostly are).
 //!
 //! Why: a packet's leaf visits test many rays against the same few triangles; across rays,
 //! a triangle's vertices are loaded once and broadcast, and eight rays share each
