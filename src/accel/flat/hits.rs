@@ -160,22 +160,10 @@ impl Accel {
                             limits,
                             first,
                             count,
-                            |l, slot, source, t, bary| {
-                                let r = chunk[l] as usize;
-                                if keep_if_closer(within, &mut best[r], slot, source, t, bary) {
-                                    improved |= 1 << l;
-                                }
-                            },
+                            keeping_closer(within, best, chunk, &mut improved),
                         )
                     };
-                    while improved != 0 {
-                        let l = improved.trailing_zeros() as usize;
-                        improved &= improved - 1;
-                        let r = chunk[l] as usize;
-                        let t = best[r].hit.map_or(f32::INFINITY, |h| h.t);
-                        // As below: boxes where a tie may hide are still visited.
-                        limits[r] = sheared[r].tie_limit(t);
-                    }
+                    limit_improved(chunk, improved, best, sheared, limits);
                 }
                 at += run;
                 continue;
@@ -190,22 +178,9 @@ impl Accel {
                     first,
                     count,
                     &cut,
-                    |l, slot, source, t, bary| {
-                        let r = chunk[l] as usize;
-                        if keep_if_closer(within, &mut best[r], slot, source, t, bary) {
-                            improved |= 1 << l;
-                        }
-                    },
+                    keeping_closer(within, best, chunk, &mut improved),
                 );
-                while improved != 0 {
-                    let l = improved.trailing_zeros() as usize;
-                    improved &= improved - 1;
-                    let r = chunk[l] as usize;
-                    let t = best[r].hit.map_or(f32::INFINITY, |h| h.t);
-                    // Keep visiting boxes that start at `t` (up to rounding), where a tie may
-                    // hide.
-                    limits[r] = sheared[r].tie_limit(t);
-                }
+                limit_improved(chunk, improved, best, sheared, limits);
             }
             at += run;
         }
@@ -338,6 +313,43 @@ impl LeafVisit for ClosestLeaf<'_> {
 /// Rays in a leaf from which [`Accel::closest_in_leaf_across`] tests each triangle across
 /// the rays; below it, each ray tests the leaf's packs alone (the answers are the same).
 const ACROSS_RAYS_MIN: usize = 4;
+
+/// The hit callback of a group test over the rays `chunk`: keeps each hit that is closer for
+/// its ray (bit `l` of `improved` set for ray `chunk[l]`).
+#[inline(always)]
+fn keeping_closer<'a>(
+    within: &'a Within,
+    best: &'a mut [Closest; PACKET],
+    chunk: &'a [u8],
+    improved: &'a mut u32,
+) -> impl FnMut(usize, u32, u32, f32, glam::Vec2) + 'a {
+    move |l, slot, source, t, bary| {
+        let r = chunk[l] as usize;
+        if keep_if_closer(within, &mut best[r], slot, source, t, bary) {
+            *improved |= 1 << l;
+        }
+    }
+}
+
+/// Lowers the limit of each ray of `chunk` whose best hit a group test improved (bit `l` of
+/// `improved` for ray `chunk[l]`) to that hit.
+#[inline(always)]
+fn limit_improved(
+    chunk: &[u8],
+    mut improved: u32,
+    best: &[Closest; PACKET],
+    sheared: &[ShearedRay; PACKET],
+    limits: &mut [f32; PACKET],
+) {
+    while improved != 0 {
+        let l = improved.trailing_zeros() as usize;
+        improved &= improved - 1;
+        let r = chunk[l] as usize;
+        let t = best[r].hit.map_or(f32::INFINITY, |h| h.t);
+        // Keep visiting boxes that start at `t` (up to rounding), where a tie may hide.
+        limits[r] = sheared[r].tie_limit(t);
+    }
+}
 
 /// Keeps the hit `(slot, source, t, bary)` in `best` when it is closer, or as close with a
 /// lower source triangle (the tie rule); returns whether it was kept.
