@@ -99,7 +99,8 @@ pub fn avx2() -> bool {
 }
 
 /// Whether the AVX2 copies may also call the few AVX-512 routines written for 16 lanes (the
-/// masked walk's node test across rays): the process runs the AVX2 copies and the CPU has
+/// masked walk's node test, a packet's leaf box test and the closest-hit triangle test, each
+/// across sixteen rays): the process runs the AVX2 copies and the CPU has
 /// AVX-512F, unless `MIPRAY_SIMD=avx2` (or `baseline`) says otherwise. Those routines
 /// compute the same bits as the 8-lane code they stand in for. Decided once.
 #[inline]
