@@ -9,7 +9,6 @@ use crate::accel::query::{Closest, Hit, PacketQuery, Within};
 #[cfg(target_arch = "x86_64")]
 use crate::accel::triangles::sixteen;
 use crate::accel::triangles::{RAYS, ShearedLanes, ShearedRay, lanes_of, runs_by_permutation};
-
 use crate::accel::wide::{GatheredLeaf, LeafVisit, PACKET, RayBoxes};
 
 impl Accel {

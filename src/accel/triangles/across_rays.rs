@@ -250,18 +250,21 @@ pub fn runs_by_permutation<'a>(
         sizes[0] = rays.len();
         return (rays, sizes);
     }
-    let mut groups = [[0u8; PACKET]; PERMUTATIONS];
+    // A counting sort: each permutation's count, where its run starts, then each ray into
+    // its run's next place (ray order kept within a run).
+    for &r in rays {
+        sizes[sheared[r as usize].permutation()] += 1;
+    }
+    let mut next = [0usize; PERMUTATIONS];
+    for p in 1..PERMUTATIONS {
+        next[p] = next[p - 1] + sizes[p - 1];
+    }
     for &r in rays {
         let p = sheared[r as usize].permutation();
-        groups[p][sizes[p]] = r;
-        sizes[p] += 1;
+        buffer[next[p]] = r;
+        next[p] += 1;
     }
-    let mut at = 0;
-    for (group, &size) in groups.iter().zip(&sizes) {
-        buffer[at..at + size].copy_from_slice(&group[..size]);
-        at += size;
-    }
-    (&buffer[..at], sizes)
+    (&buffer[..rays.len()], sizes)
 }
 
 /// `values[chunk[l]]` in lane `l` (the last one repeated past the chunk's end): a ray
@@ -424,8 +427,12 @@ pub mod sixteen {
             ))
         };
         let cut_half = |from: usize| {
-            let v: [f32; RAYS] = std::array::from_fn(|l| t_max[index(from + l)]);
-            _mm256_setr_ps(v[0], v[1], v[2], v[3], v[4], v[5], v[6], v[7])
+            let index = std::array::from_fn(|l| index(from + l) as u8);
+            // SAFETY: AVX-512F implies AVX2; `F32x8` is 32 bytes, 32-byte aligned.
+            unsafe {
+                let half = super::transposed::from_indices(t_max, index);
+                _mm256_load_ps(half.0.as_ptr())
+            }
         };
         let cut = _mm512_castpd_ps(_mm512_insertf64x4::<1>(
             _mm512_castpd256_pd512(_mm256_castps_pd(cut_half(0))),
