@@ -146,6 +146,26 @@ impl F32x8 {
         self.mask_where(other, |a, b| a != b)
     }
 
+    /// `self` where `self <= other` and +infinity in the other lanes (NaN among them), with
+    /// the mask of the lanes kept (`le_mask`'s).
+    #[inline(always)]
+    pub fn kept_where_le<const AVX: bool>(self, other: F32x8) -> (F32x8, u32) {
+        #[cfg(target_arch = "x86_64")]
+        if AVX {
+            // SAFETY: as in `sub`.
+            return unsafe { avx::kept_where_le(self, other) };
+        }
+        let mask = self.le_mask::<false>(other);
+        let kept = std::array::from_fn(|lane| {
+            if mask & (1 << lane) != 0 {
+                self.0[lane]
+            } else {
+                f32::INFINITY
+            }
+        });
+        (F32x8(kept), mask)
+    }
+
     #[inline(always)]
     fn mask_where(self, other: F32x8, f: impl Fn(f32, f32) -> bool) -> u32 {
         let mut mask = 0;
@@ -240,6 +260,15 @@ mod avx {
     pub fn le_mask(a: F32x8, b: F32x8) -> u32 {
         _mm256_movemask_ps(_mm256_cmp_ps::<_CMP_LE_OQ>(load(a), load(b))) as u32
     }
+
+    #[inline]
+    #[target_feature(enable = "avx")]
+    pub fn kept_where_le(a: F32x8, b: F32x8) -> (F32x8, u32) {
+        let a = load(a);
+        let le = _mm256_cmp_ps::<_CMP_LE_OQ>(a, load(b));
+        let kept = _mm256_blendv_ps(_mm256_set1_ps(f32::INFINITY), a, le);
+        (store(kept), _mm256_movemask_ps(le) as u32)
+    }
 }
 
 #[cfg(test)]
@@ -318,7 +347,14 @@ mod tests {
                     m | (((ordered && a.0[l] <= b.0[l]) as u32) << l)
                 });
                 assert_eq!(a.le_mask::<false>(b), le);
+                let kept: Vec<u32> = (0..WIDTH)
+                    .map(|l| if le & (1 << l) != 0 { a.0[l] } else { f32::INFINITY }.to_bits())
+                    .collect();
+                let (kept_lanes, kept_mask) = a.kept_where_le::<false>(b);
+                assert_eq!((bits(kept_lanes).to_vec(), kept_mask), (kept, le));
                 if avx2 {
+                    let (avx_lanes, avx_mask) = a.kept_where_le::<true>(b);
+                    assert_eq!((bits(avx_lanes), avx_mask), (bits(kept_lanes), kept_mask));
                     assert_eq!(bits(a.add::<true>(b)), bits(a.add::<false>(b)));
                     assert_eq!(bits(a.div::<true>(b)), bits(a.div::<false>(b)));
                     assert_eq!(a.lt_mask::<true>(b), a.lt_mask::<false>(b));

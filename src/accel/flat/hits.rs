@@ -388,6 +388,9 @@ struct ClosestPacketLeaf<'a> {
 }
 
 impl GatheredLeaf for ClosestPacketLeaf<'_> {
+    // Limits shrink to hit distances, which are at least 0.
+    const STOPS_RAYS: bool = false;
+
     #[inline(always)]
     fn visit<const AVX: bool>(
         &mut self,

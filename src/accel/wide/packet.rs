@@ -893,6 +893,13 @@ trait PacketLeaf {
 /// test that computes across rays can use [`crate::simd::F32x8`]'s AVX operations. Closures
 /// implement it (ignoring `AVX`).
 pub trait GatheredLeaf {
+    /// Whether `visit` may stop a ray (set its limit below 0, as any-hit leaves do). A
+    /// masked walk looks for stopped rays after each leaf only where it may: closest-hit
+    /// limits never go below 0, and reading them back right after the leaf stored them
+    /// stalls. (A leaf that stops a ray anyway is still exact: a negative limit enters no
+    /// box; the walk only ends later.)
+    const STOPS_RAYS: bool = true;
+
     fn visit<const AVX: bool>(
         &mut self,
         rays: &[u8],

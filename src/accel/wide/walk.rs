@@ -93,6 +93,26 @@ impl RayBoxes {
     /// `t_max` (bit `lane`); `AVX` only inside the AVX2 copy of a walk ([`Lanes`]).
     #[inline(always)]
     pub(super) fn enter<const AVX: bool>(&self, node: &WideNode, t_max: f32) -> (Lanes, u32) {
+        let (near, far) = self.slabs::<AVX>(node, t_max);
+        (near, near.le_mask::<AVX>(far))
+    }
+
+    /// [`RayBoxes::enter`] with +infinity as the entry distance of the lanes not entered
+    /// (so distances of several rays can be merged by a minimum).
+    #[inline(always)]
+    pub(super) fn enter_keeping_entered<const AVX: bool>(
+        &self,
+        node: &WideNode,
+        t_max: f32,
+    ) -> (Lanes, u32) {
+        let (near, far) = self.slabs::<AVX>(node, t_max);
+        near.kept_where_le::<AVX>(far)
+    }
+
+    /// The entry distance and the exit limit of each lane's box (the exit already cut at
+    /// `t_max`): the ray enters a lane where `near <= far`.
+    #[inline(always)]
+    fn slabs<const AVX: bool>(&self, node: &WideNode, t_max: f32) -> (Lanes, Lanes) {
         let mut near = Lanes::splat(0.0);
         let mut far = Lanes::splat(f32::INFINITY);
         for axis in 0..3 {
@@ -108,7 +128,7 @@ impl RayBoxes {
         let far = far
             .mul::<AVX>(Lanes::splat(ROBUST_FAR))
             .min::<AVX>(Lanes::splat(t_max));
-        (near, near.le_mask::<AVX>(far))
+        (near, far)
     }
 }
 
