@@ -131,7 +131,7 @@ impl WideBvh {
     ) {
         // Of the rays in `rays`, those not stopped: eight rays per step (one vector compare
         // and mask where the compiler vectorises it), skipping groups of eight with no ray
-        // in `rays` (a leaf's rays are often one or two groups of the packet).
+        // in `rays`.
         let live = |limits: &[f32; PACKET], rays: u64| {
             let mut live = 0u64;
             for (group, eight) in limits.chunks_exact(8).enumerate() {
@@ -213,8 +213,12 @@ impl WideBvh {
                     }
                     leaf.visit::<AVX>(&entering[..k], first, count, limits);
                     if L::STOPS_RAYS {
-                        // Only the rays just handed to the leaf can have stopped.
-                        alive &= !mask | live(limits, mask);
+                        // Only the rays just handed to the leaf can have stopped. Read one
+                        // by one: the leaf has just stored their limits one by one, and a
+                        // vector read of them waits for those stores to drain.
+                        for &r in &entering[..k] {
+                            alive &= !(u64::from(!(limits[usize::from(r)] >= 0.0)) << r);
+                        }
                         if alive == 0 {
                             return;
                         }

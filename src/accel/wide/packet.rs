@@ -743,7 +743,7 @@ impl WideBvh {
     ) {
         let n = packet.len;
         // The largest limit of the packet: the interval test's `t_max`. Limits only
-        // shrink, so a stale value is still a bound; it is renewed after each leaf.
+        // shrink, so a stale value is still a bound; it is renewed after leaves (below).
         let largest_limit = |limits: &[f32; PACKET]| {
             limits[..n]
                 .iter()
@@ -751,6 +751,7 @@ impl WideBvh {
                 .fold(f32::NEG_INFINITY, f32::max)
         };
         let mut packet_limit = largest_limit(limits);
+        let mut limit_stale = false;
         stack[0] = MaybeUninit::new(PacketEntry {
             child: 0,
             count: 0,
@@ -776,15 +777,20 @@ impl WideBvh {
                     count,
                     limits,
                 );
-                if any {
-                    packet_limit = largest_limit(limits);
-                    if packet_limit < 0.0 {
-                        // Every ray is done (any-hit queries mark a finished ray with a
-                        // negative limit); closest-hit limits never go below 0.
-                        return;
-                    }
-                }
+                // The packet's limit is renewed at the next node, not here: consecutive
+                // leaves share one renewal, and the leaf's own stores to the limits have
+                // drained by then (read back at once, they stalled the vector read).
+                limit_stale |= any;
                 continue;
+            }
+            if limit_stale {
+                limit_stale = false;
+                packet_limit = largest_limit(limits);
+                if packet_limit < 0.0 {
+                    // Every ray is done (any-hit queries mark a finished ray with a
+                    // negative limit); closest-hit limits never go below 0.
+                    return;
+                }
             }
             let node = &self.nodes[entry.child as usize];
             let mut push = |lane: usize, first: u32, top: &mut usize| {
