@@ -348,7 +348,14 @@ mod tests {
                 });
                 assert_eq!(a.le_mask::<false>(b), le);
                 let kept: Vec<u32> = (0..WIDTH)
-                    .map(|l| if le & (1 << l) != 0 { a.0[l] } else { f32::INFINITY }.to_bits())
+                    .map(|l| {
+                        if le & (1 << l) != 0 {
+                            a.0[l]
+                        } else {
+                            f32::INFINITY
+                        }
+                        .to_bits()
+                    })
                     .collect();
                 let (kept_lanes, kept_mask) = a.kept_where_le::<false>(b);
                 assert_eq!((bits(kept_lanes).to_vec(), kept_mask), (kept, le));

@@ -184,7 +184,10 @@ impl WideBvh {
                             Some(columns) if mask.count_ones() >= ACROSS_MIN_RAYS => {
                                 // SAFETY: as for the node test below.
                                 unsafe {
-                                    across_rays::rays_by_lane::<false>(parent, columns, limits, mask).0[lane]
+                                    across_rays::rays_by_lane::<false>(
+                                        parent, columns, limits, mask,
+                                    )
+                                    .0[lane]
                                 }
                             }
                             _ => {
@@ -395,7 +398,9 @@ mod across_rays {
         }
         let nearest = if NEAREST {
             // The minimum of a set of non-NaN floats, whatever the order of reduction.
-            Lanes(std::array::from_fn(|lane| _mm512_reduce_min_ps(nearest[lane])))
+            Lanes(std::array::from_fn(|lane| {
+                _mm512_reduce_min_ps(nearest[lane])
+            }))
         } else {
             Lanes::splat(f32::INFINITY)
         };
