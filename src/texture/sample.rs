@@ -710,6 +710,52 @@ mod tests {
         }
     }
 
+    /// `axis` against the library's `floor` and `wrap`, for every side from 1 to 70 and a
+    /// few large ones (powers of two and not), coordinates around the image and its texel
+    /// edges, every wrap mode: most of them inside the level (the fast path).
+    #[test]
+    fn axis_matches_the_library_floor_and_wrap() {
+        let mut x: u64 = 0x9e37_79b9_7f4a_7c15;
+        let mut shortcut = 0;
+        let sides: Vec<u32> = (1..=70)
+            .chain([261, 522, 1024, 1044, 16383, 16384])
+            .collect();
+        for n in sides {
+            let mut ts: Vec<f32> = Vec::new();
+            for i in 0..=2 * n + 2 {
+                // Texel edges and centres, and their neighbouring floats.
+                let t = (i as f32 * 0.5 - 0.5) / n as f32;
+                ts.extend([t, t.next_up(), t.next_down()]);
+            }
+            for _ in 0..200 {
+                x ^= x << 13;
+                x ^= x >> 7;
+                x ^= x << 17;
+                ts.push((x >> 40) as f32 / (1u64 << 24) as f32 * 1.4 - 0.2);
+            }
+            for t in ts {
+                for mode in [REPEAT, WrapMode::ClampToEdge, WrapMode::MirroredRepeat] {
+                    let exact = f64::from(t) * f64::from(n) - 0.5;
+                    let x0 = exact.floor();
+                    let i0 = x0 as i64;
+                    let expected = (
+                        wrap(i0, i64::from(n), mode),
+                        wrap(i0 + 1, i64::from(n), mode),
+                        (exact - x0) as f32,
+                    );
+                    let got = axis(t, n, mode);
+                    assert_eq!(
+                        (got.0, got.1, got.2.to_bits()),
+                        (expected.0, expected.1, expected.2.to_bits()),
+                        "t {t:e}, n {n}, {mode:?}"
+                    );
+                    shortcut += usize::from(exact >= 0.0 && exact < f64::from(n) - 1.0);
+                }
+            }
+        }
+        assert!(shortcut > 50_000, "{shortcut}");
+    }
+
     #[test]
     fn repeat_fast_path_matches_the_exact_reduction() {
         for n in [1u32, 2, 3, 7, 8, 1000, 1024] {
