@@ -223,7 +223,9 @@ impl WideBvh {
                         // by one: the leaf has just stored their limits one by one, and a
                         // vector read of them waits for those stores to drain.
                         for &r in &entering[..k] {
-                            alive &= !(u64::from(!(limits[usize::from(r)] >= 0.0)) << r);
+                            let limit = limits[usize::from(r)];
+                            let stopped = limit < 0.0 || limit.is_nan();
+                            alive &= !(u64::from(stopped) << r);
                         }
                         if alive == 0 {
                             return;
@@ -596,9 +598,9 @@ mod tests {
                             rays[r].enter_keeping_entered::<false>(&node, limits[r])
                         };
                         lanes_of[r] = lanes as u8;
-                        for lane in 0..WIDTH {
+                        for (lane, nearest) in expected_nearest.iter_mut().enumerate() {
                             if node.child[lane] != EMPTY {
-                                expected_nearest[lane] = expected_nearest[lane].min(near.0[lane]);
+                                *nearest = nearest.min(near.0[lane]);
                             }
                         }
                     }
