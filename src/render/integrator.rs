@@ -343,12 +343,33 @@ impl FrameScene<'_> {
         mut hit: Hit,
         origin: Vec3A,
         direction: Vec3A,
-        mut lod: L,
+        lod: L,
         depth: u32,
         requests: &mut Vec<ShadowRequest>,
         counters: &mut TraceCounters,
     ) -> Arrival<L> {
         let triangle = self.hit_triangle(&mut hit, origin, direction);
+        self.arrive_at(
+            &triangle, hit, origin, direction, lod, depth, requests, counters,
+        )
+    }
+
+    /// [`Self::arrive`] with the hit's triangle already read (`FrameScene::hit_triangle`,
+    /// which also settled `hit`).
+    #[allow(clippy::too_many_arguments)]
+    #[inline]
+    pub(super) fn arrive_at<L: RayLod>(
+        &self,
+        triangle: &HitTriangle,
+        hit: Hit,
+        origin: Vec3A,
+        direction: Vec3A,
+        mut lod: L,
+        depth: u32,
+        requests: &mut Vec<ShadowRequest>,
+        counters: &mut TraceCounters,
+    ) -> Arrival<L> {
+        let triangle = *triangle;
         let surface = SurfacePoint::at(&triangle, &hit, origin, direction);
         let lod_hit = surface.lod_hit(&triangle, &hit, direction);
         lod.arrive(&lod_hit);

@@ -7,8 +7,9 @@
 //! get the next free numbers, so a vertex's children always come after it. Each bounce:
 //! 1. the pending rays are traced as packets of up to [`PACKET`] (the primary rays from the
 //!    camera with interval bounds, later bounces from their hits by the masked walk);
-//! 2. each hit's surface is made and its texture looked up (`FrameScene::arrive`), which
-//!    lists the shadow rays its direct light needs;
+//! 2. each hit's surface is made (from its triangle, read as its packet's hits came back)
+//!    and its texture looked up (`FrameScene::arrive_at`), which lists the shadow rays its
+//!    direct light needs;
 //! 3. the shadow rays are traced, grouped by light, as packets of up to [`PACKET`]
 //!    ([`SceneBvh::visit_hits_packet`]: rays from a tile's hits converge on the light);
 //! 4. each hit's own light is summed and its reflected and refracted rays are spawned
@@ -23,6 +24,7 @@
 use glam::{Vec3, Vec3A};
 
 use crate::accel::{Hit, PACKET};
+use crate::geometry::HitTriangle;
 use crate::lod::RayLod;
 use crate::render::camera::Camera;
 use crate::render::film::{TILE, sample_offset};
@@ -66,6 +68,12 @@ pub(super) struct TileBuffers<L: RayLod> {
     next: Vec<Pending<L>>,
     of_light: Vec<usize>,
     pixel_of: Vec<u32>,
+    /// The bounce's hit triangles, one per hit in `bounce`'s order, read as each packet's
+    /// hits come back. Read there, the loads of a packet's hit data (a slot's vertices,
+    /// normals, uvs, material, `log2 P_b`: up to five cache lines) are in flight together;
+    /// read at the start of each hit's shading, one hit's waited at a time, at the head of
+    /// its dependent arithmetic (docs/benchmark-log.md).
+    triangles: Vec<HitTriangle>,
 }
 
 impl<L: RayLod> Default for TileBuffers<L> {
@@ -80,6 +88,7 @@ impl<L: RayLod> Default for TileBuffers<L> {
             next: Vec::new(),
             of_light: Vec::new(),
             pixel_of: Vec::new(),
+            triangles: Vec::new(),
         }
     }
 }
@@ -103,6 +112,7 @@ pub(super) fn trace_tile<L: RayLod>(
         next,
         of_light,
         pixel_of,
+        triangles,
     } = buffers;
     let x1 = (x0 + TILE).min(camera.width);
     let y1 = (y0 + TILE).min(camera.height);
@@ -114,19 +124,22 @@ pub(super) fn trace_tile<L: RayLod>(
     );
     vertices.clear();
     vertices.resize(samples.len(), Combine::EMPTY);
-    primary_bounce::<L>(scene, camera, spp, samples, counters, bounce);
+    primary_bounce::<L>(scene, camera, spp, samples, counters, bounce, triangles);
     while !bounce.is_empty() {
         // Arrive at every hit; a miss is the background.
         waiting.clear();
         requests.clear();
+        let mut hit_triangles = triangles.iter();
         for (pending, hit) in bounce.drain(..) {
             let Some(hit) = hit else {
                 vertices[pending.vertex as usize] = Combine::leaf(scene.background);
                 continue;
             };
+            let triangle = hit_triangles.next().expect("a triangle per hit");
             let first = requests.len();
             let ray = &pending.ray;
-            let arrival = scene.arrive(
+            let arrival = scene.arrive_at(
+                triangle,
                 hit,
                 ray.origin,
                 ray.direction,
@@ -169,7 +182,7 @@ pub(super) fn trace_tile<L: RayLod>(
                 depth: w.arrival.depth() + 1,
             }));
         }
-        trace_bounce(scene, next, counters, bounce);
+        trace_bounce(scene, next, counters, bounce, triangles);
     }
     // Last vertex first: children are numbered after their parents.
     for v in (0..vertices.len()).rev() {
@@ -195,7 +208,7 @@ pub(super) fn trace_tile<L: RayLod>(
 
 /// The samples' primary rays traced as packets of up to [`PACKET`] (pixel by pixel, each
 /// pixel's samples in order: a 16 x 4 block at one sample per pixel), each with its hit,
-/// into `bounce` (cleared first).
+/// into `bounce`, and each hit's triangle into `triangles` (both cleared first).
 fn primary_bounce<L: RayLod>(
     scene: &FrameScene,
     camera: &Camera,
@@ -203,8 +216,10 @@ fn primary_bounce<L: RayLod>(
     samples: &[(u32, u32, u32)],
     counters: &mut TraceCounters,
     bounce: &mut Vec<(Pending<L>, Option<Hit>)>,
+    triangles: &mut Vec<HitTriangle>,
 ) {
     bounce.clear();
+    triangles.clear();
     let mut rays = [(Vec3A::ZERO, Vec3A::ZERO); PACKET];
     let mut hits = [None; PACKET];
     for (chunk_index, chunk) in samples.chunks(PACKET).enumerate() {
@@ -235,6 +250,9 @@ fn primary_bounce<L: RayLod>(
                 );
             }
             let lod = L::primary(&scene.lod_camera, x as f32 + sx, y as f32 + sy);
+            if let Some(hit) = &mut hits[k] {
+                triangles.push(scene.hit_triangle(hit, origin, direction));
+            }
             bounce.push((
                 Pending {
                     ray: Spawned {
@@ -253,16 +271,18 @@ fn primary_bounce<L: RayLod>(
     }
 }
 
-/// A bounce's reflected and refracted rays, each with its hit, into `bounce` (cleared
-/// first): traced as packets of up to [`PACKET`] in the order they were spawned
+/// A bounce's reflected and refracted rays, each with its hit, into `bounce`, and each
+/// hit's triangle into `triangles` (both cleared first): traced as packets of up to [`PACKET`] in the order they were spawned
 /// (`SceneBvh::closest_hits_scattered`: each ray finds exactly what it finds alone).
 fn trace_bounce<L: RayLod>(
     scene: &FrameScene,
     pending: &[Pending<L>],
     counters: &mut TraceCounters,
     bounce: &mut Vec<(Pending<L>, Option<Hit>)>,
+    triangles: &mut Vec<HitTriangle>,
 ) {
     bounce.clear();
+    triangles.clear();
     let mut rays = [(Vec3A::ZERO, Vec3A::ZERO); PACKET];
     let mut hits = [None; PACKET];
     for packet in pending.chunks(PACKET) {
@@ -273,7 +293,7 @@ fn trace_bounce<L: RayLod>(
         scene
             .bvh
             .closest_hits_scattered(&rays[..n], f32::INFINITY, &mut hits[..n]);
-        for (p, &hit) in packet.iter().zip(&hits[..n]) {
+        for (p, hit) in packet.iter().zip(&mut hits[..n]) {
             let ray = &p.ray;
             counters.rays += 1;
             if let Some(log) = &mut counters.log {
@@ -283,10 +303,13 @@ fn trace_bounce<L: RayLod>(
                     ray.origin,
                     ray.direction,
                     f32::INFINITY,
-                    hit,
+                    *hit,
                 );
             }
-            bounce.push((*p, hit));
+            if let Some(hit) = hit {
+                triangles.push(scene.hit_triangle(hit, ray.origin, ray.direction));
+            }
+            bounce.push((*p, *hit));
         }
     }
 }
