@@ -36,22 +36,27 @@ pub fn log2(x: f64) -> f64 {
     let e = if high { exponent + 1.0 } else { exponent };
     let s = (m - 1.0) / (m + 1.0);
     let z = s * s;
-    let mut series = 1.0 / 19.0;
-    for c in [
-        1.0 / 17.0,
-        1.0 / 15.0,
-        1.0 / 13.0,
-        1.0 / 11.0,
-        1.0 / 9.0,
-        1.0 / 7.0,
-        1.0 / 5.0,
-        1.0 / 3.0,
-        1.0,
-    ] {
+    let mut series = SERIES_LAST;
+    for c in SERIES_BELOW {
         series = series * z + c;
     }
     e + (2.0 * s * series) * std::f64::consts::LOG2_E
 }
+
+/// The coefficients of `atanh(s) / s` in `z = s^2` (module docs), summed by Horner's rule:
+/// the last one, then the others from the highest power down.
+const SERIES_LAST: f64 = 1.0 / 19.0;
+const SERIES_BELOW: [f64; 9] = [
+    1.0 / 17.0,
+    1.0 / 15.0,
+    1.0 / 13.0,
+    1.0 / 11.0,
+    1.0 / 9.0,
+    1.0 / 7.0,
+    1.0 / 5.0,
+    1.0 / 3.0,
+    1.0,
+];
 
 /// Replaces every value of `values` with its [`log2`], the same bits as one at a time, in
 /// the copy [`simd::dispatch`] chooses (four lanes per instruction in the AVX2 copy).
@@ -139,18 +144,8 @@ mod avx512 {
         let e = _mm512_mask_add_pd(exponent, high, exponent, splat(1.0));
         let s = _mm512_div_pd(_mm512_sub_pd(m, splat(1.0)), _mm512_add_pd(m, splat(1.0)));
         let z = _mm512_mul_pd(s, s);
-        let mut series = splat(1.0 / 19.0);
-        for c in [
-            1.0 / 17.0,
-            1.0 / 15.0,
-            1.0 / 13.0,
-            1.0 / 11.0,
-            1.0 / 9.0,
-            1.0 / 7.0,
-            1.0 / 5.0,
-            1.0 / 3.0,
-            1.0,
-        ] {
+        let mut series = splat(super::SERIES_LAST);
+        for c in super::SERIES_BELOW {
             series = _mm512_add_pd(_mm512_mul_pd(series, z), splat(c));
         }
         let sum = _mm512_mul_pd(_mm512_mul_pd(splat(2.0), s), series);
