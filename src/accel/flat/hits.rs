@@ -126,8 +126,9 @@ impl Accel {
 
     /// Tests a leaf for the closest-hit queries of the packet rays `rays` (indices into
     /// `sheared`, `limits` and `best`), each triangle across the rays that share an axis
-    /// permutation, eight at a time: the same answers as [`Accel::closest_in_leaf`] for each
-    /// ray alone (the same tie rule, the same limit afterwards).
+    /// permutation, eight at a time (sixteen where the AVX-512 routines run,
+    /// `simd::avx512`): the same answers as [`Accel::closest_in_leaf`] for each ray alone
+    /// (the same tie rule, the same limit afterwards).
     #[allow(clippy::too_many_arguments)]
     #[inline(always)]
     fn closest_in_leaf_across<const AVX: bool>(

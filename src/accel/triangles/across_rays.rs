@@ -499,16 +499,17 @@ pub mod sixteen {
             let mut v = edge(ax, cy, ay, cx);
             let mut w = edge(bx, ay, by, ax);
             let zero = _mm512_setzero_ps();
+            // A vector's sixteen lanes, for the paths that take rays one by one.
+            let row = |x: __m512| {
+                let mut out = [0.0f32; WIDE];
+                // SAFETY: `out` holds sixteen floats.
+                unsafe { _mm512_storeu_ps(out.as_mut_ptr(), x) };
+                out
+            };
             let is_zero = |x: __m512| _mm512_cmp_ps_mask::<_CMP_EQ_OQ>(x, zero);
             let on_edge = (is_zero(u) | is_zero(v) | is_zero(w)) & self.live;
             if on_edge != 0 {
                 // Exactly on an edge in f32: decided in f64 (rare), as the pack test does.
-                let row = |x: __m512| {
-                    let mut out = [0.0f32; WIDE];
-                    // SAFETY: `out` holds sixteen floats.
-                    unsafe { _mm512_storeu_ps(out.as_mut_ptr(), x) };
-                    out
-                };
                 let [ax, ay, bx, by, cx, cy] = [ax, ay, bx, by, cx, cy].map(row);
                 let (mut ur, mut vr, mut wr) = (row(u), row(v), row(w));
                 let mut bits = on_edge;
@@ -549,12 +550,6 @@ pub mod sixteen {
             let (bv, bw) = (_mm512_mul_ps(v, inverse), _mm512_mul_ps(w, inverse));
             let finite = _mm512_cmp_ps_mask::<_CMP_EQ_OQ>(_mm512_sub_ps(det, det), zero)
                 & _mm512_cmp_ps_mask::<_CMP_EQ_OQ>(_mm512_sub_ps(t_scaled, t_scaled), zero);
-            let row = |x: __m512| {
-                let mut out = [0.0f32; WIDE];
-                // SAFETY: `out` holds sixteen floats.
-                unsafe { _mm512_storeu_ps(out.as_mut_ptr(), x) };
-                out
-            };
             let (t, bv, bw, cut) = (row(t), row(bv), row(bw), row(self.cut));
             let mut bits = inside;
             while bits != 0 {
