@@ -69,10 +69,10 @@ pub(super) struct TileBuffers<L: RayLod> {
     of_light: Vec<usize>,
     pixel_of: Vec<u32>,
     /// The bounce's hit triangles, one per hit in `bounce`'s order, read as each packet's
-    /// hits come back. Read there, the loads of a packet's hit data (a slot's vertices,
-    /// normals, uvs, material, `log2 P_b`: up to five cache lines) are in flight together;
-    /// read at the start of each hit's shading, one hit's waited at a time, at the head of
-    /// its dependent arithmetic (docs/benchmark-log.md).
+    /// hits come back: a short loop whose loads (a slot's vertices, normals, uvs,
+    /// material, `log2 P_b`) can overlap from hit to hit, where reading them at the start
+    /// of each hit's shading put them at the head of its long dependent arithmetic. Faster
+    /// in the `bench` build, within the noise in the release build (docs/benchmark-log.md).
     triangles: Vec<HitTriangle>,
 }
 
