@@ -20,13 +20,6 @@ use crate::simd;
 /// `log2 x` for a positive normal `x` (module docs).
 #[inline(always)]
 pub fn log2(x: f64) -> f64 {
-    const MANTISSA: u64 = 0x000f_ffff_ffff_ffff;
-    const ONE_BITS: u64 = 0x3ff0_0000_0000_0000;
-    // 2^52 as bits and value: OR-ing an 11-bit integer into its mantissa and subtracting
-    // 2^52 converts it exactly (vectorisable, unlike an integer-to-float conversion of
-    // 64-bit lanes without AVX-512).
-    const TWO_52_BITS: u64 = 0x4330_0000_0000_0000;
-    const TWO_52: f64 = 4_503_599_627_370_496.0;
     let bits = x.to_bits();
     let biased = (bits >> 52) & 0x7ff;
     let exponent = f64::from_bits(TWO_52_BITS | biased) - TWO_52 - 1023.0;
@@ -42,6 +35,15 @@ pub fn log2(x: f64) -> f64 {
     }
     e + (2.0 * s * series) * std::f64::consts::LOG2_E
 }
+
+/// An `f64`'s mantissa bits, and the bits of 1.0 (a mantissa OR-ed into them is in [1, 2)).
+const MANTISSA: u64 = 0x000f_ffff_ffff_ffff;
+const ONE_BITS: u64 = 0x3ff0_0000_0000_0000;
+/// 2^52 as bits and value: OR-ing an 11-bit integer into its mantissa and subtracting 2^52
+/// converts it exactly (vectorisable, unlike an integer-to-float conversion of 64-bit lanes
+/// without AVX-512).
+const TWO_52_BITS: u64 = 0x4330_0000_0000_0000;
+const TWO_52: f64 = 4_503_599_627_370_496.0;
 
 /// The coefficients of `atanh(s) / s` in `z = s^2` (module docs), summed by Horner's rule:
 /// the last one, then the others from the highest power down.
@@ -59,7 +61,8 @@ const SERIES_BELOW: [f64; 9] = [
 ];
 
 /// Replaces every value of `values` with its [`log2`], the same bits as one at a time, in
-/// the copy [`simd::dispatch`] chooses (four lanes per instruction in the AVX2 copy).
+/// the copy [`simd::dispatch`] chooses (four lanes per instruction in the AVX2 copy, eight
+/// where it may call AVX-512 routines).
 pub fn log2_in_place(values: &mut [f64]) {
     simd::dispatch(Log2InPlace(values))
 }
@@ -98,6 +101,8 @@ impl simd::Kernel for Log2InPlace<'_> {
 mod avx512 {
     use std::arch::x86_64::*;
 
+    use super::{MANTISSA, ONE_BITS, SERIES_BELOW, SERIES_LAST, TWO_52, TWO_52_BITS};
+
     /// Replaces every value of `values` with its [`super::log2`]: the same IEEE operations
     /// on the same operands in the same order, eight lanes at a time (the tail of fewer
     /// than eight one at a time), so the same bits.
@@ -126,17 +131,12 @@ mod avx512 {
         let splat = _mm512_set1_pd;
         let bits = _mm512_castpd_si512(x);
         let biased = _mm512_and_si512(_mm512_srli_epi64::<52>(bits), _mm512_set1_epi64(0x7ff));
-        let exponent = _mm512_castsi512_pd(_mm512_or_si512(
-            _mm512_set1_epi64(0x4330_0000_0000_0000),
-            biased,
-        ));
-        let exponent = _mm512_sub_pd(
-            _mm512_sub_pd(exponent, splat(4_503_599_627_370_496.0)),
-            splat(1023.0),
-        );
+        let bits_of = |b: u64| _mm512_set1_epi64(b as i64);
+        let exponent = _mm512_castsi512_pd(_mm512_or_si512(bits_of(TWO_52_BITS), biased));
+        let exponent = _mm512_sub_pd(_mm512_sub_pd(exponent, splat(TWO_52)), splat(1023.0));
         let mantissa = _mm512_castsi512_pd(_mm512_or_si512(
-            _mm512_and_si512(bits, _mm512_set1_epi64(0x000f_ffff_ffff_ffff)),
-            _mm512_set1_epi64(0x3ff0_0000_0000_0000),
+            _mm512_and_si512(bits, bits_of(MANTISSA)),
+            bits_of(ONE_BITS),
         ));
         // `mantissa > SQRT_2`: false for NaN, as the scalar comparison.
         let high = _mm512_cmp_pd_mask::<_CMP_GT_OQ>(mantissa, splat(std::f64::consts::SQRT_2));
@@ -144,8 +144,8 @@ mod avx512 {
         let e = _mm512_mask_add_pd(exponent, high, exponent, splat(1.0));
         let s = _mm512_div_pd(_mm512_sub_pd(m, splat(1.0)), _mm512_add_pd(m, splat(1.0)));
         let z = _mm512_mul_pd(s, s);
-        let mut series = splat(super::SERIES_LAST);
-        for c in super::SERIES_BELOW {
+        let mut series = splat(SERIES_LAST);
+        for c in SERIES_BELOW {
             series = _mm512_add_pd(_mm512_mul_pd(series, z), splat(c));
         }
         let sum = _mm512_mul_pd(_mm512_mul_pd(splat(2.0), s), series);

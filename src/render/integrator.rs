@@ -369,9 +369,8 @@ impl FrameScene<'_> {
         requests: &mut Vec<ShadowRequest>,
         counters: &mut TraceCounters,
     ) -> Arrival<L> {
-        let triangle = *triangle;
-        let surface = SurfacePoint::at(&triangle, &hit, origin, direction);
-        let lod_hit = surface.lod_hit(&triangle, &hit, direction);
+        let surface = SurfacePoint::at(triangle, &hit, origin, direction);
+        let lod_hit = surface.lod_hit(triangle, &hit, direction);
         lod.arrive(&lod_hit);
         let material = &self.materials[triangle.material as usize];
         let lookup = self.texel_lookup(&lod_hit, material, &lod, counters);
@@ -386,7 +385,7 @@ impl FrameScene<'_> {
         Arrival {
             material: triangle.material,
             hit,
-            triangle: L::Kept::keep(&triangle),
+            triangle: L::Kept::keep(triangle),
             surface,
             direction,
             lod,
