@@ -99,12 +99,12 @@ static SRGB8_INDEX: LazyLock<CodeIndex> = LazyLock::new(|| CodeIndex::new(&SRGB8
 static ALPHA8_INDEX: LazyLock<CodeIndex> = LazyLock::new(|| CodeIndex::new(&ALPHA8_LUT));
 
 /// [`SRGB8_LUT`] then [`ALPHA8_LUT`] in one array, so that a texel's four channels are read
-/// from one table (`code` for red, green and blue, `ALPHA_OFFSET + code` for alpha): one
-/// AVX2 gather decodes two texels.
+/// from one table (`code` for red, green and blue, `ALPHA_OFFSET + code` for alpha), whose
+/// 2 KiB stay in the first-level cache.
 static DECODE8: LazyLock<[f32; 2 * 256]> =
     LazyLock::new(|| std::array::from_fn(|i| [&*SRGB8_LUT, &*ALPHA8_LUT][i / 256][i % 256]));
 
-/// Where the alpha table starts in [`Srgb8Tables::decode_table`].
+/// Where the alpha table starts in `DECODE8`.
 pub(super) const ALPHA_OFFSET: usize = 256;
 
 /// The two tables that decode an 8-bit sRGB image's pixels, as `expand_u8` decodes them.
@@ -129,13 +129,6 @@ impl Srgb8Tables {
             t[codes[2] as usize],
             t[ALPHA_OFFSET + codes[3] as usize],
         )
-    }
-
-    /// Both tables in one array: colour code `c` decodes to entry `c`, alpha code `a` to
-    /// entry `ALPHA_OFFSET + a`.
-    #[inline(always)]
-    pub(super) fn decode_table(&self) -> &'static [f32; 2 * 256] {
-        self.decode
     }
 
     /// The codes [`Srgb8Tables::texel`] turns into exactly `texel`, if there are any.

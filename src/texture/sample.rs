@@ -175,10 +175,10 @@ fn plan_trilinear(pyramid: &MipPyramid, uv: Vec2, lod: f32, sampler: Sampler) ->
 fn filter_planned<const AVX2: bool>(pyramid: &MipPyramid, plan: &PlannedLookup) -> Vec4 {
     let k = plan.level as usize;
     if !plan.blend {
-        return fetch::bilinear::<AVX2>(&pyramid.levels[k], &plan.taps[0]);
+        return fetch::bilinear(&pyramid.levels[k], &plan.taps[0]);
     }
     let (lower, upper) = (&pyramid.levels[k], &pyramid.levels[k + 1]);
-    fetch::trilinear::<AVX2>([lower, upper], &plan.taps, plan.frac)
+    fetch::trilinear([lower, upper], &plan.taps, plan.frac)
 }
 
 /// Hints the cache to load the texels `plan` reads.
@@ -207,7 +207,7 @@ impl Kernel for Bilinear<'_> {
     #[inline(always)]
     fn run<const AVX2: bool>(self) -> Vec4 {
         let taps = BilinearTaps::new(self.level, self.uv, self.sampler);
-        fetch::bilinear::<AVX2>(self.level, &taps)
+        fetch::bilinear(self.level, &taps)
     }
 }
 
