@@ -5,8 +5,9 @@
 //! the decoding table one by one. An AVX2 copy that decoded two texels with one gather from
 //! the table (and blended two texels per 8-lane operation) was slower on an AMD Zen 4
 //! (`cargo bench --bench texture_filter`: trilinear 47-60 ns a lookup against 40-47 with
-//! per-channel loads), and gathers are slower still on Intel CPUs with the Gather Data
-//! Sampling mitigation: a lookup's handful of table reads are cheaper as plain loads.
+//! per-channel loads; not measured on other CPUs, but Intel's microcode mitigation of Gather
+//! Data Sampling slows gathers on the CPUs it covers): a lookup's sixteen or thirty-two
+//! reads of a 2 KiB table that stays in cache are cheaper as plain loads.
 
 use glam::Vec4;
 
