@@ -59,7 +59,9 @@ pub(super) fn bilinear(level: &MipLevel, taps: &BilinearTaps) -> Vec4 {
 /// `frac` (the weight of `levels[1]`).
 #[inline(always)]
 pub(super) fn trilinear(levels: [&MipLevel; 2], taps: &[BilinearTaps; 2], frac: f32) -> Vec4 {
-    let lower = bilinear_blend(texels(levels[0], &taps[0]), taps[0].fx, taps[0].fy);
-    let upper = bilinear_blend(texels(levels[1], &taps[1]), taps[1].fx, taps[1].fy);
-    level_blend(lower, upper, frac)
+    level_blend(
+        bilinear(levels[0], &taps[0]),
+        bilinear(levels[1], &taps[1]),
+        frac,
+    )
 }

@@ -14,7 +14,8 @@
 //! where that is exact (`taps.rs`).
 //!
 //! Each public lookup is one `simd::Kernel`: the coordinates, the texel reads and the blends
-//! are compiled into a baseline and an AVX2 copy (`fetch.rs`), which compute the same bits.
+//! are compiled into a baseline and an AVX2 copy from one formula (`fetch.rs`), so the two
+//! compute the same bits.
 //!
 //! A bilinear or trilinear lookup can also be made in two steps: planned (its levels and
 //! taps computed, and the cache asked for its texels) and, later, filtered
@@ -116,8 +117,8 @@ pub(super) fn wrap(i: i64, n: i64, mode: WrapMode) -> usize {
 
 /// Trilinear lookup at `lod` (see [`MipPyramid::sample_trilinear`]).
 #[inline(always)]
-fn trilinear<const AVX2: bool>(pyramid: &MipPyramid, uv: Vec2, lod: f32, sampler: Sampler) -> Vec4 {
-    filter_planned::<AVX2>(pyramid, &plan_trilinear(pyramid, uv, lod, sampler))
+fn trilinear(pyramid: &MipPyramid, uv: Vec2, lod: f32, sampler: Sampler) -> Vec4 {
+    filter_planned(pyramid, &plan_trilinear(pyramid, uv, lod, sampler))
 }
 
 /// Where a bilinear or trilinear lookup reads: its level (or two levels, blended by
@@ -172,7 +173,7 @@ fn plan_trilinear(pyramid: &MipPyramid, uv: Vec2, lod: f32, sampler: Sampler) ->
 
 /// The lookup `plan` describes.
 #[inline(always)]
-fn filter_planned<const AVX2: bool>(pyramid: &MipPyramid, plan: &PlannedLookup) -> Vec4 {
+fn filter_planned(pyramid: &MipPyramid, plan: &PlannedLookup) -> Vec4 {
     let k = plan.level as usize;
     if !plan.blend {
         return fetch::bilinear(&pyramid.levels[k], &plan.taps[0]);
@@ -221,7 +222,7 @@ impl Kernel for Planned<'_> {
     type Output = Vec4;
     #[inline(always)]
     fn run<const AVX2: bool>(self) -> Vec4 {
-        filter_planned::<AVX2>(self.pyramid, self.plan)
+        filter_planned(self.pyramid, self.plan)
     }
 }
 
@@ -237,7 +238,7 @@ impl Kernel for Trilinear<'_> {
     type Output = Vec4;
     #[inline(always)]
     fn run<const AVX2: bool>(self) -> Vec4 {
-        trilinear::<AVX2>(self.pyramid, self.uv, self.lod, self.sampler)
+        trilinear(self.pyramid, self.uv, self.lod, self.sampler)
     }
 }
 
@@ -258,7 +259,7 @@ impl Kernel for Anisotropic<'_> {
     fn run<const AVX2: bool>(self) -> Vec4 {
         let sum = (0..self.taps).fold(Vec4::ZERO, |sum, i| {
             let uv = self.first + self.step * i as f32;
-            sum + trilinear::<AVX2>(self.pyramid, uv, self.lod, self.sampler)
+            sum + trilinear(self.pyramid, uv, self.lod, self.sampler)
         });
         sum / self.taps as f32
     }
