@@ -8,7 +8,7 @@
 use glam::Vec3;
 use rayon::prelude::*;
 
-use crate::colour::encode_srgb8;
+use crate::colour::srgb8_encoder;
 use crate::lod::{RayLod, with_lod_state};
 use crate::render::camera::Camera;
 use crate::render::integrator::{FrameScene, TraceCounters};
@@ -27,9 +27,10 @@ pub struct LinearImage {
 impl LinearImage {
     /// 8-bit sRGB RGB bytes (clamped to [0, 1], rounded).
     pub fn to_srgb8(&self) -> Vec<u8> {
+        let encoder = srgb8_encoder();
         self.pixels
             .iter()
-            .flat_map(|p| p.to_array().map(encode_srgb8))
+            .flat_map(|p| p.to_array().map(|c| encoder.encode(c)))
             .collect()
     }
 }
