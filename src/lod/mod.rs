@@ -390,14 +390,7 @@ impl KeptTriangle for HitTriangle {
 
 /// The triangle a method that keeps none sees at a bounce: NaN everywhere, so a method that
 /// read it by mistake would give NaN levels, not plausible ones.
-static NOT_KEPT: HitTriangle = HitTriangle {
-    positions: [Vec3A::NAN; 3],
-    normals: [Vec3::NAN; 3],
-    uvs: [Vec2::NAN; 3],
-    material: u32::MAX,
-    log2_pb: f32::NAN,
-    source: u32::MAX,
-};
+static NOT_KEPT: HitTriangle = HitTriangle::UNSET;
 
 impl KeptTriangle for () {
     #[inline(always)]

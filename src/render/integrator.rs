@@ -264,6 +264,21 @@ impl FrameScene<'_> {
         self.bvh.hit_triangle(hit, origin, direction)
     }
 
+    /// [`FrameScene::hit_triangle`] appended to `triangles`, written in place (see
+    /// [`HitTriangle::UNSET`] for why).
+    #[inline(always)]
+    pub fn push_hit_triangle(
+        &self,
+        hit: &mut Hit,
+        origin: Vec3A,
+        direction: Vec3A,
+        triangles: &mut Vec<HitTriangle>,
+    ) {
+        triangles.push(HitTriangle::UNSET);
+        let out = triangles.last_mut().expect("a triangle was just pushed");
+        self.bvh.write_hit_triangle(hit, origin, direction, out);
+    }
+
     /// Radiance of the primary ray through film point `(px, py)` of `camera`, traced depth
     /// first one ray at a time (its shadow rays too), with the LOD state of method `L`: the
     /// reference the film's breadth-first tiles are tested against (they must agree bit for

@@ -185,11 +185,26 @@ impl SceneBvh<'_> {
     /// barycentrics are replaced by the world-space triangle's own (see the module note).
     #[inline]
     pub fn hit_triangle(&self, hit: &mut Hit, origin: Vec3A, direction: Vec3A) -> HitTriangle {
-        let triangle = self.triangle(hit.triangle_ref());
+        let mut triangle = HitTriangle::UNSET;
+        self.write_hit_triangle(hit, origin, direction, &mut triangle);
+        triangle
+    }
+
+    /// [`SceneBvh::hit_triangle`] written field by field into `out` (see
+    /// [`HitTriangle::UNSET`] for why).
+    #[inline]
+    pub fn write_hit_triangle(
+        &self,
+        hit: &mut Hit,
+        origin: Vec3A,
+        direction: Vec3A,
+        out: &mut HitTriangle,
+    ) {
+        self.write_triangle(hit.triangle_ref(), out);
         if let SceneBvh::TwoLevel(i) = self
             && hit.instance != Hit::WORLD
         {
-            match intersect(&triangle.positions, origin, direction) {
+            match intersect(&out.positions, origin, direction) {
                 Some((t, bary)) => (hit.t, hit.bary) = (t, bary),
                 // Missed by rounding on an edge: keep the object-space answer, its
                 // barycentrics in the world winding.
@@ -199,12 +214,19 @@ impl SceneBvh<'_> {
                 None => {}
             }
         }
-        triangle
     }
 
     /// Triangle `at` in world space.
     #[inline]
     pub fn triangle(&self, at: TriangleRef) -> HitTriangle {
+        let mut triangle = HitTriangle::UNSET;
+        self.write_triangle(at, &mut triangle);
+        triangle
+    }
+
+    /// [`SceneBvh::triangle`] written field by field into `out`.
+    #[inline]
+    fn write_triangle(&self, at: TriangleRef, out: &mut HitTriangle) {
         let slot = at.slot as usize;
         let i = match self {
             SceneBvh::Flat {
@@ -212,13 +234,19 @@ impl SceneBvh<'_> {
                 accel,
                 by_vertex,
             } => {
-                return triangles.hit_triangle(slot, accel.triangle(at.slot), *by_vertex);
+                return triangles.write_hit_triangle(
+                    slot,
+                    accel.triangle(at.slot),
+                    *by_vertex,
+                    out,
+                );
             }
             SceneBvh::TwoLevel(i) if at.instance == Hit::WORLD => {
-                return i.world_triangles.hit_triangle(
+                return i.world_triangles.write_hit_triangle(
                     slot,
                     i.world.triangle(at.slot),
                     i.by_vertex,
+                    out,
                 );
             }
             SceneBvh::TwoLevel(i) => i,
@@ -233,9 +261,8 @@ impl SceneBvh<'_> {
         let (positions, normals, uvs) = shading
             .placement
             .place_triangle(object.0, object.1, object.2);
-        let material = mesh.material[slot];
         let object_log2_pb = mesh.log2_pb[slot];
-        let log2_pb = if !i.needs_log2_pb || object_log2_pb.is_nan() {
+        out.log2_pb = if !i.needs_log2_pb || object_log2_pb.is_nan() {
             0.0 // untextured, as the flat arrays hold it
         } else {
             match shading.pb {
@@ -247,13 +274,10 @@ impl SceneBvh<'_> {
                 PbRule::World => log2_pb(positions, uvs, shading.texture_size, i.footprint),
             }
         };
-        HitTriangle {
-            positions,
-            normals,
-            uvs,
-            material,
-            log2_pb,
-            source: shading.source_base + mesh.source[slot],
-        }
+        out.positions = positions;
+        out.normals = normals;
+        out.uvs = uvs;
+        out.material = mesh.material[slot];
+        out.source = shading.source_base + mesh.source[slot];
     }
 }

@@ -61,14 +61,18 @@ struct Waiting<L: RayLod> {
 pub(super) struct TileBuffers<L: RayLod> {
     samples: Vec<(u32, u32, u32)>,
     vertices: Vec<Combine>,
-    bounce: Vec<(Pending<L>, Option<Hit>)>,
+    /// The bounce's rays, and their hits in the same order (written by the walks in place:
+    /// entries copied in pairs were built on the stack and read back as wider loads than
+    /// their fields were stored with, a store-forwarding stall per ray).
+    rays: Vec<Pending<L>>,
+    hits: Vec<Option<Hit>>,
     waiting: Vec<Waiting<L>>,
     requests: Vec<ShadowRequest>,
     spawned: Vec<Spawned<L>>,
     next: Vec<Pending<L>>,
     of_light: Vec<usize>,
     pixel_of: Vec<u32>,
-    /// The bounce's hit triangles, one per hit in `bounce`'s order, read as each packet's
+    /// The bounce's hit triangles, one per hit in `hits`' order, read as each packet's
     /// hits come back: a short loop whose loads (a slot's vertices, normals, uvs,
     /// material, `log2 P_b`) can overlap from hit to hit, where reading them at the start
     /// of each hit's shading put them at the head of its long dependent arithmetic. Faster
@@ -81,7 +85,8 @@ impl<L: RayLod> Default for TileBuffers<L> {
         TileBuffers {
             samples: Vec::new(),
             vertices: Vec::new(),
-            bounce: Vec::new(),
+            rays: Vec::new(),
+            hits: Vec::new(),
             waiting: Vec::new(),
             requests: Vec::new(),
             spawned: Vec::new(),
@@ -105,7 +110,8 @@ pub(super) fn trace_tile<L: RayLod>(
     let TileBuffers {
         samples,
         vertices,
-        bounce,
+        rays,
+        hits,
         waiting,
         requests,
         spawned,
@@ -124,13 +130,13 @@ pub(super) fn trace_tile<L: RayLod>(
     );
     vertices.clear();
     vertices.resize(samples.len(), Combine::EMPTY);
-    primary_bounce::<L>(scene, camera, spp, samples, counters, bounce, triangles);
-    while !bounce.is_empty() {
+    primary_bounce::<L>(scene, camera, spp, samples, counters, rays, hits, triangles);
+    while !rays.is_empty() {
         // Arrive at every hit; a miss is the background.
         waiting.clear();
         requests.clear();
         let mut hit_triangles = triangles.iter();
-        for (pending, hit) in bounce.drain(..) {
+        for (pending, &hit) in rays.iter().zip(hits.iter()) {
             let Some(hit) = hit else {
                 vertices[pending.vertex as usize] = Combine::leaf(scene.background);
                 continue;
@@ -182,7 +188,8 @@ pub(super) fn trace_tile<L: RayLod>(
                 depth: w.arrival.depth() + 1,
             }));
         }
-        trace_bounce(scene, next, counters, bounce, triangles);
+        std::mem::swap(rays, next);
+        trace_bounce(scene, rays, counters, hits, triangles);
     }
     // Last vertex first: children are numbered after their parents.
     for v in (0..vertices.len()).rev() {
@@ -206,99 +213,86 @@ pub(super) fn trace_tile<L: RayLod>(
     pixels
 }
 
-/// The samples' primary rays traced as packets of up to [`PACKET`] (pixel by pixel, each
-/// pixel's samples in order: a 16 x 4 block at one sample per pixel), each with its hit,
-/// into `bounce`, and each hit's triangle into `triangles` (both cleared first).
+/// The samples' primary rays into `rays` (pixel by pixel, each pixel's samples in order),
+/// traced as packets of up to [`PACKET`] (a 16 x 4 block at one sample per pixel), their
+/// hits into `hits` and each hit's triangle into `triangles` (all three cleared first).
+#[allow(clippy::too_many_arguments)]
 fn primary_bounce<L: RayLod>(
     scene: &FrameScene,
     camera: &Camera,
     spp: u32,
     samples: &[(u32, u32, u32)],
     counters: &mut TraceCounters,
-    bounce: &mut Vec<(Pending<L>, Option<Hit>)>,
+    rays: &mut Vec<Pending<L>>,
+    hits: &mut Vec<Option<Hit>>,
     triangles: &mut Vec<HitTriangle>,
 ) {
-    bounce.clear();
-    triangles.clear();
-    let mut rays = [(Vec3A::ZERO, Vec3A::ZERO); PACKET];
-    let mut hits = [None; PACKET];
-    for (chunk_index, chunk) in samples.chunks(PACKET).enumerate() {
-        for (ray, &(x, y, i)) in rays.iter_mut().zip(chunk) {
-            let (sx, sy) = sample_offset(x, y, i, spp);
-            *ray = (
-                camera.eye,
-                camera.primary_direction(x as f32 + sx, y as f32 + sy),
-            );
+    rays.clear();
+    rays.extend(samples.iter().enumerate().map(|(k, &(x, y, i))| {
+        let (sx, sy) = sample_offset(x, y, i, spp);
+        let (px, py) = (x as f32 + sx, y as f32 + sy);
+        Pending {
+            ray: Spawned {
+                class: RayClass::Primary,
+                origin: camera.eye,
+                direction: camera.primary_direction(px, py),
+                lod: L::primary(&scene.lod_camera, px, py),
+            },
+            vertex: k as u32,
+            pixel: y * camera.width + x,
+            depth: 0,
         }
-        let n = chunk.len();
-        scene
-            .bvh
-            .closest_hits(&rays[..n], f32::INFINITY, &mut hits[..n]);
-        for (k, &(x, y, i)) in chunk.iter().enumerate() {
-            let (sx, sy) = sample_offset(x, y, i, spp);
-            let (origin, direction) = rays[k];
-            let pixel = y * camera.width + x;
-            counters.rays += 1;
-            if let Some(log) = &mut counters.log {
-                log.closest(
-                    pixel,
-                    RayClass::Primary,
-                    origin,
-                    direction,
-                    f32::INFINITY,
-                    hits[k],
-                );
-            }
-            let lod = L::primary(&scene.lod_camera, x as f32 + sx, y as f32 + sy);
-            if let Some(hit) = &mut hits[k] {
-                triangles.push(scene.hit_triangle(hit, origin, direction));
-            }
-            bounce.push((
-                Pending {
-                    ray: Spawned {
-                        class: RayClass::Primary,
-                        origin,
-                        direction,
-                        lod,
-                    },
-                    vertex: (chunk_index * PACKET + k) as u32,
-                    pixel,
-                    depth: 0,
-                },
-                hits[k],
-            ));
-        }
-    }
+    }));
+    trace_packets(scene, rays, counters, hits, triangles, |rays, hits| {
+        scene.bvh.closest_hits(rays, f32::INFINITY, hits)
+    });
 }
 
-/// A bounce's reflected and refracted rays, each with its hit, into `bounce`, and each
-/// hit's triangle into `triangles` (both cleared first): traced as packets of up to [`PACKET`] in the order they were spawned
-/// (`SceneBvh::closest_hits_scattered`: each ray finds exactly what it finds alone).
+/// A bounce's reflected and refracted rays (`rays`, in the order they were spawned) traced
+/// as packets of up to [`PACKET`] (`SceneBvh::closest_hits_scattered`: each ray finds
+/// exactly what it finds alone), their hits into `hits` and each hit's triangle into
+/// `triangles` (both cleared first).
 fn trace_bounce<L: RayLod>(
     scene: &FrameScene,
-    pending: &[Pending<L>],
+    rays: &[Pending<L>],
     counters: &mut TraceCounters,
-    bounce: &mut Vec<(Pending<L>, Option<Hit>)>,
+    hits: &mut Vec<Option<Hit>>,
     triangles: &mut Vec<HitTriangle>,
 ) {
-    bounce.clear();
+    trace_packets(scene, rays, counters, hits, triangles, |rays, hits| {
+        scene.bvh.closest_hits_scattered(rays, f32::INFINITY, hits)
+    });
+}
+
+/// `rays` traced by `closest` in packets of up to [`PACKET`], the hits written in place into
+/// `hits` (cleared and sized first); each ray counted and logged, and each hit's triangle
+/// appended to `triangles` (cleared first) as its packet's hits come back. Reading a
+/// hit's triangle may replace its distance and barycentrics (`SceneBvh::hit_triangle`);
+/// the log records the hit as the walk returned it.
+#[inline(always)]
+fn trace_packets<L: RayLod>(
+    scene: &FrameScene,
+    rays: &[Pending<L>],
+    counters: &mut TraceCounters,
+    hits: &mut Vec<Option<Hit>>,
+    triangles: &mut Vec<HitTriangle>,
+    mut closest: impl FnMut(&[(Vec3A, Vec3A)], &mut [Option<Hit>]),
+) {
+    hits.clear();
+    hits.resize(rays.len(), None);
     triangles.clear();
-    let mut rays = [(Vec3A::ZERO, Vec3A::ZERO); PACKET];
-    let mut hits = [None; PACKET];
-    for packet in pending.chunks(PACKET) {
-        for (ray, p) in rays.iter_mut().zip(packet) {
+    let mut packet_rays = [(Vec3A::ZERO, Vec3A::ZERO); PACKET];
+    for (packet, packet_hits) in rays.chunks(PACKET).zip(hits.chunks_mut(PACKET)) {
+        for (ray, p) in packet_rays.iter_mut().zip(packet) {
             *ray = (p.ray.origin, p.ray.direction);
         }
-        let n = packet.len();
-        scene
-            .bvh
-            .closest_hits_scattered(&rays[..n], f32::INFINITY, &mut hits[..n]);
-        for (p, hit) in packet.iter().zip(&mut hits[..n]) {
-            let ray = &p.ray;
+        closest(&packet_rays[..packet.len()], packet_hits);
+        for (pending, hit) in packet.iter().zip(packet_hits) {
+            let ray = &pending.ray;
             counters.rays += 1;
             if let Some(log) = &mut counters.log {
                 log.closest(
-                    p.pixel,
+                    pending.pixel,
                     ray.class,
                     ray.origin,
                     ray.direction,
@@ -307,9 +301,8 @@ fn trace_bounce<L: RayLod>(
                 );
             }
             if let Some(hit) = hit {
-                triangles.push(scene.hit_triangle(hit, ray.origin, ray.direction));
+                scene.push_hit_triangle(hit, ray.origin, ray.direction, triangles);
             }
-            bounce.push((*p, *hit));
         }
     }
 }
