@@ -436,8 +436,9 @@ impl FrameScene<'_> {
 
     /// Sums the hit's own light (its shadow rays traced, `requests` as `arrive` appended
     /// them) and spawns the reflected and refracted rays: writes the vertex's [`Combine`]
-    /// into `combine` (in place, where the caller keeps it), whose steps name the spawned rays as `first_child`, `first_child + 1`, ... in the
-    /// order they are pushed to `spawned`.
+    /// into `combine` (in place, where the caller keeps it), whose steps name the spawned
+    /// rays as `first_child`, `first_child + 1`, ... in the order they are appended to
+    /// `spawned` (after the rays it already holds).
     pub(super) fn finish<L: RayLod>(
         &self,
         arrival: &Arrival<L>,
@@ -452,6 +453,7 @@ impl FrameScene<'_> {
         let lod_hit = surface.lod_hit(arrival.triangle.triangle(), &arrival.hit, direction);
         let mut children = Children {
             first: first_child,
+            before: spawned.len(),
             spawned,
         };
         match material.model {
@@ -719,6 +721,8 @@ fn direct_light(
 /// The rays a hit spawns, numbered from `first` in the order they are pushed.
 struct Children<'a, L> {
     first: u32,
+    /// How many rays `spawned` held before this hit's.
+    before: usize,
     spawned: &'a mut Vec<Spawned<L>>,
 }
 
@@ -727,7 +731,7 @@ impl<L: RayLod> Children<'_, L> {
     /// points to; returns its number.
     fn spawn(&mut self, class: RayClass, surface: &SurfacePoint, direction: Vec3A, lod: L) -> u32 {
         let origin = surface.position + surface.face_normal * surface.epsilon;
-        let index = self.spawned.len() as u32;
+        let index = (self.spawned.len() - self.before) as u32;
         self.spawned.push(Spawned {
             class,
             origin,

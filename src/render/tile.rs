@@ -33,10 +33,10 @@ use crate::render::integrator::{
 };
 use crate::render::ray_log::RayClass;
 
-/// A ray waiting to be traced: its vertex, the sample it serves, and how deep it is.
+/// Where a ray waiting to be traced belongs: its vertex, the sample it serves, and how
+/// deep it is (the ray itself is the entry of the same index in the bounce's rays).
 #[derive(Clone, Copy)]
-struct Pending<L> {
-    ray: Spawned<L>,
+struct Pending {
     vertex: u32,
     /// Pixel index (`y * width + x`) of the sample, for the ray log.
     pixel: u32,
@@ -61,15 +61,18 @@ struct Waiting<L: RayLod> {
 pub(super) struct TileBuffers<L: RayLod> {
     samples: Vec<(u32, u32, u32)>,
     vertices: Vec<Combine>,
-    /// The bounce's rays, and their hits in the same order (written by the walks in place:
-    /// entries copied in pairs were built on the stack and read back as wider loads than
-    /// their fields were stored with, a store-forwarding stall per ray).
-    rays: Vec<Pending<L>>,
+    /// The bounce's rays, where each belongs, and their hits, in the same order. Each is
+    /// written in place by what makes it (the shading spawns the rays into the next
+    /// bounce's list, the walks write the hits): entries copied from one list into another
+    /// were built or freshly stored with narrow fields and read back as 16-byte loads,
+    /// which the CPU cannot forward (a stall per ray).
+    rays: Vec<Spawned<L>>,
+    pending: Vec<Pending>,
     hits: Vec<Option<Hit>>,
+    next_rays: Vec<Spawned<L>>,
+    next_pending: Vec<Pending>,
     waiting: Vec<Waiting<L>>,
     requests: Vec<ShadowRequest>,
-    spawned: Vec<Spawned<L>>,
-    next: Vec<Pending<L>>,
     of_light: Vec<usize>,
     pixel_of: Vec<u32>,
     /// The bounce's hit triangles, one per hit in `hits`' order, read as each packet's
@@ -86,11 +89,12 @@ impl<L: RayLod> Default for TileBuffers<L> {
             samples: Vec::new(),
             vertices: Vec::new(),
             rays: Vec::new(),
+            pending: Vec::new(),
             hits: Vec::new(),
+            next_rays: Vec::new(),
+            next_pending: Vec::new(),
             waiting: Vec::new(),
             requests: Vec::new(),
-            spawned: Vec::new(),
-            next: Vec::new(),
             of_light: Vec::new(),
             pixel_of: Vec::new(),
             triangles: Vec::new(),
@@ -111,11 +115,12 @@ pub(super) fn trace_tile<L: RayLod>(
         samples,
         vertices,
         rays,
+        pending,
         hits,
+        next_rays,
+        next_pending,
         waiting,
         requests,
-        spawned,
-        next,
         of_light,
         pixel_of,
         triangles,
@@ -130,20 +135,21 @@ pub(super) fn trace_tile<L: RayLod>(
     );
     vertices.clear();
     vertices.resize(samples.len(), Combine::EMPTY);
-    primary_bounce::<L>(scene, camera, spp, samples, counters, rays, hits, triangles);
+    primary_bounce::<L>(
+        scene, camera, spp, samples, counters, rays, pending, hits, triangles,
+    );
     while !rays.is_empty() {
         // Arrive at every hit; a miss is the background.
         waiting.clear();
         requests.clear();
         let mut hit_triangles = triangles.iter();
-        for (pending, &hit) in rays.iter().zip(hits.iter()) {
+        for ((ray, pending), &hit) in rays.iter().zip(pending.iter()).zip(hits.iter()) {
             let Some(hit) = hit else {
                 vertices[pending.vertex as usize] = Combine::leaf(scene.background);
                 continue;
             };
             let triangle = hit_triangles.next().expect("a triangle per hit");
             let first = requests.len();
-            let ray = &pending.ray;
             let arrival = scene.arrive_at(
                 triangle,
                 hit,
@@ -164,9 +170,10 @@ pub(super) fn trace_tile<L: RayLod>(
         }
         trace_shadows(scene, waiting, requests, counters, of_light, pixel_of);
         // Finish every hit and spawn the next bounce.
-        next.clear();
+        next_rays.clear();
+        next_pending.clear();
         for w in waiting.iter() {
-            spawned.clear();
+            let first_ray = next_rays.len();
             let first_child = vertices.len() as u32;
             // Written in place: a combine made on the stack and then copied stalled on
             // reading its small fields' fresh stores back as 16-byte loads.
@@ -174,22 +181,23 @@ pub(super) fn trace_tile<L: RayLod>(
                 &w.arrival,
                 &requests[w.first..w.end],
                 first_child,
-                spawned,
+                next_rays,
                 &mut vertices[w.vertex as usize],
             );
             // The children's vertices, filled when their hits are finished; one resize and
             // one extend each (a push per child rebuilt the empty combine on the stack
             // around the push's possible growth and copied it).
-            vertices.resize(vertices.len() + spawned.len(), Combine::EMPTY);
-            next.extend(spawned.iter().enumerate().map(|(k, ray)| Pending {
-                ray: *ray,
-                vertex: first_child + k as u32,
+            let children = (next_rays.len() - first_ray) as u32;
+            vertices.resize(vertices.len() + children as usize, Combine::EMPTY);
+            next_pending.extend((0..children).map(|k| Pending {
+                vertex: first_child + k,
                 pixel: w.pixel,
                 depth: w.arrival.depth() + 1,
             }));
         }
-        std::mem::swap(rays, next);
-        trace_bounce(scene, rays, counters, hits, triangles);
+        std::mem::swap(rays, next_rays);
+        std::mem::swap(pending, next_pending);
+        trace_bounce(scene, rays, pending, counters, hits, triangles);
     }
     // Last vertex first: children are numbered after their parents.
     for v in (0..vertices.len()).rev() {
@@ -223,29 +231,37 @@ fn primary_bounce<L: RayLod>(
     spp: u32,
     samples: &[(u32, u32, u32)],
     counters: &mut TraceCounters,
-    rays: &mut Vec<Pending<L>>,
+    rays: &mut Vec<Spawned<L>>,
+    pending: &mut Vec<Pending>,
     hits: &mut Vec<Option<Hit>>,
     triangles: &mut Vec<HitTriangle>,
 ) {
     rays.clear();
-    rays.extend(samples.iter().enumerate().map(|(k, &(x, y, i))| {
+    rays.extend(samples.iter().map(|&(x, y, i)| {
         let (sx, sy) = sample_offset(x, y, i, spp);
         let (px, py) = (x as f32 + sx, y as f32 + sy);
-        Pending {
-            ray: Spawned {
-                class: RayClass::Primary,
-                origin: camera.eye,
-                direction: camera.primary_direction(px, py),
-                lod: L::primary(&scene.lod_camera, px, py),
-            },
-            vertex: k as u32,
-            pixel: y * camera.width + x,
-            depth: 0,
+        Spawned {
+            class: RayClass::Primary,
+            origin: camera.eye,
+            direction: camera.primary_direction(px, py),
+            lod: L::primary(&scene.lod_camera, px, py),
         }
     }));
-    trace_packets(scene, rays, counters, hits, triangles, |rays, hits| {
-        scene.bvh.closest_hits(rays, f32::INFINITY, hits)
-    });
+    pending.clear();
+    pending.extend(samples.iter().enumerate().map(|(k, &(x, y, _))| Pending {
+        vertex: k as u32,
+        pixel: y * camera.width + x,
+        depth: 0,
+    }));
+    trace_packets(
+        scene,
+        rays,
+        pending,
+        counters,
+        hits,
+        triangles,
+        |rays, hits| scene.bvh.closest_hits(rays, f32::INFINITY, hits),
+    );
 }
 
 /// A bounce's reflected and refracted rays (`rays`, in the order they were spawned) traced
@@ -254,14 +270,21 @@ fn primary_bounce<L: RayLod>(
 /// `triangles` (both cleared first).
 fn trace_bounce<L: RayLod>(
     scene: &FrameScene,
-    rays: &[Pending<L>],
+    rays: &[Spawned<L>],
+    pending: &[Pending],
     counters: &mut TraceCounters,
     hits: &mut Vec<Option<Hit>>,
     triangles: &mut Vec<HitTriangle>,
 ) {
-    trace_packets(scene, rays, counters, hits, triangles, |rays, hits| {
-        scene.bvh.closest_hits_scattered(rays, f32::INFINITY, hits)
-    });
+    trace_packets(
+        scene,
+        rays,
+        pending,
+        counters,
+        hits,
+        triangles,
+        |rays, hits| scene.bvh.closest_hits_scattered(rays, f32::INFINITY, hits),
+    );
 }
 
 /// `rays` traced by `closest` in packets of up to [`PACKET`], the hits written in place into
@@ -272,7 +295,8 @@ fn trace_bounce<L: RayLod>(
 #[inline(always)]
 fn trace_packets<L: RayLod>(
     scene: &FrameScene,
-    rays: &[Pending<L>],
+    rays: &[Spawned<L>],
+    pending: &[Pending],
     counters: &mut TraceCounters,
     hits: &mut Vec<Option<Hit>>,
     triangles: &mut Vec<HitTriangle>,
@@ -282,13 +306,13 @@ fn trace_packets<L: RayLod>(
     hits.resize(rays.len(), None);
     triangles.clear();
     let mut packet_rays = [(Vec3A::ZERO, Vec3A::ZERO); PACKET];
-    for (packet, packet_hits) in rays.chunks(PACKET).zip(hits.chunks_mut(PACKET)) {
-        for (ray, p) in packet_rays.iter_mut().zip(packet) {
-            *ray = (p.ray.origin, p.ray.direction);
+    let packets = rays.chunks(PACKET).zip(pending.chunks(PACKET));
+    for ((packet, packet_pending), packet_hits) in packets.zip(hits.chunks_mut(PACKET)) {
+        for (traced, ray) in packet_rays.iter_mut().zip(packet) {
+            *traced = (ray.origin, ray.direction);
         }
         closest(&packet_rays[..packet.len()], packet_hits);
-        for (pending, hit) in packet.iter().zip(packet_hits) {
-            let ray = &pending.ray;
+        for ((ray, pending), hit) in packet.iter().zip(packet_pending).zip(packet_hits) {
             counters.rays += 1;
             if let Some(log) = &mut counters.log {
                 log.closest(
