@@ -56,7 +56,8 @@ const FIRST_BUCKET: u32 = SMALLEST_BUCKETED.to_bits() >> BUCKET_SHIFT;
 const BUCKETS: usize = ((1.0f32.to_bits() >> BUCKET_SHIFT) - FIRST_BUCKET) as usize;
 
 /// The formula's code boundaries: `lowest[k]` is the least `f32` that encodes as `k` or
-/// more, and `bucket_code[b]` the code of bucket `b`'s least value.
+/// more (`lowest[256]` is +inf, so the comparison for a value of code 255 is false), and
+/// `bucket_code[b]` the code of bucket `b`'s least value.
 pub struct SrgbEncoder {
     lowest: [f32; 257],
     bucket_code: [u8; BUCKETS],
