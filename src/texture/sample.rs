@@ -34,15 +34,24 @@ use crate::simd::{Kernel, dispatch};
 /// overflow); beyond it the exact f64 reduction below is used.
 const REPEAT_FAST_LIMIT: f64 = 1e15;
 
-/// The two texel indices (already wrapped into `0..n`) and the weight of the second one,
-/// for a lookup at texture coordinate `t` along an axis of `n` texels.
-#[inline(always)]
+/// [`axis_in`] as the baseline copy computes it.
+#[cfg(test)]
 pub(super) fn axis(t: f32, n: u32, mode: WrapMode) -> (usize, usize, f32) {
+    axis_in::<false>(t, n, mode)
+}
+
+/// The two texel indices (already wrapped into `0..n`) and the weight of the second one,
+/// for a lookup at texture coordinate `t` along an axis of `n` texels, as the kernels'
+/// copies compute them: the AVX2 copy (which has SSE4.1's rounding instructions) takes the
+/// floor in one instruction instead of [`floor`]'s conversions. The floor is exact either
+/// way, so both copies give the same bits.
+#[inline(always)]
+pub(super) fn axis_in<const AVX2: bool>(t: f32, n: u32, mode: WrapMode) -> (usize, usize, f32) {
     // Non-finite coordinates would poison the weights; 0 is an arbitrary but valid point.
     let t = if t.is_finite() { f64::from(t) } else { 0.0 };
     let n_f = f64::from(n);
     let x = t * n_f - 0.5;
-    let x0 = floor(x);
+    let x0 = if AVX2 { x.floor() } else { floor(x) };
     let frac = (x - x0) as f32;
     // Fast path: both texels inside the level (the common case, since UVs are rebased per
     // triangle near [0, 1]): no wrapping needed, and the result equals the wrapped one.
@@ -117,8 +126,8 @@ pub(super) fn wrap(i: i64, n: i64, mode: WrapMode) -> usize {
 
 /// Trilinear lookup at `lod` (see [`MipPyramid::sample_trilinear`]).
 #[inline(always)]
-fn trilinear(pyramid: &MipPyramid, uv: Vec2, lod: f32, sampler: Sampler) -> Vec4 {
-    filter_planned(pyramid, &plan_trilinear(pyramid, uv, lod, sampler))
+fn trilinear<const AVX2: bool>(pyramid: &MipPyramid, uv: Vec2, lod: f32, sampler: Sampler) -> Vec4 {
+    filter_planned(pyramid, &plan_trilinear::<AVX2>(pyramid, uv, lod, sampler))
 }
 
 /// Where a bilinear or trilinear lookup reads: its level (or two levels, blended by
@@ -137,8 +146,13 @@ pub struct PlannedLookup {
 
 /// The plan of a bilinear lookup in level `k` (in range).
 #[inline(always)]
-fn plan_bilinear(pyramid: &MipPyramid, k: usize, uv: Vec2, sampler: Sampler) -> PlannedLookup {
-    let taps = BilinearTaps::new(&pyramid.levels[k], uv, sampler);
+fn plan_bilinear<const AVX2: bool>(
+    pyramid: &MipPyramid,
+    k: usize,
+    uv: Vec2,
+    sampler: Sampler,
+) -> PlannedLookup {
+    let taps = BilinearTaps::new_in::<AVX2>(&pyramid.levels[k], uv, sampler);
     PlannedLookup {
         level: k as u32,
         blend: false,
@@ -149,7 +163,12 @@ fn plan_bilinear(pyramid: &MipPyramid, k: usize, uv: Vec2, sampler: Sampler) -> 
 
 /// The plan of a trilinear lookup at `lod`.
 #[inline(always)]
-fn plan_trilinear(pyramid: &MipPyramid, uv: Vec2, lod: f32, sampler: Sampler) -> PlannedLookup {
+fn plan_trilinear<const AVX2: bool>(
+    pyramid: &MipPyramid,
+    uv: Vec2,
+    lod: f32,
+    sampler: Sampler,
+) -> PlannedLookup {
     let lod = pyramid.clamp_level(lod);
     // `lod` is in [0, last], where truncation is the floor (without a libm call).
     let k = lod as usize;
@@ -158,15 +177,15 @@ fn plan_trilinear(pyramid: &MipPyramid, uv: Vec2, lod: f32, sampler: Sampler) ->
     if frac == 0.0 || k + 1 >= levels.len() {
         // Integer level (including 0, magnification, and the last level): no blend, so
         // integer LODs agree exactly with `sample_bilinear`.
-        return plan_bilinear(pyramid, k, uv, sampler);
+        return plan_bilinear::<AVX2>(pyramid, k, uv, sampler);
     }
     PlannedLookup {
         level: k as u32,
         blend: true,
         frac,
         taps: [
-            BilinearTaps::new(&levels[k], uv, sampler),
-            BilinearTaps::new(&levels[k + 1], uv, sampler),
+            BilinearTaps::new_in::<AVX2>(&levels[k], uv, sampler),
+            BilinearTaps::new_in::<AVX2>(&levels[k + 1], uv, sampler),
         ],
     }
 }
@@ -207,8 +226,44 @@ impl Kernel for Bilinear<'_> {
     type Output = Vec4;
     #[inline(always)]
     fn run<const AVX2: bool>(self) -> Vec4 {
-        let taps = BilinearTaps::new(self.level, self.uv, self.sampler);
+        let taps = BilinearTaps::new_in::<AVX2>(self.level, self.uv, self.sampler);
         fetch::bilinear(self.level, &taps)
+    }
+}
+
+/// [`MipPyramid::plan_bilinear`] as a kernel (the level in range).
+struct PlanBilinear<'a> {
+    pyramid: &'a MipPyramid,
+    level: usize,
+    uv: Vec2,
+    sampler: Sampler,
+}
+
+impl Kernel for PlanBilinear<'_> {
+    type Output = PlannedLookup;
+    #[inline(always)]
+    fn run<const AVX2: bool>(self) -> PlannedLookup {
+        let plan = plan_bilinear::<AVX2>(self.pyramid, self.level, self.uv, self.sampler);
+        prefetch_planned(self.pyramid, &plan);
+        plan
+    }
+}
+
+/// [`MipPyramid::plan_trilinear`] as a kernel.
+struct PlanTrilinear<'a> {
+    pyramid: &'a MipPyramid,
+    uv: Vec2,
+    lod: f32,
+    sampler: Sampler,
+}
+
+impl Kernel for PlanTrilinear<'_> {
+    type Output = PlannedLookup;
+    #[inline(always)]
+    fn run<const AVX2: bool>(self) -> PlannedLookup {
+        let plan = plan_trilinear::<AVX2>(self.pyramid, self.uv, self.lod, self.sampler);
+        prefetch_planned(self.pyramid, &plan);
+        plan
     }
 }
 
@@ -238,7 +293,7 @@ impl Kernel for Trilinear<'_> {
     type Output = Vec4;
     #[inline(always)]
     fn run<const AVX2: bool>(self) -> Vec4 {
-        trilinear(self.pyramid, self.uv, self.lod, self.sampler)
+        trilinear::<AVX2>(self.pyramid, self.uv, self.lod, self.sampler)
     }
 }
 
@@ -259,7 +314,7 @@ impl Kernel for Anisotropic<'_> {
     fn run<const AVX2: bool>(self) -> Vec4 {
         let sum = (0..self.taps).fold(Vec4::ZERO, |sum, i| {
             let uv = self.first + self.step * i as f32;
-            sum + trilinear(self.pyramid, uv, self.lod, self.sampler)
+            sum + trilinear::<AVX2>(self.pyramid, uv, self.lod, self.sampler)
         });
         sum / self.taps as f32
     }
@@ -296,18 +351,27 @@ impl MipPyramid {
     /// needed only once the hit's shadow rays are traced) plans it first, so the texels'
     /// cache misses overlap the work in between instead of stalling the lookup, and the
     /// coordinates are computed once.
+    ///
+    /// Planned in the kernels' SIMD copy: a plan is mostly floors and conversions, which the
+    /// AVX2 copy's rounding instructions shorten (the same bits in every copy).
     pub fn plan_bilinear(&self, level: usize, uv: Vec2, sampler: Sampler) -> PlannedLookup {
-        let plan = plan_bilinear(self, level.min(self.levels.len() - 1), uv, sampler);
-        prefetch_planned(self, &plan);
-        plan
+        dispatch(PlanBilinear {
+            pyramid: self,
+            level: level.min(self.levels.len() - 1),
+            uv,
+            sampler,
+        })
     }
 
     /// [`Self::plan_bilinear`] for [`Self::sample_trilinear`] (one level or two, chosen as
     /// the lookup chooses them).
     pub fn plan_trilinear(&self, uv: Vec2, lod: f32, sampler: Sampler) -> PlannedLookup {
-        let plan = plan_trilinear(self, uv, lod, sampler);
-        prefetch_planned(self, &plan);
-        plan
+        dispatch(PlanTrilinear {
+            pyramid: self,
+            uv,
+            lod,
+            sampler,
+        })
     }
 
     /// The lookup `plan` describes (planned on this pyramid): bit for bit what the
@@ -888,11 +952,14 @@ mod tests {
                     sum + reference_trilinear(p, first + step * t as f32, lod, s)
                 }) / taps as f32;
                 let clamped = level.min(p.level_count() - 1);
-                // Planned and filtered later: the public plans (which also prefetch) are
-                // the kernels' plans.
+                // Planned and filtered later: the public plans (which also prefetch, in
+                // the AVX2 copy where the CPU has it) are the baseline copy's plans, and
+                // so is the other copy's, run here outside its kernel.
                 let plans = (p.plan_trilinear(uv, lod, s), p.plan_bilinear(level, uv, s));
-                assert_eq!(plans.0, plan_trilinear(p, uv, lod, s));
-                assert_eq!(plans.1, plan_bilinear(p, clamped, uv, s));
+                assert_eq!(plans.0, plan_trilinear::<false>(p, uv, lod, s));
+                assert_eq!(plans.1, plan_bilinear::<false>(p, clamped, uv, s));
+                assert_eq!(plans.0, plan_trilinear::<true>(p, uv, lod, s));
+                assert_eq!(plans.1, plan_bilinear::<true>(p, clamped, uv, s));
                 let planned = || {
                     (
                         Planned {

@@ -1,8 +1,8 @@
 //! Where a bilinear lookup reads in a level: four texel indices and two weights.
 //!
-//! Along each axis the answer is `sample::axis`'s, bit for bit: the texel coordinate
+//! Along each axis the answer is `sample::axis_in`'s, bit for bit: the texel coordinate
 //! `x = t * n - 0.5` in f64 (see `sample.rs` for why), its floor and fraction, wrapped.
-//! [`axis_taps`] reaches it in f32 when the side `n` is a power of two, the coordinate is
+//! [`axis_taps_in`] reaches it in f32 when the side `n` is a power of two, the coordinate is
 //! moderate and no wrap mode but Repeat has to act (the common case: tiled or not, the
 //! lookup lands in the image or repeats it):
 //! - `p = t * n` is exact in f32 (a power of two only moves the exponent) when
@@ -15,12 +15,14 @@
 //!   the same real number, and its conversion to f32 rounds nothing.
 //!
 //! Everything else (other sides, `|p| < 0.5`, huge or non-finite coordinates, Clamp and
-//! Mirror outside the image) goes to `sample::axis`. The tests check the shortcut against
+//! Mirror outside the image) goes to `sample::axis_in`. The tests check the shortcut against
 //! it on edge and random coordinates (`shortcut_is_exactly_the_f64_axis`).
 
 use glam::Vec2;
 
+#[cfg(test)]
 use super::sample::axis;
+use super::sample::axis_in;
 use super::{MipLevel, Sampler, WrapMode};
 
 /// What a bilinear lookup reads in one level.
@@ -42,11 +44,18 @@ pub(super) struct BilinearTaps {
 type AxisTaps = (usize, usize, f32);
 
 impl BilinearTaps {
-    /// The taps at any `uv` with any wrap modes.
-    #[inline(always)]
+    /// [`BilinearTaps::new_in`] as the baseline copy computes it.
+    #[cfg(test)]
     pub fn new(level: &MipLevel, uv: Vec2, sampler: Sampler) -> BilinearTaps {
-        let (x0, x1, fx) = axis_taps(uv.x, level.width, sampler.wrap_s);
-        let (y0, y1, fy) = axis_taps(uv.y, level.height, sampler.wrap_t);
+        Self::new_in::<false>(level, uv, sampler)
+    }
+
+    /// The taps at any `uv` with any wrap modes, as the kernels' copies compute them (the
+    /// same bits in each, see [`axis_taps_in`]).
+    #[inline(always)]
+    pub fn new_in<const AVX2: bool>(level: &MipLevel, uv: Vec2, sampler: Sampler) -> BilinearTaps {
+        let (x0, x1, fx) = axis_taps_in::<AVX2>(uv.x, level.width, sampler.wrap_s);
+        let (y0, y1, fy) = axis_taps_in::<AVX2>(uv.y, level.height, sampler.wrap_t);
         let (row0, row1) = (level.row_start(y0), level.row_start(y1));
         let (col0, col1) = (level.column_offset(x0), level.column_offset(x1));
         BilinearTaps {
@@ -60,13 +69,22 @@ impl BilinearTaps {
 /// Largest `|t * n|` the f32 shortcut takes (see the module note).
 const F32_EXACT_BELOW: f32 = 8_388_608.0; // 2^23
 
-/// `sample::axis(t, n, mode)`, through the f32 shortcut where it is exact.
-#[inline(always)]
+/// [`axis_taps_in`] as the baseline copy computes it.
+#[cfg(test)]
 pub(super) fn axis_taps(t: f32, n: u32, mode: WrapMode) -> AxisTaps {
+    axis_taps_in::<false>(t, n, mode)
+}
+
+/// `sample::axis_in(t, n, mode)`, through the f32 shortcut where it is exact, as the
+/// kernels' copies compute it: the AVX2 copy (which has SSE4.1's rounding instructions)
+/// takes floors in one instruction; the floors are exact either way, so every copy gives
+/// the same bits.
+#[inline(always)]
+pub(super) fn axis_taps_in<const AVX2: bool>(t: f32, n: u32, mode: WrapMode) -> AxisTaps {
     if n.is_power_of_two() {
         let p = t * n as f32;
         if p.abs() >= 0.5 && p.abs() < F32_EXACT_BELOW {
-            let (x0, frac) = floor_and_fraction_of_p_minus_half(p);
+            let (x0, frac) = floor_and_fraction_of_p_minus_half::<AVX2>(p);
             let last = n as i32 - 1;
             if mode == WrapMode::Repeat {
                 // Two's complement: the mask is the Euclidean remainder for negative x0 too.
@@ -78,7 +96,7 @@ pub(super) fn axis_taps(t: f32, n: u32, mode: WrapMode) -> AxisTaps {
             }
         }
     }
-    axis(t, n, mode)
+    axis_in::<AVX2>(t, n, mode)
 }
 
 /// `floor(p - 0.5)` and `p - 0.5 - floor(p - 0.5)`, exactly, for `0.5 <= |p| < 2^23`.
@@ -88,12 +106,21 @@ pub(super) fn axis_taps(t: f32, n: u32, mode: WrapMode) -> AxisTaps {
 /// (the AVX2 copy compiled a select of `±0.5` into one). With `r = p - floor(p)`, the half
 /// is `h = trunc(2 r)`; `floor(x) = floor(p) + h - 1` and the fraction is `(r - h) + 0.5`,
 /// where `r - h` lies in `[-0.5, 0.5)` on `r`'s grid of `2^-24`, so both steps are exact.
+/// `floor(p)` itself comes from a rounding instruction in the AVX2 copy, and from a
+/// truncation corrected by one where it overshot in the baseline copy (which has no such
+/// instruction: `f32::floor` would be a library call there).
 #[inline(always)]
-fn floor_and_fraction_of_p_minus_half(p: f32) -> (i32, f32) {
-    // SAFETY: |p| < 2^23, so the truncation fits an i32.
-    let truncated = unsafe { p.to_int_unchecked::<i32>() };
-    let floor = truncated - i32::from(truncated as f32 > p);
-    let r = p - floor as f32;
+fn floor_and_fraction_of_p_minus_half<const AVX2: bool>(p: f32) -> (i32, f32) {
+    let (floor, r) = if AVX2 {
+        let floor = p.floor();
+        // SAFETY: |p| < 2^23, so its floor fits an i32.
+        (unsafe { floor.to_int_unchecked::<i32>() }, p - floor)
+    } else {
+        // SAFETY: |p| < 2^23, so the truncation fits an i32.
+        let truncated = unsafe { p.to_int_unchecked::<i32>() };
+        let floor = truncated - i32::from(truncated as f32 > p);
+        (floor, p - floor as f32)
+    };
     // SAFETY: 0 <= 2 r < 2.
     let h = unsafe { (r * 2.0).to_int_unchecked::<i32>() };
     (floor + h - 1, (r - h as f32) + 0.5)
@@ -159,10 +186,18 @@ mod tests {
                     WrapMode::MirroredRepeat,
                 ] {
                     let want = axis(t, n, mode);
-                    let got = axis_taps(t, n, mode);
-                    // Bit for bit, the weight included.
+                    // Both copies' formulas (the floors by truncation and by rounding),
+                    // bit for bit, the weight included.
+                    for got in [axis_taps(t, n, mode), axis_taps_in::<true>(t, n, mode)] {
+                        assert_eq!(
+                            (got.0, got.1, got.2.to_bits()),
+                            (want.0, want.1, want.2.to_bits()),
+                            "t {t:e}, n {n}, {mode:?}"
+                        );
+                    }
+                    let other = axis_in::<true>(t, n, mode);
                     assert_eq!(
-                        (got.0, got.1, got.2.to_bits()),
+                        (other.0, other.1, other.2.to_bits()),
                         (want.0, want.1, want.2.to_bits()),
                         "t {t:e}, n {n}, {mode:?}"
                     );
