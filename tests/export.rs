@@ -967,3 +967,89 @@ fn a_scene_with_instances_exports_every_triangle_and_its_rays_agree() {
     let rows = bench_rows_agree("robots", "3", size, &out.join("rays_0003.bin"));
     assert!(rows.len() >= 4, "{rows:?}");
 }
+
+/// `bench --rays FILE` cuts each ray at its own `t max`, though a packet's rays share one
+/// search distance: hits of the default animation's closest-hit rays are moved just past
+/// or exactly onto their `t max` (a search up to `t max` excludes it: the hit becomes a
+/// miss), and no answer differs. A `t min` the kernels do not trace and a file recorded on
+/// another scene are refused with the file's name.
+#[test]
+fn bench_on_a_ray_file_cuts_each_ray_at_its_own_t_max_and_refuses_what_it_cannot_trace() {
+    use mipray::export::rays::{MISS, read_ray_file, write_records};
+    use mipray::render::RayClass;
+    let dir = tempfile::tempdir().unwrap();
+    let size = "48x27";
+    let run = mipray(&[
+        "export",
+        "default",
+        "--frames",
+        "5",
+        "--size",
+        size,
+        "--rays",
+        "--out",
+        dir.path().to_str().unwrap(),
+    ]);
+    assert!(
+        run.status.success(),
+        "{}",
+        String::from_utf8_lossy(&run.stderr)
+    );
+    let records = read_ray_file(&dir.path().join("rays_0005.bin")).unwrap();
+    let mut cut = records.clone();
+    let (mut misses, mut kept) = (0, 0);
+    for (i, r) in cut.iter_mut().enumerate() {
+        if r.class == RayClass::Shadow || r.result == MISS {
+            continue;
+        }
+        if i % 2 == 0 {
+            (r.t_max, r.result, r.t) = (r.t, MISS, f32::NAN);
+            misses += 1;
+        } else {
+            r.t_max = r.t.next_up();
+            kept += 1;
+        }
+    }
+    assert!(misses > 20 && kept > 20, "{misses} cut, {kept} kept");
+    let write = |name: &str, records: &[mipray::export::rays::RayRecord]| {
+        let path = dir.path().join(name);
+        let mut bytes = Vec::new();
+        write_records(&mut bytes, records).unwrap();
+        std::fs::write(&path, bytes).unwrap();
+        path
+    };
+    let rows = bench_rows_agree("default", "5", size, &write("cut.bin", &cut));
+    assert_eq!(rows.len(), 8, "{rows:?}");
+
+    let refused = |path: &Path, problem: &str| {
+        let bench = mipray(&[
+            "bench",
+            "default",
+            "--frames",
+            "5",
+            "--size",
+            size,
+            "--rays",
+            path.to_str().unwrap(),
+            "--repeats",
+            "1",
+        ]);
+        let stderr = String::from_utf8_lossy(&bench.stderr);
+        assert!(!bench.status.success(), "accepted {}", path.display());
+        assert!(
+            stderr.contains(path.file_name().unwrap().to_str().unwrap())
+                && stderr.contains(problem),
+            "{stderr}"
+        );
+    };
+    let mut later_start = records.clone();
+    later_start[3].t_min = 0.25;
+    refused(&write("t_min.bin", &later_start), "t min 0.25");
+    let mut other_scene = records.clone();
+    let hit = other_scene
+        .iter_mut()
+        .find(|r| r.class != RayClass::Shadow && r.result != MISS)
+        .unwrap();
+    hit.result = 1_000_000_000;
+    refused(&write("other.bin", &other_scene), "names face 1000000000");
+}

@@ -315,7 +315,9 @@ enum FileKernel {
 /// answer against the recorded one.
 ///
 /// # Errors
-/// The file cannot be read, or the frame cannot be prepared.
+/// The file cannot be read, asks what mipray's kernels do not trace (a `t min` other than
+/// 0: they trace every ray from its origin), names faces the frame does not have (recorded
+/// on another scene or frame), or the frame cannot be prepared.
 pub fn run_ray_file_bench(
     renderer: &mut Renderer,
     frame: u32,
@@ -331,6 +333,7 @@ pub fn run_ray_file_bench(
         .collect::<Result<Vec<_>, _>>()?;
     let prepared = renderer.prepare(frame, clock.time(frame))?;
     let face_of_slot = crate::export::face_of_slot(renderer);
+    check_records_fit(path, &records, face_of_slot.len())?;
     let bvh = renderer.frame_scene(&prepared).bvh;
     let mut rates = Vec::new();
     for class in RayClass::ALL {
@@ -390,6 +393,35 @@ pub fn run_ray_file_bench(
     Ok(rates)
 }
 
+/// Checks that mipray's kernels can trace `records` as recorded on a frame of `faces`
+/// faces: every `t min` is 0 (the kernels start every ray at its origin; a later start
+/// would need a moved origin, whose rounding would change the answers), and no closest
+/// hit names a face past the frame's last (a file recorded on another scene or frame).
+fn check_records_fit(path: &std::path::Path, records: &[RayRecord], faces: usize) -> Result<()> {
+    let path = path.display();
+    if let Some((i, r)) = records.iter().enumerate().find(|(_, r)| r.t_min != 0.0) {
+        anyhow::bail!(
+            "{path}: record {i} has t min {}: mipray's kernels trace every ray from its \
+             origin, so a ray file for `bench --rays` needs t min 0 (as `export --rays` \
+             writes it)",
+            r.t_min
+        );
+    }
+    let names_a_face = |r: &&RayRecord| r.class != RayClass::Shadow && r.result != MISS;
+    if let Some(r) = records
+        .iter()
+        .filter(names_a_face)
+        .find(|r| r.result as usize >= faces)
+    {
+        anyhow::bail!(
+            "{path}: a recorded hit names face {} but this frame has {faces} faces: was the \
+             file recorded on this scene and frame?",
+            r.result
+        );
+    }
+    Ok(())
+}
+
 /// What a kernel answered for one ray: the hit slot and distance (closest hit), or
 /// `Some((0, NaN))` for blocked (occlusion); `None` for a miss or a clear shadow ray.
 type Answer = Option<(u32, f32)>;
@@ -443,18 +475,24 @@ fn trace_chunk(kernel: FileKernel, bvh: &SceneBvh, rays: &[&RayRecord], out: &mu
 /// Closest hits of `rays` in packets of up to [`PACKET`] consecutive rays, into `out` (as
 /// long as `rays`): from one origin with interval bounds (primary rays), or with
 /// `scattered` from any origins by the masked walk (a bounce's rays).
+///
+/// A packet shares one search distance, the largest of its rays' `t max` (infinity in
+/// files `export --rays` writes); a ray whose closest hit lies at or past its own `t max`
+/// then has none below it either, so dropping that hit gives the answer a search cut at
+/// its own `t max` gives.
 fn closest_in_packets(bvh: &SceneBvh, rays: &[&RayRecord], scattered: bool, out: &mut [Answer]) {
     for (out, packet) in out.chunks_mut(PACKET).zip(rays.chunks(PACKET)) {
         let pairs = packet_rays(packet);
         let mut hits = [None; PACKET];
         let n = packet.len();
+        let t_max = packet.iter().fold(0.0f32, |m, r| m.max(r.t_max));
         if scattered {
-            bvh.closest_hits_scattered(&pairs[..n], f32::INFINITY, &mut hits[..n]);
+            bvh.closest_hits_scattered(&pairs[..n], t_max, &mut hits[..n]);
         } else {
-            bvh.closest_hits(&pairs[..n], f32::INFINITY, &mut hits[..n]);
+            bvh.closest_hits(&pairs[..n], t_max, &mut hits[..n]);
         }
-        for (answer, &hit) in out.iter_mut().zip(&hits[..n]) {
-            *answer = closest_answer(hit);
+        for ((answer, &hit), r) in out.iter_mut().zip(&hits[..n]).zip(packet) {
+            *answer = closest_answer(hit.filter(|h| h.t < r.t_max));
         }
     }
 }

@@ -96,12 +96,15 @@ impl RayRecord {
         b
     }
 
+    /// The record in `b`, checked for what no traced ray can be: a non-finite origin, a
+    /// direction that is not finite or is zero, a `t min` that is negative or NaN, a
+    /// `t max` below it or NaN, an unknown class, a shadow result other than 0 or 1.
     fn from_bytes(b: &[u8; RECORD_BYTES]) -> Result<RayRecord, String> {
         let w = |i: usize| u32::from_le_bytes([b[4 * i], b[4 * i + 1], b[4 * i + 2], b[4 * i + 3]]);
         let f = |i: usize| f32::from_bits(w(i));
         let class =
             RayClass::from_u32(w(8)).ok_or_else(|| format!("class {} is not 0..=3", w(8)))?;
-        Ok(RayRecord {
+        let record = RayRecord {
             origin: Vec3A::new(f(0), f(1), f(2)),
             direction: Vec3A::new(f(3), f(4), f(5)),
             t_min: f(6),
@@ -110,7 +113,35 @@ impl RayRecord {
             pixel: w(9),
             result: w(10),
             t: f(11),
-        })
+        };
+        if !record.origin.is_finite() {
+            return Err(format!("origin {} is not finite", record.origin));
+        }
+        if !record.direction.is_finite() || record.direction == Vec3A::ZERO {
+            return Err(format!(
+                "direction {} is not a finite non-zero vector",
+                record.direction
+            ));
+        }
+        if !(record.t_min >= 0.0) {
+            return Err(format!(
+                "t min {} is not a distance of 0 or more",
+                record.t_min
+            ));
+        }
+        if !(record.t_max >= record.t_min) {
+            return Err(format!(
+                "t max {} is not at least t min {}",
+                record.t_max, record.t_min
+            ));
+        }
+        if class == RayClass::Shadow && record.result > 1 {
+            return Err(format!(
+                "a shadow ray's result is 1 (blocked) or 0 (clear), not {}",
+                record.result
+            ));
+        }
+        Ok(record)
     }
 }
 
@@ -121,6 +152,8 @@ pub enum RayFileError {
     Io { path: PathBuf, source: io::Error },
     #[error("{path}: not a mipray ray file (the first 8 bytes are not MIPRAYS1)")]
     Magic { path: PathBuf },
+    #[error("{path}: {actual} bytes, shorter than a ray file's 16-byte header")]
+    Header { path: PathBuf, actual: u64 },
     #[error(
         "{path}: the header says {count} records ({needed} bytes) but the file has {actual} bytes"
     )]
@@ -153,7 +186,7 @@ pub fn write_records(out: &mut impl Write, records: &[RayRecord]) -> io::Result<
 ///
 /// # Errors
 /// The file cannot be read, is not a ray file, its length disagrees with its count, or a
-/// record has an unknown class.
+/// record holds what no traced ray can (see `RayRecord::from_bytes`).
 pub fn read_ray_file(path: &Path) -> Result<Vec<RayRecord>, RayFileError> {
     let io_err = |source| RayFileError::Io {
         path: path.to_path_buf(),
@@ -162,11 +195,18 @@ pub fn read_ray_file(path: &Path) -> Result<Vec<RayRecord>, RayFileError> {
     let mut file = std::fs::File::open(path).map_err(io_err)?;
     let actual = file.metadata().map_err(io_err)?.len();
     let mut header = [0u8; 16];
-    if actual < 16 || file.read_exact(&mut header).is_err() || &header[..8] != MAGIC {
+    if actual < 8 || file.read_exact(&mut header[..8]).is_err() || &header[..8] != MAGIC {
         return Err(RayFileError::Magic {
             path: path.to_path_buf(),
         });
     }
+    if actual < 16 {
+        return Err(RayFileError::Header {
+            path: path.to_path_buf(),
+            actual,
+        });
+    }
+    file.read_exact(&mut header[8..]).map_err(io_err)?;
     let count = u64::from_le_bytes(header[8..16].try_into().expect("8 bytes"));
     let needed = 16 + count as u128 * RECORD_BYTES as u128;
     if needed != actual as u128 {
@@ -272,6 +312,113 @@ mod tests {
         std::fs::write(&path, &bytes).unwrap();
         let err = read_ray_file(&path).unwrap_err();
         assert!(err.to_string().contains("record 0: class 9"), "{err}");
+        // the magic alone, or cut inside the count: a short header, not a wrong magic
+        for cut in [8, 12] {
+            std::fs::write(
+                &path,
+                &MAGIC.iter().chain(&[0u8; 8]).copied().collect::<Vec<_>>()[..cut],
+            )
+            .unwrap();
+            let err = read_ray_file(&path).unwrap_err();
+            assert!(matches!(err, RayFileError::Header { .. }), "{err}");
+            assert!(err.to_string().contains("shorter than"), "{err}");
+        }
+        for short in [&b""[..], b"MIPR"] {
+            std::fs::write(&path, short).unwrap();
+            assert!(matches!(
+                read_ray_file(&path),
+                Err(RayFileError::Magic { .. })
+            ));
+        }
+    }
+
+    /// Records no traced ray can be are named errors: the bench would otherwise count them
+    /// as answers that differ, or as matching.
+    #[test]
+    fn impossible_records_are_named_errors() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("rays.bin");
+        let good = record(RayClass::Primary, 0, 1.0);
+        let cases: [(RayRecord, &str); 9] = [
+            (
+                RayRecord {
+                    origin: Vec3A::new(f32::NAN, 0.0, 0.0),
+                    ..good
+                },
+                "origin",
+            ),
+            (
+                RayRecord {
+                    origin: Vec3A::new(0.0, f32::INFINITY, 0.0),
+                    ..good
+                },
+                "origin",
+            ),
+            (
+                RayRecord {
+                    direction: Vec3A::ZERO,
+                    ..good
+                },
+                "direction",
+            ),
+            (
+                RayRecord {
+                    direction: Vec3A::new(0.0, f32::NAN, 1.0),
+                    ..good
+                },
+                "direction",
+            ),
+            (
+                RayRecord {
+                    t_min: f32::NAN,
+                    ..good
+                },
+                "t min",
+            ),
+            (
+                RayRecord {
+                    t_min: -1.0,
+                    ..good
+                },
+                "t min",
+            ),
+            (
+                RayRecord {
+                    t_max: f32::NAN,
+                    ..good
+                },
+                "t max",
+            ),
+            (
+                RayRecord {
+                    t_min: 2.0,
+                    t_max: 1.0,
+                    ..good
+                },
+                "t max",
+            ),
+            (record(RayClass::Shadow, 7, f32::NAN), "shadow ray's result"),
+        ];
+        for (bad, problem) in cases {
+            let mut bytes = Vec::new();
+            write_records(&mut bytes, &[good, bad]).unwrap();
+            std::fs::write(&path, &bytes).unwrap();
+            let err = read_ray_file(&path).unwrap_err().to_string();
+            assert!(
+                err.contains("rays.bin: record 1: ") && err.contains(problem),
+                "{err}"
+            );
+        }
+        // The edges that are allowed: t min 0 with t max 0, and an infinite t max.
+        let edges = [
+            RayRecord { t_max: 0.0, ..good },
+            record(RayClass::Shadow, 1, f32::NAN),
+            record(RayClass::Shadow, 0, f32::NAN),
+        ];
+        let mut bytes = Vec::new();
+        write_records(&mut bytes, &edges).unwrap();
+        std::fs::write(&path, &bytes).unwrap();
+        assert_eq!(read_ray_file(&path).unwrap().len(), 3);
     }
 
     #[test]
