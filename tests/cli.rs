@@ -480,3 +480,69 @@ fn the_avx2_and_baseline_walks_render_identical_frames() {
         }
     }
 }
+
+/// Samples whose shading overflows single precision (here two lights of 3.4e38 on one
+/// triangle) are written black, counted in the record, and named in a note on stderr: the
+/// render succeeds, the frame is whole, and the user is told which frame lost samples.
+#[test]
+fn samples_that_overflow_are_written_black_and_noted() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = dir.path().join("bright.aff");
+    std::fs::write(
+        &scene,
+        "v\nfrom 0 0 5\nat 0 0 0\nup 0 1 0\nangle 45\nhither 0.1\nresolution 32 24\n\
+         l 0 3 3 3.4e38 3.4e38 3.4e38\nl 0 3 2 3.4e38 3.4e38 3.4e38\n\
+         fm 0.1 0.1 0.1  0.7 0.7 0.7  0.5 0.5 0.5  20 0 1\np 3\n-1 -1 0\n1 -1 0\n0 1 0\n",
+    )
+    .unwrap();
+    let out = mipray(
+        &[
+            "render",
+            scene.to_str().unwrap(),
+            "--size",
+            "32x24",
+            "--out",
+            "o",
+        ],
+        dir.path(),
+    );
+    assert!(out.status.success(), "{}", stderr(&out));
+    let stats = std::fs::read_to_string(dir.path().join("o/stats.jsonl")).unwrap();
+    let first: serde_json::Value = serde_json::from_str(stats.lines().next().unwrap()).unwrap();
+    let lost = first["nonfinite_samples"].as_u64().unwrap();
+    assert!(lost > 0, "the premise: some samples overflow ({stats})");
+    let note = format!("note: frame 0000: {lost} sample(s) came out infinite or NaN");
+    assert!(stderr(&out).contains(&note), "{}", stderr(&out));
+    assert!(dir.path().join("o/frame_0000.png").exists());
+}
+
+/// A scene whose first frame is fine and whose animation carries a vertex out of single
+/// precision's range between two finite keys (3e38 to -3e38): the render and the export
+/// stop at that frame with one error naming the scene file and the frame, and the frames
+/// before it stay written.
+#[test]
+fn a_frame_the_animation_breaks_is_an_error_naming_the_scene() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("tests/fixtures/frame_errors/translation_keys_overflow_between.gltf");
+    let scene = scene.to_str().unwrap();
+    for command in ["render", "export"] {
+        let out = mipray(
+            &[
+                command, scene, "--frames", "0..3", "--size", "16x12", "--out", command,
+            ],
+            dir.path(),
+        );
+        let stderr = stderr(&out);
+        assert_eq!(out.status.code(), Some(1), "{command}: {stderr}");
+        let errors: Vec<&str> = stderr.lines().filter(|l| l.starts_with("error:")).collect();
+        assert_eq!(errors.len(), 1, "{command}: {stderr}");
+        assert!(
+            errors[0].contains("translation_keys_overflow_between.gltf: frame 1 ")
+                && errors[0].contains("non-finite vertex"),
+            "{command}: {stderr}"
+        );
+    }
+    assert!(dir.path().join("render/frame_0000.png").exists());
+    assert!(!dir.path().join("render/frame_0001.png").exists());
+}

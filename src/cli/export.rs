@@ -6,7 +6,7 @@ use anyhow::Result;
 use clap::Args;
 
 use super::args::{LightArgs, SequenceArgs, TraceArgs, render_settings};
-use super::scene::open_scene;
+use super::scene::{naming_the_scene, open_scene};
 use crate::accel::BvhLayout;
 use crate::export::{ExportFormat, ExportOptions, export_frames};
 use crate::frame::Renderer;
@@ -61,6 +61,7 @@ pub fn export(args: &ExportArgs) -> Result<()> {
         rays: args.rays,
     };
     let mut renderer = Renderer::new(scene.desc, settings);
+    let scene_path = scene.path;
     let done = export_frames(&mut renderer, &options, |f| {
         println!(
             "frame {:04}  t={:.3}s  {} triangles  {} deformed  -> {}",
@@ -73,7 +74,8 @@ pub fn export(args: &ExportArgs) -> Result<()> {
         if let Some((path, count)) = &f.rays {
             println!("            {count} rays -> {}", path.display());
         }
-    })?;
+    })
+    .map_err(|e| naming_the_scene(e.into(), &scene_path))?;
     println!(
         "exported {} frame(s) into {}",
         done.len(),

@@ -59,6 +59,12 @@ impl SequenceProgress for SequenceLines {
 
     fn frame_written(&mut self, frame: &WrittenFrame) {
         self.print(&frame_line(frame));
+        if let Some(note) = nonfinite_note(frame) {
+            match &self.bar {
+                Some(bar) => bar.suspend(|| eprintln!("{note}")),
+                None => eprintln!("{note}"),
+            }
+        }
         if let Some(bar) = &self.bar {
             bar.inc(1);
         }
@@ -96,6 +102,21 @@ fn frame_line(f: &WrittenFrame) -> String {
         },
         f.path.display()
     )
+}
+
+/// The note on stderr for a frame some of whose samples came out infinite or NaN (shading
+/// overflowed single precision: a light or material far too bright) and were written
+/// black, as the frame's record counts them; none for a frame without such samples.
+fn nonfinite_note(f: &WrittenFrame) -> Option<String> {
+    let n = f.record.nonfinite_samples;
+    (n > 0).then(|| {
+        format!(
+            "note: frame {:04}: {n} sample(s) came out infinite or NaN (a light or material \
+             too bright for single precision?) and were written black \
+             (`nonfinite_samples` in stats.jsonl)",
+            f.frame
+        )
+    })
 }
 
 /// The line printed for each checked frame.

@@ -11,7 +11,7 @@ use super::args::{
 };
 use super::diff::CheckArgs;
 use super::progress::{SequenceLines, print_sequence_end};
-use super::scene::{OpenedScene, open_scene};
+use super::scene::{OpenedScene, naming_the_scene, open_scene};
 use crate::accel::{BvhLayout, BvhPolicy};
 use crate::anim::AnimationSelection;
 use crate::diff::{DiffOptions, Verdict};
@@ -140,19 +140,21 @@ pub fn render(args: &RenderArgs) -> Result<ExitCode> {
         fail_fast: args.fail_fast,
         junit: args.check_args.junit.clone(),
     });
-    let (frames, clock) = (scene.frames.clone(), scene.clock);
+    let (frames, clock, scene_path) = (scene.frames.clone(), scene.clock, scene.path);
     let mut renderer = Renderer::new(scene.desc, settings);
     let mut lines = SequenceLines::default();
-    let report = pool.install(|| {
-        render_sequence(
-            &mut renderer,
-            frames,
-            clock,
-            &output,
-            check.as_ref(),
-            &mut lines,
-        )
-    })?;
+    let report = pool
+        .install(|| {
+            render_sequence(
+                &mut renderer,
+                frames,
+                clock,
+                &output,
+                check.as_ref(),
+                &mut lines,
+            )
+        })
+        .map_err(|e| naming_the_scene(e, &scene_path))?;
     print_sequence_end(&report);
     Ok(match report.check {
         Some(check) if check.not_compared > 0 => {

@@ -14,6 +14,24 @@ use crate::scene::sources::SourceFile;
 
 pub use crate::scene::load as load_scene;
 
+/// `error`, naming the scene file `path` when it stopped a frame (an animation that carries
+/// a vertex out of single precision's range, ...): the loader names the file for what it
+/// can check at load, and an error found at a later frame names it too.
+pub fn naming_the_scene(error: anyhow::Error, path: &Path) -> anyhow::Error {
+    let stopped_a_frame = error.chain().any(|cause| {
+        cause.downcast_ref::<crate::frame::FrameError>().is_some()
+            || matches!(
+                cause.downcast_ref::<crate::export::ExportError>(),
+                Some(crate::export::ExportError::Frame(_))
+            )
+    });
+    if stopped_a_frame {
+        error.context(path.display().to_string())
+    } else {
+        error
+    }
+}
+
 /// A scene ready for the frame loop.
 pub struct OpenedScene {
     pub path: PathBuf,

@@ -197,8 +197,8 @@ impl Parser {
         match token.text {
             // Scene-wide settings.
             b"v" => self.view(r)?,
-            b"b" => self.background = Some(r.vec3("b")?),
-            b"am" => self.ambient = Some(r.vec3("am")?),
+            b"b" => self.background = Some(r.colour("b")?),
+            b"am" => self.ambient = Some(r.colour("am")?),
             b"a" => self.frame_times = Some(frame_times(r)?),
             b"l" => self.light(r, None)?,
             b"la" => {
@@ -241,7 +241,7 @@ impl Parser {
     fn light(&mut self, r: &mut Reader, name: Option<String>) -> Result<(), String> {
         let position = r.vec3("l")?;
         let color = if r.next_is_number() {
-            r.vec3("l")?
+            r.colour("l")?
         } else {
             Vec3::ONE
         };

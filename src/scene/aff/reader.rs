@@ -103,6 +103,24 @@ impl<'a> Reader<'a> {
         ))
     }
 
+    /// Three numbers of 0 or more after `after`: a colour (a light's, the background's, the
+    /// ambient light's). A negative component is an error naming its line: a light of
+    /// negative power has no meaning, and its shading would subtract light.
+    pub fn colour(&mut self, after: &str) -> Result<Vec3, String> {
+        let line = self.peek().map_or(0, |t| t.line);
+        let colour = self.vec3(after)?;
+        if colour.min_element() < 0.0 {
+            return Err(self.error_at(
+                line,
+                format!(
+                    "'{after}' colour {:?} has a negative component (colours are 0 or more)",
+                    colour.to_array()
+                ),
+            ));
+        }
+        Ok(colour)
+    }
+
     pub fn vec2(&mut self, after: &str) -> Result<Vec2, String> {
         Ok(Vec2::new(self.number(after)?, self.number(after)?))
     }

@@ -83,6 +83,16 @@ pub(super) fn add_camera_file(scene: &mut SceneDesc, path: &Path) -> Result<(), 
     if !vectors.iter().all(|v| finite3(*v)) {
         return Err(error(path, None, "camera has a non-finite vector"));
     }
+    if file.background.iter().any(|&c| c < 0.0) {
+        return Err(error(
+            path,
+            None,
+            format!(
+                "background {:?} has a negative component (a colour is 0 or more)",
+                file.background
+            ),
+        ));
+    }
     if let Some(problem) = degenerate_view(&file) {
         return Err(error(path, None, format!("camera: {problem}")));
     }
@@ -126,6 +136,16 @@ pub(super) fn add_camera_file(scene: &mut SceneDesc, path: &Path) -> Result<(), 
             && light.range.is_none_or(f32::is_finite);
         if !finite {
             return Err(error(path, None, format!("light {i}: non-finite value")));
+        }
+        if light.intensity.iter().any(|&c| c < 0.0) {
+            return Err(error(
+                path,
+                None,
+                format!(
+                    "light {i}: intensity {:?} has a negative component (light is 0 or more)",
+                    light.intensity
+                ),
+            ));
         }
         scene.lights.push(LightDesc {
             kind,
