@@ -167,6 +167,8 @@ fn bad_options_are_refused() {
         &["render", "tri.gltf", "--lod-bias", "99"],
         &["render", "tri.gltf", "--shard", "4/4"],
         &["render", "tri.gltf", "--shard", "x"],
+        // Frame 1 of 2 at 1e-45 frames a second would be at an infinite time.
+        &["render", "tri.gltf", "--fps", "1e-45", "--frames", "0..2"],
         &["compare", "tri.gltf", "--repeats", "0"],
         &["man", "rendr"],
         // Worker counts the system would take minutes to start are refused up front.

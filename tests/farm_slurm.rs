@@ -573,7 +573,8 @@ fn example_slurm_jobs_render_resume_and_fail_visibly() {
     );
     let log = cluster.job_output(&format!("mipray-render-{failed_array}_1.out"));
     assert!(
-        log.contains(&format!("error: frame {FIRST_FAILING_FRAME} "))
+        log.contains(&format!("overflowing.gltf: frame {FIRST_FAILING_FRAME} "))
+            && log.contains("error: ")
             && log.contains("non-finite vertex"),
         "failed task's output: {log}"
     );

@@ -579,6 +579,27 @@ fn truncated_glb_is_an_error() {
     );
 }
 
+/// A GLB whose magic is damaged is said to be neither GLB nor JSON, not reported as the
+/// JSON parser's complaint about its first byte; JSON with leading blanks still loads.
+#[test]
+fn a_damaged_magic_is_neither_glb_nor_json() {
+    let dir = tempfile::tempdir().unwrap();
+    let png = common::png(PNG_WIDTH, PNG_HEIGHT);
+    let (json, bin) = round_trip_scene(Storage::Binary, &png);
+    let mut glb = common::glb(&json, &bin);
+    glb[..4].copy_from_slice(b"gLTF");
+    let path = write(dir.path(), "magic.glb", &glb);
+    expect_error(
+        &path,
+        &["magic.glb", "neither binary glTF", "nor glTF JSON"],
+    );
+    let full = write_round_trip(dir.path(), Storage::Embedded);
+    let mut text = b"\n  \t".to_vec();
+    text.extend(std::fs::read(&full).unwrap());
+    let path = write(dir.path(), "blank_first.gltf", &text);
+    load(&path).unwrap_or_else(|e| panic!("{e}"));
+}
+
 #[test]
 fn truncated_json_is_an_error() {
     let dir = tempfile::tempdir().unwrap();

@@ -67,6 +67,17 @@ pub fn open_scene(args: &SequenceArgs) -> Result<OpenedScene> {
     };
     let clock = FrameClock::for_scene(&desc, args.fps);
     let frames = asked_frames.unwrap_or_else(|| clock.default_frames(animation.duration(&desc)));
+    if let (FrameClock::Fps(fps), Some(last)) = (&clock, frames.clone().next_back()) {
+        // A frame's time is kept in single precision (the animation and the record read
+        // it): an fps so small that a frame's time overflows it is refused, not rendered at
+        // an infinite time.
+        let time = clock.time(last);
+        if !time.is_finite() {
+            return Err(super::args::usage(format!(
+                "--fps {fps}: frame {last} would be at {time} s, beyond single precision's range"
+            )));
+        }
+    }
     Ok(OpenedScene {
         name: scene_name(&path),
         path,

@@ -141,6 +141,17 @@ const GLB_HEADER_SIZE: usize = 12;
 /// truncated file is reported as such.
 fn check_glb_header(bytes: &[u8]) -> Result<(), String> {
     if !bytes.starts_with(b"glTF") {
+        // Not a GLB: then JSON, whose first non-blank byte opens an object. Anything else
+        // (a GLB with a damaged magic, another format) is said as such, not as the JSON
+        // parser's "expected value at line 1 column 1".
+        let first = bytes.iter().find(|b| !b.is_ascii_whitespace());
+        if first.is_some_and(|&b| b != b'{') {
+            return Err(
+                "not a valid glTF/GLB file: neither binary glTF (its first 4 bytes are not \
+                 `glTF`) nor glTF JSON (it does not start with `{`)"
+                    .into(),
+            );
+        }
         return Ok(());
     }
     let word = |at: usize| {
