@@ -32,9 +32,14 @@ pub struct SequenceLines {
 impl SequenceLines {
     /// Prints `line` on stdout, above the bar.
     fn print(&self, line: &str) {
+        self.above_bar(|| println!("{line}"));
+    }
+
+    /// Runs `write` (a print to stdout or stderr) with the bar, if any, out of the way.
+    fn above_bar(&self, write: impl FnOnce()) {
         match &self.bar {
-            Some(bar) => bar.suspend(|| println!("{line}")),
-            None => println!("{line}"),
+            Some(bar) => bar.suspend(write),
+            None => write(),
         }
     }
 }
@@ -60,10 +65,7 @@ impl SequenceProgress for SequenceLines {
     fn frame_written(&mut self, frame: &WrittenFrame) {
         self.print(&frame_line(frame));
         if let Some(note) = nonfinite_note(frame) {
-            match &self.bar {
-                Some(bar) => bar.suspend(|| eprintln!("{note}")),
-                None => eprintln!("{note}"),
-            }
+            self.above_bar(|| eprintln!("{note}"));
         }
         if let Some(bar) = &self.bar {
             bar.inc(1);

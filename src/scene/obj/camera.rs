@@ -64,6 +64,19 @@ pub(super) fn matrix_node(name: String, matrix: Mat4) -> NodeDesc {
     }
 }
 
+/// An error naming `what` when a colour or light value has a negative component: light of
+/// negative power has no meaning, and shading would subtract it.
+fn refuse_negative(path: &Path, what: &str, value: [f32; 3]) -> Result<(), ObjError> {
+    if value.iter().any(|&c| c < 0.0) {
+        return Err(error(
+            path,
+            None,
+            format!("{what} {value:?} has a negative component (colours and light are 0 or more)"),
+        ));
+    }
+    Ok(())
+}
+
 /// Adds the camera, lights and background of an export's camera file.
 pub(super) fn add_camera_file(scene: &mut SceneDesc, path: &Path) -> Result<(), ObjError> {
     let text = crate::scene::sources::read_to_string(path)
@@ -83,16 +96,7 @@ pub(super) fn add_camera_file(scene: &mut SceneDesc, path: &Path) -> Result<(), 
     if !vectors.iter().all(|v| finite3(*v)) {
         return Err(error(path, None, "camera has a non-finite vector"));
     }
-    if file.background.iter().any(|&c| c < 0.0) {
-        return Err(error(
-            path,
-            None,
-            format!(
-                "background {:?} has a negative component (a colour is 0 or more)",
-                file.background
-            ),
-        ));
-    }
+    refuse_negative(path, "background", file.background)?;
     if let Some(problem) = degenerate_view(&file) {
         return Err(error(path, None, format!("camera: {problem}")));
     }
@@ -137,16 +141,7 @@ pub(super) fn add_camera_file(scene: &mut SceneDesc, path: &Path) -> Result<(), 
         if !finite {
             return Err(error(path, None, format!("light {i}: non-finite value")));
         }
-        if light.intensity.iter().any(|&c| c < 0.0) {
-            return Err(error(
-                path,
-                None,
-                format!(
-                    "light {i}: intensity {:?} has a negative component (light is 0 or more)",
-                    light.intensity
-                ),
-            ));
-        }
+        refuse_negative(path, &format!("light {i}: intensity"), light.intensity)?;
         scene.lights.push(LightDesc {
             kind,
             color: Vec3::from(light.intensity),
