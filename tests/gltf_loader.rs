@@ -600,6 +600,37 @@ fn a_damaged_magic_is_neither_glb_nor_json() {
     load(&path).unwrap_or_else(|e| panic!("{e}"));
 }
 
+/// A GLB whose header declares fewer bytes than the file holds loads from the declared
+/// bytes, with a note saying how many were ignored; an exact GLB gets no such note.
+#[test]
+fn bytes_past_a_glbs_declared_length_are_ignored_with_a_note() {
+    let dir = tempfile::tempdir().unwrap();
+    let png = common::png(PNG_WIDTH, PNG_HEIGHT);
+    let (json, bin) = round_trip_scene(Storage::Binary, &png);
+    let glb = common::glb(&json, &bin);
+    let exact = load(&write(dir.path(), "exact.glb", &glb)).unwrap_or_else(|e| panic!("{e}"));
+    assert!(
+        !exact.notes.iter().any(|n| n.contains("declares")),
+        "{:?}",
+        exact.notes
+    );
+    let mut longer = glb.clone();
+    longer.extend_from_slice(b"trailer");
+    let scene = load(&write(dir.path(), "longer.glb", &longer)).unwrap_or_else(|e| panic!("{e}"));
+    let note = scene
+        .notes
+        .iter()
+        .find(|n| n.contains("declares"))
+        .unwrap_or_else(|| panic!("no note among {:?}", scene.notes));
+    assert!(
+        note.contains(&format!("declares {} bytes", glb.len()))
+            && note.contains(&format!("the file has {}", longer.len()))
+            && note.contains("the 7 bytes after them are ignored"),
+        "{note}"
+    );
+    assert_eq!(scene.meshes.len(), exact.meshes.len());
+}
+
 #[test]
 fn truncated_json_is_an_error() {
     let dir = tempfile::tempdir().unwrap();

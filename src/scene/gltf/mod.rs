@@ -75,11 +75,12 @@ fn scene_from_bytes(path: &Path, bytes: &[u8]) -> Result<SceneDesc, String> {
     if bytes.is_empty() {
         return Err("file is empty".into());
     }
+    let mut notes = Vec::new();
+    notes.extend(glb_trailing_bytes(bytes));
     let gltf::Gltf { document, blob } = parse(bytes)?;
     let base_dir = path.parent().unwrap_or(Path::new(""));
     let buffers = buffers::Buffers::load(&document, blob, base_dir)?;
 
-    let mut notes = Vec::new();
     let (materials, textures) =
         material::load_materials(&document, &buffers, base_dir, &mut notes)?;
     let meshes = mesh::load_meshes(&document, &buffers, &mut notes)?;
@@ -174,6 +175,24 @@ fn check_glb_header(bytes: &[u8]) -> Result<(), String> {
         ));
     }
     Ok(())
+}
+
+/// A note for a GLB whose header declares fewer bytes than the file has (the glTF spec
+/// wants them equal): the bytes past the declared length are ignored, as the GLB parser
+/// reads only that far. `None` for JSON, an exact GLB, or a header [`check_glb_header`]
+/// refuses.
+fn glb_trailing_bytes(bytes: &[u8]) -> Option<String> {
+    let declared = u32::from_le_bytes(bytes.get(8..12)?.try_into().ok()?) as usize;
+    (bytes.starts_with(b"glTF") && declared >= GLB_HEADER_SIZE && declared < bytes.len()).then(
+        || {
+            format!(
+                "GLB header declares {declared} bytes but the file has {}; the {} bytes after \
+                 them are ignored",
+                bytes.len(),
+                bytes.len() - declared
+            )
+        },
+    )
 }
 
 /// Checks the references gltf's validation does not (it would index or unwrap them

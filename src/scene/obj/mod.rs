@@ -261,6 +261,28 @@ mod tests {
     }
 
     #[test]
+    fn numbers_no_f32_can_hold_are_located() {
+        let tri = "f 1 2 3\n";
+        for (line, word) in [
+            ("v nan 0 0", "nan"),
+            ("v 0 inf 0", "inf"),
+            ("v 0 0 -1e39", "-1e39"),
+            ("vn 0 NaN 1", "NaN"),
+            ("vt 1e40 0", "1e40"),
+        ] {
+            let text = format!("v 0 0 0\nv 1 0 0\n{line}\nv 0 1 0\n{tri}");
+            let (at, message) = first_bad_obj_line(&text).expect(line);
+            assert_eq!(at, 3, "{line}");
+            assert!(
+                message.contains(word) && message.contains("finite"),
+                "{message}"
+            );
+        }
+        // Large but representable, and the smallest subnormal, are fine.
+        assert_eq!(first_bad_obj_line("v 3e38 -3e38 1e-45\nvt 0 1\n"), None);
+    }
+
+    #[test]
     fn tf_is_read_as_transmission() {
         let tf = |v: &str| transmission_filter(Some(&v.to_string()), Path::new("a.mtl"), "m");
         assert_eq!(tf("1 1 1"), Ok(Some(1.0)));

@@ -8,6 +8,16 @@ pub(super) fn floats(words: &[&str]) -> usize {
         .count()
 }
 
+/// The first of `words` that parses as a number but not as a finite `f32` (NaN, infinity,
+/// or beyond `f32`'s range), which the renderer cannot place: named with its line here,
+/// since tobj reads such values silently and the loader meets them without a line.
+fn non_finite<'a>(words: &[&'a str]) -> Option<&'a str> {
+    words
+        .iter()
+        .copied()
+        .find(|w| w.parse::<f64>().is_ok_and(|x| !(x as f32).is_finite()))
+}
+
 /// The first line (1-based) of an MTL text the parser would reject, and why.
 pub(super) fn first_bad_mtl_line(text: &str) -> Option<(usize, String)> {
     for (i, line) in text.lines().enumerate() {
@@ -60,6 +70,8 @@ pub(super) fn first_bad_obj_line(text: &str) -> Option<(usize, String)> {
                     Some("expected x y z [w | r g b]".into())
                 } else if n == 4 && args[3].parse::<f64>() == Ok(0.0) {
                     Some("w is zero".into())
+                } else if let Some(w) = non_finite(args) {
+                    Some(format!("{w} is not a finite 32-bit number"))
                 } else {
                     v += 1;
                     None
@@ -68,6 +80,8 @@ pub(super) fn first_bad_obj_line(text: &str) -> Option<(usize, String)> {
             "vt" => {
                 if floats(args) < 2 {
                     Some("expected u v".into())
+                } else if let Some(w) = non_finite(args) {
+                    Some(format!("{w} is not a finite 32-bit number"))
                 } else {
                     vt += 1;
                     None
@@ -76,6 +90,8 @@ pub(super) fn first_bad_obj_line(text: &str) -> Option<(usize, String)> {
             "vn" => {
                 if floats(args) < 3 {
                     Some("expected x y z".into())
+                } else if let Some(w) = non_finite(args) {
+                    Some(format!("{w} is not a finite 32-bit number"))
                 } else {
                     vn += 1;
                     None
