@@ -593,6 +593,60 @@ fn loader_rejects_inconsistent_deformation_data() {
     }
 }
 
+/// Values glTF forbids but files contain load with a note saying what mipray does instead:
+/// a vertex whose joint weights sum to zero (it follows its node unskinned) and a rotation
+/// key of zero length (the identity where the frame's rotation cannot be normalised). The
+/// valid file gets neither note.
+#[test]
+fn zero_weights_and_zero_rotation_keys_load_with_notes() {
+    let dir = tempfile::tempdir().unwrap();
+    let (json, b) = skinned_morph_gltf();
+    let notes_of = |bin: Vec<u8>| {
+        let corrupted = common::BufferBuilder {
+            bin,
+            views: b.views.clone(),
+            accessors: b.accessors.clone(),
+        };
+        let scene = load(&write_gltf(
+            dir.path(),
+            &common::with_embedded_buffer(json.clone(), &corrupted),
+        ))
+        .unwrap_or_else(|e| panic!("{e}"));
+        assert_deformable(&scene, "degenerate values");
+        let pose = pose_at(&scene, AnimationSelection::All, 0.0);
+        let (positions, _, _) = deformed(&scene, &pose, 0);
+        assert!(positions.iter().all(|p| p.is_finite()), "{positions:?}");
+        scene.notes.join("\n")
+    };
+    let start_of = |accessor: &Value| {
+        let view = b.accessors[accessor.as_u64().unwrap() as usize]["bufferView"]
+            .as_u64()
+            .unwrap() as usize;
+        b.views[view]["byteOffset"].as_u64().unwrap() as usize
+    };
+    let clean = notes_of(b.bin.clone());
+    assert!(
+        !clean.contains("summing to zero") && !clean.contains("zero length"),
+        "{clean}"
+    );
+    // Vertex 0: its WEIGHTS_0 (unsigned bytes) zeroed; its WEIGHTS_1 are zero already.
+    let mut bin = b.bin.clone();
+    let weights0 = start_of(&json["meshes"][0]["primitives"][0]["attributes"]["WEIGHTS_0"]);
+    bin[weights0..weights0 + 4].fill(0);
+    // The rotation channel's first key (sampler 1's output, float VEC4) zeroed.
+    let keys = start_of(&json["animations"][0]["samplers"][1]["output"]);
+    bin[keys..keys + 16].fill(0);
+    let notes = notes_of(bin);
+    assert!(
+        notes.contains("1 skinned vertex(es) have joint weights summing to zero"),
+        "{notes}"
+    );
+    assert!(
+        notes.contains("animation 0 channel 1: 1 rotation key(s) have zero length"),
+        "{notes}"
+    );
+}
+
 /// Every number of the file replaced by hostile values and every member removed: loading
 /// may fail but never panics, and a loaded scene keeps the deformation invariants (and
 /// deforms to finite vertices).

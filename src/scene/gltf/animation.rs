@@ -88,6 +88,9 @@ fn load_channel(
             times.len()
         ));
     }
+    if target == ChannelTarget::Rotation {
+        note_zero_rotation_keys(&values, per_key, what, notes);
+    }
     Ok(Some(ChannelDesc {
         node: node.index(),
         target,
@@ -96,6 +99,27 @@ fn load_channel(
         values,
         components,
     }))
+}
+
+/// Notes a rotation channel's keys too short to normalise (zero, or so small that their
+/// squared length underflows): glTF requires unit quaternions, and a frame whose sampled
+/// rotation cannot be normalised gets the identity (`anim::sample_rotation`'s fallback).
+/// `per_key`: numbers per key (4, or 12 for CUBICSPLINE, whose key value is the middle 4).
+fn note_zero_rotation_keys(values: &[f32], per_key: usize, what: &str, notes: &mut Vec<String>) {
+    let value_at = if per_key == 12 { 4 } else { 0 };
+    let zero = values
+        .chunks_exact(per_key)
+        .filter(|key| {
+            glam::Vec4::from_slice(&key[value_at..value_at + 4]).normalize_or_zero()
+                == glam::Vec4::ZERO
+        })
+        .count();
+    if zero > 0 {
+        notes.push(format!(
+            "{what}: {zero} rotation key(s) have zero length (glTF requires unit quaternions); \
+             a frame whose rotation cannot be normalised uses the identity"
+        ));
+    }
 }
 
 fn channel_target(property: Property) -> ChannelTarget {
