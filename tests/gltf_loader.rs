@@ -600,8 +600,8 @@ fn a_damaged_magic_is_neither_glb_nor_json() {
     load(&path).unwrap_or_else(|e| panic!("{e}"));
 }
 
-/// A GLB whose header declares fewer bytes than the file holds loads from the declared
-/// bytes, with a note saying how many were ignored; an exact GLB gets no such note.
+/// A GLB whose header declares fewer bytes than the file holds is read from the declared
+/// bytes alone, with a note saying how many were ignored; an exact GLB gets no such note.
 #[test]
 fn bytes_past_a_glbs_declared_length_are_ignored_with_a_note() {
     let dir = tempfile::tempdir().unwrap();
@@ -629,6 +629,15 @@ fn bytes_past_a_glbs_declared_length_are_ignored_with_a_note() {
         "{note}"
     );
     assert_eq!(scene.meshes.len(), exact.meshes.len());
+    // A header that declares only the JSON chunk leaves the BIN chunk outside the GLB: the
+    // buffer it holds is then missing, and the error says why.
+    let json_chunk = u32::from_le_bytes(glb[12..16].try_into().unwrap()) as usize;
+    let mut short = glb.clone();
+    short[8..12].copy_from_slice(&((20 + json_chunk) as u32).to_le_bytes());
+    expect_error(
+        &write(dir.path(), "short.glb", &short),
+        &["short.glb", &format!("declares {} bytes", 20 + json_chunk)],
+    );
 }
 
 #[test]

@@ -145,19 +145,42 @@ pub fn sample_rotation(channel: &ChannelDesc, t: f32) -> Quat {
     };
     let q = if channel.interpolation == Interpolation::Linear && !channel.times.is_empty() {
         let span = locate(&channel.times, t);
-        let a = quat_at(span.index).normalize();
+        let Some(a) = unit_quaternion(quat_at(span.index)) else {
+            return Quat::IDENTITY;
+        };
         if span.fraction == 0.0 || span.index + 1 >= channel.times.len() {
             a
         } else {
-            a.slerp(quat_at(span.index + 1).normalize(), span.fraction)
+            let Some(b) = unit_quaternion(quat_at(span.index + 1)) else {
+                return Quat::IDENTITY;
+            };
+            a.slerp(b, span.fraction)
         }
     } else {
         let mut v = [0.0; 4];
         sample_channel(channel, t, &mut v);
         Quat::from_array(v)
     };
-    let q = q.normalize();
-    if q.is_finite() { q } else { Quat::IDENTITY }
+    unit_quaternion(q).unwrap_or(Quat::IDENTITY)
+}
+
+/// `q` at unit length: `Quat::normalize`'s bits wherever its squared length is a normal
+/// `f32` (every key a valid file holds); a quaternion so long or so short that the squared
+/// length overflows or underflows is first divided by its largest component, so it keeps
+/// its direction. `None` where there is no direction: all zeros (glTF forbids it, the
+/// loader notes it) or a non-finite component.
+pub fn unit_quaternion(q: Quat) -> Option<Quat> {
+    let unit = q.normalize();
+    if unit.is_finite() && unit != Quat::from_xyzw(0.0, 0.0, 0.0, 0.0) {
+        return Some(unit);
+    }
+    let v = Vec4::from(q);
+    let largest = v.abs().max_element();
+    if !(largest > 0.0 && largest.is_finite()) {
+        return None;
+    }
+    let unit = Quat::from_vec4(v / largest).normalize();
+    unit.is_finite().then_some(unit)
 }
 
 /// Slerp as the BART reference (Eberly's) computes it: no hemisphere flip (the shorter arc
@@ -187,6 +210,70 @@ pub fn squad(q1: Quat, q2: Quat, a: Quat, b: Quat, u: f32) -> Quat {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn unit_quaternions_keep_their_direction_at_any_length() {
+        let q = Quat::from_xyzw(0.1, -0.2, 0.3, 0.9);
+        // The usual case: exactly `normalize`'s bits.
+        assert_eq!(unit_quaternion(q), Some(q.normalize()));
+        for scale in [1e-30f32, 1e-37, 1e20, 3e38] {
+            let scaled = Quat::from_vec4(Vec4::from(q) * scale);
+            let unit = unit_quaternion(scaled).unwrap_or_else(|| panic!("{scale}"));
+            assert!(unit.is_normalized(), "{scale}: {unit}");
+            assert!(unit.angle_between(q.normalize()) < 1e-3, "{scale}: {unit}");
+        }
+        assert_eq!(unit_quaternion(Quat::from_xyzw(0.0, 0.0, 0.0, 0.0)), None);
+        assert_eq!(
+            unit_quaternion(Quat::from_xyzw(0.0, f32::NAN, 0.0, 1.0)),
+            None
+        );
+        assert_eq!(
+            unit_quaternion(Quat::from_xyzw(0.0, f32::INFINITY, 0.0, 1.0)),
+            None
+        );
+    }
+
+    #[test]
+    fn rotation_keys_without_a_direction_give_the_identity_and_huge_keys_their_own() {
+        let quarter = Quat::from_rotation_z(std::f32::consts::FRAC_PI_2);
+        let huge = Vec4::from(quarter) * 1e30;
+        for (interpolation, values) in [
+            (
+                Interpolation::Linear,
+                [[0.0; 4], quarter.to_array()].concat(),
+            ),
+            (Interpolation::Step, [[0.0; 4], quarter.to_array()].concat()),
+        ] {
+            let c = channel(interpolation, &[0.0, 1.0], &values, 4);
+            assert_eq!(
+                sample_rotation(&c, 0.0),
+                Quat::IDENTITY,
+                "{interpolation:?}"
+            );
+            assert!(
+                sample_rotation(&c, 1.0).angle_between(quarter) < 1e-6,
+                "{interpolation:?}"
+            );
+        }
+        // Linear: the span next to a zero key has no direction to turn from.
+        let c = channel(
+            Interpolation::Linear,
+            &[0.0, 1.0],
+            &[[0.0; 4], quarter.to_array()].concat(),
+            4,
+        );
+        assert_eq!(sample_rotation(&c, 0.5), Quat::IDENTITY);
+        // A key whose squared length overflows f32 is the rotation it points to.
+        let c = channel(
+            Interpolation::Linear,
+            &[0.0, 1.0],
+            &[Quat::IDENTITY.to_array(), huge.to_array()].concat(),
+            4,
+        );
+        assert!(sample_rotation(&c, 1.0).angle_between(quarter) < 1e-5);
+        let half = Quat::from_rotation_z(std::f32::consts::FRAC_PI_4);
+        assert!(sample_rotation(&c, 0.5).angle_between(half) < 1e-5);
+    }
     use crate::scene::ChannelTarget;
 
     fn channel(

@@ -101,23 +101,22 @@ fn load_channel(
     }))
 }
 
-/// Notes a rotation channel's keys too short to normalise (zero, or so small that their
-/// squared length underflows): glTF requires unit quaternions, and a frame whose sampled
-/// rotation cannot be normalised gets the identity (`anim::sample_rotation`'s fallback).
-/// `per_key`: numbers per key (4, or 12 for CUBICSPLINE, whose key value is the middle 4).
+/// Notes a rotation channel's keys of zero length (all four numbers zero): glTF requires
+/// unit quaternions, and such a key has no direction, so where a frame's rotation comes out
+/// without one `anim::sample_rotation` gives the identity (under LINEAR, throughout both
+/// spans next to the key). Keys of any other length keep their direction
+/// (`anim::unit_quaternion`). `per_key`: numbers per key (4, or 12 for CUBICSPLINE, whose
+/// key value is the middle 4).
 fn note_zero_rotation_keys(values: &[f32], per_key: usize, what: &str, notes: &mut Vec<String>) {
     let value_at = if per_key == 12 { 4 } else { 0 };
     let zero = values
         .chunks_exact(per_key)
-        .filter(|key| {
-            glam::Vec4::from_slice(&key[value_at..value_at + 4]).normalize_or_zero()
-                == glam::Vec4::ZERO
-        })
+        .filter(|key| key[value_at..value_at + 4].iter().all(|&c| c == 0.0))
         .count();
     if zero > 0 {
         notes.push(format!(
             "{what}: {zero} rotation key(s) have zero length (glTF requires unit quaternions); \
-             a frame whose rotation cannot be normalised uses the identity"
+             a frame whose rotation has no direction there uses the identity"
         ));
     }
 }

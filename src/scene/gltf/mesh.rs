@@ -25,9 +25,6 @@ struct Approximations {
     /// Primitives with more than one `JOINTS_n`/`WEIGHTS_n` set, folded into four
     /// influences per vertex.
     folded_influences: usize,
-    /// Vertices of skinned primitives whose weights sum to zero (glTF requires 1), which
-    /// follow their node unskinned (`anim::deform`'s fallback).
-    unweighted_vertices: usize,
 }
 
 /// Whether a primitive mode is loaded (triangles, strips, fans); points and lines are
@@ -72,7 +69,6 @@ fn push_notes(approximations: &Approximations, notes: &mut Vec<String>) {
         dropped_normals,
         missing_uvs,
         folded_influences,
-        unweighted_vertices,
     } = *approximations;
     if skipped_modes > 0 {
         notes.push(format!(
@@ -92,11 +88,6 @@ fn push_notes(approximations: &Approximations, notes: &mut Vec<String>) {
     if folded_influences > 0 {
         notes.push(format!(
             "{folded_influences} skinned primitive(s) have more than 4 joint influences per vertex; the 4 largest are kept and rescaled"
-        ));
-    }
-    if unweighted_vertices > 0 {
-        notes.push(format!(
-            "{unweighted_vertices} skinned vertex(es) have joint weights summing to zero; they follow their node unskinned"
         ));
     }
 }
@@ -149,13 +140,8 @@ fn load_primitive(
     };
     let indices = read_triangle_indices(primitive, mode, buffers, what, positions.len())?;
     let influences = skin::read_influences(primitive, buffers, what, positions.len())?;
-    if let Some(influences) = &influences {
-        approximations.folded_influences += usize::from(influences.sets > 1);
-        approximations.unweighted_vertices += influences
-            .weights
-            .iter()
-            .filter(|w| w.iter().sum::<f32>() == 0.0)
-            .count();
+    if influences.as_ref().is_some_and(|i| i.sets > 1) {
+        approximations.folded_influences += 1;
     }
     let (joints, weights) = influences.map_or((None, None), |i| (Some(i.joints), Some(i.weights)));
     let morph_targets =

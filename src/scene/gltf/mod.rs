@@ -75,8 +75,28 @@ fn scene_from_bytes(path: &Path, bytes: &[u8]) -> Result<SceneDesc, String> {
     if bytes.is_empty() {
         return Err("file is empty".into());
     }
+    match glb_declared_length(bytes) {
+        // Bytes past a GLB's declared length are not part of it: the GLB parser would read
+        // chunks from them, so it is handed the declared bytes only.
+        Some(declared) if declared < bytes.len() => {
+            let trailing = format!(
+                "GLB header declares {declared} bytes but the file has {}; the {} bytes after \
+                 them are ignored",
+                bytes.len(),
+                bytes.len() - declared
+            );
+            let mut scene = scene_from_document_bytes(path, &bytes[..declared])
+                .map_err(|e| format!("{e} ({trailing})"))?;
+            scene.notes.insert(0, trailing);
+            Ok(scene)
+        }
+        _ => scene_from_document_bytes(path, bytes),
+    }
+}
+
+/// [`scene_from_bytes`] on the bytes of the glTF JSON or of the GLB as its header declares it.
+fn scene_from_document_bytes(path: &Path, bytes: &[u8]) -> Result<SceneDesc, String> {
     let mut notes = Vec::new();
-    notes.extend(glb_trailing_bytes(bytes));
     let gltf::Gltf { document, blob } = parse(bytes)?;
     let base_dir = path.parent().unwrap_or(Path::new(""));
     let buffers = buffers::Buffers::load(&document, blob, base_dir)?;
@@ -177,22 +197,14 @@ fn check_glb_header(bytes: &[u8]) -> Result<(), String> {
     Ok(())
 }
 
-/// A note for a GLB whose header declares fewer bytes than the file has (the glTF spec
-/// wants them equal): the bytes past the declared length are ignored, as the GLB parser
-/// reads only that far. `None` for JSON, an exact GLB, or a header [`check_glb_header`]
-/// refuses.
-fn glb_trailing_bytes(bytes: &[u8]) -> Option<String> {
-    let declared = u32::from_le_bytes(bytes.get(8..12)?.try_into().ok()?) as usize;
-    (bytes.starts_with(b"glTF") && declared >= GLB_HEADER_SIZE && declared < bytes.len()).then(
-        || {
-            format!(
-                "GLB header declares {declared} bytes but the file has {}; the {} bytes after \
-                 them are ignored",
-                bytes.len(),
-                bytes.len() - declared
-            )
-        },
-    )
+/// The total length a GLB's header declares (`None` for JSON, or a header too short to
+/// hold it; [`check_glb_header`] judges the value). The glTF spec wants it equal to the
+/// file's length; more is an error, fewer leaves bytes that are not part of the GLB.
+fn glb_declared_length(bytes: &[u8]) -> Option<usize> {
+    let word = bytes.get(8..12)?;
+    (bytes.starts_with(b"glTF"))
+        .then(|| u32::from_le_bytes([word[0], word[1], word[2], word[3]]) as usize)
+        .filter(|&declared| declared >= GLB_HEADER_SIZE)
 }
 
 /// Checks the references gltf's validation does not (it would index or unwrap them

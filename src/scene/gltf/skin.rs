@@ -206,6 +206,8 @@ pub(super) fn check_skinned_nodes(
     notes: &mut Vec<String>,
 ) -> Result<(), String> {
     let (mut unskinned, mut jointless) = (0, 0);
+    // Meshes some node draws with its skin (each counted once below).
+    let mut skinned_meshes = std::collections::BTreeSet::new();
     for (n, node) in nodes.iter().enumerate() {
         let Some(m) = node.mesh else { continue };
         let mesh = &meshes[m];
@@ -218,6 +220,7 @@ pub(super) fn check_skinned_nodes(
             jointless += 1;
             continue;
         }
+        skinned_meshes.insert(m);
         let joint_count = skins[s].joints.len();
         let sources = document
             .meshes()
@@ -256,6 +259,25 @@ pub(super) fn check_skinned_nodes(
     if jointless > 0 {
         notes.push(format!(
             "{jointless} node(s) have a skin but draw a mesh without JOINTS/WEIGHTS; drawn without skinning"
+        ));
+    }
+    // glTF requires each vertex's weights to sum to 1; one whose weights are all zero
+    // (non-negative, so a zero sum means every one is zero) cannot be skinned and follows
+    // its node (`anim::deform`'s fallback).
+    let unweighted: usize = skinned_meshes
+        .iter()
+        .flat_map(|&m| &meshes[m].primitives)
+        .filter_map(|p| p.weights.as_ref())
+        .map(|weights| {
+            weights
+                .iter()
+                .filter(|w| w.iter().all(|&w| w == 0.0))
+                .count()
+        })
+        .sum();
+    if unweighted > 0 {
+        notes.push(format!(
+            "{unweighted} skinned vertex(es) have joint weights summing to zero; they follow their node unskinned"
         ));
     }
     Ok(())

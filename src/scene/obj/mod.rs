@@ -263,10 +263,12 @@ mod tests {
     #[test]
     fn numbers_no_f32_can_hold_are_located() {
         let tri = "f 1 2 3\n";
-        for (line, word) in [
-            ("v nan 0 0", "nan"),
+        for (line, shown) in [
+            ("v nan 0 0", "NaN"),
             ("v 0 inf 0", "inf"),
             ("v 0 0 -1e39", "-1e39"),
+            // tobj divides by w: x / w is what must fit.
+            ("v 1e30 0 0 1e-30", "1e60"),
             ("vn 0 NaN 1", "NaN"),
             ("vt 1e40 0", "1e40"),
         ] {
@@ -274,12 +276,24 @@ mod tests {
             let (at, message) = first_bad_obj_line(&text).expect(line);
             assert_eq!(at, 3, "{line}");
             assert!(
-                message.contains(word) && message.contains("finite"),
-                "{message}"
+                message.contains(&format!("a coordinate is {shown},"))
+                    && message.contains("finite"),
+                "{line}: {message}"
             );
         }
-        // Large but representable, and the smallest subnormal, are fine.
-        assert_eq!(first_bad_obj_line("v 3e38 -3e38 1e-45\nvt 0 1\n"), None);
+        // Large but representable, the smallest subnormal, what a w brings back into range,
+        // and numbers tobj does not keep (vertex colours, a third uv, a comment) are fine.
+        for fine in [
+            "v 3e38 -3e38 1e-45\nvt 0 1\n",
+            "v 1e40 0 0 1e10\n",
+            "v 1 0 0 inf\n",
+            "v 0 0 0 nan 0 0\n",
+            "vt 0 0 1e39\n",
+            "vt 0 0 # inf\n",
+            "vn 0 0 1 nan\n",
+        ] {
+            assert_eq!(first_bad_obj_line(fine), None, "{fine}");
+        }
     }
 
     #[test]

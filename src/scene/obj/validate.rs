@@ -8,14 +8,26 @@ pub(super) fn floats(words: &[&str]) -> usize {
         .count()
 }
 
-/// The first of `words` that parses as a number but not as a finite `f32` (NaN, infinity,
-/// or beyond `f32`'s range), which the renderer cannot place: named with its line here,
-/// since tobj reads such values silently and the loader meets them without a line.
-fn non_finite<'a>(words: &[&'a str]) -> Option<&'a str> {
-    words
-        .iter()
-        .copied()
-        .find(|w| w.parse::<f64>().is_ok_and(|x| !(x as f32).is_finite()))
+/// The first of `values` (as tobj keeps them, in f64) that is not a finite `f32` (NaN,
+/// infinity, or beyond `f32`'s range), which the renderer cannot place: named with its line
+/// here, since tobj reads such values silently and the loader meets them without a line.
+fn non_finite(values: impl IntoIterator<Item = f64>) -> Option<f64> {
+    values.into_iter().find(|&x| !(x as f32).is_finite())
+}
+
+/// The numbers of `words` (all of which parse).
+fn numbers(words: &[&str]) -> Vec<f64> {
+    words.iter().filter_map(|w| w.parse::<f64>().ok()).collect()
+}
+
+/// What tobj keeps of a valid `v` line's numbers: `x y z`, divided by `w` when there is
+/// one (vertex colours are not read).
+fn kept_position(args: &[&str]) -> Vec<f64> {
+    let n = numbers(args);
+    match n.as_slice() {
+        [x, y, z, w] => vec![x / w, y / w, z / w],
+        _ => n[..3].to_vec(),
+    }
 }
 
 /// The first line (1-based) of an MTL text the parser would reject, and why.
@@ -70,8 +82,8 @@ pub(super) fn first_bad_obj_line(text: &str) -> Option<(usize, String)> {
                     Some("expected x y z [w | r g b]".into())
                 } else if n == 4 && args[3].parse::<f64>() == Ok(0.0) {
                     Some("w is zero".into())
-                } else if let Some(w) = non_finite(args) {
-                    Some(format!("{w} is not a finite 32-bit number"))
+                } else if let Some(x) = non_finite(kept_position(args)) {
+                    Some(format!("a coordinate is {x:e}, not a finite 32-bit number"))
                 } else {
                     v += 1;
                     None
@@ -80,8 +92,8 @@ pub(super) fn first_bad_obj_line(text: &str) -> Option<(usize, String)> {
             "vt" => {
                 if floats(args) < 2 {
                     Some("expected u v".into())
-                } else if let Some(w) = non_finite(args) {
-                    Some(format!("{w} is not a finite 32-bit number"))
+                } else if let Some(x) = non_finite(numbers(&args[..2])) {
+                    Some(format!("a coordinate is {x:e}, not a finite 32-bit number"))
                 } else {
                     vt += 1;
                     None
@@ -90,8 +102,8 @@ pub(super) fn first_bad_obj_line(text: &str) -> Option<(usize, String)> {
             "vn" => {
                 if floats(args) < 3 {
                     Some("expected x y z".into())
-                } else if let Some(w) = non_finite(args) {
-                    Some(format!("{w} is not a finite 32-bit number"))
+                } else if let Some(x) = non_finite(numbers(&args[..3])) {
+                    Some(format!("a coordinate is {x:e}, not a finite 32-bit number"))
                 } else {
                     vn += 1;
                     None
