@@ -210,6 +210,7 @@ pub fn squad(q1: Quat, q2: Quat, a: Quat, b: Quat, u: f32) -> Quat {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::scene::ChannelTarget;
 
     #[test]
     fn unit_quaternions_keep_their_direction_at_any_length() {
@@ -274,7 +275,6 @@ mod tests {
         let half = Quat::from_rotation_z(std::f32::consts::FRAC_PI_4);
         assert!(sample_rotation(&c, 0.5).angle_between(half) < 1e-5);
     }
-    use crate::scene::ChannelTarget;
 
     fn channel(
         interpolation: Interpolation,

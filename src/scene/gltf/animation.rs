@@ -105,7 +105,7 @@ fn load_channel(
 /// unit quaternions, and such a key has no direction, so where a frame's rotation comes out
 /// without one `anim::sample_rotation` gives the identity (under LINEAR, throughout both
 /// spans next to the key). Keys of any other length keep their direction
-/// (`anim::unit_quaternion`). `per_key`: numbers per key (4, or 12 for CUBICSPLINE, whose
+/// (`anim::sample`'s `unit_quaternion`). `per_key`: numbers per key (4, or 12 for CUBICSPLINE, whose
 /// key value is the middle 4).
 fn note_zero_rotation_keys(values: &[f32], per_key: usize, what: &str, notes: &mut Vec<String>) {
     let value_at = if per_key == 12 { 4 } else { 0 };

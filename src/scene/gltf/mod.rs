@@ -75,7 +75,7 @@ fn scene_from_bytes(path: &Path, bytes: &[u8]) -> Result<SceneDesc, String> {
     if bytes.is_empty() {
         return Err("file is empty".into());
     }
-    match glb_declared_length(bytes) {
+    match checked_glb_length(bytes)? {
         // Bytes past a GLB's declared length are not part of it: the GLB parser would read
         // chunks from them, so it is handed the declared bytes only.
         Some(declared) if declared < bytes.len() => {
@@ -94,7 +94,8 @@ fn scene_from_bytes(path: &Path, bytes: &[u8]) -> Result<SceneDesc, String> {
     }
 }
 
-/// [`scene_from_bytes`] on the bytes of the glTF JSON or of the GLB as its header declares it.
+/// [`scene_from_bytes`] on the bytes of the glTF JSON or of the GLB as its header declares it
+/// ([`checked_glb_length`] has judged the header).
 fn scene_from_document_bytes(path: &Path, bytes: &[u8]) -> Result<SceneDesc, String> {
     let mut notes = Vec::new();
     let gltf::Gltf { document, blob } = parse(bytes)?;
@@ -136,7 +137,6 @@ fn scene_from_document_bytes(path: &Path, bytes: &[u8]) -> Result<SceneDesc, Str
 /// those are checked first on the unvalidated document; a panic anywhere else in parsing
 /// is still caught and reported like any other malformed file.
 fn parse(bytes: &[u8]) -> Result<gltf::Gltf, String> {
-    check_glb_header(bytes)?;
     let parsed = catch_unwind(AssertUnwindSafe(|| {
         let gltf::Gltf { document, blob } = gltf::Gltf::from_slice_without_validation(bytes)?;
         Ok::<_, gltf::Error>(check_unvalidated_references(&document).map(|()| (document, blob)))
@@ -159,8 +159,10 @@ fn parse(bytes: &[u8]) -> Result<gltf::Gltf, String> {
 const GLB_HEADER_SIZE: usize = 12;
 
 /// For a GLB, checks the header's version and total length against the file's size, so a
-/// truncated file is reported as such.
-fn check_glb_header(bytes: &[u8]) -> Result<(), String> {
+/// truncated file is reported as such, and returns that length (`None` for glTF JSON). The
+/// glTF spec wants it equal to the file's length; fewer leaves bytes that are not part of
+/// the GLB.
+fn checked_glb_length(bytes: &[u8]) -> Result<Option<usize>, String> {
     if !bytes.starts_with(b"glTF") {
         // Not a GLB: then JSON, whose first non-blank byte opens an object. Anything else
         // (a GLB with a damaged magic, another format) is said as such, not as the JSON
@@ -173,7 +175,7 @@ fn check_glb_header(bytes: &[u8]) -> Result<(), String> {
                     .into(),
             );
         }
-        return Ok(());
+        return Ok(None);
     }
     let word = |at: usize| {
         bytes
@@ -194,17 +196,7 @@ fn check_glb_header(bytes: &[u8]) -> Result<(), String> {
             bytes.len()
         ));
     }
-    Ok(())
-}
-
-/// The total length a GLB's header declares (`None` for JSON, or a header too short to
-/// hold it; [`check_glb_header`] judges the value). The glTF spec wants it equal to the
-/// file's length; more is an error, fewer leaves bytes that are not part of the GLB.
-fn glb_declared_length(bytes: &[u8]) -> Option<usize> {
-    let word = bytes.get(8..12)?;
-    (bytes.starts_with(b"glTF"))
-        .then(|| u32::from_le_bytes([word[0], word[1], word[2], word[3]]) as usize)
-        .filter(|&declared| declared >= GLB_HEADER_SIZE)
+    Ok(Some(length as usize))
 }
 
 /// Checks the references gltf's validation does not (it would index or unwrap them

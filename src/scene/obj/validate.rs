@@ -8,25 +8,28 @@ pub(super) fn floats(words: &[&str]) -> usize {
         .count()
 }
 
-/// The first of `values` (as tobj keeps them, in f64) that is not a finite `f32` (NaN,
-/// infinity, or beyond `f32`'s range), which the renderer cannot place: named with its line
-/// here, since tobj reads such values silently and the loader meets them without a line.
-fn non_finite(values: impl IntoIterator<Item = f64>) -> Option<f64> {
-    values.into_iter().find(|&x| !(x as f32).is_finite())
+/// What is wrong with the coordinates tobj keeps of a line (`kept`, in f64 as it reads them):
+/// the first that is not a finite `f32` (NaN, infinity, beyond `f32`'s range), which the
+/// renderer cannot place. Named with its line here, since tobj reads such values silently
+/// and the loader meets them without a line.
+fn non_finite_coordinate(kept: &[f64]) -> Option<String> {
+    kept.iter()
+        .find(|&&x| !(x as f32).is_finite())
+        .map(|x| format!("a coordinate is {x:e}, not a finite 32-bit number"))
 }
 
-/// The numbers of `words` (all of which parse).
-fn numbers(words: &[&str]) -> Vec<f64> {
-    words.iter().filter_map(|w| w.parse::<f64>().ok()).collect()
+/// The first `N` numbers of `words`, which the caller has checked parse (`floats`).
+fn leading<const N: usize>(words: &[&str]) -> [f64; N] {
+    std::array::from_fn(|i| words[i].parse().unwrap_or(f64::NAN))
 }
 
 /// What tobj keeps of a valid `v` line's numbers: `x y z`, divided by `w` when there is
 /// one (vertex colours are not read).
-fn kept_position(args: &[&str]) -> Vec<f64> {
-    let n = numbers(args);
-    match n.as_slice() {
-        [x, y, z, w] => vec![x / w, y / w, z / w],
-        _ => n[..3].to_vec(),
+fn kept_position(args: &[&str]) -> [f64; 3] {
+    let xyz = leading::<3>(args);
+    match args {
+        [_, _, _, w] => xyz.map(|c| c / w.parse::<f64>().unwrap_or(f64::NAN)),
+        _ => xyz,
     }
 }
 
@@ -82,31 +85,28 @@ pub(super) fn first_bad_obj_line(text: &str) -> Option<(usize, String)> {
                     Some("expected x y z [w | r g b]".into())
                 } else if n == 4 && args[3].parse::<f64>() == Ok(0.0) {
                     Some("w is zero".into())
-                } else if let Some(x) = non_finite(kept_position(args)) {
-                    Some(format!("a coordinate is {x:e}, not a finite 32-bit number"))
                 } else {
-                    v += 1;
-                    None
+                    let problem = non_finite_coordinate(&kept_position(args));
+                    v += usize::from(problem.is_none());
+                    problem
                 }
             }
             "vt" => {
                 if floats(args) < 2 {
                     Some("expected u v".into())
-                } else if let Some(x) = non_finite(numbers(&args[..2])) {
-                    Some(format!("a coordinate is {x:e}, not a finite 32-bit number"))
                 } else {
-                    vt += 1;
-                    None
+                    let problem = non_finite_coordinate(&leading::<2>(args));
+                    vt += usize::from(problem.is_none());
+                    problem
                 }
             }
             "vn" => {
                 if floats(args) < 3 {
                     Some("expected x y z".into())
-                } else if let Some(x) = non_finite(numbers(&args[..3])) {
-                    Some(format!("a coordinate is {x:e}, not a finite 32-bit number"))
                 } else {
-                    vn += 1;
-                    None
+                    let problem = non_finite_coordinate(&leading::<3>(args));
+                    vn += usize::from(problem.is_none());
+                    problem
                 }
             }
             "f" => {
