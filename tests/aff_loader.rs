@@ -324,7 +324,8 @@ fn fixture_uses_every_command() {
 }
 
 /// An `a` line a user may not have meant is rendered as the formula says, with a note: no
-/// frames (one frame at the start time), or an end before the start (played backwards).
+/// frames (one frame at the start time), an end before the start (played backwards), or
+/// more frames than a default range renders (spread over that many).
 #[test]
 fn unusual_frame_times_are_noted() {
     let scene = |a: &str| {
@@ -344,6 +345,26 @@ fn unusual_frame_times_are_noted() {
         "{:?}",
         usual.notes
     );
+    // More frames than a default range renders: spread over 1,000,001 over the same time,
+    // as a USD stage's range is; the last frame shows the end time.
+    let many = scene("a 0 1 2000000000");
+    assert!(
+        noted(
+            &many,
+            "'a 0 1 2000000000' asks for more than 1000001 frames"
+        ),
+        "{:?}",
+        many.notes
+    );
+    let times = many.frame_times.expect("frame times");
+    assert_eq!(
+        (times.start, times.end, times.frames),
+        (0.0, 1.0, 1_000_001)
+    );
+    assert_eq!(times.time(1_000_000), 1.0);
+    let most = scene("a 0 1 1000001");
+    assert_eq!(most.frame_times.map(|t| t.frames), Some(1_000_001));
+    assert!(!noted(&most, "asks for more than"), "{:?}", most.notes);
 }
 
 #[test]

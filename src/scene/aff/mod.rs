@@ -31,7 +31,8 @@
 //!   interpolates the raw, non-unit normals, then normalises), so in-between normals can
 //!   differ slightly in direction where a normal's length changes between samples;
 //! - `SceneDesc::ambient` = `am` (default 1 1 1), `background` = `b` (default black),
-//!   `frame_times` = `a` (frame i at `start + i (end - start) / (frames - 1)`).
+//!   `frame_times` = `a` (frame i at `start + i (end - start) / (frames - 1)`; at most
+//!   1,000,001 frames, a longer request spread over that many, noted).
 //!
 //! Not rendered as the reference would, each reported in `SceneDesc::notes` when used:
 //! `visibility` tracks (parsed, ignored), `la` animated lights (static at their position),
@@ -192,11 +193,24 @@ fn load_scene(path: &Path) -> Result<(SceneDesc, AffStats), String> {
 }
 
 /// Resolves key blocks, adds camera and light nodes, and assembles the description.
+/// Most frames an `a` line's own range gives, as for a USD stage's time code range: a
+/// longer range keeps its start and end with frames further apart (`--frames` and `--fps`
+/// choose others).
+const MAX_AFF_FRAMES: u32 = 1_000_001;
+
 /// Notes for an `a start end frames` line a user may not have meant: no frames at all
-/// (rendered as one frame at `start`), or an end before the start (played backwards, as
-/// the line's formula says).
-fn note_frame_times(times: Option<FrameTimes>, notes: &mut Vec<String>) {
+/// (rendered as one frame at `start`), an end before the start (played backwards, as the
+/// line's formula says), or more frames than [`MAX_AFF_FRAMES`] (spread over that many).
+fn note_frame_times(times: &mut Option<FrameTimes>, notes: &mut Vec<String>) {
     let Some(t) = times else { return };
+    if t.frames > MAX_AFF_FRAMES {
+        notes.push(format!(
+            "'a {} {} {}' asks for more than {MAX_AFF_FRAMES} frames; the default range is \
+             {MAX_AFF_FRAMES} frames over the same time (use --frames and --fps to choose)",
+            t.start, t.end, t.frames
+        ));
+        t.frames = MAX_AFF_FRAMES;
+    }
     if t.frames == 0 {
         notes.push(format!(
             "'a {} {} 0' asks for no frames; the default range is one frame, at time {}",
@@ -222,7 +236,7 @@ fn finish(path: &Path, mut p: Parser) -> Result<(SceneDesc, AffStats), String> {
             p.scopes.len() - 1
         ));
     }
-    note_frame_times(p.frame_times, &mut notes);
+    note_frame_times(&mut p.frame_times, &mut notes);
     let rest_time = p.frame_times.map_or(0.0, |f| f.start);
     let mut tracks = ResolvedTracks::default();
     animate_transforms(&mut p, rest_time, &mut tracks);
