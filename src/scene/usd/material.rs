@@ -555,6 +555,7 @@ fn surface_shader(reader: &Reader, material: &Prim) -> Result<Option<Prim>, Stri
         let Some(source) = connections.into_iter().next() else {
             return Ok(None);
         };
+        super::values::walkable_path(&source).map_err(|e| format!("{}: {e}", attr.as_str()))?;
         let prim = stage.prim(source.prim_path());
         if !prim.is_valid().unwrap_or(false) {
             return Err(format!(
@@ -598,7 +599,7 @@ fn shader_input(reader: &Reader, shader: &Prim, name: &str) -> Result<Input, Str
     let mut prim = shader.clone();
     let mut attr_name = format!("inputs:{name}");
     for _ in 0..MAX_CONNECTION_HOPS {
-        let attr = prim.attribute(attr_name.as_str());
+        let attr = super::values::attribute(&prim, &attr_name)?;
         let connections = attr
             .connections()
             .map_err(|e| format!("{}: {e:#}", attr_path(&prim, &attr_name)))?;
@@ -608,6 +609,8 @@ fn shader_input(reader: &Reader, shader: &Prim, name: &str) -> Result<Input, Str
                 None => Input::Unset,
             });
         };
+        super::values::walkable_path(&source)
+            .map_err(|e| format!("{}: {e}", attr_path(&prim, &attr_name)))?;
         let source_prim = stage.prim(source.prim_path());
         if !source_prim.is_valid().unwrap_or(false) {
             return Err(format!(

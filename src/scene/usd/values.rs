@@ -24,7 +24,7 @@ pub(super) struct Samples {
 impl Reader<'_> {
     /// The attribute's composed default value (`None` when unauthored or blocked).
     pub fn default_value(&self, prim: &Prim, name: &str) -> Result<Option<Value>, String> {
-        let attr = prim.attribute(name);
+        let attr = attribute(prim, name)?;
         match attr.get::<Value>() {
             Ok(Some(Value::ValueBlock | Value::None)) | Ok(None) => Ok(None),
             Ok(Some(v)) => Ok(Some(v)),
@@ -39,7 +39,7 @@ impl Reader<'_> {
     /// are dropped (a USD block means "no value" from that time on, which the frame loop
     /// cannot express; the caller notes nothing, as no converter writes them).
     pub fn samples(&self, prim: &Prim, name: &str) -> Result<Samples, String> {
-        let attr = prim.attribute(name);
+        let attr = attribute(prim, name)?;
         let what = || attr_path(prim, name);
         let raw = attr
             .time_samples()
@@ -75,7 +75,7 @@ impl Reader<'_> {
 
     /// How many time samples the attribute has (their values are not read).
     pub fn sample_count(&self, prim: &Prim, name: &str) -> Result<usize, String> {
-        prim.attribute(name).num_time_samples().map_err(|e| {
+        attribute(prim, name)?.num_time_samples().map_err(|e| {
             format!(
                 "{}: cannot read its time samples: {e:#}",
                 attr_path(prim, name)
@@ -92,7 +92,7 @@ impl Reader<'_> {
     /// sample when there are samples (USD: samples win over the default at every time), else
     /// the default. Only that one value is read.
     pub fn static_value(&self, prim: &Prim, name: &str) -> Result<Option<Value>, String> {
-        let attr = prim.attribute(name);
+        let attr = attribute(prim, name)?;
         let times = attr.time_sample_times().map_err(|e| {
             format!(
                 "{}: cannot read its time samples: {e:#}",
@@ -114,7 +114,8 @@ impl Reader<'_> {
 
     /// A token metadata field of an attribute (e.g. `interpolation`).
     pub fn attr_token_metadata(&self, prim: &Prim, name: &str, key: &str) -> Option<String> {
-        prim.attribute(name)
+        attribute(prim, name)
+            .ok()?
             .get_metadata::<Value>(key)
             .ok()
             .flatten()
@@ -123,7 +124,8 @@ impl Reader<'_> {
 
     /// An integer metadata field of an attribute (e.g. `elementSize`).
     pub fn attr_int_metadata(&self, prim: &Prim, name: &str, key: &str) -> Option<i64> {
-        prim.attribute(name)
+        attribute(prim, name)
+            .ok()?
             .get_metadata::<Value>(key)
             .ok()
             .flatten()
@@ -132,11 +134,62 @@ impl Reader<'_> {
     }
 
     /// The targets of a relationship (empty when unauthored).
+    /// The relationship's targets are paths as the file writes them; each is checked
+    /// with [`walkable_path`] before anything looks it up.
     pub fn targets(&self, prim: &Prim, name: &str) -> Result<Vec<openusd::sdf::Path>, String> {
-        prim.relationship(name)
+        check_property_name(prim, name)?;
+        let targets = prim
+            .relationship(name)
             .targets()
-            .map_err(|e| format!("{}: cannot read its targets: {e:#}", attr_path(prim, name)))
+            .map_err(|e| format!("{}: cannot read its targets: {e:#}", attr_path(prim, name)))?;
+        for target in &targets {
+            walkable_path(target).map_err(|e| format!("{}: {e}", attr_path(prim, name)))?;
+        }
+        Ok(targets)
     }
+}
+
+/// Attribute `name` of `prim`, once `name` is known to name a property
+/// ([`check_property_name`]).
+pub(super) fn attribute(prim: &Prim, name: &str) -> Result<openusd::usd::Attribute, String> {
+    check_property_name(prim, name)?;
+    Ok(prim.attribute(name))
+}
+
+/// An error unless `name` is a property name as USD spells them: identifiers (a letter or
+/// `_`, then letters, digits and `_`) joined by `:`. Names read from a file's values (an
+/// `xformOpOrder` entry is a token, any string) can hold anything, and `openusd` walks
+/// the ancestors of the path it makes from one: a `}` in the name made that walk return
+/// the same path forever (a hang found by fuzzing).
+pub(super) fn check_property_name(prim: &Prim, name: &str) -> Result<(), String> {
+    let identifiers =
+        !name.is_empty() && name.split(':').all(openusd::sdf::Path::is_valid_identifier);
+    if identifiers {
+        return Ok(());
+    }
+    Err(format!(
+        "{}: '{}' is not a property name (identifiers joined by ':')",
+        prim.path().as_str(),
+        name.escape_debug()
+    ))
+}
+
+/// An error unless every step up `path`'s ancestors, as `openusd` takes them, gives a
+/// shorter path, so that a lookup of `path` (which walks them) ends. Paths in a text
+/// layer are written between `<` and `>` and taken as written; one with a `}` and no
+/// `{`, for example, is its own parent.
+pub(super) fn walkable_path(path: &openusd::sdf::Path) -> Result<(), String> {
+    let mut at = path.clone();
+    while let Some(parent) = at.parent() {
+        if parent.as_str().len() >= at.as_str().len() {
+            return Err(format!(
+                "the path <{}> is not a USD path",
+                path.as_str().escape_debug()
+            ));
+        }
+        at = parent;
+    }
+    Ok(())
 }
 
 /// `/Prim.attr`, for messages.
@@ -360,4 +413,32 @@ pub(super) fn property_name(path: &openusd::sdf::Path) -> &str {
     let full = path.as_str();
     let prim = path.prim_path();
     full.get(prim.as_str().len() + 1..).unwrap_or("")
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn paths_whose_ancestor_walk_would_not_end_are_refused() {
+        let path = |s: &str| openusd::sdf::Path::new(s).unwrap();
+        for good in [
+            "/",
+            "/A",
+            "/A/B.xformOp:translate",
+            "/A{v=s}B.attr",
+            "/Mat/Tex.outputs:rgb",
+        ] {
+            assert_eq!(walkable_path(&path(good)), Ok(()), "{good}");
+        }
+        for bad in [
+            "/Ma}t",
+            "/Mat/Sh}.outputs:surface",
+            "/A.xformOp:transl}ate",
+            "/A}/B",
+        ] {
+            let error = walkable_path(&path(bad)).expect_err(bad);
+            assert!(error.contains(&format!("<{bad}>")), "{error}");
+        }
+    }
 }
