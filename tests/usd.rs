@@ -1071,3 +1071,73 @@ fn a_text_parse_error_names_its_layer_and_line() {
     assert!(error.contains("root.usda"), "{error}");
     assert!(error.contains("sub.usda:6:"), "{error}");
 }
+
+/// A primvar reader's `varname` is any token (empty by default): one that names no
+/// property (here the empty name, `primvars:`) names no primvar the mesh has, so the mesh
+/// loads untextured with a note, as for any primvar it lacks.
+#[test]
+fn a_primvar_reader_naming_no_property_leaves_the_mesh_untextured() {
+    let stage = |varname: &str| {
+        format!(
+            r#"#usda 1.0
+(
+    metersPerUnit = 1
+    upAxis = "Y"
+)
+def Mesh "Tri"
+{{
+    uniform token subdivisionScheme = "none"
+    int[] faceVertexCounts = [3]
+    int[] faceVertexIndices = [0, 1, 2]
+    point3f[] points = [(0, 0, 0), (1, 0, 0), (0, 1, 0)]
+    texCoord2f[] primvars:st = [(0, 0), (1, 0), (0, 1)] (interpolation = "vertex")
+    rel material:binding = </Tex>
+}}
+def Material "Tex"
+{{
+    token outputs:surface.connect = </Tex/S.outputs:surface>
+    def Shader "S"
+    {{
+        uniform token info:id = "UsdPreviewSurface"
+        color3f inputs:diffuseColor.connect = </Tex/T.outputs:rgb>
+        token outputs:surface
+    }}
+    def Shader "R"
+    {{
+        uniform token info:id = "UsdPrimvarReader_float2"
+        token inputs:varname = "{varname}"
+        float2 outputs:result
+    }}
+    def Shader "T"
+    {{
+        uniform token info:id = "UsdUVTexture"
+        asset inputs:file = @checker.png@
+        float2 inputs:st.connect = </Tex/R.outputs:result>
+        float3 outputs:rgb
+    }}
+}}
+"#
+        )
+    };
+    let tmp = tempfile::tempdir().unwrap();
+    image::RgbImage::from_pixel(2, 2, image::Rgb([200; 3]))
+        .save(tmp.path().join("checker.png"))
+        .unwrap();
+    let load = |varname: &str| {
+        let path = tmp.path().join("reader.usda");
+        std::fs::write(&path, stage(varname)).unwrap();
+        mipray::scene::load(&path).unwrap()
+    };
+    let named = load("st");
+    assert!(named.meshes[0].primitives[0].uvs.is_some());
+    for varname in ["", "s}t"] {
+        let scene = load(varname);
+        assert!(scene.meshes[0].primitives[0].uvs.is_none(), "{varname:?}");
+        let note = format!("reads primvar '{varname}', which the mesh does not have");
+        assert!(
+            scene.notes.iter().any(|n| n.contains(&note)),
+            "{varname:?}: {:?}",
+            scene.notes
+        );
+    }
+}

@@ -192,7 +192,6 @@ fn load_scene(path: &Path) -> Result<(SceneDesc, AffStats), String> {
     finish(path, p)
 }
 
-/// Resolves key blocks, adds camera and light nodes, and assembles the description.
 /// Most frames an `a` line's own range gives, as for a USD stage's time code range: a
 /// longer range keeps its start and end with frames further apart (`--frames` and `--fps`
 /// choose others).

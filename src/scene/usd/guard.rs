@@ -475,8 +475,11 @@ fn check_text(bytes: &[u8]) -> Result<(), String> {
             }
             '<' => {
                 // A path literal: openusd 0.6 recursed without end on one that ran over
-                // lines (found by the fuzz target); real paths hold no whitespace.
+                // lines (found by the fuzz target); real paths hold no whitespace. Nor may
+                // its walk up the path's ancestors fail to end (a `}` without its `{`):
+                // openusd walks them while composing, before the loader sees the path.
                 let mut closed = false;
+                let mut literal = String::new();
                 for (_, d) in chars.by_ref() {
                     if d == '>' {
                         closed = true;
@@ -485,12 +488,16 @@ fn check_text(bytes: &[u8]) -> Result<(), String> {
                     if d.is_whitespace() {
                         break;
                     }
+                    literal.push(d);
                 }
                 if !closed {
                     return Err(format!(
                         "line {line}: a path '<...>' is not closed on its line or holds whitespace"
                     ));
                 }
+                let path =
+                    openusd::sdf::Path::new(&literal).map_err(|e| format!("line {line}: {e}"))?;
+                super::values::walkable_path(&path).map_err(|e| format!("line {line}: {e}"))?;
             }
             '{' | '[' | '(' => {
                 depth += 1;

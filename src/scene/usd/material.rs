@@ -619,6 +619,13 @@ fn shader_input(reader: &Reader, shader: &Prim, name: &str) -> Result<Input, Str
                 source.as_str()
             ));
         }
+        if !source.is_property_path() {
+            return Err(format!(
+                "{}: connected to <{}>, which is not a property",
+                attr_path(&prim, &attr_name),
+                source.as_str()
+            ));
+        }
         let property = super::values::property_name(&source).to_string();
         match property.strip_prefix("outputs:") {
             Some(output) if info_id(reader, &source_prim)?.is_some() => {

@@ -219,7 +219,12 @@ pub(super) fn triangulate(
     let uvs = match wanted.uv_primvar {
         Some(name) => {
             let attr = format!("primvars:{name}");
-            let uvs = primvar(reader, prim, &attr, topology, vec2s, "texCoord2f[]")?;
+            // A primvar reader's `varname` is any token (empty by default): one that names
+            // no property names no primvar the mesh has.
+            let uvs = match super::values::is_property_name(&attr) {
+                true => primvar(reader, prim, &attr, topology, vec2s, "texCoord2f[]")?,
+                false => None,
+            };
             if uvs.is_none() {
                 notes.push(format!(
                     "{}: the material reads primvar '{name}', which the mesh does not have; untextured",

@@ -162,9 +162,7 @@ pub(super) fn attribute(prim: &Prim, name: &str) -> Result<openusd::usd::Attribu
 /// the ancestors of the path it makes from one: a `}` in the name made that walk return
 /// the same path forever (a hang found by fuzzing).
 pub(super) fn check_property_name(prim: &Prim, name: &str) -> Result<(), String> {
-    let identifiers =
-        !name.is_empty() && name.split(':').all(openusd::sdf::Path::is_valid_identifier);
-    if identifiers {
+    if is_property_name(name) {
         return Ok(());
     }
     Err(format!(
@@ -172,6 +170,11 @@ pub(super) fn check_property_name(prim: &Prim, name: &str) -> Result<(), String>
         prim.path().as_str(),
         name.escape_debug()
     ))
+}
+
+/// Whether `name` is identifiers joined by `:` (see [`check_property_name`]).
+pub(super) fn is_property_name(name: &str) -> bool {
+    !name.is_empty() && name.split(':').all(openusd::sdf::Path::is_valid_identifier)
 }
 
 /// An error unless every step up `path`'s ancestors, as `openusd` takes them, gives a

@@ -148,6 +148,13 @@ fn op_pieces(
             "{what}: not an xformOp (xformOpOrder entries start with xformOp:)"
         ));
     };
+    if !super::values::is_property_name(name) {
+        return Err(format!(
+            "{}: entry '{}' is not a property name (identifiers joined by ':')",
+            attr_path(prim, "xformOpOrder"),
+            op.escape_debug()
+        ));
+    }
     let samples = reader.samples(prim, name)?;
     let values: Vec<openusd::sdf::Value> = if samples.times.is_empty() {
         match reader.default_value(prim, name)? {
