@@ -1080,20 +1080,7 @@ fn a_primvar_reader_naming_no_property_leaves_the_mesh_untextured() {
     let stage = |varname: &str| {
         format!(
             r#"#usda 1.0
-(
-    metersPerUnit = 1
-    upAxis = "Y"
-)
-def Mesh "Tri"
-{{
-    uniform token subdivisionScheme = "none"
-    int[] faceVertexCounts = [3]
-    int[] faceVertexIndices = [0, 1, 2]
-    point3f[] points = [(0, 0, 0), (1, 0, 0), (0, 1, 0)]
-    texCoord2f[] primvars:st = [(0, 0), (1, 0), (0, 1)] (interpolation = "vertex")
-    rel material:binding = </Tex>
-}}
-def Material "Tex"
+{}def Material "Tex"
 {{
     token outputs:surface.connect = </Tex/S.outputs:surface>
     def Shader "S"
@@ -1116,7 +1103,11 @@ def Material "Tex"
         float3 outputs:rgb
     }}
 }}
-"#
+"#,
+            triangle(
+                "Tri",
+                "texCoord2f[] primvars:st = [(0, 0), (1, 0), (0, 1)] (interpolation = \"vertex\")\n    rel material:binding = </Tex>"
+            )
         )
     };
     let tmp = tempfile::tempdir().unwrap();

@@ -446,7 +446,7 @@ fn check_text(bytes: &[u8]) -> Result<(), String> {
     let mut depth = 0usize;
     let mut chars = text.char_indices().peekable();
     let mut line = 1;
-    while let Some((_, c)) = chars.next() {
+    while let Some((start, c)) = chars.next() {
         match c {
             '\n' => line += 1,
             '#' => {
@@ -478,25 +478,23 @@ fn check_text(bytes: &[u8]) -> Result<(), String> {
                 // lines (found by the fuzz target); real paths hold no whitespace. Nor may
                 // its walk up the path's ancestors fail to end (a `}` without its `{`):
                 // openusd walks them while composing, before the loader sees the path.
-                let mut closed = false;
-                let mut literal = String::new();
-                for (_, d) in chars.by_ref() {
+                let mut end = None;
+                for (at, d) in chars.by_ref() {
                     if d == '>' {
-                        closed = true;
+                        end = Some(at);
                         break;
                     }
                     if d.is_whitespace() {
                         break;
                     }
-                    literal.push(d);
                 }
-                if !closed {
+                let Some(end) = end else {
                     return Err(format!(
                         "line {line}: a path '<...>' is not closed on its line or holds whitespace"
                     ));
-                }
-                let path =
-                    openusd::sdf::Path::new(&literal).map_err(|e| format!("line {line}: {e}"))?;
+                };
+                let path = openusd::sdf::Path::new(&text[start + 1..end])
+                    .map_err(|e| format!("line {line}: {e}"))?;
                 super::values::walkable_path(&path).map_err(|e| format!("line {line}: {e}"))?;
             }
             '{' | '[' | '(' => {

@@ -555,15 +555,7 @@ fn surface_shader(reader: &Reader, material: &Prim) -> Result<Option<Prim>, Stri
         let Some(source) = connections.into_iter().next() else {
             return Ok(None);
         };
-        super::values::walkable_path(&source).map_err(|e| format!("{}: {e}", attr.as_str()))?;
-        let prim = stage.prim(source.prim_path());
-        if !prim.is_valid().unwrap_or(false) {
-            return Err(format!(
-                "{}: connected to {}, which does not exist",
-                attr.as_str(),
-                source.as_str()
-            ));
-        }
+        let prim = connected_prim(stage, &source, attr.as_str())?;
         match info_id(reader, &prim)?.as_deref() {
             Some("UsdPreviewSurface") => return Ok(Some(prim)),
             Some(_) => return Ok(None),
@@ -575,6 +567,21 @@ fn surface_shader(reader: &Reader, material: &Prim) -> Result<Option<Prim>, Stri
         "{}: connections loop or nest too deeply",
         material.path().as_str()
     ))
+}
+
+/// The prim that attribute `what`'s connection `source` leads to: the path, as the file
+/// wrote it, checked before the lookup walks it (`values::walkable_path`); an error when
+/// no such prim exists.
+fn connected_prim(stage: &Stage, source: &sdf::Path, what: &str) -> Result<Prim, String> {
+    super::values::walkable_path(source).map_err(|e| format!("{what}: {e}"))?;
+    let prim = stage.prim(source.prim_path());
+    if !prim.is_valid().unwrap_or(false) {
+        return Err(format!(
+            "{what}: connected to {}, which does not exist",
+            source.as_str()
+        ));
+    }
+    Ok(prim)
 }
 
 fn info_id(reader: &Reader, shader: &Prim) -> Result<Option<String>, String> {
@@ -609,16 +616,7 @@ fn shader_input(reader: &Reader, shader: &Prim, name: &str) -> Result<Input, Str
                 None => Input::Unset,
             });
         };
-        super::values::walkable_path(&source)
-            .map_err(|e| format!("{}: {e}", attr_path(&prim, &attr_name)))?;
-        let source_prim = stage.prim(source.prim_path());
-        if !source_prim.is_valid().unwrap_or(false) {
-            return Err(format!(
-                "{}: connected to {}, which does not exist",
-                attr_path(&prim, &attr_name),
-                source.as_str()
-            ));
-        }
+        let source_prim = connected_prim(stage, &source, &attr_path(&prim, &attr_name))?;
         if !source.is_property_path() {
             return Err(format!(
                 "{}: connected to <{}>, which is not a property",

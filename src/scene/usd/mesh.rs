@@ -221,9 +221,10 @@ pub(super) fn triangulate(
             let attr = format!("primvars:{name}");
             // A primvar reader's `varname` is any token (empty by default): one that names
             // no property names no primvar the mesh has.
-            let uvs = match super::values::is_property_name(&attr) {
-                true => primvar(reader, prim, &attr, topology, vec2s, "texCoord2f[]")?,
-                false => None,
+            let uvs = if super::values::is_property_name(&attr) {
+                primvar(reader, prim, &attr, topology, vec2s, "texCoord2f[]")?
+            } else {
+                None
             };
             if uvs.is_none() {
                 notes.push(format!(

@@ -133,9 +133,8 @@ impl Reader<'_> {
             .map(|x| x as i64)
     }
 
-    /// The targets of a relationship (empty when unauthored).
-    /// The relationship's targets are paths as the file writes them; each is checked
-    /// with [`walkable_path`] before anything looks it up.
+    /// The targets of a relationship (empty when unauthored): paths as the file writes
+    /// them, each checked with [`walkable_path`] before anything looks it up.
     pub fn targets(&self, prim: &Prim, name: &str) -> Result<Vec<openusd::sdf::Path>, String> {
         check_property_name(prim, name)?;
         let targets = prim
