@@ -126,12 +126,21 @@ impl SlotVertices {
         out: &mut Vec<SlotIndices>,
     ) {
         out.clear();
-        out.reserve(RUN);
         let first = run * RUN;
         let end = (first + RUN).min(self.deltas.len());
         if first >= end {
             return;
         }
+        // Sized once and written by index: a push per slot (its capacity test and length
+        // update) was most of the decoding's time.
+        out.resize(
+            end - first,
+            SlotIndices {
+                instance: 0,
+                vertices: [0; 3],
+            },
+        );
+        let decoded = &mut out[..];
         // The instance run holding `first`; then, segment by segment, the slots up to the
         // next run's start (no per-slot check of where the instance changes).
         let mut at = self
@@ -143,7 +152,8 @@ impl SlotVertices {
         while s < end {
             let instance = self.instances[at].1;
             let stop = self.next_instance_start(at).min(end);
-            for (slot, &[d0, d1, d2]) in (s..stop).zip(&self.deltas[s..stop]) {
+            let segment = &mut decoded[s - first..stop - first];
+            for ((slot, &[d0, d1, d2]), out) in (s..stop).zip(&self.deltas[s..stop]).zip(segment) {
                 let vertices = if d0 == ESCAPE {
                     escaped(slot, instance)
                 } else {
@@ -155,7 +165,7 @@ impl SlotVertices {
                     ]
                 };
                 previous = vertices[0];
-                out.push(SlotIndices { instance, vertices });
+                *out = SlotIndices { instance, vertices };
             }
             s = stop;
             at += 1;
