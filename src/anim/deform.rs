@@ -369,7 +369,7 @@ impl Skinning<'_> {
         weights: &[f32; 4],
         rigid_normals: &(Mat3A, f32),
         position: Vec3,
-    ) -> (Vec3, Option<((Mat3A, f32), Mat3A)>) {
+    ) -> (Vec3, Option<(NormalTransform, Mat3A)>) {
         let (blended, total) = self.blend(joints, weights);
         let p = blended.transform_point3a(Vec3A::from(position));
         if total != 0.0 && all_finite(&blended) && p.is_finite() {
@@ -531,6 +531,9 @@ fn unit_or_none(v: Vec3A) -> Option<Vec3A> {
     let rcp = v.length_recip();
     (rcp > 0.0 && rcp < f32::INFINITY).then(|| v * rcp)
 }
+
+/// A linear map's normal transform and the sign of its determinant ([`cofactor`]).
+type NormalTransform = (Mat3A, f32);
 
 /// The normal transform of a linear map `m` and its sign: `(cofactor(m), sign(det m))`,
 /// where `cofactor(m) = det(m) * m^-T` has columns `c1 x c2`, `c2 x c0`, `c0 x c1`.
