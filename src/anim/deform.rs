@@ -339,7 +339,7 @@ impl Skinning<'_> {
         &self,
         joints: &[u16; 4],
         weights: &[f32; 4],
-        rigid_normals: &(Mat3A, f32),
+        rigid_normals: &NormalTransform,
         position: Vec3,
         normal: Option<Vec3>,
     ) -> (Vec3, Option<Vec3>) {
@@ -367,7 +367,7 @@ impl Skinning<'_> {
         &self,
         joints: &[u16; 4],
         weights: &[f32; 4],
-        rigid_normals: &(Mat3A, f32),
+        rigid_normals: &NormalTransform,
         position: Vec3,
     ) -> (Vec3, Option<(NormalTransform, Mat3A)>) {
         let (blended, total) = self.blend(joints, weights);
@@ -404,15 +404,17 @@ impl Skinning<'_> {
     }
 }
 
-/// A run of vertices skinned by [`Skinning::skin_vertex`], compiled once per SIMD copy
-/// (`simd::dispatch`): the loop is the same code, but the AVX2 copy encodes glam's 4-wide
-/// operations with three operands, about a tenth fewer instructions per vertex.
+/// A run of vertices skinned as [`Skinning::skin_vertex`] skins one (positions by
+/// [`Skinning::skin_position`], normals normalised a block at a time, the same bits),
+/// compiled once per SIMD copy (`simd::dispatch`): the loop is the same code, but the AVX2
+/// copy encodes glam's 4-wide operations with three operands, about a tenth fewer
+/// instructions per vertex.
 struct SkinRange<'a, 'b> {
     skinning: &'a Skinning<'a>,
     influences: Influences<'a>,
     /// Rest positions and normals to skin from, indexed from `first`; `None`: in place.
     rest: Option<(&'a [Vec3], &'a [Vec3])>,
-    rigid_normals: &'a (Mat3A, f32),
+    rigid_normals: &'a NormalTransform,
     /// The index of `positions[0]` in the primitive.
     first: usize,
     positions: &'b mut [Vec3],
@@ -444,18 +446,18 @@ impl simd::Kernel for SkinRange<'_, '_> {
             Some((p, n)) => (p[k], n.get(k).copied()),
             None => (positions[k], normals.get(k).copied()),
         };
-        // Normals are skinned where there are some to read and write (`apply`'s contract
-        // gives either none or one per vertex on both sides; otherwise they are left alone).
-        let skins_normals =
-            !normals.is_empty() && rest.is_none_or(|(_, rest_normals)| rest_normals.len() == count);
-        if !skins_normals {
-            for k in 0..count {
-                let (from, _) = input(k, positions, normals);
-                positions[k] = skinning
-                    .skin_position(&joints[k], &weights[k], rigid_normals, from)
-                    .0;
-            }
-            return;
+        // Normals are skinned where there is one to read and a place to write it (`apply`'s
+        // contract gives one per vertex or none, on both sides): the first `with_normals`
+        // vertices. The others' positions alone; their normals, if any, are left alone.
+        let with_normals = match rest {
+            Some((_, rest_normals)) if rest_normals.len() < count => 0,
+            _ => count.min(normals.len()),
+        };
+        for k in with_normals..count {
+            let (from, _) = input(k, positions, normals);
+            positions[k] = skinning
+                .skin_position(&joints[k], &weights[k], rigid_normals, from)
+                .0;
         }
         // Blocks of vertices: skinned, their normals transformed but not yet normalised
         // (kept side by side, axis by axis), then their lengths' reciprocals taken in one
@@ -465,8 +467,8 @@ impl simd::Kernel for SkinRange<'_, '_> {
         let mut kept = [(Vec3::ZERO, Vec3::ZERO); NORMAL_BLOCK];
         let mut axes = [[0f32; NORMAL_BLOCK]; 3];
         let mut rcp = [0f32; NORMAL_BLOCK];
-        for start in (0..count).step_by(NORMAL_BLOCK) {
-            let len = NORMAL_BLOCK.min(count - start);
+        for start in (0..with_normals).step_by(NORMAL_BLOCK) {
+            let len = NORMAL_BLOCK.min(with_normals - start);
             for b in 0..len {
                 let k = start + b;
                 let (from, from_normal) = input(k, positions, normals);
@@ -486,6 +488,8 @@ impl simd::Kernel for SkinRange<'_, '_> {
                     axes[axis][b] = oriented[axis];
                 }
             }
+            // All the block's entries (past `len`, the last block's are stale and unused):
+            // a fixed count the compiler unrolls into vectors.
             let [x, y, z] = &axes;
             for b in 0..NORMAL_BLOCK {
                 // `Vec3A::length_recip`'s operations: (x x + y y) + z z, square root, 1 / it.
@@ -497,15 +501,17 @@ impl simd::Kernel for SkinRange<'_, '_> {
                 normals[k] = if r > 0.0 && r < f32::INFINITY {
                     Vec3::new(x[b] * r, y[b] * r, z[b] * r)
                 } else {
+                    // Rare (a degenerate map, or a vertex kept as it was): the one-vertex
+                    // code again, with its fallbacks. Given a normal it returns one.
                     let (from, normal) = kept[b];
-                    let n = skinning.skin_vertex(
+                    let (_, n) = skinning.skin_vertex(
                         &joints[k],
                         &weights[k],
                         rigid_normals,
                         from,
                         Some(normal),
                     );
-                    n.1.unwrap_or(normal)
+                    n.unwrap_or(normal)
                 };
             }
         }
@@ -538,7 +544,7 @@ type NormalTransform = (Mat3A, f32);
 /// The normal transform of a linear map `m` and its sign: `(cofactor(m), sign(det m))`,
 /// where `cofactor(m) = det(m) * m^-T` has columns `c1 x c2`, `c2 x c0`, `c0 x c1`.
 #[inline(always)]
-fn cofactor(m: Mat3A) -> (Mat3A, f32) {
+fn cofactor(m: Mat3A) -> NormalTransform {
     let cofactor = Mat3A::from_cols(
         m.y_axis.cross(m.z_axis),
         m.z_axis.cross(m.x_axis),
@@ -550,7 +556,7 @@ fn cofactor(m: Mat3A) -> (Mat3A, f32) {
 
 /// `sign * cofactor * n`, the normal before it is normalised.
 #[inline(always)]
-fn oriented_normal(normal_from_object: &(Mat3A, f32), n: Vec3A) -> Vec3A {
+fn oriented_normal(normal_from_object: &NormalTransform, n: Vec3A) -> Vec3A {
     let (cofactor, sign) = *normal_from_object;
     // The sign as a negation: `-v` is `sign * v` bit for bit, one instruction fewer.
     let transformed = cofactor * n;
@@ -565,7 +571,7 @@ fn oriented_normal(normal_from_object: &(Mat3A, f32), n: Vec3A) -> Vec3A {
 /// failing that, `n` normalized, or zero (so skinned normals are always unit or zero, as
 /// world-space normals must be: they are not placed again).
 #[inline(always)]
-fn transform_normal(normal_from_object: &(Mat3A, f32), m: Mat3A, n: Vec3) -> Vec3 {
+fn transform_normal(normal_from_object: &NormalTransform, m: Mat3A, n: Vec3) -> Vec3 {
     let n = Vec3A::from(n);
     let out = unit_or_none(oriented_normal(normal_from_object, n))
         .or_else(|| unit_or_none(m * n))
@@ -842,6 +848,24 @@ mod tests {
                 all_bits(&in_place_normals) == expected.1
                     && all_bits(&from_rest_normals) == expected.1
             );
+            // Normals on one side only: the positions as before, the normals written only
+            // where there is one to read and a place to write it, the others left alone.
+            let short = normals.len() / 2 + 7;
+            let (mut some, mut some_normals) = (positions.clone(), normals[..short].to_vec());
+            skinning.apply(influences, None, &mut some, &mut some_normals);
+            assert!(
+                all_bits(&some) == expected.0 && all_bits(&some_normals) == expected.1[..short]
+            );
+            let mut untouched = vec![Vec3::ONE; positions.len()];
+            let mut no_rest_normals = vec![Vec3::NAN; positions.len()];
+            skinning.apply(
+                influences,
+                Some((positions, &[])),
+                &mut no_rest_normals,
+                &mut untouched,
+            );
+            assert!(all_bits(&no_rest_normals) == expected.0);
+            assert!(untouched.iter().all(|&n| n == Vec3::ONE));
         }
         // The cases reach both the blend and the fallbacks.
         assert!(

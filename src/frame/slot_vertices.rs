@@ -153,7 +153,9 @@ impl SlotVertices {
             let instance = self.instances[at].1;
             let stop = self.next_instance_start(at).min(end);
             let segment = &mut decoded[s - first..stop - first];
-            for ((slot, &[d0, d1, d2]), out) in (s..stop).zip(&self.deltas[s..stop]).zip(segment) {
+            for ((slot, &[d0, d1, d2]), slot_out) in
+                (s..stop).zip(&self.deltas[s..stop]).zip(segment)
+            {
                 let vertices = if d0 == ESCAPE {
                     escaped(slot, instance)
                 } else {
@@ -165,7 +167,7 @@ impl SlotVertices {
                     ]
                 };
                 previous = vertices[0];
-                *out = SlotIndices { instance, vertices };
+                *slot_out = SlotIndices { instance, vertices };
             }
             s = stop;
             at += 1;
