@@ -250,8 +250,7 @@ fn apply_morph(
 /// Each normal normalised, the bits of `Vec3::try_normalize`, or its `base` entry where
 /// that fails (pairs past the shorter slice are left alone). The reciprocal lengths are
 /// taken a block at a time in one loop the compiler puts in vectors, as skinning's are
-/// ([`SkinRange`]), with `Vec3::length_recip`'s operations: `(x x + y y) + z z`, its square
-/// root, 1 / it.
+/// ([`SkinRange`]).
 fn normalize_or(normals: &mut [Vec3], base: &[Vec3]) {
     let mut rcp = [0f32; NORMAL_BLOCK];
     for (block, base) in normals
@@ -259,14 +258,10 @@ fn normalize_or(normals: &mut [Vec3], base: &[Vec3]) {
         .zip(base.chunks(NORMAL_BLOCK))
     {
         for (r, n) in rcp.iter_mut().zip(block.iter()) {
-            *r = 1.0 / ((n.x * n.x + n.y * n.y) + n.z * n.z).sqrt();
+            *r = length_recip(n.x, n.y, n.z);
         }
         for ((n, base), &r) in block.iter_mut().zip(base).zip(&rcp) {
-            *n = if r.is_finite() && r > 0.0 {
-                *n * r
-            } else {
-                *base
-            };
+            *n = if scales_to_unit(r) { *n * r } else { *base };
         }
     }
 }
@@ -492,13 +487,12 @@ impl simd::Kernel for SkinRange<'_, '_> {
             // a fixed count the compiler unrolls into vectors.
             let [x, y, z] = &axes;
             for b in 0..NORMAL_BLOCK {
-                // `Vec3A::length_recip`'s operations: (x x + y y) + z z, square root, 1 / it.
-                rcp[b] = 1.0 / ((x[b] * x[b] + y[b] * y[b]) + z[b] * z[b]).sqrt();
+                rcp[b] = length_recip(x[b], y[b], z[b]);
             }
             for b in 0..len {
                 let k = start + b;
                 let r = rcp[b];
-                normals[k] = if r > 0.0 && r < f32::INFINITY {
+                normals[k] = if scales_to_unit(r) {
                     Vec3::new(x[b] * r, y[b] * r, z[b] * r)
                 } else {
                     // Rare (a degenerate map, or a vertex kept as it was): the one-vertex
@@ -535,7 +529,22 @@ fn all_finite(m: &Mat4) -> bool {
 #[inline(always)]
 fn unit_or_none(v: Vec3A) -> Option<Vec3A> {
     let rcp = v.length_recip();
-    (rcp > 0.0 && rcp < f32::INFINITY).then(|| v * rcp)
+    scales_to_unit(rcp).then(|| v * rcp)
+}
+
+/// `1 / |(x, y, z)|` with the operations of glam's `Vec3::length_recip` and
+/// `Vec3A::length_recip`, in their order: `(x x + y y) + z z`, its square root, 1 / it (so
+/// a loop over many takes them in vectors with the same bits).
+#[inline(always)]
+fn length_recip(x: f32, y: f32, z: f32) -> f32 {
+    1.0 / ((x * x + y * y) + z * z).sqrt()
+}
+
+/// Whether a vector times its reciprocal length `rcp` is a unit vector: `rcp` is a positive
+/// finite number (`try_normalize`'s test, as two compares).
+#[inline(always)]
+fn scales_to_unit(rcp: f32) -> bool {
+    rcp > 0.0 && rcp < f32::INFINITY
 }
 
 /// A linear map's normal transform and the sign of its determinant ([`cofactor`]).
