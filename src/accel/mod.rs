@@ -32,7 +32,7 @@ pub use flat::{Accel, AccelError, BUILD_CHUNK_TRIANGLES, RefitKind, RunLeafBoxes
 pub use instanced::{TlasInstance, TwoLevelAccel};
 pub use policy::{BvhLayout, BvhPolicy, TreeStep};
 pub use query::{Hit, TriangleRef};
-pub use triangles::{SlotLanes, intersect};
+pub use triangles::{LANES as PACK_LANES, SlotLanes, intersect};
 pub use wide::PACKET;
 
 #[cfg(test)]

@@ -404,6 +404,28 @@ impl InstanceWriter<'_> {
         self.rewrite == Rewrite::Changed
     }
 
+    /// Whether writing a slot of this instance writes its positions alone and marks it
+    /// deformed where they changed: a deforming instance whose inputs changed, whose slots
+    /// store no normals and keep their uvs (then the write in slot order can write a pack's
+    /// lanes together, [`crate::accel::SlotLanes::rewrite_pack`]).
+    #[inline]
+    pub fn writes_positions_alone(&self) -> bool {
+        self.rewrite == Rewrite::Changed && !self.stores_normals && !self.rewrites_uvs
+    }
+
+    /// The positions [`Self::write_vertices`] writes for the triangle of primitive vertices
+    /// `vertices` when [`Self::writes_positions_alone`].
+    #[inline(always)]
+    pub fn positions(&self, vertices: [u32; 3]) -> [Vec3A; 3] {
+        self.placed_positions(vertices)
+    }
+
+    /// Marks that a triangle written with new vertices has a non-finite one.
+    #[inline]
+    pub fn note_nonfinite(&self) {
+        self.writer.moved_nonfinite.store(true, Ordering::Relaxed);
+    }
+
     /// Source triangle `source`'s vertex indices in its primitive (as the index buffer
     /// lists them).
     #[inline]

@@ -36,7 +36,7 @@ use super::scatter::{SlotScatter, SourceMotions};
 use super::setup::FrameSetup;
 use super::slot_vertices::{self, SlotIndices, SlotVertices};
 use super::two_level::{TwoLevel, Which};
-use crate::accel::{Accel, AccelError, BvhPolicy, RunLeafBoxes, SlotLanes, TreeStep};
+use crate::accel::{Accel, AccelError, BvhPolicy, PACK_LANES, RunLeafBoxes, SlotLanes, TreeStep};
 use crate::anim::NodeShape;
 use crate::geometry::FrameTriangles;
 use crate::simd;
@@ -809,27 +809,62 @@ impl simd::Kernel for SlotRunWrite<'_, '_> {
         slot_vertices.decode_run(run, escaped, decoded);
         let deformed_by_bit = words.is_some();
         let mut current: Option<(u32, InstanceWriter)> = None;
-        for (
-            k,
-            &SlotIndices {
+        let mut k = 0;
+        while k < decoded.len() {
+            let SlotIndices {
                 instance: i,
                 vertices,
-            },
-        ) in decoded.iter().enumerate()
-        {
+            } = decoded[k];
             if plan[i as usize] == Rewrite::Keep {
+                k += 1;
                 continue;
             }
             let instance = match &current {
                 Some((at, instance)) if *at == i => instance,
                 _ => &current.insert((i, writer.instance(i as usize))).1,
             };
+            let slot = (run * SLOT_RUN + k) as u32;
+            // A whole pack of this instance's slots that write their positions alone: its
+            // lanes written together (`SlotLanes::rewrite_pack`).
+            if instance.writes_positions_alone()
+                && let Some(live) = lanes.pack_from(slot).map(|live| live as usize)
+                && decoded
+                    .get(k..k + live)
+                    .is_some_and(|pack| pack.iter().all(|s| s.instance == i))
+            {
+                let mut tri = [[glam::Vec3A::ZERO; 3]; PACK_LANES];
+                for (l, t) in tri.iter_mut().enumerate().take(live) {
+                    if let Some(ahead) = decoded.get(k + l + PREFETCH_AHEAD)
+                        && ahead.instance == i
+                    {
+                        instance.prefetch_vertices(ahead.vertices);
+                    }
+                    *t = instance.positions(decoded[k + l].vertices);
+                }
+                // SAFETY: the pack's slots all lie in this run (`decoded` holds the run's),
+                // which no other task reads or writes (`scatter`).
+                let (changed, nonfinite) = unsafe { lanes.rewrite_pack(slot, live as u32, &tri) };
+                if nonfinite != 0 {
+                    instance.note_nonfinite();
+                }
+                for l in 0..live {
+                    let moved = changed & (1 << l) != 0;
+                    match words.as_deref_mut() {
+                        Some(words) => words[(k + l) / 64] |= u64::from(moved) << ((k + l) % 64),
+                        // SAFETY: as above (each source has one slot, in this run).
+                        None => unsafe {
+                            motions.set(sources[k + l], moved.then_some(Motion::Deformed))
+                        },
+                    }
+                }
+                k += live;
+                continue;
+            }
             if let Some(ahead) = decoded.get(k + PREFETCH_AHEAD)
                 && ahead.instance == i
             {
                 instance.prefetch_vertices(ahead.vertices);
             }
-            let slot = (run * SLOT_RUN + k) as u32;
             let source = sources[k];
             // SAFETY: each slot is in one run only, so no other task reads or writes
             // its lane or its source's motion (`scatter`).
@@ -855,6 +890,7 @@ impl simd::Kernel for SlotRunWrite<'_, '_> {
                     motions.set(source, motion);
                 }
             }
+            k += 1;
         }
         // The boxes of the run's leaves, while its packs are in this task's cache: the
         // refit's leaf pass read every pack again from memory (a million skinned

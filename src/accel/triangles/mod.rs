@@ -390,6 +390,41 @@ impl SlotLanes<'_> {
         })
     }
 
+    /// How many live lanes the pack whose lane 0 holds slot `slot` has (`None` when `slot`
+    /// lies in another lane): the slots `slot..slot + live` [`Self::rewrite_pack`] writes.
+    #[inline]
+    pub fn pack_from(&self, slot: u32) -> Option<u32> {
+        let (pack, lane) = self.lane(slot);
+        // SAFETY: in bounds; `live` is written by the build alone, never through the lanes,
+        // so reading it races with nothing.
+        (lane == 0).then(|| unsafe { (*pack).live })
+    }
+
+    /// Writes `tri[lane]` into each of the first `live` lanes of the pack whose lane 0
+    /// holds slot `first` (its other lanes keep theirs) and returns two lane masks (bit
+    /// `l` for lane `l`): the lanes whose bits changed (so -0 and 0 differ and a NaN equals
+    /// itself, as the write's moved test has it), and those of them with a non-finite
+    /// vertex. The same bits [`Self::set`] stores lane by lane; whole lanes are read,
+    /// compared and stored as vectors (lane by lane, each slot's nine scalar reads and
+    /// stores were the hottest part of a deforming mesh's write).
+    ///
+    /// # Safety
+    /// No other task may read or write any slot of that pack at the same time, and `live`
+    /// is at most its live lanes ([`Self::pack_from`]).
+    #[inline(always)]
+    pub unsafe fn rewrite_pack(
+        &self,
+        first: u32,
+        live: u32,
+        tri: &[[Vec3A; 3]; LANES],
+    ) -> (u32, u32) {
+        let (pack, lane) = self.lane(first);
+        debug_assert_eq!(lane, 0, "slot {first} does not begin a pack");
+        debug_assert!(live as usize <= LANES);
+        // SAFETY: in bounds, and the pack's lanes are this task's alone (the contract).
+        unsafe { rewrite_lanes(&raw mut (*pack).v, live, tri) }
+    }
+
     /// Hints the cache to load the lines of slot `slot`'s lane (no effect when out of range).
     #[inline]
     pub fn prefetch(&self, slot: u32) {
@@ -411,6 +446,87 @@ impl SlotLanes<'_> {
             }
         }
     }
+}
+
+/// [`SlotLanes::rewrite_pack`] on the pack's vertex lanes `v`: per vertex, the four
+/// triangles' vertices turned into lanes (a 4x4 transpose), blended with the old lanes
+/// past `live`, compared bit for bit and stored.
+///
+/// # Safety
+/// `v` must point to a pack's vertex lanes that no other task accesses meanwhile.
+#[cfg(target_arch = "x86_64")]
+#[inline(always)]
+unsafe fn rewrite_lanes(
+    v: *mut [[[f32; LANES]; 3]; 3],
+    live: u32,
+    tri: &[[Vec3A; 3]; LANES],
+) -> (u32, u32) {
+    use std::arch::x86_64::*;
+    let live_bits = (1u32 << live) - 1;
+    // SAFETY: SSE2 is part of x86_64; `v` is a pack's (16-byte aligned, `TrianglePack`) and
+    // this task's alone (the contract), so its lanes can be loaded and stored whole.
+    unsafe {
+        let lanes = _mm_setr_epi32(0, 1, 2, 3);
+        let written = _mm_castsi128_ps(_mm_cmplt_epi32(lanes, _mm_set1_epi32(live as i32)));
+        let magnitude = _mm_castsi128_ps(_mm_set1_epi32(i32::MAX));
+        let infinity = _mm_set1_ps(f32::INFINITY);
+        let mut changed = _mm_setzero_si128();
+        let mut finite = _mm_castps_si128(written);
+        for (vertex, lanes_of_vertex) in (*v).iter_mut().enumerate() {
+            let [r0, r1, r2, r3] = tri.map(|t| __m128::from(t[vertex]));
+            let (t0, t1) = (_mm_unpacklo_ps(r0, r1), _mm_unpacklo_ps(r2, r3));
+            let (t2, t3) = (_mm_unpackhi_ps(r0, r1), _mm_unpackhi_ps(r2, r3));
+            let axes = [
+                _mm_movelh_ps(t0, t1),
+                _mm_movehl_ps(t1, t0),
+                _mm_movelh_ps(t2, t3),
+            ];
+            for (axis, lane) in axes.into_iter().zip(lanes_of_vertex.iter_mut()) {
+                let old = _mm_load_ps(lane.as_ptr());
+                let new = _mm_or_ps(_mm_and_ps(written, axis), _mm_andnot_ps(written, old));
+                let same = _mm_cmpeq_epi32(_mm_castps_si128(new), _mm_castps_si128(old));
+                changed = _mm_or_si128(changed, _mm_xor_si128(same, _mm_set1_epi32(-1)));
+                let bounded = _mm_cmplt_ps(_mm_and_ps(new, magnitude), infinity);
+                finite = _mm_and_si128(finite, _mm_castps_si128(bounded));
+                _mm_store_ps(lane.as_mut_ptr(), new);
+            }
+        }
+        let changed = _mm_movemask_ps(_mm_castsi128_ps(changed)) as u32 & live_bits;
+        let finite = _mm_movemask_ps(_mm_castsi128_ps(finite)) as u32;
+        (changed, changed & !finite)
+    }
+}
+
+/// [`SlotLanes::rewrite_pack`] lane by lane, where there is no SSE2.
+///
+/// # Safety
+/// As the x86_64 version.
+#[cfg(not(target_arch = "x86_64"))]
+#[inline(always)]
+unsafe fn rewrite_lanes(
+    v: *mut [[[f32; LANES]; 3]; 3],
+    live: u32,
+    tri: &[[Vec3A; 3]; LANES],
+) -> (u32, u32) {
+    let (mut changed, mut nonfinite) = (0, 0);
+    // SAFETY: the contract: the lanes are this task's alone.
+    let v = unsafe { &mut *v };
+    for (l, t) in tri.iter().enumerate().take(live as usize) {
+        let mut same = true;
+        for vertex in 0..3 {
+            for axis in 0..3 {
+                same &= v[vertex][axis][l].to_bits() == t[vertex][axis].to_bits();
+                v[vertex][axis][l] = t[vertex][axis];
+            }
+        }
+        if !same {
+            changed |= 1 << l;
+            if !t.iter().all(|p| p.is_finite()) {
+                nonfinite |= 1 << l;
+            }
+        }
+    }
+    (changed, nonfinite)
 }
 
 impl PackedTriangles {
@@ -905,6 +1021,62 @@ mod tests {
         };
         leaf_box(0, 5, 0..5);
         leaf_box(5, 6, 5..11);
+    }
+
+    /// A whole pack rewritten at once stores what lane-by-lane writes store, keeps its dead
+    /// lanes, and reports as changed exactly the lanes whose bits differ (a signed zero's
+    /// flip counts, a NaN rewritten with the same bits does not) and, of those, the ones
+    /// with a non-finite vertex.
+    #[test]
+    fn a_pack_rewritten_at_once_matches_lane_by_lane_writes_bit_for_bit() {
+        let start: Vec<[Vec3A; 3]> = (0..7)
+            .map(|i| {
+                let f = i as f32;
+                let mut t = tri([f, 0.0, -0.0], [f + 1.0, 0.5, 0.0], [f, 1.0, 2.0]);
+                if i == 2 {
+                    t[1].y = f32::NAN;
+                }
+                t
+            })
+            .collect();
+        // Leaves of 4 and 3: the second pack has a dead lane.
+        let mut packed = PackedTriangles::pack(&start, [(0, 4), (4, 3)].into_iter());
+        let mut expected = start.clone();
+        // Lane 0 unchanged; lane 1: -0 -> +0 (a change of bits); lane 2: the same NaN
+        // (unchanged); lane 3: an infinity (changed, non-finite); lanes 4..7: moved, one
+        // to a NaN.
+        expected[1][0].z = 0.0;
+        expected[3][2].x = f32::INFINITY;
+        expected[4] = expected[4].map(|v| v + Vec3A::splat(0.25));
+        expected[5] = tri([1e30, -1e30, 3.0], [f32::MIN_POSITIVE; 3], [-0.0; 3]);
+        expected[6][0].y = f32::NAN;
+        let dead_before = packed.packs[1]
+            .v
+            .map(|vertex| vertex.map(|axis| axis[3].to_bits()));
+        let lanes = packed.slot_lanes();
+        let pack_of = |first: usize, live: usize| {
+            let mut t = [[Vec3A::splat(f32::NAN); 3]; LANES];
+            t[..live].copy_from_slice(&expected[first..first + live]);
+            t
+        };
+        assert_eq!(lanes.pack_from(0), Some(4));
+        assert_eq!(lanes.pack_from(4), Some(3));
+        assert_eq!(lanes.pack_from(5), None);
+        // SAFETY: one thread.
+        let first = unsafe { lanes.rewrite_pack(0, 4, &pack_of(0, 4)) };
+        let second = unsafe { lanes.rewrite_pack(4, 3, &pack_of(4, 3)) };
+        assert_eq!(first, (0b1010, 0b1000));
+        assert_eq!(second, (0b111, 0b100));
+        let bits = |t: &[[Vec3A; 3]]| -> Vec<[[u32; 3]; 3]> {
+            t.iter()
+                .map(|t| t.map(|v| v.to_array().map(f32::to_bits)))
+                .collect()
+        };
+        assert_eq!(bits(&packed.triangles_in_slot_order()), bits(&expected));
+        let dead_after = packed.packs[1]
+            .v
+            .map(|vertex| vertex.map(|axis| axis[3].to_bits()));
+        assert_eq!(dead_after, dead_before, "the dead lane is kept");
     }
 
     /// A pack's box, computed four lanes at once, is the union of its live lanes'
