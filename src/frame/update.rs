@@ -13,11 +13,14 @@
 //! order. The write goes in source order, scattering into the slots (`scatter`), unless at
 //! least half the slots are written (and the tree is not rebuilt every frame): then it goes
 //! in slot order, the order of the tree's packs, reading each slot's vertex indices from a
-//! compact copy kept in slot order (`slot_vertices`). Every written value is a pure function of the pose and its
-//! triangle, and the dirty order is fixed by source order, so the parallel update is
+//! compact copy kept in slot order (`slot_vertices`); there a pack whose slots all belong
+//! to one deforming instance is written whole, its four lanes compared and stored as
+//! vectors (`SlotLanes::rewrite_pack`). Every written value is a pure function of the pose
+//! and its triangle, and the dirty order is fixed by source order, so the parallel update is
 //! bit-identical to the sequential one, dirty order included. Timing: classifying instances
 //! and listing the dirty set count as `dirty_ms`; posing and writing (including the
-//! per-triangle "did its vertices change" test, fused with the write) as `animate_ms`.
+//! "did its vertices change" test, per triangle or per pack, fused with the write) as
+//! `animate_ms`.
 
 use std::time::Instant;
 
@@ -46,7 +49,8 @@ use glam::{Vec2, Vec3};
 /// rayon's split and join cost more than the work (tens of ns per item).
 const PARALLEL_MIN_ITEMS: usize = 8192;
 
-/// How many source triangles ahead the scattered write prefetches its slot.
+/// How many triangles ahead the writes prefetch: the scattered write its slot, the write
+/// in slot order its vertices.
 const PREFETCH_AHEAD: usize = 16;
 
 thread_local! {
@@ -759,10 +763,12 @@ impl TreeState {
 }
 
 /// One run of [`TreeState::write_in_slot_order`]: its slots' indices decoded, then each
-/// planned slot's triangle written into its pack lane, its motion recorded and (with
-/// `words`) its dirty bit set. A [`simd::Kernel`] so the loop is compiled once per SIMD
-/// copy: the AVX2 copy encodes the gathers, compares and lane stores with fewer
-/// instructions.
+/// planned slot's triangle written into its pack lane (a pack of one deforming instance's
+/// slots lying in the run, all four lanes at once), its motion recorded and (with `words`)
+/// its dirty bit set; then the boxes of the leaves inside the run. A [`simd::Kernel`] so
+/// the loop is compiled once per SIMD copy: the AVX2 copy encodes the per-slot gathers,
+/// compares and lane stores with fewer instructions (the whole-pack rewrite is SSE2 in
+/// both).
 struct SlotRunWrite<'a, 'r> {
     writer: &'a TriangleWriter<'a>,
     plan: &'a [Rewrite],
@@ -841,8 +847,9 @@ impl simd::Kernel for SlotRunWrite<'_, '_> {
                     }
                     *t = instance.positions(decoded[k + l].vertices);
                 }
-                // SAFETY: the pack's slots all lie in this run (`decoded` holds the run's),
-                // which no other task reads or writes (`scatter`).
+                // SAFETY: all the pack's slots lie in this run (`decoded` holds the run's
+                // slots, and `get(k..k + live)` found them there), and no other task reads
+                // or writes a run's slots (`scatter`).
                 let (changed, nonfinite) = unsafe { lanes.rewrite_pack(slot, live as u32, &tri) };
                 if nonfinite != 0 {
                     instance.note_nonfinite();

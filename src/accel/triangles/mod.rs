@@ -314,17 +314,21 @@ impl PackedTriangles {
 /// moved triangles straight into the packs, on several threads, in source order: slots
 /// scattered over the packs, two tasks possibly in two lanes of one pack).
 ///
-/// Sound because every access goes through the raw pointer to one `f32` of a lane (no
-/// reference to a whole pack is formed), lanes of distinct slots are distinct memory
-/// (`lane_of_slot` is one-to-one), and the caller keeps each slot to one task at a time.
+/// Sound because a slot's access ([`Self::get`], [`Self::set`]) goes through the raw
+/// pointer to one `f32` of its lane at a time (no reference to a whole pack is formed),
+/// lanes of distinct slots are distinct memory (`lane_of_slot` is one-to-one), and the
+/// caller keeps each slot to one task at a time. The one whole-pack access,
+/// [`Self::rewrite_pack`], reads and stores every lane of a pack's vertex rows, dead lanes
+/// included: its caller keeps every slot of that pack to its one task.
 pub struct SlotLanes<'a> {
     packs: *mut TrianglePack,
     lane_of_slot: &'a [u32],
     _packs: std::marker::PhantomData<&'a mut [TrianglePack]>,
 }
 
-// SAFETY: the pointer comes from an exclusive borrow held for 'a; the contract of `get` and
-// `set` keeps every slot to one task at a time, and distinct slots never share a float.
+// SAFETY: the pointer comes from an exclusive borrow held for 'a; the contracts of `get` and
+// `set` keep every slot to one task at a time (distinct slots never share a float), and
+// that of `rewrite_pack` keeps a whole pack to one task.
 unsafe impl Sync for SlotLanes<'_> {}
 
 impl SlotLanes<'_> {
@@ -401,7 +405,8 @@ impl SlotLanes<'_> {
     }
 
     /// Writes `tri[lane]` into each of the first `live` lanes of the pack whose lane 0
-    /// holds slot `first` (its other lanes keep theirs) and returns two lane masks (bit
+    /// holds slot `first` (its other lanes are read and stored back with their own bits)
+    /// and returns two lane masks (bit
     /// `l` for lane `l`): the lanes whose bits changed (so -0 and 0 differ and a NaN equals
     /// itself, as the write's moved test has it), and those of them with a non-finite
     /// vertex. The same bits [`Self::set`] stores lane by lane; whole lanes are read,
@@ -409,8 +414,8 @@ impl SlotLanes<'_> {
     /// stores were the hottest part of a deforming mesh's write).
     ///
     /// # Safety
-    /// No other task may read or write any slot of that pack at the same time, and `live`
-    /// is at most its live lanes ([`Self::pack_from`]).
+    /// No other task may read or write any part of that pack's vertex rows (any of its
+    /// slots) at the same time, and `live` is at most its live lanes ([`Self::pack_from`]).
     #[inline(always)]
     pub unsafe fn rewrite_pack(
         &self,
@@ -497,13 +502,14 @@ unsafe fn rewrite_lanes(
     }
 }
 
-/// [`SlotLanes::rewrite_pack`] lane by lane, where there is no SSE2.
+/// [`SlotLanes::rewrite_pack`] lane by lane: the version for targets other than x86_64,
+/// and the reference the x86_64 one is tested against.
 ///
 /// # Safety
 /// As the x86_64 version.
-#[cfg(not(target_arch = "x86_64"))]
+#[cfg(any(test, not(target_arch = "x86_64")))]
 #[inline(always)]
-unsafe fn rewrite_lanes(
+unsafe fn rewrite_lanes_by_lane(
     v: *mut [[[f32; LANES]; 3]; 3],
     live: u32,
     tri: &[[Vec3A; 3]; LANES],
@@ -527,6 +533,21 @@ unsafe fn rewrite_lanes(
         }
     }
     (changed, nonfinite)
+}
+
+/// [`SlotLanes::rewrite_pack`] where there is no x86_64 SSE2: lane by lane.
+///
+/// # Safety
+/// As the x86_64 version.
+#[cfg(not(target_arch = "x86_64"))]
+#[inline(always)]
+unsafe fn rewrite_lanes(
+    v: *mut [[[f32; LANES]; 3]; 3],
+    live: u32,
+    tri: &[[Vec3A; 3]; LANES],
+) -> (u32, u32) {
+    // SAFETY: the caller's contract.
+    unsafe { rewrite_lanes_by_lane(v, live, tri) }
 }
 
 impl PackedTriangles {
@@ -1078,6 +1099,69 @@ mod tests {
             .map(|vertex| vertex.map(|axis| axis[3].to_bits()));
         assert_eq!(dead_after, dead_before, "the dead lane is kept");
     }
+
+    /// The vector rewrite of a pack equals the lane-by-lane one (the version other targets
+    /// compile) in every stored bit and both masks, for every live count, on rows that mix
+    /// unchanged lanes, signed zeros, NaNs of other payloads, infinities and subnormals.
+    #[cfg(target_arch = "x86_64")]
+    #[test]
+    fn a_pack_rewritten_as_vectors_equals_the_lane_by_lane_rewrite() {
+        let hard = [
+            0.0,
+            -0.0,
+            1.5,
+            -3.25e7,
+            f32::NAN,
+            f32::from_bits(0x7fc0_1234),
+            f32::from_bits(0xffc0_0001),
+            f32::INFINITY,
+            f32::NEG_INFINITY,
+            f32::MIN_POSITIVE / 4.0,
+            f32::MAX,
+        ];
+        let mut state = 0x9e37_79b9_7f4a_7c15u64;
+        let mut next = move || {
+            state ^= state << 13;
+            state ^= state >> 7;
+            state ^= state << 17;
+            state
+        };
+        for case in 0..4000 {
+            let old: [[[f32; LANES]; 3]; 3] = std::array::from_fn(|_| {
+                std::array::from_fn(|_| std::array::from_fn(|_| hard[next() as usize % hard.len()]))
+            });
+            // Most lanes written with their own bits or one component changed, so the
+            // unchanged and changed cases both occur.
+            let tri: [[Vec3A; 3]; LANES] = std::array::from_fn(|lane| {
+                std::array::from_fn(|vertex| {
+                    Vec3A::from_array(std::array::from_fn(|axis| match next() % 8 {
+                        0 | 1 => hard[next() as usize % hard.len()],
+                        _ => old[vertex][axis][lane],
+                    }))
+                })
+            });
+            let live = 1 + case % LANES as u32;
+            let (mut by_vectors, mut by_lane) = (old, old);
+            // SAFETY: local arrays, one thread, 16-byte aligned by `Aligned`.
+            let (vectors, lanes) = unsafe {
+                let mut a = Aligned(by_vectors);
+                let r = rewrite_lanes(&raw mut a.0, live, &tri);
+                by_vectors = a.0;
+                (r, rewrite_lanes_by_lane(&raw mut by_lane, live, &tri))
+            };
+            let bits = |v: &[[[f32; LANES]; 3]; 3]| v.map(|r| r.map(|a| a.map(f32::to_bits)));
+            assert_eq!(vectors, lanes, "case {case}, live {live}");
+            assert_eq!(
+                bits(&by_vectors),
+                bits(&by_lane),
+                "case {case}, live {live}"
+            );
+        }
+    }
+
+    /// Vertex rows aligned as a pack's are.
+    #[repr(C, align(16))]
+    struct Aligned([[[f32; LANES]; 3]; 3]);
 
     /// A pack's box, computed four lanes at once, is the union of its live lanes'
     /// [`padded_box`]es bit for bit, in lane order (and a leaf's, of its packs' in order),
