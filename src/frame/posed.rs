@@ -413,13 +413,6 @@ impl InstanceWriter<'_> {
         self.rewrite == Rewrite::Changed && !self.stores_normals && !self.rewrites_uvs
     }
 
-    /// The positions [`Self::write_vertices`] writes for the triangle of primitive vertices
-    /// `vertices` when [`Self::writes_positions_alone`].
-    #[inline(always)]
-    pub fn positions(&self, vertices: [u32; 3]) -> [Vec3A; 3] {
-        self.placed_positions(vertices)
-    }
-
     /// Marks that a triangle written with new vertices has a non-finite one.
     #[inline]
     pub fn note_nonfinite(&self) {
@@ -447,9 +440,10 @@ impl InstanceWriter<'_> {
         }
     }
 
-    /// The vertices alone of the triangle of primitive vertices `vertices` placed.
+    /// The vertices alone of the triangle of primitive vertices `vertices` placed (what
+    /// [`Self::write_vertices`] writes when [`Self::writes_positions_alone`]).
     #[inline(always)]
-    fn placed_positions(&self, vertices: [u32; 3]) -> [Vec3A; 3] {
+    pub fn placed_positions(&self, vertices: [u32; 3]) -> [Vec3A; 3] {
         self.writer.geometry.placed_positions(
             vertices,
             self.placement.flips_winding,

@@ -43,7 +43,7 @@ use crate::accel::{Accel, AccelError, BvhPolicy, PACK_LANES, RunLeafBoxes, SlotL
 use crate::anim::NodeShape;
 use crate::geometry::FrameTriangles;
 use crate::simd;
-use glam::{Vec2, Vec3};
+use glam::{Vec2, Vec3, Vec3A};
 
 /// Below this much work (triangles or vertices) an update step stays on the calling thread:
 /// rayon's split and join cost more than the work (tens of ns per item).
@@ -814,6 +814,21 @@ impl simd::Kernel for SlotRunWrite<'_, '_> {
         };
         slot_vertices.decode_run(run, escaped, decoded);
         let deformed_by_bit = words.is_some();
+        // Slot `k`'s motion recorded: its dirty bit when the write sets them, and its motion
+        // by source, except where a deforming instance's moved slots are listed from those
+        // bits (`Listed::DeformedByBit`).
+        let mut record = |k: usize, motion: Option<Motion>, deforms_by_change: bool| {
+            if let Some(words) = words.as_deref_mut()
+                && motion.is_some()
+            {
+                words[k / 64] |= 1 << (k % 64);
+            }
+            if !(deformed_by_bit && deforms_by_change) {
+                // SAFETY: each slot is in one run only, and each source has one slot, so no
+                // other task writes this source's motion (`scatter`).
+                unsafe { motions.set(sources[k], motion) };
+            }
+        };
         let mut current: Option<(u32, InstanceWriter)> = None;
         let mut k = 0;
         while k < decoded.len() {
@@ -838,14 +853,14 @@ impl simd::Kernel for SlotRunWrite<'_, '_> {
                     .get(k..k + live)
                     .is_some_and(|pack| pack.iter().all(|s| s.instance == i))
             {
-                let mut tri = [[glam::Vec3A::ZERO; 3]; PACK_LANES];
+                let mut tri = [[Vec3A::ZERO; 3]; PACK_LANES];
                 for (l, t) in tri.iter_mut().enumerate().take(live) {
                     if let Some(ahead) = decoded.get(k + l + PREFETCH_AHEAD)
                         && ahead.instance == i
                     {
                         instance.prefetch_vertices(ahead.vertices);
                     }
-                    *t = instance.positions(decoded[k + l].vertices);
+                    *t = instance.placed_positions(decoded[k + l].vertices);
                 }
                 // SAFETY: all the pack's slots lie in this run (`decoded` holds the run's
                 // slots, and `get(k..k + live)` found them there), and no other task reads
@@ -856,13 +871,7 @@ impl simd::Kernel for SlotRunWrite<'_, '_> {
                 }
                 for l in 0..live {
                     let moved = changed & (1 << l) != 0;
-                    match words.as_deref_mut() {
-                        Some(words) => words[(k + l) / 64] |= u64::from(moved) << ((k + l) % 64),
-                        // SAFETY: as above (each source has one slot, in this run).
-                        None => unsafe {
-                            motions.set(sources[k + l], moved.then_some(Motion::Deformed))
-                        },
-                    }
+                    record(k + l, moved.then_some(Motion::Deformed), true);
                 }
                 k += live;
                 continue;
@@ -872,31 +881,23 @@ impl simd::Kernel for SlotRunWrite<'_, '_> {
             {
                 instance.prefetch_vertices(ahead.vertices);
             }
-            let source = sources[k];
-            // SAFETY: each slot is in one run only, so no other task reads or writes
-            // its lane or its source's motion (`scatter`).
-            unsafe {
+            // SAFETY: each slot is in one run only, so no other task reads or writes its
+            // lane (`scatter`).
+            let motion = unsafe {
                 let mut position = lanes.get(slot);
                 let motion = instance.write_vertices(
                     vertices,
-                    source,
+                    sources[k],
                     &mut position,
                     normals.get_mut(k),
                     &mut uvs[k],
                 );
                 if motion.is_some() {
                     lanes.set(slot, &position);
-                    if let Some(words) = words.as_deref_mut() {
-                        words[k / 64] |= 1 << (k % 64);
-                    }
                 }
-                // A deforming instance's moved slots are listed from their dirty bits
-                // when the write sets them (`Listed::DeformedByBit`): no motion to
-                // record, by source, scattered.
-                if !(deformed_by_bit && instance.deforms_by_change()) {
-                    motions.set(source, motion);
-                }
-            }
+                motion
+            };
+            record(k, motion, instance.deforms_by_change());
             k += 1;
         }
         // The boxes of the run's leaves, while its packs are in this task's cache: the

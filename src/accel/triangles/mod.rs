@@ -536,19 +536,8 @@ unsafe fn rewrite_lanes_by_lane(
 }
 
 /// [`SlotLanes::rewrite_pack`] where there is no x86_64 SSE2: lane by lane.
-///
-/// # Safety
-/// As the x86_64 version.
 #[cfg(not(target_arch = "x86_64"))]
-#[inline(always)]
-unsafe fn rewrite_lanes(
-    v: *mut [[[f32; LANES]; 3]; 3],
-    live: u32,
-    tri: &[[Vec3A; 3]; LANES],
-) -> (u32, u32) {
-    // SAFETY: the caller's contract.
-    unsafe { rewrite_lanes_by_lane(v, live, tri) }
-}
+use rewrite_lanes_by_lane as rewrite_lanes;
 
 impl PackedTriangles {
     /// [`PackedTriangles::hits_in_leaf`] for a group of rays at once: each triangle of the
