@@ -868,14 +868,22 @@ fn the_ray_file_records_every_ray_with_answers_brute_force_confirms() {
     for class in [RayClass::Shadow, RayClass::Reflection, RayClass::Refraction] {
         assert!(count(class) > 20, "{class:?}: {}", count(class));
     }
-    // Film order: tile by tile, so the primary rays' pixels come in the tiles' order.
-    let first_row: Vec<u32> = records
+    // Film order: tile by tile, a tile's pixels in Morton order, so the first primary rays
+    // are the first tile's top-left 2 x 2, then 8 x 8 block, pixel for pixel.
+    let first: Vec<u32> = records
         .iter()
         .filter(|r| r.class == RayClass::Primary)
-        .take(16)
+        .take(64)
         .map(|r| r.pixel)
         .collect();
-    assert_eq!(first_row, (0..16).collect::<Vec<_>>());
+    assert_eq!(first[..4], [0, 1, w, w + 1]);
+    let mut block: Vec<u32> = (0..8)
+        .flat_map(|y| (0..8).map(move |x| y * w + x))
+        .collect();
+    let mut got = first.clone();
+    block.sort();
+    got.sort();
+    assert_eq!(got, block);
     let mut checked = [0usize; 4];
     for r in &records {
         assert!(r.pixel < w * h);

@@ -20,7 +20,7 @@ use crate::accel::PACKET;
 use crate::export::rays::{MISS, RayRecord, read_ray_file};
 use crate::frame::Renderer;
 use crate::percentiles::Percentiles;
-use crate::render::film::TILE;
+use crate::render::film::{TILE, pixels_in_blocks};
 use crate::render::{RayClass, SceneBvh, shadow_ray_toward};
 
 /// Which rays `--rays` times.
@@ -160,14 +160,15 @@ fn frame_rays(renderer: &Renderer, prepared: &crate::frame::PreparedFrame) -> Fr
     let scene = renderer.frame_scene(prepared);
     let (w, h) = (camera.width, camera.height);
     let tiles_x = w.div_ceil(TILE);
-    // Per tile, its primary rays in pixel order and, per light, the shadow rays of their
-    // hits (the film's grouping: `render::tile` traces a tile's requests light by light).
+    // Per tile, its primary rays in the film's pixel order and, per light, the shadow rays
+    // of their hits (the film's grouping: `render::tile` traces a tile's requests light by
+    // light).
     let per_tile: Vec<(Vec<TimedRay>, Vec<Vec<TimedRay>>)> = (0..tiles_x * h.div_ceil(TILE))
         .into_par_iter()
         .map(|tile| {
             let (x0, y0) = ((tile % tiles_x) * TILE, (tile / tiles_x) * TILE);
-            let primary: Vec<TimedRay> = (y0..(y0 + TILE).min(h))
-                .flat_map(|y| (x0..(x0 + TILE).min(w)).map(move |x| (x, y)))
+            let primary: Vec<TimedRay> = pixels_in_blocks(TILE.min(w - x0), TILE.min(h - y0))
+                .map(|(dx, dy)| (x0 + dx, y0 + dy))
                 .map(|(x, y)| {
                     let d = camera.primary_direction(x as f32 + 0.5, y as f32 + 0.5);
                     (camera.eye, d, f32::INFINITY)

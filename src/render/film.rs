@@ -16,6 +16,22 @@ use crate::render::tile::{TileBuffers, trace_tile};
 
 pub const TILE: u32 = 16;
 
+/// The pixels of a `w x h` tile (offsets from its corner) in Morton order: every run of
+/// 4^k pixels of a whole tile is a square block of 2^k x 2^k (a packet of 64 primary rays
+/// at one sample per pixel is an 8 x 8 block, at four samples a 4 x 4 block), and a partial
+/// tile at the image's edge keeps the order of the pixels it has.
+pub fn pixels_in_blocks(w: u32, h: u32) -> impl Iterator<Item = (u32, u32)> {
+    debug_assert!(w <= TILE && h <= TILE && TILE <= 256);
+    (0..TILE * TILE)
+        .map(|code| (deinterleave(code), deinterleave(code >> 1)))
+        .filter(move |&(x, y)| x < w && y < h)
+}
+
+/// The even bits of `code` (bits 0, 2, 4, ... of up to 16) packed into the low bits.
+fn deinterleave(code: u32) -> u32 {
+    (0..8).map(|bit| ((code >> (2 * bit)) & 1) << bit).sum()
+}
+
 /// A rendered frame in linear RGB, row-major, row 0 at the top.
 #[derive(Debug, Clone, PartialEq)]
 pub struct LinearImage {
@@ -141,6 +157,34 @@ fn hash3(x: u32, y: u32, z: u32) -> u32 {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Every pixel of a whole or partial tile comes exactly once; in a whole tile every run
+    /// of 4^k pixels (a packet of 64 rays at one sample per pixel, of 16 pixels at four) is
+    /// a square block of 2^k x 2^k.
+    #[test]
+    fn a_tile_s_pixels_come_once_each_in_square_blocks() {
+        for (w, h) in [(TILE, TILE), (1, 1), (TILE, 3), (5, TILE), (7, 9)] {
+            let order: Vec<(u32, u32)> = pixels_in_blocks(w, h).collect();
+            assert_eq!(order.len(), (w * h) as usize, "{w}x{h}");
+            let mut seen = vec![false; (w * h) as usize];
+            for &(x, y) in &order {
+                assert!(x < w && y < h, "{w}x{h}: ({x}, {y})");
+                assert!(!std::mem::replace(&mut seen[(y * w + x) as usize], true));
+            }
+        }
+        let whole: Vec<(u32, u32)> = pixels_in_blocks(TILE, TILE).collect();
+        for side in [2u32, 4, 8, 16] {
+            for run in whole.chunks((side * side) as usize) {
+                let (x0, y0) = run[0];
+                assert!(x0 % side == 0 && y0 % side == 0, "{side}: {run:?}");
+                assert!(
+                    run.iter()
+                        .all(|&(x, y)| x / side == x0 / side && y / side == y0 / side),
+                    "{side}: {run:?}"
+                );
+            }
+        }
+    }
 
     #[test]
     fn samples_are_stratified_and_inside_the_pixel() {

@@ -3,7 +3,8 @@
 //! that share a light or a direction are traced together as packets.
 //!
 //! A tile holds its rays as path vertices: a sample's primary ray is vertex `k` for the
-//! `k`-th sample (in pixel order, each pixel's samples in order), and the rays a hit spawns
+//! `k`-th sample (pixels in Morton order within the tile, so that a packet of the first
+//! bounce is a square block of pixels; each pixel's samples in order), and the rays a hit spawns
 //! get the next free numbers, so a vertex's children always come after it. Each bounce:
 //! 1. the pending rays are traced as packets of up to [`PACKET`] (the primary rays from the
 //!    camera with interval bounds, later bounces from their hits by the masked walk);
@@ -27,7 +28,7 @@ use crate::accel::{Hit, PACKET};
 use crate::geometry::HitTriangle;
 use crate::lod::RayLod;
 use crate::render::camera::Camera;
-use crate::render::film::{TILE, sample_offset};
+use crate::render::film::{TILE, pixels_in_blocks, sample_offset};
 use crate::render::integrator::{
     Arrival, Combine, FrameScene, MAX_SHADOW_GLASS, ShadowRequest, Spawned, TraceCounters,
 };
@@ -102,7 +103,8 @@ impl<L: RayLod> Default for TileBuffers<L> {
     }
 }
 
-/// The tile's pixels, row by row, with the LOD state `L`, using `buffers` for its lists.
+/// The tile's pixels (returned row by row; traced in the order of [`pixels_in_blocks`]),
+/// with the LOD state `L`, using `buffers` for its lists.
 pub(super) fn trace_tile<L: RayLod>(
     scene: &FrameScene,
     camera: &Camera,
@@ -129,8 +131,8 @@ pub(super) fn trace_tile<L: RayLod>(
     let y1 = (y0 + TILE).min(camera.height);
     samples.clear();
     samples.extend(
-        (y0..y1)
-            .flat_map(|y| (x0..x1).map(move |x| (x, y)))
+        pixels_in_blocks(x1 - x0, y1 - y0)
+            .map(|(dx, dy)| (x0 + dx, y0 + dy))
             .flat_map(|(x, y)| (0..spp).map(move |i| (x, y, i))),
     );
     vertices.clear();
@@ -204,7 +206,8 @@ pub(super) fn trace_tile<L: RayLod>(
         let radiance = vertices[v].evaluate(|child| vertices[child as usize].radiance);
         vertices[v].radiance = radiance;
     }
-    let mut pixels = Vec::with_capacity(((x1 - x0) * (y1 - y0)) as usize);
+    let w = x1 - x0;
+    let mut pixels = vec![Vec3::ZERO; (w * (y1 - y0)) as usize];
     let mut sum = Vec3A::ZERO;
     for (k, vertex) in vertices[..samples.len()].iter().enumerate() {
         let radiance = vertex.radiance;
@@ -214,15 +217,16 @@ pub(super) fn trace_tile<L: RayLod>(
             counters.nonfinite_samples += 1;
         }
         if (k as u32 + 1) % spp == 0 {
-            pixels.push(Vec3::from(sum / spp as f32));
+            let (x, y, _) = samples[k];
+            pixels[((y - y0) * w + (x - x0)) as usize] = Vec3::from(sum / spp as f32);
             sum = Vec3A::ZERO;
         }
     }
     pixels
 }
 
-/// The samples' primary rays into `rays` (pixel by pixel, each pixel's samples in order),
-/// traced as packets of up to [`PACKET`] (a 16 x 4 block at one sample per pixel), their
+/// The samples' primary rays into `rays` (in the samples' order),
+/// traced as packets of up to [`PACKET`] (an 8 x 8 block at one sample per pixel), their
 /// hits into `hits` and each hit's triangle into `triangles` (all three cleared first).
 #[allow(clippy::too_many_arguments)]
 fn primary_bounce<L: RayLod>(
