@@ -16,9 +16,10 @@
 //! | 40 | result: closest hit, the triangle's index in the face order of the frame's OBJ export (whatever `--format` wrote beside it) (`0xFFFFFFFF` for a miss); shadow, 1 blocked (any surface in `[t min, t max)`), 0 clear | u32 |
 //! | 44 | hit distance (NaN where there is none) | f32 |
 //!
-//! Records follow the film's order: tile by tile (16 x 16 pixels, row-major tiles), within a
-//! tile the order the integrator traced them (a packet of primary rays, then each sample's
-//! shading rays depth first).
+//! Records follow the film's order: tile by tile (32 x 32 pixels, row-major tiles), within a
+//! tile the order it traced them, bounce by bounce: the bounce's closest-hit rays (first the
+//! primary rays, the tile's pixels in Morton order), then the shadow rays of their hits,
+//! light by light.
 
 use std::io::{self, Read, Write};
 use std::path::{Path, PathBuf};

@@ -55,7 +55,7 @@ struct Waiting<L: RayLod> {
 }
 
 /// A tile's working lists, kept by a worker from one tile to the next: a tile fills them
-/// to a few hundred entries (an `Arrival` is a few hundred bytes), and growing them afresh
+/// to a few thousand entries (an `Arrival` is a few hundred bytes), and growing them afresh
 /// for every tile copied them over and over (3% of a BART Kitchen frame in `memmove`).
 /// Every list is cleared before use, so what a tile computes does not depend on the tile
 /// before it.
