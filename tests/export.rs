@@ -845,6 +845,7 @@ fn the_ray_file_records_every_ray_with_answers_brute_force_confirms() {
     use mipray::accel::intersect;
     use mipray::export::rays::{MISS, read_ray_file};
     use mipray::render::RayClass;
+    use mipray::render::film::{TILE, pixels_in_blocks};
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().to_str().unwrap();
     let (w, h) = (48u32, 27u32);
@@ -869,21 +870,28 @@ fn the_ray_file_records_every_ray_with_answers_brute_force_confirms() {
         assert!(count(class) > 20, "{class:?}: {}", count(class));
     }
     // Film order: tile by tile, a tile's pixels in Morton order, so the first primary rays
-    // are the first tile's top-left 2 x 2, then 8 x 8 block, pixel for pixel.
-    let first: Vec<u32> = records
+    // are the first tile's top-left 2 x 2, then its 8 x 8 block, in the film's order; and
+    // every pixel has its primary ray once.
+    let primary: Vec<u32> = records
         .iter()
         .filter(|r| r.class == RayClass::Primary)
-        .take(64)
         .map(|r| r.pixel)
         .collect();
-    assert_eq!(first[..4], [0, 1, w, w + 1]);
+    assert_eq!(primary[..4], [0, 1, w, w + 1]);
+    let film_order: Vec<u32> = pixels_in_blocks(TILE.min(w), TILE.min(h))
+        .take(64)
+        .map(|(x, y)| y * w + x)
+        .collect();
+    assert_eq!(primary[..64], film_order[..]);
     let mut block: Vec<u32> = (0..8)
         .flat_map(|y| (0..8).map(move |x| y * w + x))
         .collect();
-    let mut got = first.clone();
+    let mut first = primary[..64].to_vec();
     block.sort();
-    got.sort();
-    assert_eq!(got, block);
+    first.sort();
+    assert_eq!(first, block);
+    let distinct: std::collections::HashSet<u32> = primary.iter().copied().collect();
+    assert_eq!(distinct.len(), primary.len(), "a pixel's primary ray twice");
     let mut checked = [0usize; 4];
     for r in &records {
         assert!(r.pixel < w * h);

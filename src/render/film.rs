@@ -1,5 +1,6 @@
-//! The film: pixels rendered in square tiles ([`TILE`]) in parallel, stratified supersampling, and the
-//! conversion of linear radiance to output pixels (with the sRGB encoding of `colour`).
+//! The film: pixels rendered in square tiles ([`TILE`]) in parallel, stratified
+//! supersampling, and the conversion of linear radiance to output pixels (with the sRGB
+//! encoding of `colour`).
 //!
 //! Determinism: every pixel is a pure function of its coordinates (jitter comes from a hash
 //! of pixel and sample index, not from a shared random state) and tiles are reassembled in
@@ -20,12 +21,16 @@ use crate::render::tile::{TileBuffers, trace_tile};
 /// faster than 16 x 16 and 64 x 64 slower again (the tile's lists outgrow the caches).
 pub const TILE: u32 = 32;
 
+// `pixels_in_blocks` walks the Morton codes of a TILE x TILE square, which cover every
+// pixel of the tile only when its side is a power of two (and fit `deinterleave`'s 16 bits).
+const _: () = assert!(TILE.is_power_of_two() && TILE <= 256);
+
 /// The pixels of a `w x h` tile (offsets from its corner) in Morton order: every run of
 /// 4^k pixels of a whole tile is a square block of 2^k x 2^k (a packet of 64 primary rays
 /// at one sample per pixel is an 8 x 8 block, at four samples a 4 x 4 block), and a partial
 /// tile at the image's edge keeps the order of the pixels it has.
 pub fn pixels_in_blocks(w: u32, h: u32) -> impl Iterator<Item = (u32, u32)> {
-    debug_assert!(w <= TILE && h <= TILE && TILE <= 256);
+    debug_assert!(w <= TILE && h <= TILE);
     (0..TILE * TILE)
         .map(|code| (deinterleave(code), deinterleave(code >> 1)))
         .filter(move |&(x, y)| x < w && y < h)
@@ -177,6 +182,11 @@ mod tests {
             }
         }
         let whole: Vec<(u32, u32)> = pixels_in_blocks(TILE, TILE).collect();
+        // A partial tile (at the image's edge) keeps the whole tile's order.
+        for (w, h) in [(TILE, 3), (5, TILE), (7, 9)] {
+            let inside = whole.iter().copied().filter(|&(x, y)| x < w && y < h);
+            assert!(pixels_in_blocks(w, h).eq(inside), "{w}x{h}");
+        }
         for side in [2u32, 4, 8, 16, TILE] {
             for run in whole.chunks((side * side) as usize) {
                 let (x0, y0) = run[0];

@@ -4,8 +4,9 @@
 //!
 //! A tile holds its rays as path vertices: a sample's primary ray is vertex `k` for the
 //! `k`-th sample (pixels in Morton order within the tile, so that a packet of the first
-//! bounce is a square block of pixels; each pixel's samples in order), and the rays a hit spawns
-//! get the next free numbers, so a vertex's children always come after it. Each bounce:
+//! bounce is a compact block of pixels; each pixel's samples in order), and the rays a hit
+//! spawns get the next free numbers, so a vertex's children always come after it. Each
+//! bounce:
 //! 1. the pending rays are traced as packets of up to [`PACKET`] (the primary rays from the
 //!    camera with interval bounds, later bounces from their hits by the masked walk);
 //! 2. each hit's surface is made (from its triangle, read as its packet's hits came back)
@@ -135,6 +136,7 @@ pub(super) fn trace_tile<L: RayLod>(
             .map(|(dx, dy)| (x0 + dx, y0 + dy))
             .flat_map(|(x, y)| (0..spp).map(move |i| (x, y, i))),
     );
+    debug_assert_eq!(samples.len(), ((x1 - x0) * (y1 - y0) * spp) as usize);
     vertices.clear();
     vertices.resize(samples.len(), Combine::EMPTY);
     primary_bounce::<L>(
@@ -225,9 +227,9 @@ pub(super) fn trace_tile<L: RayLod>(
     pixels
 }
 
-/// The samples' primary rays into `rays` (in the samples' order),
-/// traced as packets of up to [`PACKET`] (an 8 x 8 block at one sample per pixel), their
-/// hits into `hits` and each hit's triangle into `triangles` (all three cleared first).
+/// The samples' primary rays into `rays` (in the samples' order), traced as packets of up to
+/// [`PACKET`] (an 8 x 8 block of a whole tile at one sample per pixel), their hits into
+/// `hits` and each hit's triangle into `triangles` (all three cleared first).
 #[allow(clippy::too_many_arguments)]
 fn primary_bounce<L: RayLod>(
     scene: &FrameScene,
