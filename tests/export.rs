@@ -845,7 +845,7 @@ fn the_ray_file_records_every_ray_with_answers_brute_force_confirms() {
     use mipray::accel::intersect;
     use mipray::export::rays::{MISS, read_ray_file};
     use mipray::render::RayClass;
-    use mipray::render::film::{TILE, pixels_in_blocks};
+    use mipray::render::film::tile_pixels;
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().to_str().unwrap();
     let (w, h) = (48u32, 27u32);
@@ -878,7 +878,7 @@ fn the_ray_file_records_every_ray_with_answers_brute_force_confirms() {
         .map(|r| r.pixel)
         .collect();
     assert_eq!(primary[..4], [0, 1, w, w + 1]);
-    let film_order: Vec<u32> = pixels_in_blocks(TILE.min(w), TILE.min(h))
+    let film_order: Vec<u32> = tile_pixels((0, 0), w, h)
         .take(64)
         .map(|(x, y)| y * w + x)
         .collect();

@@ -20,7 +20,7 @@ use crate::accel::PACKET;
 use crate::export::rays::{MISS, RayRecord, read_ray_file};
 use crate::frame::Renderer;
 use crate::percentiles::Percentiles;
-use crate::render::film::{TILE, pixels_in_blocks};
+use crate::render::film::{TILE, tile_pixels};
 use crate::render::{RayClass, SceneBvh, shadow_ray_toward};
 
 /// Which rays `--rays` times.
@@ -167,8 +167,7 @@ fn frame_rays(renderer: &Renderer, prepared: &crate::frame::PreparedFrame) -> Fr
         .into_par_iter()
         .map(|tile| {
             let (x0, y0) = ((tile % tiles_x) * TILE, (tile / tiles_x) * TILE);
-            let primary: Vec<TimedRay> = pixels_in_blocks(TILE.min(w - x0), TILE.min(h - y0))
-                .map(|(dx, dy)| (x0 + dx, y0 + dy))
+            let primary: Vec<TimedRay> = tile_pixels((x0, y0), w, h)
                 .map(|(x, y)| {
                     let d = camera.primary_direction(x as f32 + 0.5, y as f32 + 0.5);
                     (camera.eye, d, f32::INFINITY)

@@ -21,24 +21,48 @@ use crate::render::tile::{TileBuffers, trace_tile};
 /// faster than 16 x 16 and 64 x 64 slower again (the tile's lists outgrow the caches).
 pub const TILE: u32 = 32;
 
-// `pixels_in_blocks` walks the Morton codes of a TILE x TILE square, which cover every
-// pixel of the tile only when its side is a power of two (and fit `deinterleave`'s 16 bits).
+// The Morton codes of a TILE x TILE square cover every pixel of the tile only when its
+// side is a power of two; offsets up to 255 fit the table's bytes.
 const _: () = assert!(TILE.is_power_of_two() && TILE <= 256);
 
-/// The pixels of a `w x h` tile (offsets from its corner) in Morton order: every run of
-/// 4^k pixels of a whole tile is a square block of 2^k x 2^k (a packet of 64 primary rays
-/// at one sample per pixel is an 8 x 8 block, at four samples a 4 x 4 block), and a partial
-/// tile at the image's edge keeps the order of the pixels it has.
-pub fn pixels_in_blocks(w: u32, h: u32) -> impl Iterator<Item = (u32, u32)> {
-    debug_assert!(w <= TILE && h <= TILE);
-    (0..TILE * TILE)
-        .map(|code| (deinterleave(code), deinterleave(code >> 1)))
-        .filter(move |&(x, y)| x < w && y < h)
+/// A whole tile's pixel offsets in Morton order, made once at compile time.
+const MORTON_ORDER: [(u8, u8); (TILE * TILE) as usize] = {
+    let mut order = [(0, 0); (TILE * TILE) as usize];
+    let mut code = 0;
+    while code < order.len() {
+        order[code] = (deinterleave(code as u32), deinterleave(code as u32 >> 1));
+        code += 1;
+    }
+    order
+};
+
+/// The even bits of `code` (bits 0, 2, ..., 14) packed into a byte.
+const fn deinterleave(code: u32) -> u8 {
+    let mut packed = 0;
+    let mut bit = 0;
+    while bit < 8 {
+        packed |= ((code >> (2 * bit)) & 1) << bit;
+        bit += 1;
+    }
+    packed as u8
 }
 
-/// The even bits of `code` (bits 0, 2, 4, ... of up to 16) packed into the low bits.
-fn deinterleave(code: u32) -> u32 {
-    (0..8).map(|bit| ((code >> (2 * bit)) & 1) << bit).sum()
+/// The pixels of the tile whose corner is `(x0, y0)` in a `width x height` image, in Morton
+/// order: every run of 4^k pixels of a whole tile is a square block of 2^k x 2^k (a packet
+/// of 64 primary rays at one sample per pixel is an 8 x 8 block, at four samples a 4 x 4
+/// block), and a tile cut by the image's edge keeps the order of the pixels it has.
+pub fn tile_pixels(
+    (x0, y0): (u32, u32),
+    width: u32,
+    height: u32,
+) -> impl Iterator<Item = (u32, u32)> {
+    debug_assert!(x0 < width && y0 < height);
+    let (w, h) = (TILE.min(width - x0), TILE.min(height - y0));
+    MORTON_ORDER
+        .iter()
+        .map(|&(x, y)| (u32::from(x), u32::from(y)))
+        .filter(move |&(x, y)| x < w && y < h)
+        .map(move |(x, y)| (x0 + x, y0 + y))
 }
 
 /// A rendered frame in linear RGB, row-major, row 0 at the top.
@@ -173,7 +197,7 @@ mod tests {
     #[test]
     fn a_tile_s_pixels_come_once_each_in_square_blocks() {
         for (w, h) in [(TILE, TILE), (1, 1), (TILE, 3), (5, TILE), (7, 9)] {
-            let order: Vec<(u32, u32)> = pixels_in_blocks(w, h).collect();
+            let order: Vec<(u32, u32)> = tile_pixels((0, 0), w, h).collect();
             assert_eq!(order.len(), (w * h) as usize, "{w}x{h}");
             let mut seen = vec![false; (w * h) as usize];
             for &(x, y) in &order {
@@ -181,11 +205,20 @@ mod tests {
                 assert!(!std::mem::replace(&mut seen[(y * w + x) as usize], true));
             }
         }
-        let whole: Vec<(u32, u32)> = pixels_in_blocks(TILE, TILE).collect();
-        // A partial tile (at the image's edge) keeps the whole tile's order.
+        let whole: Vec<(u32, u32)> = tile_pixels((0, 0), TILE, TILE).collect();
+        // A tile cut by the image's edge keeps the whole tile's order, at its own corner.
         for (w, h) in [(TILE, 3), (5, TILE), (7, 9)] {
             let inside = whole.iter().copied().filter(|&(x, y)| x < w && y < h);
-            assert!(pixels_in_blocks(w, h).eq(inside), "{w}x{h}");
+            assert!(tile_pixels((0, 0), w, h).eq(inside), "{w}x{h}");
+            let (x0, y0) = (3 * TILE, TILE);
+            let placed = whole
+                .iter()
+                .filter(|&&(x, y)| x < w && y < h)
+                .map(|&(x, y)| (x0 + x, y0 + y));
+            assert!(
+                tile_pixels((x0, y0), x0 + w, y0 + h).eq(placed),
+                "{w}x{h} at ({x0}, {y0})"
+            );
         }
         for side in [2u32, 4, 8, 16, TILE] {
             for run in whole.chunks((side * side) as usize) {

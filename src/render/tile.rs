@@ -29,7 +29,7 @@ use crate::accel::{Hit, PACKET};
 use crate::geometry::HitTriangle;
 use crate::lod::RayLod;
 use crate::render::camera::Camera;
-use crate::render::film::{TILE, pixels_in_blocks, sample_offset};
+use crate::render::film::{TILE, sample_offset, tile_pixels};
 use crate::render::integrator::{
     Arrival, Combine, FrameScene, MAX_SHADOW_GLASS, ShadowRequest, Spawned, TraceCounters,
 };
@@ -104,7 +104,7 @@ impl<L: RayLod> Default for TileBuffers<L> {
     }
 }
 
-/// The tile's pixels (returned row by row; traced in the order of [`pixels_in_blocks`]),
+/// The tile's pixels (returned row by row; traced in the order of [`tile_pixels`]),
 /// with the LOD state `L`, using `buffers` for its lists.
 pub(super) fn trace_tile<L: RayLod>(
     scene: &FrameScene,
@@ -132,8 +132,7 @@ pub(super) fn trace_tile<L: RayLod>(
     let y1 = (y0 + TILE).min(camera.height);
     samples.clear();
     samples.extend(
-        pixels_in_blocks(x1 - x0, y1 - y0)
-            .map(|(dx, dy)| (x0 + dx, y0 + dy))
+        tile_pixels((x0, y0), camera.width, camera.height)
             .flat_map(|(x, y)| (0..spp).map(move |i| (x, y, i))),
     );
     debug_assert_eq!(samples.len(), ((x1 - x0) * (y1 - y0) * spp) as usize);

@@ -808,6 +808,7 @@ pub fn intersect(tri: &[Vec3A; 3], origin: Vec3A, direction: Vec3A) -> Option<(f
 mod tests {
     use super::*;
     use crate::accel::flat::padded_box;
+    use crate::accel::wide::test_support::xorshift;
 
     /// The frame as first written, with branches: what `ShearedRay::new`'s arithmetic
     /// choice must give.
@@ -1108,13 +1109,7 @@ mod tests {
             f32::MIN_POSITIVE / 4.0,
             f32::MAX,
         ];
-        let mut state = 0x9e37_79b9_7f4a_7c15u64;
-        let mut next = move || {
-            state ^= state << 13;
-            state ^= state >> 7;
-            state ^= state << 17;
-            state
-        };
+        let mut next = xorshift(0x9e37_79b9_7f4a_7c15);
         for case in 0..4000 {
             let old: [[[f32; LANES]; 3]; 3] = std::array::from_fn(|_| {
                 std::array::from_fn(|_| std::array::from_fn(|_| hard[next() as usize % hard.len()]))
@@ -1173,13 +1168,7 @@ mod tests {
             f32::NAN,
             123_456.79,
         ];
-        let mut seed = 0x2545_f491_4f6c_dd1d_u64;
-        let mut next = move || {
-            seed ^= seed << 13;
-            seed ^= seed >> 7;
-            seed ^= seed << 17;
-            seed
-        };
+        let mut next = xorshift(0x2545_f491_4f6c_dd1d);
         let bits = |a: &Aabb| {
             (
                 a.min.to_array().map(f32::to_bits),

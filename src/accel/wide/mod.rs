@@ -30,7 +30,7 @@ mod node;
 mod packet;
 mod refit;
 #[cfg(test)]
-mod test_support;
+pub(in crate::accel) mod test_support;
 mod walk;
 
 /// One `f32` per child lane of a node.

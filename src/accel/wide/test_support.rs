@@ -1,4 +1,5 @@
-//! Trees and rays shared by the wide tree's tests.
+//! Trees and rays shared by the wide tree's tests (and the pseudo-random stream the
+//! triangle packs' tests use too).
 
 use glam::Vec3A;
 use obvhs::{
