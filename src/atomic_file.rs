@@ -224,14 +224,52 @@ where
     [P::Subpixel]: image::EncodableLayout,
     C: std::ops::Deref<Target = [P::Subpixel]>,
 {
-    // PNG and EXR encoders seek: into a temporary (a regular file) they write directly; a
-    // device or pipe cannot seek, so it gets the bytes whole, encoded in memory first.
+    write_encoded_atomically_as(path, owner, |mut w| image.write_to(&mut w, format))
+}
+
+/// Writes a linear RGB image of `width x height` pixels as a 32-bit float OpenEXR file
+/// (the layout and compression `image`'s EXR encoder writes) atomically, pixel `(x, y)`
+/// read from `pixel` as the encoder asks for it: no copy of the image is made.
+///
+/// # Errors
+/// As [`write_image_atomically`].
+pub fn write_rgb_f32_exr_atomically_as(
+    path: &Path,
+    owner: Option<&str>,
+    (width, height): (usize, usize),
+    pixel: impl Fn(usize, usize) -> (f32, f32, f32) + Sync,
+) -> Result<(), FileWriteError> {
+    use exr::prelude::{Image, SpecificChannels, Vec2, WritableImage};
+    write_encoded_atomically_as(path, owner, |w| {
+        Image::from_channels(
+            (width, height),
+            SpecificChannels::rgb(|at: Vec2<usize>| pixel(at.x(), at.y())),
+        )
+        .write()
+        .to_buffered(w)
+        .map_err(|e| {
+            image::ImageError::Encoding(image::error::EncodingError::new(
+                ImageFormat::OpenExr.into(),
+                e,
+            ))
+        })
+    })
+}
+
+/// Writes what `encode` writes into `path` atomically. Encoders may seek: into a temporary
+/// (a regular file) they write directly; a device or pipe cannot seek, so it gets the bytes
+/// whole, encoded in memory first.
+fn write_encoded_atomically_as(
+    path: &Path,
+    owner: Option<&str>,
+    encode: impl Fn(&mut dyn SeekWrite) -> Result<(), image::ImageError>,
+) -> Result<(), FileWriteError> {
     let encode = |w: &mut BufWriter<File>| -> Result<(), image::ImageError> {
         if w.get_ref().metadata()?.is_file() {
-            return image.write_to(w, format);
+            return encode(w);
         }
         let mut bytes = io::Cursor::new(Vec::new());
-        image.write_to(&mut bytes, format)?;
+        encode(&mut bytes)?;
         w.write_all(bytes.get_ref())
             .map_err(image::ImageError::IoError)
     };
@@ -243,6 +281,10 @@ where
         },
     })
 }
+
+/// A writer encoders can seek in.
+trait SeekWrite: Write + io::Seek {}
+impl<T: Write + io::Seek> SeekWrite for T {}
 
 /// Writes an 8-bit RGB PNG atomically.
 ///

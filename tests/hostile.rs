@@ -161,6 +161,39 @@ fn every_hostile_file_is_a_clean_error_under_a_memory_limit() {
     );
 }
 
+/// The largest `--size` accepted, under an address-space limit far below its frame's 3 GB,
+/// is a clean error naming the size, given before any rendering, and leaves no frame file.
+#[test]
+fn a_frame_larger_than_the_memory_allows_is_a_clean_error() {
+    for format in ["png", "exr"] {
+        let out = tempfile::tempdir().unwrap();
+        let output = mipray_limited(&[
+            "render",
+            "../../../animations/default.gltf",
+            "--frames",
+            "0..1",
+            "--size",
+            "16384x16384",
+            "--format",
+            format,
+            "--out",
+            out.path().to_str().unwrap(),
+        ]);
+        if let Some(why) = not_a_clean_error(&output, "16384x16384") {
+            panic!("{format}: {why}");
+        }
+        let frames: Vec<_> = std::fs::read_dir(out.path())
+            .map(|entries| {
+                entries
+                    .filter_map(|e| e.ok())
+                    .filter(|e| e.file_name().to_string_lossy().contains("frame_"))
+                    .collect()
+            })
+            .unwrap_or_default();
+        assert!(frames.is_empty(), "{format}: a frame file was written");
+    }
+}
+
 /// Counts typed on the command line must cost memory in proportion to real work: the last
 /// shard of a 4e9-frame range is 4 frames, rendered at once.
 #[test]

@@ -3,8 +3,13 @@
 //! encoding of `colour`).
 //!
 //! Determinism: every pixel is a pure function of its coordinates (jitter comes from a hash
-//! of pixel and sample index, not from a shared random state) and tiles are reassembled in
-//! a fixed order, so the image is byte-identical whatever the thread count.
+//! of pixel and sample index, not from a shared random state), each tile writes only its own
+//! pixels, and the tiles' counters are summed in tile order, so the image and the counters
+//! are the same whatever the thread count.
+//!
+//! Memory: the tiles write straight into the frame's pixels (no copy of the frame per tile
+//! alongside it), so a frame holds 12 bytes per pixel while it renders; the largest size
+//! `--size` accepts (`cli::args::MAX_PIXELS`, 16384 x 16384) needs about 3.2 GB for it.
 
 use glam::Vec3;
 use rayon::prelude::*;
@@ -106,55 +111,77 @@ fn render_image_with(
     record: bool,
 ) -> (LinearImage, TraceCounters) {
     let (width, height) = (camera.width, camera.height);
-    let tiles_x = width.div_ceil(TILE);
-    let tiles = with_lod_state!(scene.lod, L => render_tiles::<L>(scene, camera, spp, record));
     let mut image = LinearImage {
         width,
         height,
-        pixels: vec![Vec3::ZERO; (width * height) as usize],
+        pixels: vec![Vec3::ZERO; width as usize * height as usize],
     };
+    let tiles = tile_rows(&mut image.pixels, width, height);
+    let tile_counters =
+        with_lod_state!(scene.lod, L => render_tiles::<L>(scene, camera, spp, record, tiles));
     let mut counters = if record {
         TraceCounters::recording()
     } else {
         TraceCounters::default()
     };
-    for (tile, (pixels, tile_counters)) in tiles.iter().enumerate() {
-        let (x0, y0) = (
-            (tile as u32 % tiles_x) * TILE,
-            (tile as u32 / tiles_x) * TILE,
-        );
-        let w = TILE.min(width - x0);
-        for (row, chunk) in pixels.chunks_exact(w as usize).enumerate() {
-            let start = ((y0 + row as u32) * width + x0) as usize;
-            image.pixels[start..start + w as usize].copy_from_slice(chunk);
-        }
+    for tile_counters in &tile_counters {
         counters.add(tile_counters);
     }
     (image, counters)
 }
 
-/// Every tile's pixels (row by row) and counters, in tile order, with the LOD state type
-/// of `scene.lod` (chosen once here, so the per-ray code is monomorphised per method). Each
-/// worker keeps one set of working lists for all the tiles it renders (`map_init`).
+/// The rows of each tile of a `width x height` image whose pixels are `pixels`, tiles in
+/// row-major order, each tile's rows top to bottom (each at most [`TILE`] pixels wide):
+/// disjoint borrows, so the tiles can be written in parallel without copies.
+fn tile_rows(pixels: &mut [Vec3], width: u32, height: u32) -> Vec<Vec<&mut [Vec3]>> {
+    let tiles_x = width.div_ceil(TILE) as usize;
+    let tiles_y = height.div_ceil(TILE) as usize;
+    let side = TILE as usize;
+    let mut tiles: Vec<Vec<&mut [Vec3]>> = (0..tiles_x * tiles_y)
+        .map(|_| Vec::with_capacity(side))
+        .collect();
+    for (y, row) in pixels.chunks_exact_mut(width as usize).enumerate() {
+        let band = &mut tiles[y / side * tiles_x..][..tiles_x];
+        for (rows, segment) in band.iter_mut().zip(row.chunks_mut(side)) {
+            rows.push(segment);
+        }
+    }
+    tiles
+}
+
+/// Renders every tile into its rows (`tiles`, from [`tile_rows`]) with the LOD state type
+/// of `scene.lod` (chosen once here, so the per-ray code is monomorphised per method);
+/// returns each tile's counters in tile order. Each worker keeps one set of working lists
+/// for all the tiles it renders (`map_init`).
 fn render_tiles<L: RayLod>(
     scene: &FrameScene,
     camera: &Camera,
     spp: u32,
     record: bool,
-) -> Vec<(Vec<Vec3>, TraceCounters)> {
+    tiles: Vec<Vec<&mut [Vec3]>>,
+) -> Vec<TraceCounters> {
     let tiles_x = camera.width.div_ceil(TILE);
-    let tiles_y = camera.height.div_ceil(TILE);
-    (0..tiles_x * tiles_y)
+    tiles
         .into_par_iter()
-        .map_init(TileBuffers::<L>::default, |buffers, tile| {
+        .enumerate()
+        .map_init(TileBuffers::<L>::default, |buffers, (tile, mut rows)| {
             let mut counters = if record {
                 TraceCounters::recording()
             } else {
                 TraceCounters::default()
             };
+            let tile = tile as u32;
             let origin = ((tile % tiles_x) * TILE, (tile / tiles_x) * TILE);
-            let pixels = trace_tile::<L>(scene, camera, spp, origin, &mut counters, buffers);
-            (pixels, counters)
+            trace_tile::<L>(
+                scene,
+                camera,
+                spp,
+                origin,
+                &mut counters,
+                buffers,
+                &mut rows,
+            );
+            counters
         })
         .collect()
 }

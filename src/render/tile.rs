@@ -104,7 +104,8 @@ impl<L: RayLod> Default for TileBuffers<L> {
     }
 }
 
-/// The tile's pixels (returned row by row; traced in the order of [`tile_pixels`]),
+/// Renders the tile whose corner is `(x0, y0)` into `rows` (its rows of the frame, top to
+/// bottom, each as wide as the tile), tracing its pixels in the order of [`tile_pixels`],
 /// with the LOD state `L`, using `buffers` for its lists.
 pub(super) fn trace_tile<L: RayLod>(
     scene: &FrameScene,
@@ -113,7 +114,8 @@ pub(super) fn trace_tile<L: RayLod>(
     (x0, y0): (u32, u32),
     counters: &mut TraceCounters,
     buffers: &mut TileBuffers<L>,
-) -> Vec<Vec3> {
+    rows: &mut [&mut [Vec3]],
+) {
     let TileBuffers {
         samples,
         vertices,
@@ -207,8 +209,8 @@ pub(super) fn trace_tile<L: RayLod>(
         let radiance = vertices[v].evaluate(|child| vertices[child as usize].radiance);
         vertices[v].radiance = radiance;
     }
-    let w = x1 - x0;
-    let mut pixels = vec![Vec3::ZERO; (w * (y1 - y0)) as usize];
+    debug_assert!(rows.len() == (y1 - y0) as usize);
+    debug_assert!(rows.iter().all(|row| row.len() == (x1 - x0) as usize));
     let mut sum = Vec3A::ZERO;
     for (k, vertex) in vertices[..samples.len()].iter().enumerate() {
         let radiance = vertex.radiance;
@@ -219,11 +221,10 @@ pub(super) fn trace_tile<L: RayLod>(
         }
         if (k as u32 + 1) % spp == 0 {
             let (x, y, _) = samples[k];
-            pixels[((y - y0) * w + (x - x0)) as usize] = Vec3::from(sum / spp as f32);
+            rows[(y - y0) as usize][(x - x0) as usize] = Vec3::from(sum / spp as f32);
             sum = Vec3A::ZERO;
         }
     }
-    pixels
 }
 
 /// The samples' primary rays into `rays` (in the samples' order), traced as packets of up to

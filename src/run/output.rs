@@ -16,6 +16,7 @@ use image::{ImageBuffer, ImageFormat, Rgb};
 
 use crate::atomic_file::{
     FileWriteError, remove_stale_temporaries, write_bytes_atomically_as, write_image_atomically_as,
+    write_rgb_f32_exr_atomically_as,
 };
 use crate::record::{
     FrameRecord, Record, RunIdentity, StatsFileError, describe_differences, is_stats_file_name,
@@ -41,6 +42,38 @@ impl FrameFormat {
             FrameFormat::Exr => "exr",
         }
     }
+
+    /// The bytes a frame of `pixels` pixels holds at once while it is rendered and
+    /// written: its linear pixels (12 bytes each; the tiles write into them) and, while a
+    /// PNG is encoded, their 8-bit sRGB codes (3 more). The format does not change it: an
+    /// EXR is encoded straight from the linear pixels, but its PNG preview is written too.
+    pub fn frame_bytes(pixels: u64) -> u64 {
+        pixels.saturating_mul(15)
+    }
+}
+
+/// Checks, before any frame is rendered, that this process can allocate what one
+/// `width x height` frame holds while it is rendered and written as `format`
+/// ([`FrameFormat::frame_bytes`]): a frame too large for the memory the process may use
+/// fails with a clear error at once, not with an abort after its rendering. It sees the
+/// process's own limits (`ulimit -v`, the address space); where the system overcommits
+/// memory it cannot foresee the kernel's out-of-memory killer.
+///
+/// # Errors
+/// The allocation is refused; the error names the size, the format and the bytes needed.
+pub fn check_frame_memory(width: u32, height: u32, format: FrameFormat) -> Result<()> {
+    let bytes = FrameFormat::frame_bytes(u64::from(width) * u64::from(height));
+    let mut probe: Vec<u8> = Vec::new();
+    if let Err(e) = probe.try_reserve_exact(usize::try_from(bytes).unwrap_or(usize::MAX)) {
+        bail!(
+            "--size {width}x{height}: a frame this size needs {:.2} GB while it is rendered and \
+             written as {}, and this process cannot allocate that ({e}); render a smaller \
+             size or allow the process more memory",
+            bytes as f64 / 1e9,
+            format.extension().to_uppercase(),
+        );
+    }
+    Ok(())
 }
 
 fn io_error(path: &Path) -> impl FnOnce(std::io::Error) -> FileWriteError + '_ {
@@ -365,15 +398,14 @@ fn write_frame_atomically_as(
             write_image_atomically_as(path, owner, &buffer, ImageFormat::Png)
         }
         FrameFormat::Exr => {
-            let data: Vec<f32> = image
-                .pixels
-                .iter()
-                .flat_map(|p| p.to_array().map(|c| if c.is_finite() { c } else { 0.0 }))
-                .collect();
-            let buffer: ImageBuffer<Rgb<f32>, Vec<f32>> =
-                ImageBuffer::from_raw(image.width, image.height, data)
-                    .expect("buffer length matches the image size");
-            write_image_atomically_as(path, owner, &buffer, ImageFormat::OpenExr)
+            // Encoded straight from the frame's pixels: a float copy of a 16384 x 16384
+            // frame would be 3.2 GB more.
+            let width = image.width as usize;
+            let finite = |c: f32| if c.is_finite() { c } else { 0.0 };
+            write_rgb_f32_exr_atomically_as(path, owner, (width, image.height as usize), |x, y| {
+                let p = image.pixels[y * width + x];
+                (finite(p.x), finite(p.y), finite(p.z))
+            })
         }
     }
 }
@@ -381,6 +413,20 @@ fn write_frame_atomically_as(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn frame_memory_is_checked_against_what_can_be_allocated() {
+        assert_eq!(FrameFormat::frame_bytes(800 * 600), 7_200_000);
+        assert!(check_frame_memory(800, 600, FrameFormat::Png).is_ok());
+        // More bytes than any address space holds (the count saturates, not wraps).
+        let err = check_frame_memory(u32::MAX, u32::MAX, FrameFormat::Exr).unwrap_err();
+        let message = err.to_string();
+        assert!(
+            message.contains(&format!("--size {}x{}", u32::MAX, u32::MAX))
+                && message.contains("EXR"),
+            "{message}"
+        );
+    }
 
     fn temporaries_in(dir: &Path) -> Vec<String> {
         let mut left: Vec<String> = fs::read_dir(dir)

@@ -18,7 +18,7 @@ use std::time::{Duration, Instant};
 use anyhow::{Context, Result};
 
 use super::check::{CheckFinished, finish_check};
-use super::output::{FrameFormat, OutputDir, Shard, frame_file_name};
+use super::output::{FrameFormat, OutputDir, Shard, check_frame_memory, frame_file_name};
 use crate::atomic_file::write_image_atomically_as;
 use crate::diff::{
     DiffInputError, DiffOptions, DiffReport, FrameDiff, compare_stats, diff_frame, frame_file,
@@ -156,6 +156,8 @@ pub fn render_sequence(
             super::check::check_junit_path(junit)?;
         }
     }
+    let settings = renderer.settings();
+    check_frame_memory(settings.width, settings.height, out.format)?;
     let resume = out.resume == Resume::SkipComplete;
     let (mut output, previous) = OutputDir::open(
         &out.dir,
