@@ -9,7 +9,8 @@
 //! written in place, with no temporary. This is the one implementation: frames, stats
 //! summaries, plots, pages, reports and exported meshes all go through
 //! [`write_atomically`] (or [`write_atomically_as`], naming the owner), text through
-//! [`write_text_atomically`] and images through [`write_image_atomically`]. A run that
+//! [`write_text_atomically`], images through [`write_image_atomically`] and EXR frames,
+//! encoded from the frame's own pixels, through [`write_rgb_f32_exr_atomically_as`]. A run that
 //! starts again (a resumed render, `mipray report`) removes the stale temporaries its
 //! owner left for the files it writes, and no others ([`remove_stale_temporaries`]).
 
@@ -247,11 +248,13 @@ pub fn write_rgb_f32_exr_atomically_as(
         )
         .write()
         .to_buffered(w)
-        .map_err(|e| {
-            image::ImageError::Encoding(image::error::EncodingError::new(
+        .map_err(|e| match e {
+            exr::error::Error::Io(e) => image::ImageError::IoError(e),
+            // As `image`'s EXR encoder reports the crate's other errors: one line.
+            e => image::ImageError::Decoding(image::error::DecodingError::new(
                 ImageFormat::OpenExr.into(),
-                e,
-            ))
+                e.to_string(),
+            )),
         })
     })
 }
@@ -552,6 +555,18 @@ mod tests {
         };
         write_rgb8_atomically(&fifo, &image::RgbImage::new(2, 2)).unwrap();
         assert!(reader.join().unwrap().starts_with(b"\x89PNG"));
+        assert!(fs::metadata(&fifo).unwrap().file_type().is_fifo());
+        // And EXR frames, encoded from a closure.
+        let reader = {
+            let fifo = fifo.clone();
+            std::thread::spawn(move || fs::read(fifo).unwrap())
+        };
+        write_rgb_f32_exr_atomically_as(&fifo, None, (3, 2), |x, y| (x as f32, y as f32, 0.5))
+            .unwrap();
+        let bytes = reader.join().unwrap();
+        assert!(bytes.starts_with(&[0x76, 0x2f, 0x31, 0x01]), "not an EXR");
+        let decoded = image::load_from_memory(&bytes).unwrap().into_rgb32f();
+        assert_eq!(decoded.get_pixel(2, 1).0, [2.0, 1.0, 0.5]);
         assert!(fs::metadata(&fifo).unwrap().file_type().is_fifo());
     }
 

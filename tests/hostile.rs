@@ -161,7 +161,7 @@ fn every_hostile_file_is_a_clean_error_under_a_memory_limit() {
     );
 }
 
-/// The largest `--size` accepted, under an address-space limit far below its frame's 3 GB,
+/// The largest `--size` accepted, under an address-space limit far below its frame's 4 GB,
 /// is a clean error naming the size, given before any rendering, and leaves no frame file.
 #[test]
 fn a_frame_larger_than_the_memory_allows_is_a_clean_error() {

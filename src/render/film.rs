@@ -137,8 +137,11 @@ fn tile_rows(pixels: &mut [Vec3], width: u32, height: u32) -> Vec<Vec<&mut [Vec3
     let tiles_x = width.div_ceil(TILE) as usize;
     let tiles_y = height.div_ceil(TILE) as usize;
     let side = TILE as usize;
+    if tiles_x == 0 || tiles_y == 0 {
+        return Vec::new();
+    }
     let mut tiles: Vec<Vec<&mut [Vec3]>> = (0..tiles_x * tiles_y)
-        .map(|_| Vec::with_capacity(side))
+        .map(|tile| Vec::with_capacity(side.min(height as usize - tile / tiles_x * side)))
         .collect();
     for (y, row) in pixels.chunks_exact_mut(width as usize).enumerate() {
         let band = &mut tiles[y / side * tiles_x..][..tiles_x];
@@ -217,6 +220,47 @@ fn hash3(x: u32, y: u32, z: u32) -> u32 {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Every pixel belongs to exactly one tile, in the row of that tile's origin that
+    /// `render_tiles` gives it (tiles row-major), edge tiles cut by the image.
+    #[test]
+    fn tile_rows_cover_every_pixel_once_at_its_tiles_origin() {
+        for (width, height) in [
+            (1u32, 1u32),
+            (33, 65),
+            (100, 37),
+            (64, 32),
+            (1, 70),
+            (70, 1),
+        ] {
+            let mut pixels: Vec<Vec3> = (0..width * height)
+                .map(|i| Vec3::new(i as f32, 0.0, 0.0))
+                .collect();
+            let tiles_x = width.div_ceil(TILE);
+            let tiles = tile_rows(&mut pixels, width, height);
+            assert_eq!(tiles.len() as u32, tiles_x * height.div_ceil(TILE));
+            let mut seen = vec![0u32; (width * height) as usize];
+            for (tile, rows) in tiles.iter().enumerate() {
+                let (x0, y0) = (
+                    (tile as u32 % tiles_x) * TILE,
+                    (tile as u32 / tiles_x) * TILE,
+                );
+                assert_eq!(rows.len() as u32, TILE.min(height - y0), "{width}x{height}");
+                for (dy, row) in rows.iter().enumerate() {
+                    assert_eq!(row.len() as u32, TILE.min(width - x0), "{width}x{height}");
+                    for (dx, p) in row.iter().enumerate() {
+                        let index = (y0 + dy as u32) * width + x0 + dx as u32;
+                        assert_eq!(p.x, index as f32, "{width}x{height} tile {tile}");
+                        seen[index as usize] += 1;
+                    }
+                }
+            }
+            assert!(seen.iter().all(|&n| n == 1), "{width}x{height}");
+        }
+        let mut empty: Vec<Vec3> = Vec::new();
+        assert!(tile_rows(&mut empty, 0, 5).is_empty());
+        assert!(tile_rows(&mut empty, 5, 0).is_empty());
+    }
 
     /// Every pixel of a whole or partial tile comes exactly once; in a whole tile every run
     /// of 4^k pixels (a packet of 64 rays at one sample per pixel, of 16 pixels at four) is

@@ -42,38 +42,6 @@ impl FrameFormat {
             FrameFormat::Exr => "exr",
         }
     }
-
-    /// The bytes a frame of `pixels` pixels holds at once while it is rendered and
-    /// written: its linear pixels (12 bytes each; the tiles write into them) and, while a
-    /// PNG is encoded, their 8-bit sRGB codes (3 more). The format does not change it: an
-    /// EXR is encoded straight from the linear pixels, but its PNG preview is written too.
-    pub fn frame_bytes(pixels: u64) -> u64 {
-        pixels.saturating_mul(15)
-    }
-}
-
-/// Checks, before any frame is rendered, that this process can allocate what one
-/// `width x height` frame holds while it is rendered and written as `format`
-/// ([`FrameFormat::frame_bytes`]): a frame too large for the memory the process may use
-/// fails with a clear error at once, not with an abort after its rendering. It sees the
-/// process's own limits (`ulimit -v`, the address space); where the system overcommits
-/// memory it cannot foresee the kernel's out-of-memory killer.
-///
-/// # Errors
-/// The allocation is refused; the error names the size, the format and the bytes needed.
-pub fn check_frame_memory(width: u32, height: u32, format: FrameFormat) -> Result<()> {
-    let bytes = FrameFormat::frame_bytes(u64::from(width) * u64::from(height));
-    let mut probe: Vec<u8> = Vec::new();
-    if let Err(e) = probe.try_reserve_exact(usize::try_from(bytes).unwrap_or(usize::MAX)) {
-        bail!(
-            "--size {width}x{height}: a frame this size needs {:.2} GB while it is rendered and \
-             written as {}, and this process cannot allocate that ({e}); render a smaller \
-             size or allow the process more memory",
-            bytes as f64 / 1e9,
-            format.extension().to_uppercase(),
-        );
-    }
-    Ok(())
 }
 
 fn io_error(path: &Path) -> impl FnOnce(std::io::Error) -> FileWriteError + '_ {
@@ -414,18 +382,40 @@ fn write_frame_atomically_as(
 mod tests {
     use super::*;
 
+    /// An EXR frame encoded from the frame's pixels has the bytes `image`'s encoder writes
+    /// from a float copy of them (non-finite components as 0), on a size that is not a
+    /// whole number of tiles or EXR blocks; it decodes to those values.
     #[test]
-    fn frame_memory_is_checked_against_what_can_be_allocated() {
-        assert_eq!(FrameFormat::frame_bytes(800 * 600), 7_200_000);
-        assert!(check_frame_memory(800, 600, FrameFormat::Png).is_ok());
-        // More bytes than any address space holds (the count saturates, not wraps).
-        let err = check_frame_memory(u32::MAX, u32::MAX, FrameFormat::Exr).unwrap_err();
-        let message = err.to_string();
-        assert!(
-            message.contains(&format!("--size {}x{}", u32::MAX, u32::MAX))
-                && message.contains("EXR"),
-            "{message}"
-        );
+    fn exr_frames_have_the_bytes_of_images_encoder() {
+        let (width, height) = (37u32, 19u32);
+        let pixels: Vec<glam::Vec3> = (0..width * height)
+            .map(|i| match i % 7 {
+                0 => glam::Vec3::new(f32::NAN, 1.0, -0.0),
+                1 => glam::Vec3::new(f32::INFINITY, f32::NEG_INFINITY, 2.5),
+                _ => glam::Vec3::new(i as f32 * 0.01, 1.0 / (i as f32 + 1.0), -0.25),
+            })
+            .collect();
+        let frame = LinearImage {
+            width,
+            height,
+            pixels,
+        };
+        let dir = tempfile::tempdir().unwrap();
+        let ours = dir.path().join("ours.exr");
+        write_frame_atomically(&ours, &frame, FrameFormat::Exr).unwrap();
+        let finite = |c: f32| if c.is_finite() { c } else { 0.0 };
+        let copy: Vec<f32> = frame
+            .pixels
+            .iter()
+            .flat_map(|p| p.to_array().map(finite))
+            .collect();
+        let buffer: ImageBuffer<Rgb<f32>, Vec<f32>> =
+            ImageBuffer::from_raw(width, height, copy.clone()).unwrap();
+        let mut theirs = std::io::Cursor::new(Vec::new());
+        buffer.write_to(&mut theirs, ImageFormat::OpenExr).unwrap();
+        assert_eq!(fs::read(&ours).unwrap(), theirs.into_inner());
+        let decoded = image::open(&ours).unwrap().into_rgb32f();
+        assert_eq!(decoded.into_raw(), copy);
     }
 
     fn temporaries_in(dir: &Path) -> Vec<String> {
