@@ -187,6 +187,80 @@ fn a_frame_larger_than_the_memory_allows_is_a_clean_error() {
     }
 }
 
+/// The other commands that render or trace a frame check its size the same way: at the
+/// largest `--size` accepted, under the limit, `compare`, `bench` (frames, and rays made
+/// from the frame) and `export --rays` end with a clean error naming the size before they
+/// render, and `export` leaves no ray file.
+#[test]
+fn every_command_refuses_a_size_larger_than_the_memory_allows() {
+    let out = tempfile::tempdir().unwrap();
+    let dir = out.path().to_str().unwrap();
+    let scene = "../../../animations/default.gltf";
+    let commands: [&[&str]; 4] = [
+        &[
+            "compare",
+            scene,
+            "--frames",
+            "0..2",
+            "--repeats",
+            "1",
+            "--out",
+            dir,
+        ],
+        &["bench", scene, "--frames", "0", "--repeats", "1"],
+        &[
+            "bench",
+            scene,
+            "--frames",
+            "0",
+            "--rays",
+            "primary",
+            "--repeats",
+            "1",
+        ],
+        &["export", scene, "--frames", "0", "--rays", "--out", dir],
+    ];
+    for command in commands {
+        let args: Vec<&str> = command
+            .iter()
+            .copied()
+            .chain(["--size", "16384x16384"])
+            .collect();
+        let output = mipray_limited(&args);
+        if let Some(why) = not_a_clean_error(&output, "16384x16384") {
+            panic!("{}: {why}", command[..2].join(" "));
+        }
+    }
+    assert_eq!(count_files(out.path(), |name| name.starts_with("rays_")), 0);
+}
+
+/// A ray file larger than the process may hold is a clean error naming the file, not an
+/// abort: a sparse file whose header and length agree (30 M records, 1.44 GB, past the
+/// 1 GiB limit), so only its size is wrong.
+#[test]
+fn a_ray_file_larger_than_the_memory_allows_is_a_clean_error() {
+    use std::io::Write;
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("huge_rays.bin");
+    let count: u64 = 30_000_000;
+    let mut file = std::fs::File::create(&path).unwrap();
+    file.write_all(b"MIPRAYS1").unwrap();
+    file.write_all(&count.to_le_bytes()).unwrap();
+    file.set_len(16 + 48 * count).unwrap();
+    drop(file);
+    let output = mipray_limited(&[
+        "bench",
+        "../../../animations/default.gltf",
+        "--frames",
+        "0",
+        "--rays",
+        path.to_str().unwrap(),
+    ]);
+    if let Some(why) = not_a_clean_error(&output, "huge_rays.bin") {
+        panic!("{why}");
+    }
+}
+
 /// Counts typed on the command line must cost memory in proportion to real work: the last
 /// shard of a 4e9-frame range is 4 frames, rendered at once.
 #[test]

@@ -20,6 +20,7 @@ use crate::accel::{BvhLayout, BvhPolicy};
 use crate::frame::{RenderSettings, Renderer};
 use crate::lod::LodMethod;
 use crate::percentiles::Percentiles;
+use crate::render::memory::{LINEAR_PIXEL_BYTES, check_frame_memory};
 use crate::scene::SceneDesc;
 
 /// One timed configuration.
@@ -67,6 +68,12 @@ pub fn run_bench(
     configs: &[BenchConfig],
     repeats: usize,
 ) -> Result<Vec<BenchResult>> {
+    // Each render holds at least its frame's linear pixels.
+    if !frames.is_empty() && repeats > 0 && !configs.is_empty() {
+        check_frame_memory(settings.width, settings.height, LINEAR_PIXEL_BYTES, || {
+            "rendering a frame this size".to_string()
+        })?;
+    }
     let pools = configs
         .iter()
         .map(|c| {

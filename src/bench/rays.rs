@@ -21,6 +21,7 @@ use crate::export::rays::{MISS, RayRecord, read_ray_file};
 use crate::frame::Renderer;
 use crate::percentiles::Percentiles;
 use crate::render::film::{TILE, tile_pixels};
+use crate::render::memory::check_frame_memory;
 use crate::render::{RayClass, SceneBvh, shadow_ray_toward};
 
 /// Which rays `--rays` times.
@@ -100,6 +101,15 @@ pub fn run_ray_bench(
     threads: &[usize],
     repeats: usize,
 ) -> Result<Vec<RayRate>> {
+    // A frame's rays are made before they are timed: at least one primary ray a pixel
+    // (the shadow rays of their hits come on top).
+    if !frames.is_empty() {
+        let settings = renderer.settings();
+        let per_pixel = std::mem::size_of::<TimedRay>() as u64;
+        check_frame_memory(settings.width, settings.height, per_pixel, || {
+            "tracing a frame's rays at this size".to_string()
+        })?;
+    }
     let pools = threads
         .iter()
         .map(|&t| rayon::ThreadPoolBuilder::new().num_threads(t).build())

@@ -35,6 +35,7 @@ use crate::percentiles::median;
 use crate::record::Phase;
 use crate::render::integrator::{FrameScene, MIP_LEVELS};
 use crate::render::lod_view::lod_image;
+use crate::render::memory::{LINEAR_PIXEL_BYTES, SRGB8_PIXEL_BYTES, check_frame_memory};
 use crate::render::{Camera, LinearImage, render_image};
 use crate::scene::SceneDesc;
 
@@ -58,6 +59,23 @@ pub struct CompareOptions {
     pub frames_dir: Option<PathBuf>,
     /// Where to write each method's `--view lod` images (`None`: not written).
     pub lod_view_dir: Option<PathBuf>,
+}
+
+/// The bytes per pixel a comparison holds at least while it compares a frame: every
+/// method's linear image (the interleaved timing keeps them all), the reference's 8-bit
+/// codes, the probe's and the two sub-pixel LOD references, and from the second frame on
+/// the previous frame's codes of every method and of the reference (for flicker). A lower
+/// bound: each method's 8-bit codes, made one at a time, and the `--view lod` images come
+/// on top.
+fn compare_pixel_bytes(methods: usize, several_frames: bool) -> u64 {
+    let methods = methods as u64;
+    let level = std::mem::size_of::<Option<super::lod_error::ReferenceLevel>>() as u64;
+    let previous = if several_frames {
+        (methods + 1) * SRGB8_PIXEL_BYTES
+    } else {
+        0
+    };
+    methods * LINEAR_PIXEL_BYTES + SRGB8_PIXEL_BYTES + 3 * level + previous
 }
 
 /// Per-method state carried over the frames.
@@ -85,6 +103,13 @@ pub fn run_compare(
     log: &dyn Fn(&str),
 ) -> Result<CompareResults> {
     let methods = with_baseline(&options.methods);
+    if !options.frames.is_empty() {
+        let (width, height) = (options.settings.width, options.settings.height);
+        let per_pixel = compare_pixel_bytes(methods.len(), options.frames.len() > 1);
+        check_frame_memory(width, height, per_pixel, || {
+            format!("comparing {} methods at this size", methods.len())
+        })?;
+    }
     let mut runs: Vec<MethodRun> = methods
         .iter()
         .map(|&method| MethodRun {

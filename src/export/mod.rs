@@ -26,6 +26,7 @@ use std::path::{Path, PathBuf};
 
 use crate::atomic_file::{self, AtomicWriteError};
 use crate::frame::{FrameError, Motion, Renderer};
+use crate::render::memory::{FrameTooLarge, LINEAR_PIXEL_BYTES, check_frame_memory};
 
 pub use crate::scene::camera_file::{CameraFile, LightFile};
 pub use obj::{MTL_FILE, texture_file_name};
@@ -86,6 +87,9 @@ pub enum ExportError {
     },
     #[error(transparent)]
     Frame(#[from] FrameError),
+    /// `--rays` at a size whose rays this process cannot hold.
+    #[error(transparent)]
+    Memory(#[from] FrameTooLarge),
     /// The renderer places some meshes as instances, whose triangles are not in its world
     /// tree: the export writes the world tree's triangles, so it needs the flat layout.
     #[error(
@@ -156,6 +160,15 @@ pub fn face_of_slot(renderer: &Renderer) -> Vec<u32> {
     face
 }
 
+/// The bytes per pixel [`write_frame_rays`] holds at least: the frame's linear pixels and,
+/// for each sample's primary ray, its record in the log and in the file's layout (the
+/// bounces' and shadow rays come on top).
+fn recorded_pixel_bytes(spp: u32) -> u64 {
+    let ray = (std::mem::size_of::<crate::render::TracedRay>()
+        + std::mem::size_of::<rays::RayRecord>()) as u64;
+    LINEAR_PIXEL_BYTES + u64::from(spp.max(1)) * ray
+}
+
 /// Renders the prepared frame recording its rays and writes them to `path` (the result of
 /// a hit as the face index in the frame's OBJ export); returns the number of rays.
 fn write_frame_rays(
@@ -199,6 +212,15 @@ pub fn export_frames(
     let meshes = renderer.layout().instanced_meshes();
     if meshes > 0 {
         return Err(ExportError::Instanced { meshes });
+    }
+    if options.rays && !options.frames.is_empty() {
+        let settings = renderer.settings();
+        check_frame_memory(
+            settings.width,
+            settings.height,
+            recorded_pixel_bytes(settings.spp),
+            || "recording a frame's rays at this size".to_string(),
+        )?;
     }
     fs::create_dir_all(&options.dir).map_err(io_error(&options.dir))?;
     let time_of = |frame: u32| options.clock.time(frame);

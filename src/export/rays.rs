@@ -164,6 +164,12 @@ pub enum RayFileError {
         needed: u128,
         actual: u64,
     },
+    #[error("{path}: {count} records, more than this process can hold in memory ({cause})")]
+    Memory {
+        path: PathBuf,
+        count: u64,
+        cause: std::collections::TryReserveError,
+    },
     #[error("{path}: record {index}: {problem}")]
     Record {
         path: PathBuf,
@@ -218,21 +224,34 @@ pub fn read_ray_file(path: &Path) -> Result<Vec<RayRecord>, RayFileError> {
             actual,
         });
     }
-    let mut bytes = Vec::with_capacity(actual as usize - 16);
-    file.read_to_end(&mut bytes).map_err(io_err)?;
+    // The file's bytes and its records are held at once: both are asked for before reading,
+    // so a file larger than the process may hold is an error, not an abort.
+    let too_large = |cause| RayFileError::Memory {
+        path: path.to_path_buf(),
+        count,
+        cause,
+    };
+    let mut bytes = Vec::new();
     bytes
-        .chunks_exact(RECORD_BYTES)
-        .enumerate()
-        .map(|(index, chunk)| {
+        .try_reserve_exact(usize::try_from(actual - 16).unwrap_or(usize::MAX))
+        .map_err(too_large)?;
+    let mut records = Vec::new();
+    records
+        .try_reserve_exact(usize::try_from(count).unwrap_or(usize::MAX))
+        .map_err(too_large)?;
+    file.read_to_end(&mut bytes).map_err(io_err)?;
+    for (index, chunk) in bytes.chunks_exact(RECORD_BYTES).enumerate() {
+        let record =
             RayRecord::from_bytes(chunk.try_into().expect("48 bytes")).map_err(|problem| {
                 RayFileError::Record {
                     path: path.to_path_buf(),
                     index: index as u64,
                     problem,
                 }
-            })
-        })
-        .collect()
+            })?;
+        records.push(record);
+    }
+    Ok(records)
 }
 
 /// File name of frame `index`'s rays: `rays_0000.bin`.

@@ -11,6 +11,7 @@ pub mod integrator;
 pub mod light;
 pub mod lod_view;
 pub mod material;
+pub mod memory;
 pub mod probe;
 pub mod ray_log;
 pub mod scene_bvh;

@@ -25,6 +25,7 @@ use crate::diff::{
 };
 use crate::frame::{FrameClock, LevelImage, Renderer};
 use crate::record::{FrameRecord, RunIdentity};
+use crate::render::memory::{LINEAR_PIXEL_BYTES, SRGB8_PIXEL_BYTES, check_frame_memory};
 use crate::report::frame_file_problem;
 use image::ImageFormat;
 use rayon::prelude::*;
@@ -158,7 +159,17 @@ pub fn render_sequence(
     }
     if !frames.is_empty() {
         let settings = renderer.settings();
-        check_frame_memory(settings.width, settings.height, out)?;
+        check_frame_memory(
+            settings.width,
+            settings.height,
+            frame_pixel_bytes(out),
+            || {
+                format!(
+                    "rendering and writing a frame this size as {}",
+                    out.format.extension().to_uppercase()
+                )
+            },
+        )?;
     }
     let resume = out.resume == Resume::SkipComplete;
     let (mut output, previous) = OutputDir::open(
@@ -356,40 +367,15 @@ fn finish_sequence_check(
     finish_check(&report, &check.options.out, check.junit.as_deref())
 }
 
-/// The bytes a `width x height` frame holds at once while it is rendered and written
-/// (`out`'s format and views): its linear pixels, which the tiles write into, and while its
-/// PNG (an EXR frame's PNG preview) is encoded their 8-bit sRGB codes; with `--view lod`
-/// also the level image. A lower bound: the PNG encoder's compressed stream, small for
-/// rendered frames, comes on top.
-fn frame_bytes(width: u32, height: u32, out: &SequenceOutput) -> u64 {
-    const LINEAR: u64 = std::mem::size_of::<glam::Vec3>() as u64;
-    const SRGB8: u64 = 3;
+/// The bytes per pixel a frame holds at once while it is rendered and written (`out`'s
+/// format and views): its linear pixels, which the tiles write into, and while its PNG (an
+/// EXR frame's PNG preview) is encoded their 8-bit sRGB codes; with `--view lod` also the
+/// level image. A lower bound: the PNG encoder's compressed stream, small for rendered
+/// frames, comes on top.
+fn frame_pixel_bytes(out: &SequenceOutput) -> u64 {
     let view = match out.level_image {
-        LevelImage::Make => SRGB8,
+        LevelImage::Make => SRGB8_PIXEL_BYTES,
         LevelImage::Skip => 0,
     };
-    (u64::from(width) * u64::from(height)).saturating_mul(LINEAR + SRGB8 + view)
-}
-
-/// Checks, before any frame is rendered, that this process can allocate what one
-/// `width x height` frame holds ([`frame_bytes`]): a frame too large for the memory the
-/// process may use fails with a clear error at once, not with an abort after its rendering.
-/// It sees the process's own limits (`ulimit -v`, the address space); where the system
-/// overcommits memory it cannot foresee the kernel's out-of-memory killer.
-///
-/// # Errors
-/// The allocation is refused; the error names the size, the format and the bytes needed.
-fn check_frame_memory(width: u32, height: u32, out: &SequenceOutput) -> Result<()> {
-    let bytes = frame_bytes(width, height, out);
-    let mut probe: Vec<u8> = Vec::new();
-    if let Err(e) = probe.try_reserve_exact(usize::try_from(bytes).unwrap_or(usize::MAX)) {
-        anyhow::bail!(
-            "--size {width}x{height}: a frame this size needs at least {:.2} GB while it is \
-             rendered and written as {}, and this process cannot allocate that ({e}); render \
-             a smaller size or allow the process more memory",
-            bytes as f64 / 1e9,
-            out.format.extension().to_uppercase(),
-        );
-    }
-    Ok(())
+    LINEAR_PIXEL_BYTES + SRGB8_PIXEL_BYTES + view
 }
