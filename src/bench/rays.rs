@@ -325,7 +325,7 @@ enum FileKernel {
 /// answer against the recorded one.
 ///
 /// # Errors
-/// The file cannot be read, asks what mipray's kernels do not trace (a `t min` other than
+/// The file cannot be read (or held in memory), asks what mipray's kernels do not trace (a `t min` other than
 /// 0: they trace every ray from its origin), names faces the frame does not have (recorded
 /// on another scene or frame), or the frame cannot be prepared.
 pub fn run_ray_file_bench(

@@ -107,7 +107,10 @@ pub fn run_compare(
         let (width, height) = (options.settings.width, options.settings.height);
         let per_pixel = compare_pixel_bytes(methods.len(), options.frames.len() > 1);
         check_frame_memory(width, height, per_pixel, || {
-            format!("comparing {} methods at this size", methods.len())
+            format!(
+                "comparing {} methods (`none` included) at this size",
+                methods.len()
+            )
         })?;
     }
     let mut runs: Vec<MethodRun> = methods

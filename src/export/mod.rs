@@ -160,13 +160,15 @@ pub fn face_of_slot(renderer: &Renderer) -> Vec<u32> {
     face
 }
 
-/// The bytes per pixel [`write_frame_rays`] holds at least: the frame's linear pixels and,
-/// for each sample's primary ray, its record in the log and in the file's layout (the
-/// bounces' and shadow rays come on top).
+/// The bytes per pixel [`write_frame_rays`] holds at least: when the film joins its tiles,
+/// the frame's linear pixels, every tile's log and the frame's log at once (two logged rays
+/// per sample's primary ray); then the frame's log and its records in the file's layout.
+/// The larger of the two (the bounces' and shadow rays come on top of both).
 fn recorded_pixel_bytes(spp: u32) -> u64 {
-    let ray = (std::mem::size_of::<crate::render::TracedRay>()
-        + std::mem::size_of::<rays::RayRecord>()) as u64;
-    LINEAR_PIXEL_BYTES + u64::from(spp.max(1)) * ray
+    let logged = std::mem::size_of::<crate::render::TracedRay>() as u64;
+    let record = std::mem::size_of::<rays::RayRecord>() as u64;
+    let samples = u64::from(spp.max(1));
+    (LINEAR_PIXEL_BYTES + 2 * logged * samples).max((logged + record) * samples)
 }
 
 /// Renders the prepared frame recording its rays and writes them to `path` (the result of

@@ -192,8 +192,9 @@ pub fn write_records(out: &mut impl Write, records: &[RayRecord]) -> io::Result<
 /// anything is allocated, so a damaged header cannot ask for gigabytes.
 ///
 /// # Errors
-/// The file cannot be read, is not a ray file, its length disagrees with its count, or a
-/// record holds what no traced ray can (see `RayRecord::from_bytes`).
+/// The file cannot be read, is not a ray file, its length disagrees with its count, its
+/// records are more than this process can allocate, or a record holds what no traced ray
+/// can (see `RayRecord::from_bytes`).
 pub fn read_ray_file(path: &Path) -> Result<Vec<RayRecord>, RayFileError> {
     let io_err = |source| RayFileError::Io {
         path: path.to_path_buf(),
