@@ -28,7 +28,7 @@
 
 use std::mem::MaybeUninit;
 
-use glam::{BVec4A, Vec3A, Vec4};
+use glam::{Vec3A, Vec4};
 
 use super::walk::{INLINE_STACK, safe_inverse4};
 use super::{EMPTY, LEAF, Lanes, PACKET, ROBUST_FAR, RayBoxes, WIDTH, WideBvh, WideNode};
@@ -334,8 +334,13 @@ impl Frustum {
             return None;
         }
         for row in origin {
+            // Every bit compared without an early exit, so the compiler takes it in vectors.
             let o = row[0].to_bits();
-            if row[..len].iter().any(|v| v.to_bits() != o) {
+            if row[..len]
+                .iter()
+                .fold(0, |differ, v| differ | (v.to_bits() ^ o))
+                != 0
+            {
                 return None;
             }
         }
@@ -481,20 +486,30 @@ impl Frustum {
             reach_low: [f32::NEG_INFINITY; 3],
             reach_high: [f32::INFINITY; 3],
         };
+        // Four at a time; the slots of a last, partial group repeat ray 0.
+        let whole = len / 4 * 4;
+        let tail = Vec4::new(0.0, 1.0, 2.0, 3.0).cmplt(Vec4::splat((len - whole) as f32));
         for axis in 0..3 {
-            // Four at a time; the slots of the last group past `len` repeat ray 0.
             let row = &inverse[axis];
             let first = Vec4::splat(row[0]);
             let (mut min, mut max) = (first, first);
-            let (mut negative, mut nan) = (0, 0);
-            for at in (0..len).step_by(4) {
-                let live = (1u32 << (len - at).min(4)) - 1;
-                let lanes = BVec4A::new(live & 1 != 0, live & 2 != 0, live & 4 != 0, live & 8 != 0);
-                let v = Vec4::select(lanes, Vec4::from_slice(&row[at..at + 4]), first);
+            // Bit k: some (every) group has a negative inverse in lane k; lanes past `len`
+            // count as negative for `every` and not for `some`.
+            let (mut some_negative, mut every_negative, mut nan) = (0, 0b1111, 0);
+            let mut take = |v: Vec4, live: u32| {
                 min = min.min(v);
                 max = max.max(v);
-                negative += (v.cmplt(Vec4::ZERO).bitmask() & live).count_ones() as usize;
+                let negative = v.cmplt(Vec4::ZERO).bitmask();
+                some_negative |= negative & live;
+                every_negative &= negative | !live;
                 nan |= v.cmpne(v).bitmask();
+            };
+            for at in (0..whole).step_by(4) {
+                take(Vec4::from_slice(&row[at..at + 4]), 0b1111);
+            }
+            if whole < len {
+                let v = Vec4::select(tail, Vec4::from_slice(&row[whole..whole + 4]), first);
+                take(v, tail.bitmask());
             }
             if nan != 0 {
                 return None;
@@ -502,10 +517,11 @@ impl Frustum {
             frustum.inverse_min[axis] = Lanes::splat(min.min_element());
             frustum.inverse_max[axis] = Lanes::splat(max.max_element());
             // As `RayBoxes`: a negative inverse meets the upper plane first.
-            let down = (negative == len) as usize;
+            let all_negative = every_negative & 0b1111 == 0b1111;
+            let down = all_negative as usize;
             frustum.front[axis] = axis + 3 * down;
             frustum.back[axis] = axis + 3 * (1 - down);
-            if negative == 0 || negative == len {
+            if some_negative == 0 || all_negative {
                 frustum.agreeing |= 1 << axis;
             }
         }
@@ -1529,6 +1545,57 @@ mod tests {
                 "this CPU has no AVX2: the baseline node tests were checked against the scalar reference only"
             );
         }
+    }
+
+    /// The interval bounds of packets of every length (whole and partial groups of four)
+    /// and sign pattern (all negative, all positive, mixed, signed zeros) are those of a
+    /// scalar fold over the packet's rays alone.
+    #[test]
+    fn interval_bounds_of_every_length_are_a_fold_over_the_rays() {
+        let mut next = stream(0x1f2e_3d4c);
+        for len in 1..=PACKET {
+            for pattern in 0..4 {
+                let mut inverse = [[0.0f32; PACKET]; 3];
+                for row in &mut inverse {
+                    for (r, value) in row.iter_mut().enumerate() {
+                        let magnitude = next().abs() + 0.1;
+                        *value = match pattern {
+                            0 => -magnitude,
+                            1 => magnitude,
+                            2 => next().signum() * magnitude,
+                            // Zeros of both signs among negatives (zero counts as not negative).
+                            _ => [-magnitude, -0.0, 0.0, -magnitude][r % 4],
+                        };
+                    }
+                    // Past `len`: values that would change every bound if they were read.
+                    for value in &mut row[len..] {
+                        *value = if next() < 0.0 { 1e30 } else { -1e30 };
+                    }
+                }
+                let origin = [Lanes::splat(0.5); 3];
+                let frustum =
+                    Frustum::over_inverses(origin, origin, &inverse, len).expect("no NaN");
+                for axis in 0..3 {
+                    let row = &inverse[axis][..len];
+                    let min = row.iter().copied().fold(f32::INFINITY, f32::min);
+                    let max = row.iter().copied().fold(f32::NEG_INFINITY, f32::max);
+                    let negative = row.iter().filter(|v| **v < 0.0).count();
+                    let case = format!("len {len}, pattern {pattern}, axis {axis}");
+                    assert_eq!(frustum.inverse_min[axis].0[0], min, "{case}");
+                    assert_eq!(frustum.inverse_max[axis].0[0], max, "{case}");
+                    let down = usize::from(negative == len);
+                    assert_eq!(frustum.front[axis], axis + 3 * down, "{case}");
+                    assert_eq!(frustum.back[axis], axis + 3 * (1 - down), "{case}");
+                    let agreeing = negative == 0 || negative == len;
+                    assert_eq!(frustum.agreeing & (1 << axis) != 0, agreeing, "{case}");
+                }
+            }
+        }
+        let mut nan = [[1.0f32; PACKET]; 3];
+        nan[1][36] = f32::NAN;
+        let origin = [Lanes::splat(0.0); 3];
+        assert!(Frustum::over_inverses(origin, origin, &nan, 37).is_none());
+        assert!(Frustum::over_inverses(origin, origin, &nan, 36).is_some());
     }
 
     #[test]
