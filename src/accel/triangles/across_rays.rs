@@ -200,19 +200,22 @@ impl ShearedLanes {
         // test decides them.
         let finite = det.sub::<AVX>(det).eq_mask::<AVX>(zero)
             & t_scaled.sub::<AVX>(t_scaled).eq_mask::<AVX>(zero);
-        let mut bits = inside;
+        // `0 <= t < t_max` with `t` finite, per lane in one vector (the scalar test's
+        // ordered comparisons: a NaN or infinite `t` is refused as it was lane by lane).
+        let accepted = finite
+            & zero.le_mask::<AVX>(t)
+            & t.lt_mask::<AVX>(*t_max)
+            & t.sub::<AVX>(t).eq_mask::<AVX>(zero);
+        let mut bits = inside & (accepted | !finite);
         while bits != 0 {
             let l = bits.trailing_zeros() as usize;
             bits &= bits - 1;
             // Each path writes its own answer: an `Option` of both paths' answers went
             // through the stack and stalled on reading its pieces back.
             if finite & (1 << l) != 0 {
-                let t = t.0[l];
-                if t >= 0.0 && t < t_max.0[l] && t.is_finite() {
-                    hits.mask |= 1 << l;
-                    hits.t[l] = t;
-                    hits.bary[l] = Vec2::new(v.0[l], w.0[l]);
-                }
+                hits.mask |= 1 << l;
+                hits.t[l] = t.0[l];
+                hits.bary[l] = Vec2::new(v.0[l], w.0[l]);
             } else {
                 let origin = self.origin.map(|axis| axis.0[l]);
                 let shear = self.shear.map(|axis| axis.0[l]);
@@ -550,21 +553,24 @@ pub mod sixteen {
             let (bv, bw) = (_mm512_mul_ps(v, inverse), _mm512_mul_ps(w, inverse));
             let finite = _mm512_cmp_ps_mask::<_CMP_EQ_OQ>(_mm512_sub_ps(det, det), zero)
                 & _mm512_cmp_ps_mask::<_CMP_EQ_OQ>(_mm512_sub_ps(t_scaled, t_scaled), zero);
+            // `0 <= t < cut` with `t` finite, per lane in one mask (the scalar test's
+            // ordered comparisons: a NaN or infinite `t` is refused as it was lane by lane).
+            let accepted = finite
+                & _mm512_cmp_ps_mask::<_CMP_LE_OQ>(zero, t)
+                & _mm512_cmp_ps_mask::<_CMP_LT_OQ>(t, self.cut)
+                & _mm512_cmp_ps_mask::<_CMP_EQ_OQ>(_mm512_sub_ps(t, t), zero);
             let (t, bv, bw, cut) = (row(t), row(bv), row(bw), row(self.cut));
-            let mut bits = inside;
+            let mut bits = inside & (accepted | !finite);
             while bits != 0 {
                 let l = bits.trailing_zeros() as usize;
                 bits &= bits - 1;
-                let t_max = cut[l];
                 let (slot, source) = (pack.first_slot + lane as u32, pack.source[lane]);
                 // Two calls rather than one on an `Option` of both paths' answers: that
                 // went through the stack and stalled on reading its pieces back.
                 if finite & (1 << l) != 0 {
-                    let t = t[l];
-                    if t >= 0.0 && t < t_max && t.is_finite() {
-                        hit(l, slot, source, t, Vec2::new(bv[l], bw[l]));
-                    }
+                    hit(l, slot, source, t[l], Vec2::new(bv[l], bw[l]));
                 } else {
+                    let t_max = cut[l];
                     let origin = self.origin.map(|axis| row(axis)[l]);
                     let shear = self.shear.map(|axis| row(axis)[l]);
                     let k = self.k.map(|axis| axis as u8);
