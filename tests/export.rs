@@ -214,6 +214,17 @@ fn info_triangle_count(scene: &str) -> usize {
 /// Runs `bench SCENE --frames FRAME --size SIZE --rays FILE` and returns its table's rows,
 /// after checking that no answer differs from the file's.
 fn bench_rows_agree(scene: &str, frame: &str, size: &str, file: &Path) -> Vec<String> {
+    bench_api_rows_agree(scene, frame, size, file, "both")
+}
+
+/// [`bench_rows_agree`] timing only the kernels `--api api` names.
+fn bench_api_rows_agree(
+    scene: &str,
+    frame: &str,
+    size: &str,
+    file: &Path,
+    api: &str,
+) -> Vec<String> {
     let bench = mipray(&[
         "bench",
         scene,
@@ -223,6 +234,8 @@ fn bench_rows_agree(scene: &str, frame: &str, size: &str, file: &Path) -> Vec<St
         size,
         "--rays",
         file.to_str().unwrap(),
+        "--api",
+        api,
         "--threads",
         "1",
         "--repeats",
@@ -924,12 +937,30 @@ fn the_ray_file_records_every_ray_with_answers_brute_force_confirms() {
     }
     assert_eq!(checked.iter().sum::<usize>(), records.len());
 
-    let rows = bench_rows_agree("default", "5", &size, &dir.path().join("rays_0005.bin"));
+    let file = dir.path().join("rays_0005.bin");
+    let rows = bench_rows_agree("default", "5", &size, &file);
     assert_eq!(
         rows.len(),
         8,
         "packets and single for primary, shadow, reflection and refraction: {rows:?}"
     );
+    // `--api` times one way alone, every class of it, and the rows are those of both.
+    for api in ["packets", "single"] {
+        let alone = bench_api_rows_agree("default", "5", &size, &file, api);
+        let column = |row: &String| row.split('|').nth(2).map(|c| c.trim().to_string());
+        assert_eq!(alone.len(), 4, "{api}: {alone:?}");
+        assert!(
+            alone.iter().all(|row| column(row).as_deref() == Some(api)),
+            "{alone:?}"
+        );
+        let classes = |rows: &[String]| -> Vec<Option<String>> {
+            rows.iter()
+                .filter(|row| column(row).as_deref() == Some(api))
+                .map(|row| row.split('|').nth(1).map(|c| c.trim().to_string()))
+                .collect()
+        };
+        assert_eq!(classes(&alone), classes(&rows), "{api}");
+    }
 }
 
 /// A scene whose moving meshes the default layout places as instances (BART-like robots at

@@ -10,7 +10,7 @@ use std::fmt::Write;
 mod rays;
 
 pub use rays::{
-    RayFileRate, RayKind, RayKinds, RayRate, ray_file_table, ray_table, run_ray_bench,
+    RayApi, RayFileRate, RayKind, RayKinds, RayRate, ray_file_table, ray_table, run_ray_bench,
     run_ray_file_bench,
 };
 

@@ -43,6 +43,28 @@ impl RayKinds {
     }
 }
 
+/// Which of mipray's ways of tracing `--rays` times: packets (as the film traces each
+/// class), one ray at a time, or both. One alone is what an instruction count needs (a
+/// profiler counts the whole process, not one row of the table).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, clap::ValueEnum)]
+pub enum RayApi {
+    #[default]
+    Both,
+    Packets,
+    Single,
+}
+
+impl RayApi {
+    /// Whether rays traced in packets (`packets`) or one at a time are timed.
+    fn includes(self, packets: bool) -> bool {
+        match self {
+            RayApi::Both => true,
+            RayApi::Packets => packets,
+            RayApi::Single => !packets,
+        }
+    }
+}
+
 /// One kind of ray.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum RayKind {
@@ -98,6 +120,7 @@ pub fn run_ray_bench(
     frames: std::ops::Range<u32>,
     clock: crate::frame::FrameClock,
     kinds: RayKinds,
+    api: RayApi,
     threads: &[usize],
     repeats: usize,
 ) -> Result<Vec<RayRate>> {
@@ -122,7 +145,8 @@ pub fn run_ray_bench(
         RayKind::ShadowSingle,
     ];
     for kind in all {
-        if !kinds.includes(kind) {
+        let packets = matches!(kind, RayKind::Primary | RayKind::Shadow);
+        if !kinds.includes(kind) || !api.includes(packets) {
             continue;
         }
         // seconds[thread config][repeat], summed over frames; hits from the first repeat
@@ -321,18 +345,19 @@ enum FileKernel {
 }
 
 /// Traces the rays of a ray file (`mipray export --rays`) on frame `frame` of the
-/// renderer's scene, class by class, for each thread count, `repeats` times; checks every
-/// answer against the recorded one.
+/// renderer's scene, class by class, on the kernels `api` names, for each thread count,
+/// `repeats` times; checks every answer against the recorded one.
 ///
 /// # Errors
-/// The file cannot be read (or held in memory), asks what mipray's kernels do not trace (a `t min` other than
-/// 0: they trace every ray from its origin), names faces the frame does not have (recorded
-/// on another scene or frame), or the frame cannot be prepared.
+/// The file cannot be read (or held in memory), asks what mipray's kernels do not trace
+/// (a `t min` other than 0: they trace every ray from its origin), names faces the frame
+/// does not have (recorded on another scene or frame), or the frame cannot be prepared.
 pub fn run_ray_file_bench(
     renderer: &mut Renderer,
     frame: u32,
     clock: crate::frame::FrameClock,
     path: &std::path::Path,
+    api: RayApi,
     threads: &[usize],
     repeats: usize,
 ) -> Result<Vec<RayFileRate>> {
@@ -365,7 +390,10 @@ pub fn run_ray_file_bench(
                 (FileKernel::ClosestSingle, "single"),
             ],
         };
-        for &(kernel, api) in kernels {
+        for &(kernel, name) in kernels {
+            if !api.includes(name == "packets") {
+                continue;
+            }
             let mut seconds = vec![vec![0.0f64; repeats]; threads.len()];
             let mut answers = Vec::new();
             for repeat in 0..repeats {
@@ -388,7 +416,7 @@ pub fn run_ray_file_bench(
             for (c, &t) in threads.iter().enumerate() {
                 rates.push(RayFileRate {
                     class,
-                    api,
+                    api: name,
                     threads: t,
                     rays: rays.len(),
                     hit_share: hits as f64 / rays.len() as f64,

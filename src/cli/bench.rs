@@ -8,8 +8,8 @@ use super::render::{BvhMode, apply_bvh};
 use super::scene::{load_scene, open_scene};
 use crate::accel::BvhPolicy;
 use crate::bench::{
-    BenchConfig, RayKinds, bench_table, ray_file_table, ray_table, run_bench, run_ray_bench,
-    run_ray_file_bench,
+    BenchConfig, RayApi, RayKinds, bench_table, ray_file_table, ray_table, run_bench,
+    run_ray_bench, run_ray_file_bench,
 };
 use crate::frame::Renderer;
 use crate::lod::LodMethod;
@@ -44,6 +44,11 @@ pub struct BenchArgs {
     /// answers.
     #[arg(long, value_parser = parse_rays_arg)]
     pub rays: Option<RaysArg>,
+    /// With `--rays`: time mipray's packets (as the film traces each class), single rays
+    /// (one at a time), or both. One alone suits a profiler or an instruction count,
+    /// which see the whole process.
+    #[arg(long, value_enum, default_value = "both", requires = "rays")]
+    pub api: RayApi,
     /// BVH layouts and policies, comma separated, as `render --bvh` (whole frames: each is a
     /// configuration; `--rays primary|shadow|all`: the first; a ray file is always traced on
     /// the flat tree, whose slots are the faces its answers name).
@@ -118,6 +123,7 @@ pub fn bench(args: &BenchArgs) -> Result<()> {
             frames.start,
             clock,
             file,
+            args.api,
             &threads,
             args.repeats,
         )?;
@@ -142,7 +148,15 @@ pub fn bench(args: &BenchArgs) -> Result<()> {
         );
         settings.lod = args.methods[0];
         let mut renderer = Renderer::new(load_scene(&path)?, settings);
-        let rates = run_ray_bench(&mut renderer, frames, clock, kinds, &threads, args.repeats)?;
+        let rates = run_ray_bench(
+            &mut renderer,
+            frames,
+            clock,
+            kinds,
+            args.api,
+            &threads,
+            args.repeats,
+        )?;
         print!("{}", ray_table(&rates));
         return Ok(());
     }

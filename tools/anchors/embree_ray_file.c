@@ -6,10 +6,13 @@
 // triangle test); and checks its answers against the file's.
 //
 // build:  cc -O3 -march=native -o embree_ray_file embree_ray_file.c -lembree3 -lm
-// usage:  embree_ray_file FRAME.obj RAYS.bin WIDTH [REPS]
+// usage:  embree_ray_file FRAME.obj RAYS.bin WIDTH [REPS [ONLY]]
 //   FRAME.obj: the frame's exported mesh (its face order is the file's triangle index).
 //   RAYS.bin:  MIPRAYS1 records (format: docs/src/reference/ray-file.md).
 //   WIDTH:     the image width, to group rays into pixel blocks for packets.
+//   ONLY:      BUILD:CLASS:API (e.g. refit:shadow:16): build that scene alone and trace that
+//              one combination, so that an instruction count of the whole process
+//              (instructions_side_by_side.sh) holds nothing else that grows with REPS.
 //
 // APIs: "1" traces the class's rays one at a time in file order. Packets of N lanes take
 // the class's rays grouped by pixel block (2x2 for 4, 4x2 for 8, 4x4 for 16) and, within a
@@ -290,6 +293,7 @@ int main(int argc, char **argv) {
     }
     W = atoi(argv[3]);
     int reps = argc > 4 ? atoi(argv[4]) : 3;
+    const char *only = argc > 5 ? argv[5] : NULL;
     if (W < 1) { fprintf(stderr, "bad WIDTH\n"); return 2; }
     if (reps < 1 || reps > 100) reps = 3;
     printf("triangles %zu\nrays %zu\n", m.nt, count);
@@ -298,15 +302,27 @@ int main(int argc, char **argv) {
     for (int k = 0; k < 4; k++) prepare(&cls[k], rays, count, (uint32_t)k);
 
     RTCDevice dev = rtcNewDevice("threads=1");
-    RTCScene scenes[3] = {make_scene(dev, &m, 0), make_scene(dev, &m, 1), make_scene(dev, &m, 2)};
     const char *BUILD[3] = {"refit", "high", "robust"};
+    // Which (build, class, API) run: all, or the one ONLY names (NULL scenes are not built).
+    int run[3][4][APIS], any = 0;
+    RTCScene scenes[3] = {NULL, NULL, NULL};
+    for (int b = 0; b < 3; b++)
+        for (int k = 0; k < 4; k++)
+            for (int api = 0; api < APIS; api++) {
+                char key[64];
+                snprintf(key, sizeof key, "%s:%s:%s", BUILD[b], CLASS[k], API_NAME[api]);
+                run[b][k][api] = cls[k].n > 0 && (!only || !strcmp(key, only));
+                any |= run[b][k][api];
+                if (run[b][k][api] && !scenes[b]) scenes[b] = make_scene(dev, &m, b);
+            }
+    if (!any) { fprintf(stderr, "nothing to trace: %s names no class of this file\n", only ? only : "the file"); return 2; }
     static double ms[3][4][APIS][100];
     long hits[3][4][APIS], agree[3][4][APIS];
     for (int rep = 0; rep < reps; rep++)
         for (int b = 0; b < 3; b++)
             for (int k = 0; k < 4; k++) {
-                if (!cls[k].n) continue;
                 for (int api = 0; api < APIS; api++) {
+                    if (!run[b][k][api]) continue;
                     double a = now_ms();
                     hits[b][k][api] = trace_api(api, scenes[b], &cls[k], k == 1, &agree[b][k][api]);
                     ms[b][k][api][rep] = now_ms() - a;
@@ -314,15 +330,15 @@ int main(int argc, char **argv) {
             }
     for (int b = 0; b < 3; b++)
         for (int k = 0; k < 4; k++) {
-            if (!cls[k].n) continue;
             for (int api = 0; api < APIS; api++) {
+                if (!run[b][k][api]) continue;
                 double *v = ms[b][k][api];
                 qsort(v, reps, sizeof(double), cmp_d);
                 printf("ray %s %s %s %zu %ld %.3f %.3f %ld\n", BUILD[b], CLASS[k], API_NAME[api], cls[k].n,
                        hits[b][k][api], cls[k].n / v[0] / 1e3, cls[k].n / v[reps / 2] / 1e3, agree[b][k][api]);
             }
         }
-    for (int b = 0; b < 3; b++) rtcReleaseScene(scenes[b]);
+    for (int b = 0; b < 3; b++) if (scenes[b]) rtcReleaseScene(scenes[b]);
     rtcReleaseDevice(dev);
     return 0;
 }
