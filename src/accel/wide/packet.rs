@@ -30,6 +30,7 @@ use std::mem::MaybeUninit;
 
 use glam::{Vec3A, Vec4};
 
+use super::node::Plane;
 use super::walk::{INLINE_STACK, safe_inverse4};
 use super::{EMPTY, LEAF, Lanes, PACKET, ROBUST_FAR, RayBoxes, WIDTH, WideBvh, WideNode};
 use crate::simd::{self, F32x8};
@@ -69,8 +70,8 @@ struct Frustum {
     inverse_min: [Lanes; 3],
     inverse_max: [Lanes; 3],
     /// Per axis, the `bounds` rows of the planes met first and last (as in `RayBoxes`).
-    front: [usize; 3],
-    back: [usize; 3],
+    front: [Plane; 3],
+    back: [Plane; 3],
     /// Bit `axis` set when every ray runs the same way along it; the other axes bound
     /// nothing (their rays meet the planes in different orders).
     agreeing: u32,
@@ -452,7 +453,7 @@ impl Frustum {
         for axis in 0..3 {
             // Positive along the axis: the lower plane is the front one; grown, it moves
             // down by the margin, which is measuring it from `apex + margin`.
-            let up = self.front[axis] == axis;
+            let up = self.front[axis].row() == axis;
             let (front, back) = if up {
                 (apex[axis] + margin, apex[axis] - margin)
             } else {
@@ -479,8 +480,8 @@ impl Frustum {
             limit_shift: 0.0,
             inverse_min: [Lanes::splat(0.0); 3],
             inverse_max: [Lanes::splat(0.0); 3],
-            front: [0; 3],
-            back: [0; 3],
+            front: [Plane::LowX; 3],
+            back: [Plane::LowX; 3],
             agreeing: 0,
             reaching: 0,
             reach_low: [f32::NEG_INFINITY; 3],
@@ -518,9 +519,8 @@ impl Frustum {
             frustum.inverse_max[axis] = Lanes::splat(max.max_element());
             // As `RayBoxes`: a negative inverse meets the upper plane first.
             let all_negative = every_negative & 0b1111 == 0b1111;
-            let down = all_negative as usize;
-            frustum.front[axis] = axis + 3 * down;
-            frustum.back[axis] = axis + 3 * (1 - down);
+            frustum.front[axis] = Plane::of(axis, all_negative);
+            frustum.back[axis] = Plane::of(axis, !all_negative);
             if some_negative == 0 || all_negative {
                 frustum.agreeing |= 1 << axis;
             }
@@ -538,8 +538,8 @@ impl Frustum {
             if self.agreeing & (1 << axis) == 0 {
                 continue;
             }
-            let front = Lanes(node.bounds[self.front[axis]]).sub::<AVX>(self.front_origin[axis]);
-            let back = Lanes(node.bounds[self.back[axis]]).sub::<AVX>(self.back_origin[axis]);
+            let front = Lanes(*node.plane(self.front[axis])).sub::<AVX>(self.front_origin[axis]);
+            let back = Lanes(*node.plane(self.back[axis])).sub::<AVX>(self.back_origin[axis]);
             let (low, high) = (self.inverse_min[axis], self.inverse_max[axis]);
             near = near.max::<AVX>(front.mul::<AVX>(low).min::<AVX>(front.mul::<AVX>(high)));
             far = far.min::<AVX>(back.mul::<AVX>(low).max::<AVX>(back.mul::<AVX>(high)));
@@ -1584,8 +1584,8 @@ mod tests {
                     assert_eq!(frustum.inverse_min[axis].0[0], min, "{case}");
                     assert_eq!(frustum.inverse_max[axis].0[0], max, "{case}");
                     let down = usize::from(negative == len);
-                    assert_eq!(frustum.front[axis], axis + 3 * down, "{case}");
-                    assert_eq!(frustum.back[axis], axis + 3 * (1 - down), "{case}");
+                    assert_eq!(frustum.front[axis].row(), axis + 3 * down, "{case}");
+                    assert_eq!(frustum.back[axis].row(), axis + 3 * (1 - down), "{case}");
                     let agreeing = negative == 0 || negative == len;
                     assert_eq!(frustum.agreeing & (1 << axis) != 0, agreeing, "{case}");
                 }

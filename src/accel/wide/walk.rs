@@ -20,7 +20,7 @@ use glam::{Vec3A, Vec4};
 use obvhs::aabb::Aabb;
 
 use super::Lanes;
-use super::node::{ChildRef, WideNode};
+use super::node::{ChildRef, Plane, WideNode};
 use super::{ROBUST_FAR, WIDTH, WideBvh};
 use crate::simd;
 
@@ -59,8 +59,8 @@ pub struct RayBoxes {
     inverse: [f32; 3],
     /// Per axis, the plane the ray meets first and last (`bounds` rows): lower then upper
     /// when it runs toward higher coordinates. Indices, not branches, in the node test.
-    front: [u8; 3],
-    back: [u8; 3],
+    front: [Plane; 3],
+    back: [Plane; 3],
 }
 
 const _: () = assert!(std::mem::size_of::<RayBoxes>() == 32);
@@ -74,12 +74,12 @@ impl RayBoxes {
     /// The constants from the origin and the (safe) inverse direction.
     #[inline(always)]
     pub(super) fn from_inverse(origin: [f32; 3], inverse: [f32; 3]) -> RayBoxes {
-        let negative = inverse.map(|v| (v < 0.0) as usize);
+        let negative = inverse.map(|v| v < 0.0);
         RayBoxes {
             origin,
             inverse,
-            front: [0, 1, 2].map(|axis| (axis + 3 * negative[axis]) as u8),
-            back: [0, 1, 2].map(|axis| (axis + 3 * (1 - negative[axis])) as u8),
+            front: [0, 1, 2].map(|axis| Plane::of(axis, negative[axis])),
+            back: [0, 1, 2].map(|axis| Plane::of(axis, !negative[axis])),
         }
     }
 
@@ -116,8 +116,8 @@ impl RayBoxes {
         let mut near = Lanes::splat(0.0);
         let mut far = Lanes::splat(f32::INFINITY);
         for axis in 0..3 {
-            let front = Lanes(node.bounds[usize::from(self.front[axis])]);
-            let back = Lanes(node.bounds[usize::from(self.back[axis])]);
+            let front = Lanes(*node.plane(self.front[axis]));
+            let back = Lanes(*node.plane(self.back[axis]));
             let origin = Lanes::splat(self.origin[axis]);
             let inverse = Lanes::splat(self.inverse[axis]);
             let t_front = front.sub::<AVX>(origin).mul::<AVX>(inverse);
@@ -142,8 +142,8 @@ impl RayBoxes {
         let bounds = [aabb.min, aabb.max];
         for axis in 0..3 {
             let (origin, inverse) = (self.origin[axis], self.inverse[axis]);
-            let front = bounds[usize::from(self.front[axis] / 3)][axis];
-            let back = bounds[usize::from(self.back[axis] / 3)][axis];
+            let front = bounds[self.front[axis].row() / 3][axis];
+            let back = bounds[self.back[axis].row() / 3][axis];
             near = near.max((front - origin) * inverse);
             far = far.min((back - origin) * inverse);
         }
