@@ -275,7 +275,7 @@ static long trace_api(int api, RTCScene s, const Class *c, int shadow, long *agr
 static int cmp_d(const void *a, const void *b) { double x = *(const double *)a, y = *(const double *)b; return (x > y) - (x < y); }
 
 int main(int argc, char **argv) {
-    if (argc < 4) { fprintf(stderr, "usage: %s FRAME.obj RAYS.bin WIDTH [REPS]\n", argv[0]); return 2; }
+    if (argc < 4) { fprintf(stderr, "usage: %s FRAME.obj RAYS.bin WIDTH [REPS [ONLY]]\n", argv[0]); return 2; }
     Mesh m;
     if (load_obj(argv[1], &m)) return 2;
     size_t count;
@@ -315,7 +315,11 @@ int main(int argc, char **argv) {
                 any |= run[b][k][api];
                 if (run[b][k][api] && !scenes[b]) scenes[b] = make_scene(dev, &m, b);
             }
-    if (!any) { fprintf(stderr, "nothing to trace: %s names no class of this file\n", only ? only : "the file"); return 2; }
+    if (!any) {
+        if (only) fprintf(stderr, "nothing to trace: %s is no BUILD:CLASS:API with rays in this file\n", only);
+        else fprintf(stderr, "nothing to trace: the file holds no rays\n");
+        return 2;
+    }
     static double ms[3][4][APIS][100];
     long hits[3][4][APIS], agree[3][4][APIS];
     for (int rep = 0; rep < reps; rep++)

@@ -20,8 +20,9 @@
 # Both binaries are counted in their AVX2 copies: valgrind does not run AVX-512, and both
 # choose their SIMD copy from what the CPU reports (Embree's verbose mode prints AVX2 under
 # valgrind). Each count includes its harness (copying the rays into packets, checking the
-# answers): Embree's, the anchor's `main`, is printed apart; mipray's loop is inlined into
-# functions shared with other code, about 40 instructions a ray in a first count by function.
+# answers): Embree's, the anchor's own functions (`main` and its tracing loops), is printed
+# apart; mipray's loop is inlined into functions shared with other code (23-41 instructions
+# a ray in a first count by function on BART Kitchen).
 # Takes 10-20 minutes on a BART frame at 800x600 (valgrind runs 30-60x slower).
 set -euo pipefail
 [ $# -ge 3 ] || { sed -n '4,6p' "$0" >&2; exit 2; }
@@ -38,7 +39,8 @@ if [ ! -x "$anchor" ] || [ "$here/embree_ray_file.c" -nt "$anchor" ]; then
     || { echo "cannot build the Embree anchor: apt-get install -y libembree-dev" >&2; exit 2; }
 fi
 ex="$work/rays-$$"; rm -rf "$ex"; trap 'rm -rf "$ex"' EXIT
-"$bin" export "$scene" --frames "$frame" --size "$size" --lights "$lights" --rays --out "$ex" >/dev/null 2>&1
+"$bin" export "$scene" --frames "$frame" --size "$size" --lights "$lights" --rays --out "$ex" >/dev/null \
+  || { echo "mipray export failed (its message is above)" >&2; exit 1; }
 obj=$(ls "$ex"/frame_*.obj | head -1); rays=$(ls "$ex"/rays_*.bin | head -1)
 width=${size%x*}
 # One file per class (same header, the class's records in file order).
@@ -59,7 +61,7 @@ count_instructions() {  # NAME REPS COMMAND...
   local name=$1 reps=$2; shift 2
   valgrind --tool=cachegrind --cache-sim=no --cachegrind-out-file="$ex/$name.$reps.out" \
     "$@" > "$ex/$name.$reps.txt" 2> "$ex/$name.$reps.log" \
-    || { echo "failed under valgrind: $* (log: $ex/$name.$reps.log)" >&2; cat "$ex/$name.$reps.log" >&2; exit 1; }
+    || { echo "failed under valgrind: $*" >&2; cat "$ex/$name.$reps.log" >&2; exit 1; }
 }
 for file in "$ex"/class_*.bin; do
   class=$(basename "$file" .bin); class=${class#class_}
@@ -108,7 +110,8 @@ for cls in ["primary", "shadow", "reflection", "refraction"]:
         continue
     rays = rays_of(path)
     mipray, _ = per_ray(f"mipray_{cls}", rays, lambda f: False)
-    embree, loop = per_ray(f"embree_{cls}", rays, lambda f: f == "main")
+    anchor = {"main", "trace_api", "trace1", "trace4", "trace8", "trace16"}
+    embree, loop = per_ray(f"embree_{cls}", rays, lambda f: f in anchor)
     best = open(f"{ex}/embree_{cls}.best").read().strip()
     build, _, api = best.split(":")
     print(f"| {cls} | {rays} | {mipray:.0f} | {build}:{api} | {embree:.0f} | {loop:.0f} | "
