@@ -78,6 +78,16 @@ pub enum RayKind {
     ShadowSingle,
 }
 
+impl RayKind {
+    /// Whether its rays are traced in packets (else one at a time).
+    fn in_packets(self) -> bool {
+        match self {
+            RayKind::Primary | RayKind::Shadow => true,
+            RayKind::PrimarySingle | RayKind::ShadowSingle => false,
+        }
+    }
+}
+
 impl std::fmt::Display for RayKind {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         f.write_str(match self {
@@ -145,8 +155,7 @@ pub fn run_ray_bench(
         RayKind::ShadowSingle,
     ];
     for kind in all {
-        let packets = matches!(kind, RayKind::Primary | RayKind::Shadow);
-        if !kinds.includes(kind) || !api.includes(packets) {
+        if !kinds.includes(kind) || !api.includes(kind.in_packets()) {
             continue;
         }
         // seconds[thread config][repeat], summed over frames; hits from the first repeat
@@ -344,6 +353,18 @@ enum FileKernel {
     OcclusionPackets,
 }
 
+impl FileKernel {
+    /// Whether it traces rays in packets (else one at a time).
+    fn in_packets(self) -> bool {
+        match self {
+            FileKernel::ClosestPackets
+            | FileKernel::ClosestScattered
+            | FileKernel::OcclusionPackets => true,
+            FileKernel::ClosestSingle | FileKernel::Occlusion => false,
+        }
+    }
+}
+
 /// Traces the rays of a ray file (`mipray export --rays`) on frame `frame` of the
 /// renderer's scene, class by class, on the kernels `api` names, for each thread count,
 /// `repeats` times; checks every answer against the recorded one.
@@ -376,22 +397,15 @@ pub fn run_ray_file_bench(
         if rays.is_empty() {
             continue;
         }
-        let kernels: &[(FileKernel, &str)] = match class {
-            RayClass::Primary => &[
-                (FileKernel::ClosestPackets, "packets"),
-                (FileKernel::ClosestSingle, "single"),
-            ],
-            RayClass::Shadow => &[
-                (FileKernel::OcclusionPackets, "packets"),
-                (FileKernel::Occlusion, "single"),
-            ],
-            RayClass::Reflection | RayClass::Refraction => &[
-                (FileKernel::ClosestScattered, "packets"),
-                (FileKernel::ClosestSingle, "single"),
-            ],
+        let kernels: &[FileKernel] = match class {
+            RayClass::Primary => &[FileKernel::ClosestPackets, FileKernel::ClosestSingle],
+            RayClass::Shadow => &[FileKernel::OcclusionPackets, FileKernel::Occlusion],
+            RayClass::Reflection | RayClass::Refraction => {
+                &[FileKernel::ClosestScattered, FileKernel::ClosestSingle]
+            }
         };
-        for &(kernel, name) in kernels {
-            if !api.includes(name == "packets") {
+        for &kernel in kernels {
+            if !api.includes(kernel.in_packets()) {
                 continue;
             }
             let mut seconds = vec![vec![0.0f64; repeats]; threads.len()];
@@ -416,7 +430,11 @@ pub fn run_ray_file_bench(
             for (c, &t) in threads.iter().enumerate() {
                 rates.push(RayFileRate {
                     class,
-                    api: name,
+                    api: if kernel.in_packets() {
+                        "packets"
+                    } else {
+                        "single"
+                    },
                     threads: t,
                     rays: rays.len(),
                     hit_share: hits as f64 / rays.len() as f64,
