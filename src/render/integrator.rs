@@ -581,7 +581,7 @@ impl FrameScene<'_> {
         let pyramid = &texture.pyramid;
         let footprint = lod.footprint(lod_hit, &self.lod_camera, pyramid.base_size());
         let (_, level) = self.biased_level(&footprint, pyramid);
-        counters.mip_histogram[(level as usize).min(MIP_LEVELS - 1)] += 1;
+        counters.mip_histogram[MipPyramid::split_level(level).0.min(MIP_LEVELS - 1)] += 1;
         let sampler = texture.sampler;
         match footprint {
             Footprint::Base => TexelLookup::Planned {

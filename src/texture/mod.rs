@@ -309,6 +309,17 @@ impl MipPyramid {
         // `f32::max` returns the non-NaN operand, so NaN becomes 0 here.
         lod.max(0.0).min((self.levels.len() - 1) as f32)
     }
+
+    /// The level below `lod` (a level in `[0, last]`, as [`Self::clamp_level`] gives it)
+    /// and the fraction towards the next one.
+    #[inline(always)]
+    pub fn split_level(lod: f32) -> (usize, f32) {
+        // In `[0, last]` truncation is the floor. Through `u32`: x86-64 converts an `f32`
+        // to a `usize` with two conversions and a select (no unsigned 64-bit conversion
+        // before AVX-512), to a `u32` with one, and both saturate (NaN gives 0).
+        let k = lod as u32 as usize;
+        (k, lod - k as f32)
+    }
 }
 
 #[cfg(test)]

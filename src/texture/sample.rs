@@ -169,10 +169,7 @@ fn plan_trilinear<const AVX2: bool>(
     lod: f32,
     sampler: Sampler,
 ) -> PlannedLookup {
-    let lod = pyramid.clamp_level(lod);
-    // `lod` is in [0, last], where truncation is the floor (without a libm call).
-    let k = lod as usize;
-    let frac = lod - k as f32;
+    let (k, frac) = MipPyramid::split_level(pyramid.clamp_level(lod));
     let levels = &pyramid.levels;
     if frac == 0.0 || k + 1 >= levels.len() {
         // Integer level (including 0, magnification, and the last level): no blend, so
