@@ -180,10 +180,7 @@ fn plan_trilinear<const AVX2: bool>(
         level: k as u32,
         blend: true,
         frac,
-        taps: [
-            BilinearTaps::new_in::<AVX2>(&levels[k], uv, sampler),
-            BilinearTaps::new_in::<AVX2>(&levels[k + 1], uv, sampler),
-        ],
+        taps: BilinearTaps::pair_in::<AVX2>([&levels[k], &levels[k + 1]], uv, sampler),
     }
 }
 
