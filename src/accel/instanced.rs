@@ -574,9 +574,9 @@ impl TwoLevelAccel {
             let (origin, direction) = rays[r as usize];
             let (o, d) = object_ray(&placed.object_from_world, origin, direction);
             object.object_rays[s] = (o, d);
-            object.sheared[s] = ShearedRay::new(o, d);
             object.limits[s] = limits[r as usize];
         }
+        ShearedRay::fill(&mut object.sheared, &object.object_rays[..inside.len()]);
         let within = Within {
             source_base: placed.source_base,
             instance: placed.index,

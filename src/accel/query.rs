@@ -134,9 +134,7 @@ impl PacketQuery {
     pub(super) fn fill(&mut self, rays: &[(Vec3A, Vec3A)], t_max: f32) {
         let n = rays.len().min(PACKET);
         self.packet.set(&rays[..n]);
-        for (sheared, &(origin, direction)) in self.sheared.iter_mut().zip(&rays[..n]) {
-            *sheared = ShearedRay::new(origin, direction);
-        }
+        ShearedRay::fill(&mut self.sheared[..n], &rays[..n]);
         self.best[..n].fill(Closest::default());
         self.limits.fill(t_max);
     }
@@ -169,10 +167,10 @@ impl PacketQuery {
 
     /// Each ray's hit-test constants, and its own slab constants when it walks `masked`.
     fn fill_ray_constants(&mut self, rays: &[(Vec3A, Vec3A)], masked: bool) {
-        for (k, &(origin, direction)) in rays.iter().enumerate() {
-            self.sheared[k] = ShearedRay::new(origin, direction);
-            if masked {
-                self.boxes[k] = RayBoxes::new(origin, direction);
+        ShearedRay::fill(&mut self.sheared, rays);
+        if masked {
+            for (boxes, &(origin, direction)) in self.boxes.iter_mut().zip(rays) {
+                *boxes = RayBoxes::new(origin, direction);
             }
         }
     }
