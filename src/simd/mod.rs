@@ -22,6 +22,26 @@ mod prefetch;
 pub use f32x8::F32x8;
 pub use prefetch::{prefetch, prefetch_ptr};
 
+/// Four rays' `Vec3A`s (one a row, as glam keeps them) as rows of their x, y, z and w
+/// components (one a row, a ray a lane): how a packet's rays, kept ray by ray, become
+/// structure of arrays four at a time. Moves bits only.
+#[cfg(target_arch = "x86_64")]
+#[inline(always)]
+pub fn transpose4([a, b, c, d]: [std::arch::x86_64::__m128; 4]) -> [std::arch::x86_64::__m128; 4] {
+    use std::arch::x86_64::*;
+    // SAFETY: SSE2 is part of x86_64; these shuffles only read and write registers.
+    unsafe {
+        let (ab_low, cd_low) = (_mm_unpacklo_ps(a, b), _mm_unpacklo_ps(c, d));
+        let (ab_high, cd_high) = (_mm_unpackhi_ps(a, b), _mm_unpackhi_ps(c, d));
+        [
+            _mm_movelh_ps(ab_low, cd_low),
+            _mm_movehl_ps(cd_low, ab_low),
+            _mm_movelh_ps(ab_high, cd_high),
+            _mm_movehl_ps(cd_high, ab_high),
+        ]
+    }
+}
+
 /// What the `MIPRAY_SIMD` environment variable asks for.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum SimdOverride {

@@ -354,7 +354,7 @@ mod tests {
     }
 
     /// The taps of a pair of levels, four axes at a time where they can be, are each
-    /// level's own taps bit for bit, in both copies: on pairs of float levels of any sizes
+    /// level's own taps bit for bit, with both copies' formulas: on pairs of float levels of any sizes
     /// (powers of two or not, sides of 1), on consecutive 8-bit levels (blocked storage),
     /// at the edge and random coordinates above, under every pair of wrap modes.
     #[test]

@@ -608,16 +608,7 @@ fn sheared_four(rays: &[(Vec3A, Vec3A); 4], out: &mut [ShearedRay; 4]) {
     // (`repr(C)`, align 32, no padding: origin, shear, tie offset, then the three axis
     // bytes and the zero filler as one little-endian word), and any bits are valid there.
     unsafe {
-        let transpose = |[a, b, c, d]: [__m128; 4]| {
-            let (ab_low, cd_low) = (_mm_unpacklo_ps(a, b), _mm_unpacklo_ps(c, d));
-            let (ab_high, cd_high) = (_mm_unpackhi_ps(a, b), _mm_unpackhi_ps(c, d));
-            [
-                _mm_movelh_ps(ab_low, cd_low),
-                _mm_movehl_ps(cd_low, ab_low),
-                _mm_movelh_ps(ab_high, cd_high),
-                _mm_movehl_ps(cd_high, ab_high),
-            ]
-        };
+        let transpose = crate::simd::transpose4;
         let [ox, oy, oz, _] = transpose(rays.map(|(o, _)| __m128::from(o)));
         let [dx, dy, dz, _] = transpose(rays.map(|(_, d)| __m128::from(d)));
         let magnitude = |v: __m128| _mm_and_ps(v, _mm_castsi128_ps(_mm_set1_epi32(i32::MAX)));
@@ -707,8 +698,8 @@ impl ShearedRay {
     /// four rays at a time on x86-64 ([`sheared_four`]: the same bits).
     ///
     /// Why: a packet makes the frames of its 64 rays before its walk, and one at a time
-    /// (a division, and the axes picked lane by lane) that was about 45 of the 615
-    /// instructions of a primary ray and 706 of a shadow ray on BART Kitchen.
+    /// (a division, and the axes picked lane by lane) that was about 63 of a primary ray's
+    /// 615 instructions on BART Kitchen (four at a time: about 29 in the AVX2 copy).
     ///
     /// In the copy [`crate::simd::dispatch`] chooses: the same operations, which the AVX2
     /// copy encodes with three operands (SSE2's copy spends a move on most of them).
@@ -1041,7 +1032,7 @@ mod tests {
                     out: &mut baseline,
                     rays: group,
                 });
-                let mut avx2 = baseline.clone();
+                let mut avx2 = vec![ShearedRay::default(); run];
                 let ran = crate::simd::run_avx2_if_available(FillFrames {
                     out: &mut avx2,
                     rays: group,

@@ -39,8 +39,8 @@ use crate::simd::{self, F32x8};
 /// leaf; one ray's splatted slab constants are made when a walk needs them), and the
 /// interval bounds when they apply.
 pub struct RayPacket {
-    /// `origin[axis][ray]`, `inverse[axis][ray]`; unused slots hold a ray that enters
-    /// nothing (never reported: the walk masks slots at or past `len`).
+    /// `origin[axis][ray]`, `inverse[axis][ray]`; slots at or past `len` hold whatever an
+    /// earlier packet left there (never reported: the walk masks them).
     origin: [[f32; PACKET]; 3],
     inverse: [[f32; PACKET]; 3],
     frustum: Option<Frustum>,
@@ -158,16 +158,34 @@ impl RayPacket {
     fn set_rays(&mut self, rays: &[(Vec3A, Vec3A)]) {
         let len = rays.len().min(PACKET);
         self.len = len;
-        // Directions into `inverse`, inverted there four at a time (the same IEEE division
-        // as one at a time), then each ray's splatted constants from those.
-        for (i, &(origin, direction)) in rays[..len].iter().enumerate() {
+        // Four rays at a time: their origins and directions transposed into rows (x86-64),
+        // the directions inverted there (the same IEEE division as one at a time).
+        #[cfg(target_arch = "x86_64")]
+        let whole = {
+            for (group, four) in rays[..len].chunks_exact(4).enumerate() {
+                let at = group * 4;
+                let origins = simd::transpose4([0, 1, 2, 3].map(|k| four[k].0.into()));
+                let directions = simd::transpose4([0, 1, 2, 3].map(|k| four[k].1.into()));
+                for axis in 0..3 {
+                    Vec4::from(origins[axis]).write_to_slice(&mut self.origin[axis][at..at + 4]);
+                    safe_inverse4(Vec4::from(directions[axis]))
+                        .write_to_slice(&mut self.inverse[axis][at..at + 4]);
+                }
+            }
+            len / 4 * 4
+        };
+        #[cfg(not(target_arch = "x86_64"))]
+        let whole = 0;
+        // The rest ray by ray into the rows, inverted four at a time (a last, partial group
+        // inverts whatever its slots past `len` hold: no ray reads them).
+        for (i, &(origin, direction)) in rays[..len].iter().enumerate().skip(whole) {
             for axis in 0..3 {
                 self.origin[axis][i] = origin[axis];
                 self.inverse[axis][i] = direction[axis];
             }
         }
         for row in &mut self.inverse {
-            for group in row[..len.next_multiple_of(4)].chunks_exact_mut(4) {
+            for group in row[whole..len.next_multiple_of(4)].chunks_exact_mut(4) {
                 safe_inverse4(Vec4::from_slice(group)).write_to_slice(group);
             }
         }
@@ -1111,6 +1129,34 @@ mod tests {
             })
             .collect();
         vec![block, straddling, zeros, scattered]
+    }
+
+    /// Each ray's slab constants in the packet's rows (made four rays at a time where they
+    /// can be) are those the ray makes alone (origin and inverse bits; its planes follow
+    /// from the inverse's signs), for packets of every length from the test's
+    /// sets (zero components of both signs included), refilled over longer packets.
+    #[test]
+    fn a_packets_rows_hold_each_rays_own_constants() {
+        let mut next = stream(0x51ab_c0de_77aa_1234);
+        let sets = packets(&mut next);
+        let mut packet = RayPacket::new(&sets[0]);
+        let mut compared = 0;
+        for rays in &sets {
+            for len in (0..=rays.len().min(PACKET)).rev() {
+                packet.set(&rays[..len]);
+                assert_eq!(packet.len, len);
+                for (r, &(origin, direction)) in rays[..len].iter().enumerate() {
+                    let (alone, mine) = (RayBoxes::new(origin, direction), packet.ray(r));
+                    let bits = |ray: &RayBoxes| {
+                        let (o, inv) = ray.constants();
+                        (o.map(f32::to_bits), inv.map(f32::to_bits))
+                    };
+                    assert_eq!(bits(&mine), bits(&alone), "ray {r} of {len}");
+                    compared += 1;
+                }
+            }
+        }
+        assert!(compared > 5_000, "{compared}");
     }
 
     /// A box of no thickness (an axis-aligned quad's) met head-on at exactly a ray's limit:
