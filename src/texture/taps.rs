@@ -54,8 +54,16 @@ impl BilinearTaps {
     /// same bits in each, see [`axis_taps_in`]).
     #[inline(always)]
     pub fn new_in<const AVX2: bool>(level: &MipLevel, uv: Vec2, sampler: Sampler) -> BilinearTaps {
-        let (x0, x1, fx) = axis_taps_in::<AVX2>(uv.x, level.width, sampler.wrap_s);
-        let (y0, y1, fy) = axis_taps_in::<AVX2>(uv.y, level.height, sampler.wrap_t);
+        Self::of_axes(
+            level,
+            axis_taps_in::<AVX2>(uv.x, level.width, sampler.wrap_s),
+            axis_taps_in::<AVX2>(uv.y, level.height, sampler.wrap_t),
+        )
+    }
+
+    /// The taps of `level` from its two axes' texel indices and weights.
+    #[inline(always)]
+    fn of_axes(level: &MipLevel, (x0, x1, fx): AxisTaps, (y0, y1, fy): AxisTaps) -> BilinearTaps {
         let (row0, row1) = (level.row_start(y0), level.row_start(y1));
         let (col0, col1) = (level.column_offset(x0), level.column_offset(x1));
         BilinearTaps {
@@ -64,9 +72,7 @@ impl BilinearTaps {
             fy,
         }
     }
-}
 
-impl BilinearTaps {
     /// [`BilinearTaps::new_in`] in two levels at once (a trilinear lookup's), the same bits
     /// as one level at a time: where the shortcut applies to all four axes (both levels'
     /// sides powers of two, see the module note), their floors, fractions and wraps are
@@ -90,21 +96,12 @@ impl BilinearTaps {
             if let Some((i0, i1, frac)) =
                 four_axes(scaled, lasts, [repeat[0], repeat[1], repeat[0], repeat[1]])
             {
-                let at = |level: &MipLevel, axis: usize| {
-                    let (x0, x1, y0, y1) = (i0[axis], i1[axis], i0[axis + 1], i1[axis + 1]);
-                    let (row0, row1) = (level.row_start(y0 as usize), level.row_start(y1 as usize));
-                    let (col0, col1) = (
-                        level.column_offset(x0 as usize),
-                        level.column_offset(x1 as usize),
-                    );
-                    BilinearTaps {
-                        texels: [row0 + col0, row0 + col1, row1 + col0, row1 + col1]
-                            .map(|i| i as u32),
-                        fx: frac[axis],
-                        fy: frac[axis + 1],
-                    }
-                };
-                return [at(a, 0), at(b, 2)];
+                // Lane `lane`'s axis; every index is in `0..n` (wrapped, or inside).
+                let axis = |lane: usize| (i0[lane] as usize, i1[lane] as usize, frac[lane]);
+                return [
+                    Self::of_axes(a, axis(0), axis(1)),
+                    Self::of_axes(b, axis(2), axis(3)),
+                ];
             }
         }
         // Written out, not `levels.map`: a closure the compiler leaves out of line loses

@@ -938,23 +938,27 @@ mod tests {
         ([kx, ky, kz].map(|a| a as u8), shear)
     }
 
+    /// Direction components for the frame tests: ties, signed zeros, tiny, huge, infinite
+    /// and NaN.
+    const HARD_COMPONENTS: [f32; 12] = [
+        0.0,
+        -0.0,
+        1.0,
+        -1.0,
+        2.0,
+        -2.0,
+        0.5,
+        1e-30,
+        -3e38,
+        f32::INFINITY,
+        f32::NEG_INFINITY,
+        f32::NAN,
+    ];
+
     #[test]
     fn the_ray_frame_chosen_without_branches_is_the_branching_one() {
-        // Ties, signed zeros, tiny, huge, infinite and NaN components, in every position.
-        let values = [
-            0.0,
-            -0.0,
-            1.0,
-            -1.0,
-            2.0,
-            -2.0,
-            0.5,
-            1e-30,
-            -3e38,
-            f32::INFINITY,
-            f32::NEG_INFINITY,
-            f32::NAN,
-        ];
+        // The hard components in every position.
+        let values = HARD_COMPONENTS;
         let mut checked = 0;
         for &x in &values {
             for &y in &values {
@@ -992,20 +996,7 @@ mod tests {
     /// up to nine (the last rays of a run made one at a time).
     #[test]
     fn frames_made_four_at_a_time_are_each_rays_own() {
-        let values = [
-            0.0,
-            -0.0,
-            1.0,
-            -1.0,
-            2.0,
-            -2.0,
-            0.5,
-            1e-30,
-            -3e38,
-            f32::INFINITY,
-            f32::NEG_INFINITY,
-            f32::NAN,
-        ];
+        let values = HARD_COMPONENTS;
         let origins = [
             Vec3A::new(1.0, -2.0, 3.0),
             Vec3A::new(-0.0, 0.0, -0.0),
