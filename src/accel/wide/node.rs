@@ -12,16 +12,21 @@ use super::{EMPTY, LEAF, WIDTH};
 /// Why an enum and not a `u8`: a node test picks its rows by the ray's direction, and the
 /// compiler can prove an enum's rows in range where it checked a byte's (a compare and a
 /// branch for each of the test's six rows, about a fifth of its instructions).
+///
+/// Each value is where its row starts among the node's bounds taken as one array of floats
+/// (`row * WIDTH`): a load addresses it as base + value x 4, which x86-64 does within the
+/// load itself. Numbered by row, every one of a node test's six loads took a shift first
+/// (a row is 32 bytes, beyond the addressing modes' largest scale of 8).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 #[repr(u8)]
 pub enum Plane {
     #[default]
-    LowX,
-    LowY,
-    LowZ,
-    HighX,
-    HighY,
-    HighZ,
+    LowX = 0,
+    LowY = WIDTH as u8,
+    LowZ = 2 * WIDTH as u8,
+    HighX = 3 * WIDTH as u8,
+    HighY = 4 * WIDTH as u8,
+    HighZ = 5 * WIDTH as u8,
 }
 
 impl Plane {
@@ -53,6 +58,12 @@ impl Plane {
     /// The row of [`WideNode::bounds`] (0 to 5).
     #[inline(always)]
     pub const fn row(self) -> usize {
+        self.first_float() / WIDTH
+    }
+
+    /// Where the row starts among a node's bounds as one array of floats.
+    #[inline(always)]
+    const fn first_float(self) -> usize {
         self as usize
     }
 }
@@ -101,10 +112,12 @@ impl WideNode {
         count: [0; WIDTH],
     };
 
-    /// The bounds of every lane on `plane`, without a range check (a [`Plane`] is a row).
+    /// The bounds of every lane on `plane`, without a range check (a [`Plane`] starts a
+    /// row, and the compiler knows the largest one leaves a whole row).
     #[inline(always)]
     pub(super) fn plane(&self, plane: Plane) -> &[f32; WIDTH] {
-        &self.bounds[plane.row()]
+        let row = &self.bounds.as_flattened()[plane.first_float()..][..WIDTH];
+        row.try_into().expect("a row is WIDTH floats")
     }
 
     pub(super) fn lane_box(&self, lane: usize) -> Aabb {
