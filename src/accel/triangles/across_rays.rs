@@ -248,8 +248,13 @@ pub fn runs_by_permutation<'a>(
     let Some(&r0) = rays.first() else {
         return (rays, sizes);
     };
-    let k = sheared[r0 as usize].k;
-    if rays.iter().all(|&r| sheared[r as usize].k == k) {
+    // Compared as words (the axes and the zero filler; ray numbers are below PACKET): a
+    // primary packet's leaves ask this of every ray they are handed.
+    let axes = sheared[usize::from(r0) % PACKET].axes_word();
+    if rays
+        .iter()
+        .all(|&r| sheared[usize::from(r) % PACKET].axes_word() == axes)
+    {
         sizes[0] = rays.len();
         return (rays, sizes);
     }

@@ -755,6 +755,13 @@ impl ShearedRay {
         t * (1.0 + TIE_MARGIN) + self.tie_offset
     }
 
+    /// The axes and the filler as one word: equal for two rays exactly when their axes are
+    /// (the filler is always zero).
+    #[inline(always)]
+    pub fn axes_word(&self) -> u32 {
+        u32::from_le_bytes([self.k[0], self.k[1], self.k[2], self.filler])
+    }
+
     /// Which of the six axis permutations the ray's frame uses (rays that share it can be
     /// tested together, [`ShearedLanes`]).
     #[inline(always)]
