@@ -26,8 +26,9 @@
 //! that can no longer reach it are not handed to it.
 //!
 //! Where the CPU has AVX-512, a node in the mask of at least 16 rays is tested the other way
-//! round: per child, sixteen rays per instruction (`across_rays`), with each ray's own
-//! arithmetic, so the masks are the same bits. On BART Kitchen's recorded rays that made
+//! round: per child, sixteen rays per instruction (`across_rays`), each ray's slab test in
+//! the textbook form `(plane - origin) * inverse`, whose masks are those of the ray's own
+//! test (see `RayBoxes::slabs`). On BART Kitchen's recorded rays that made
 //! shadow packets about 2.5% faster and mirror packets about 4.5%: the walk waits on node
 //! fetches more than on the test.
 
@@ -348,8 +349,11 @@ mod across_rays {
     use crate::accel::wide::{EMPTY, Lanes, ROBUST_FAR, WideNode};
 
     /// Per lane of `node`, the mask of the rays of `rays` that enter it: what
-    /// [`super::rays_by_lane`] makes from each ray's `RayBoxes::enter`, bit for bit (the same
-    /// operations in the same order on the same operands, sixteen rays per instruction).
+    /// [`super::rays_by_lane`] makes from each ray's `RayBoxes::enter`, bit for bit. Per ray
+    /// the textbook slab test `(plane - origin) * inverse`, sixteen rays per instruction;
+    /// `RayBoxes::slabs` computes `(origin - plane) * -inverse`, the same numbers (its
+    /// entry distances can differ only in the sign of a zero, which the masks and the
+    /// nearest distance's uses do not see).
     /// Lanes without a child get no rays (the walk skips them either way). With `NEAREST`,
     /// also per lane the least entry distance of those rays (+infinity where none enters),
     /// else +infinity.

@@ -112,8 +112,9 @@ impl WideNode {
         count: [0; WIDTH],
     };
 
-    /// The bounds of every lane on `plane`, without a range check (a [`Plane`] starts a
-    /// row, and the compiler knows the largest one leaves a whole row).
+    /// The bounds of every lane on `plane`. The slice's range checks compile away in
+    /// release builds: a [`Plane`] starts a row, and the compiler knows the largest one
+    /// leaves a whole row.
     #[inline(always)]
     pub(super) fn plane(&self, plane: Plane) -> &[f32; WIDTH] {
         let row = &self.bounds.as_flattened()[plane.first_float()..][..WIDTH];
