@@ -897,7 +897,7 @@ mod tests {
                 expected_near[lane] = near;
                 expected_mask |= u32::from(near <= (far * ROBUST_FAR).min(limit)) << lane;
             }
-            let mut check = |(near, mask): (Lanes, u32), copy: &str| {
+            let check = |(near, mask): (Lanes, u32), copy: &str| {
                 assert_eq!(mask, expected_mask, "{copy}: {origin} {direction} {limit}");
                 for lane in 0..WIDTH {
                     let (got, want) = (near.0[lane], expected_near[lane]);
