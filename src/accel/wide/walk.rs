@@ -133,8 +133,9 @@ impl RayBoxes {
     /// A plane's distance is `(origin - plane) * -inverse`: the bits of `(plane - origin) *
     /// inverse` (negating is exact, and rounding to nearest is symmetric in sign), but for
     /// the sign of a zero where the origin and the plane are the same number, and the sign
-    /// of a NaN; no comparison sees either, and the near-to-far order ignores the sign. Written so, the plane is the subtrahend and its load
-    /// folds into the subtraction: six instructions fewer in a test of about forty.
+    /// of a NaN; no comparison sees either, and the near-to-far order ignores the sign.
+    /// Written so, the plane is the subtrahend and its load folds into the subtraction: six
+    /// instructions fewer in a test of about forty.
     ///
     /// The exit starts as x's back plane, not as the minimum of it and +infinity: that
     /// minimum is its second operand whatever it holds (NaN included), in both copies.
