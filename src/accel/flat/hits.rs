@@ -9,7 +9,8 @@ use crate::accel::query::{Closest, Hit, PacketQuery, Within};
 #[cfg(target_arch = "x86_64")]
 use crate::accel::triangles::sixteen;
 use crate::accel::triangles::{RAYS, ShearedLanes, ShearedRay, lanes_of, runs_by_permutation};
-use crate::accel::wide::{GatheredLeaf, LeafVisit, PACKET, RayBoxes};
+use crate::accel::wide::{GatheredLeaf, LeafVisit, PACKET, RayBoxes, listed, rays_below};
+use crate::simd::F32x8;
 
 impl Accel {
     /// The closest hit with `t` in `[0, t_max)`. Among hits at exactly the same distance
@@ -113,6 +114,8 @@ impl Accel {
             accel: self,
             within,
             sheared: &query.sheared,
+            one_permutation: groups_of_one_permutation(&query.sheared, n),
+            len: n,
             best: &mut query.best,
         };
         if packet {
@@ -157,6 +160,7 @@ impl Accel {
                             &self.triangles,
                             sheared,
                             chunk,
+                            u16::MAX,
                             limits,
                             first,
                             count,
@@ -175,6 +179,7 @@ impl Accel {
                 let mut improved = 0u32;
                 self.triangles.hits_in_leaf_across::<AVX>(
                     lanes,
+                    u32::MAX,
                     first,
                     count,
                     &cut,
@@ -240,6 +245,8 @@ impl Accel {
                 let mut leaf = AnyHitPacketLeaf {
                     accel: self,
                     sheared: &q.sheared,
+                    one_permutation: groups_of_one_permutation(&q.sheared, n),
+                    len: n,
                     t_max: &ceilings,
                     visit,
                     stopped: 0,
@@ -380,12 +387,159 @@ fn keep_if_closer(
 }
 
 /// The closest-hit leaf test of a packet: a few rays test the leaf one by one, more test
-/// each triangle across them.
+/// each triangle across them, in the packet's fixed groups of [`RAYS`] where a group's rays
+/// share one axis permutation (as a primary packet's mostly all do).
 struct ClosestPacketLeaf<'a> {
     accel: &'a Accel,
     within: &'a Within<'a>,
     sheared: &'a [ShearedRay; PACKET],
+    /// The rays of the groups (rays `RAYS * g..RAYS * (g + 1)`) whose rays share one axis
+    /// permutation: [`groups_of_one_permutation`].
+    one_permutation: u64,
+    /// The packet's rays (`0..len`).
+    len: usize,
     best: &'a mut [Closest; PACKET],
+}
+
+/// The rays of a packet's first `n` that lie in groups of [`RAYS`] (rays `RAYS * g..RAYS *
+/// (g + 1)`, cut at `n`) whose rays all share one axis permutation, as a mask.
+pub(super) fn groups_of_one_permutation(sheared: &[ShearedRay; PACKET], n: usize) -> u64 {
+    let mut rays = 0u64;
+    for at in (0..n.min(PACKET)).step_by(RAYS) {
+        let group = &sheared[at..(at + RAYS).min(n)];
+        let axes = group[0].axes_word();
+        if group.iter().all(|ray| ray.axes_word() == axes) {
+            rays |= rays_below(group.len()) << at;
+        }
+    }
+    rays
+}
+
+/// Rays entering a leaf from one fixed group from which the group is tested in its own
+/// lanes; fewer are gathered with other groups' (a lane group test costs the same for one
+/// ray as for eight).
+const FIXED_GROUP_MIN: u32 = 4;
+
+// A group's rays are a byte of a packet's mask.
+const _: () = assert!(RAYS == 8 && PACKET % RAYS == 0);
+
+/// The rays of `entering` that a leaf tests in their fixed groups: those of groups of one
+/// permutation (`one_permutation`) with at least [`FIXED_GROUP_MIN`] rays entering.
+#[inline(always)]
+fn in_fixed_groups(entering: u64, one_permutation: u64) -> u64 {
+    let candidates = entering & one_permutation;
+    let mut fixed = 0u64;
+    for at in (0..PACKET).step_by(RAYS) {
+        let group = candidates & (0xff << at);
+        if group.count_ones() >= FIXED_GROUP_MIN {
+            fixed |= group;
+        }
+    }
+    fixed
+}
+
+/// Ray `r` at index `r`: the ray numbers of a packet's fixed groups, as the lists the
+/// group tests take.
+const RAY_NUMBERS: [u8; PACKET] = {
+    let mut numbers = [0u8; PACKET];
+    let mut r = 0;
+    while r < PACKET {
+        numbers[r] = r as u8;
+        r += 1;
+    }
+    numbers
+};
+
+impl ClosestPacketLeaf<'_> {
+    /// Tests a leaf for the rays of `entering` that lie in groups of one permutation, group
+    /// by group, each group's rays in their fixed lanes (no list, no sort): the same tests,
+    /// ray by ray, as [`Accel::closest_in_leaf_across`] makes on the rays gathered.
+    #[inline(always)]
+    fn visit_fixed_groups<const AVX: bool>(
+        &mut self,
+        entering: u64,
+        first: u32,
+        count: u32,
+        limits: &mut [f32; PACKET],
+    ) {
+        #[cfg(target_arch = "x86_64")]
+        if AVX && crate::simd::avx512() {
+            for at in (0..self.len).step_by(sixteen::WIDE) {
+                let live = (entering >> at) as u16;
+                if live == 0 {
+                    continue;
+                }
+                let end = (at + sixteen::WIDE).min(self.len);
+                let chunk = &RAY_NUMBERS[at..end];
+                // Sixteen lanes where both halves share one permutation and more than
+                // eight rays enter; else each half in eight.
+                let one = rays_below(end - at) << at;
+                if live.count_ones() as usize > RAYS
+                    && self.one_permutation & one == one
+                    && self.sheared[at].axes_word() == self.sheared[end - 1].axes_word()
+                {
+                    let mut improved = 0u32;
+                    // SAFETY: `simd::avx512()` holds only where the CPU has AVX-512F.
+                    unsafe {
+                        sixteen::hits_in_leaf(
+                            &self.accel.triangles,
+                            self.sheared,
+                            chunk,
+                            live,
+                            limits,
+                            first,
+                            count,
+                            keeping_closer(self.within, self.best, chunk, &mut improved),
+                        )
+                    };
+                    limit_improved(chunk, improved, self.best, self.sheared, limits);
+                    continue;
+                }
+                for half in [at, at + RAYS] {
+                    let live = u32::from((entering >> half) as u8);
+                    if live != 0 {
+                        self.visit_group::<AVX>(half, live, first, count, limits);
+                    }
+                }
+            }
+            return;
+        }
+        for at in (0..self.len).step_by(RAYS) {
+            let live = u32::from((entering >> at) as u8);
+            if live != 0 {
+                self.visit_group::<AVX>(at, live, first, count, limits);
+            }
+        }
+    }
+
+    /// The leaf test of the rays `live` (bit `l` for ray `at + l`) of the fixed group from
+    /// ray `at`, whose rays share one permutation.
+    #[inline(always)]
+    fn visit_group<const AVX: bool>(
+        &mut self,
+        at: usize,
+        live: u32,
+        first: u32,
+        count: u32,
+        limits: &mut [f32; PACKET],
+    ) {
+        let chunk = &RAY_NUMBERS[at..(at + RAYS).min(self.len)];
+        // Transposed at each leaf: kept from leaf to leaf (made once a packet), the lanes
+        // were read back from memory in each triangle test, which cost more.
+        let lanes = &ShearedLanes::of_rays::<AVX>(self.sheared, chunk);
+        // Every triangle of the leaf is cut at the limit the ray entered it with.
+        let cut = F32x8(limits[at..at + RAYS].try_into().expect("a group's limits"));
+        let mut improved = 0u32;
+        self.accel.triangles.hits_in_leaf_across::<AVX>(
+            lanes,
+            live,
+            first,
+            count,
+            &cut,
+            keeping_closer(self.within, self.best, chunk, &mut improved),
+        );
+        limit_improved(chunk, improved, self.best, self.sheared, limits);
+    }
 }
 
 impl GatheredLeaf for ClosestPacketLeaf<'_> {
@@ -424,6 +578,38 @@ impl GatheredLeaf for ClosestPacketLeaf<'_> {
             self.best,
         );
     }
+
+    #[inline(always)]
+    fn visit_entering<const AVX: bool>(
+        &mut self,
+        entering: u64,
+        first: u32,
+        count: u32,
+        limits: &mut [f32; PACKET],
+    ) {
+        let fixed = in_fixed_groups(entering, self.one_permutation);
+        if (entering.count_ones() as usize) < ACROSS_RAYS_MIN || fixed == 0 {
+            let mut buffer = [0u8; PACKET];
+            let rays = listed(entering, &mut buffer);
+            return self.visit::<AVX>(rays, first, count, limits);
+        }
+        let rest = entering & !fixed;
+        if rest != 0 {
+            // Rays of groups with several permutations: gathered and sorted by permutation.
+            let mut buffer = [0u8; PACKET];
+            let rays = listed(rest, &mut buffer);
+            self.accel.closest_in_leaf_across::<AVX>(
+                self.within,
+                self.sheared,
+                rays,
+                first,
+                count,
+                limits,
+                self.best,
+            );
+        }
+        self.visit_fixed_groups::<AVX>(fixed, first, count, limits);
+    }
 }
 
 /// The limit of a ray whose any-hit query has stopped: below every entry distance, so the
@@ -435,6 +621,11 @@ const STOPPED: f32 = -1.0;
 struct AnyHitPacketLeaf<'a, F> {
     accel: &'a Accel,
     sheared: &'a [ShearedRay; PACKET],
+    /// The rays of the groups whose rays share one axis permutation
+    /// ([`groups_of_one_permutation`]).
+    one_permutation: u64,
+    /// The packet's rays (`0..len`).
+    len: usize,
     /// Each ray's own search distance (its limit drops to [`STOPPED`] when it stops).
     t_max: &'a [f32; PACKET],
     visit: F,
@@ -468,6 +659,75 @@ impl<F: FnMut(usize, u32, f32) -> bool> GatheredLeaf for &mut AnyHitPacketLeaf<'
             }
             return;
         }
+        self.visit_across::<AVX>(rays, first, count, limits);
+    }
+
+    #[inline(always)]
+    fn visit_entering<const AVX: bool>(
+        &mut self,
+        entering: u64,
+        first: u32,
+        count: u32,
+        limits: &mut [f32; PACKET],
+    ) {
+        let fixed = in_fixed_groups(entering, self.one_permutation);
+        let rest = entering & !fixed;
+        if (entering.count_ones() as usize) < ACROSS_RAYS_MIN || fixed == 0 {
+            let mut buffer = [0u8; PACKET];
+            let rays = listed(entering, &mut buffer);
+            return self.visit::<AVX>(rays, first, count, limits);
+        }
+        if rest != 0 {
+            // Rays of groups with several permutations: gathered and sorted by permutation
+            // (more than one ray enters: fewer in all would have gone the way above).
+            let mut buffer = [0u8; PACKET];
+            let rays = listed(rest, &mut buffer);
+            self.visit_across::<AVX>(rays, first, count, limits);
+        }
+        // The groups of one permutation in their fixed lanes (no list, no sort): per ray the
+        // same tests in the same order as gathered.
+        for at in (0..self.len).step_by(RAYS) {
+            let live = u32::from((fixed >> at) as u8);
+            if live == 0 {
+                continue;
+            }
+            let chunk = &RAY_NUMBERS[at..(at + RAYS).min(self.len)];
+            let lanes = &ShearedLanes::of_rays::<AVX>(self.sheared, chunk);
+            let cut = F32x8(
+                self.t_max[at..at + RAYS]
+                    .try_into()
+                    .expect("a group's limits"),
+            );
+            let visit = &mut self.visit;
+            let mut alive = live;
+            self.accel.triangles.hits_in_leaf_across::<AVX>(
+                lanes,
+                live,
+                first,
+                count,
+                &cut,
+                |l, slot, _, t, _| {
+                    if alive & (1 << l) != 0 && !visit(at + l, slot, t) {
+                        alive &= !(1 << l);
+                    }
+                },
+            );
+            stop(&mut self.stopped, chunk, live & !alive, limits);
+        }
+    }
+}
+
+impl<F: FnMut(usize, u32, f32) -> bool> AnyHitPacketLeaf<'_, F> {
+    /// Tests each triangle of a leaf across the rays `rays`, sorted into runs of one
+    /// permutation and cut into groups of [`RAYS`].
+    #[inline(always)]
+    fn visit_across<const AVX: bool>(
+        &mut self,
+        rays: &[u8],
+        first: u32,
+        count: u32,
+        limits: &mut [f32; PACKET],
+    ) {
         let mut buffer = [0u8; PACKET];
         let (order, runs) = runs_by_permutation(self.sheared, rays, &mut buffer);
         let visit = &mut self.visit;
@@ -479,6 +739,7 @@ impl<F: FnMut(usize, u32, f32) -> bool> GatheredLeaf for &mut AnyHitPacketLeaf<'
                 let mut alive = (1u32 << chunk.len()) - 1;
                 self.accel.triangles.hits_in_leaf_across::<AVX>(
                     lanes,
+                    u32::MAX,
                     first,
                     count,
                     &cut,
@@ -488,16 +749,22 @@ impl<F: FnMut(usize, u32, f32) -> bool> GatheredLeaf for &mut AnyHitPacketLeaf<'
                         }
                     },
                 );
-                let mut finished = ((1u32 << chunk.len()) - 1) & !alive;
-                while finished != 0 {
-                    let l = finished.trailing_zeros() as usize;
-                    finished &= finished - 1;
-                    let r = chunk[l] as usize;
-                    limits[r] = STOPPED;
-                    self.stopped |= 1 << r;
-                }
+                let finished = ((1u32 << chunk.len()) - 1) & !alive;
+                stop(&mut self.stopped, chunk, finished, limits);
             }
             at += run;
         }
+    }
+}
+
+/// Marks the rays `finished` (bit `l` for ray `chunk[l]`) of an any-hit packet as stopped.
+#[inline(always)]
+fn stop(stopped: &mut u64, chunk: &[u8], mut finished: u32, limits: &mut [f32; PACKET]) {
+    while finished != 0 {
+        let l = finished.trailing_zeros() as usize;
+        finished &= finished - 1;
+        let r = chunk[l] as usize;
+        limits[r] = STOPPED;
+        *stopped |= 1 << r;
     }
 }

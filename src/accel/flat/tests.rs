@@ -356,6 +356,101 @@ fn a_packet_finds_what_each_of_its_rays_finds_alone() {
     );
 }
 
+/// Packets whose fixed groups of eight rays (a packet's rows of eight) do and do not share
+/// one axis permutation: those that do are tested at a leaf in their own lanes, the others
+/// gathered and sorted by permutation, and a leaf can see both. A camera block whose upper
+/// rows are narrow (every ray's largest direction axis is z) and whose lower rows are wide
+/// (the outer rays' is x), and occlusion rays converging on a light near the diagonal of x
+/// and y (rows where x or y is the largest axis, and rows with both); full packets and
+/// packets cut short inside a group. Each ray finds, and meets, what it does alone.
+#[test]
+fn packets_whose_groups_mix_axis_permutations_answer_as_single_rays() {
+    use crate::accel::triangles::{RAYS, ShearedRay};
+    let mut rng = Rng(0x51_7cc1_b727_220a);
+    let (_, mut tris) = random_soup(&mut rng, 4000);
+    let accel = Accel::build(&mut tris).unwrap();
+    // Which of a packet's first `n` rays lie in groups of one permutation, and in how many
+    // groups of each kind (the test means little without both).
+    let groups = |rays: &[(Vec3A, Vec3A)]| {
+        let mut sheared = [ShearedRay::default(); PACKET];
+        for (s, &(o, d)) in sheared.iter_mut().zip(rays) {
+            *s = ShearedRay::new(o, d);
+        }
+        let one = super::hits::groups_of_one_permutation(&sheared, rays.len());
+        let uniform = (0..rays.len().div_ceil(RAYS))
+            .filter(|g| one & (1 << (g * RAYS)) != 0)
+            .count();
+        (uniform, rays.len().div_ceil(RAYS) - uniform)
+    };
+    let eye = Vec3A::new(0.5, -0.25, 0.0);
+    let camera: Vec<(Vec3A, Vec3A)> = (0..64)
+        .map(|i| {
+            let (x, y) = ((i % 8) as f32 - 3.5, (i / 8) as f32 - 3.5);
+            let spread = if i < 32 { 0.05 } else { 0.45 };
+            (eye, Vec3A::new(x * spread, y * 0.05, -1.0).normalize())
+        })
+        .collect();
+    let mut found = 0;
+    for rays in [&camera[..], &camera[..45], &camera[5..50]] {
+        let (uniform, mixed) = groups(rays);
+        assert!(
+            uniform > 0 && mixed > 0,
+            "{uniform} groups of one permutation, {mixed} not"
+        );
+        let mut hits = vec![None; rays.len()];
+        accel.closest_hits(rays, f32::INFINITY, &mut hits);
+        for (&(o, d), hit) in rays.iter().zip(&hits) {
+            assert_eq!(*hit, accel.closest_hit(o, d, f32::INFINITY));
+            found += hit.is_some() as usize;
+        }
+    }
+    assert!(found > 100, "too few hits ({found})");
+    // Rows 0 and 1: y is every ray's largest axis; 2 to 4: some x, some y; 5 to 7: x.
+    let light = Vec3A::new(40.0, 40.0, 1.0);
+    let converging: Vec<(Vec3A, Vec3A, f32)> = (0..64)
+        .map(|i| {
+            let (x, y) = ((i % 8) as f32, (i / 8) as f32);
+            let from = Vec3A::new(x * 0.2 - 0.7, y * 0.4 - 1.2, rng.next() - 0.5);
+            let to = light - from;
+            (from, to.normalize(), to.length() * 0.999)
+        })
+        .collect();
+    let mut met = 0;
+    for rays in [&converging[..], &converging[..30]] {
+        let pairs: Vec<(Vec3A, Vec3A)> = rays.iter().map(|&(o, d, _)| (o, d)).collect();
+        let limits: Vec<f32> = rays.iter().map(|r| r.2).collect();
+        assert!(crate::accel::wide::RayPacket::new(&[]).set_converging(&pairs, &limits));
+        let (uniform, mixed) = groups(&pairs);
+        assert!(
+            uniform > 0 && mixed > 0,
+            "{uniform} groups of one permutation, {mixed} not"
+        );
+        let mut seen = vec![Vec::new(); rays.len()];
+        accel.visit_hits_packet(&pairs, &limits, |r, slot, t| {
+            seen[r].push((slot, t.to_bits()));
+            true
+        });
+        for (r, &(o, d, t_max)) in rays.iter().enumerate() {
+            let mut alone = Vec::new();
+            accel.visit_hits(o, d, t_max, |slot, t| {
+                alone.push((slot, t.to_bits()));
+                true
+            });
+            seen[r].sort_unstable();
+            alone.sort_unstable();
+            assert_eq!(seen[r], alone, "ray {r}");
+            met += alone.len();
+        }
+        // Stopped at the first hit on an even slot, as alone.
+        let stopped = accel.visit_hits_packet(&pairs, &limits, |_, slot, _| slot % 2 == 1);
+        for (r, &(o, d, t_max)) in rays.iter().enumerate() {
+            let blocked_alone = !accel.visit_hits(o, d, t_max, |slot, _| slot % 2 == 1);
+            assert_eq!(stopped & (1 << r) != 0, blocked_alone, "ray {r}");
+        }
+    }
+    assert!(met > 100, "too few hits met ({met})");
+}
+
 /// A bundle of nearly parallel rays from different origins (no common apex, so the masked
 /// walk) through a dense soup: the rays find hits early, so leaves pushed before those hits
 /// are tested again with the shrunk limits when popped, sixteen rays at a time where the

@@ -145,15 +145,18 @@ impl ShearedLanes {
         (x, y, z)
     }
 
-    /// Tests triangle `lane` of `pack` against every ray of the group; a ray's hit counts
-    /// when `t` lies in `[0, t_max)` of that ray's lane.
+    /// Tests triangle `lane` of `pack` against the rays of the group in the lanes `live`
+    /// (`u32::MAX`: every ray of the group); a ray's hit counts when `t` lies in `[0,
+    /// t_max)` of that ray's lane.
     #[inline(always)]
     pub fn intersect<const AVX: bool>(
         &self,
         pack: &TrianglePack,
         lane: usize,
         t_max: &F32x8,
+        live: u32,
     ) -> LaneHits {
+        let live = live & self.live;
         // Plain functions, not closures: a closure is compiled on its own, without the AVX2
         // copy's target features, and then cannot inline the AVX operations.
         let (ax, ay, az) = self.sheared_vertex::<AVX>(pack, 0, lane);
@@ -165,7 +168,7 @@ impl ShearedLanes {
         let sz = self.shear[2];
         let zero = F32x8::splat(0.0);
         let on_edge =
-            (u.eq_mask::<AVX>(zero) | v.eq_mask::<AVX>(zero) | w.eq_mask::<AVX>(zero)) & self.live;
+            (u.eq_mask::<AVX>(zero) | v.eq_mask::<AVX>(zero) | w.eq_mask::<AVX>(zero)) & live;
         if on_edge != 0 {
             // Exactly on an edge in f32: decided in f64 (rare), as the pack test does.
             let mut bits = on_edge;
@@ -184,7 +187,7 @@ impl ShearedLanes {
             .mul::<AVX>(sz.mul::<AVX>(az))
             .add::<AVX>(v.mul::<AVX>(sz.mul::<AVX>(bz)))
             .add::<AVX>(w.mul::<AVX>(sz.mul::<AVX>(cz)));
-        let inside = !(negative & positive) & det.ne_mask::<AVX>(zero) & self.live;
+        let inside = !(negative & positive) & det.ne_mask::<AVX>(zero) & live;
         let mut hits = LaneHits {
             mask: 0,
             t: [0.0; RAYS],
@@ -388,9 +391,10 @@ pub mod sixteen {
     pub const WIDE: usize = 2 * RAYS;
 
     /// Tests each triangle of the leaf `first_pack`, `count` against the rays `chunk`
-    /// (indices into `sheared`, 1 to [`WIDE`] of them, sharing one permutation), ray `l`
-    /// of the chunk cut at `t_max[chunk[l]]`; calls `hit(l, slot, source, t, bary)` for
-    /// every ray and triangle that cross.
+    /// (indices into `sheared`, 1 to [`WIDE`] of them, sharing one permutation) whose bits
+    /// are set in `live` (bit `l` for `chunk[l]`), ray `l` of the chunk cut at
+    /// `t_max[chunk[l]]`; calls `hit(l, slot, source, t, bary)` for every such ray and
+    /// triangle that cross.
     ///
     /// # Safety
     /// The CPU must have AVX-512F.
@@ -400,6 +404,7 @@ pub mod sixteen {
         triangles: &PackedTriangles,
         sheared: &[ShearedRay; PACKET],
         chunk: &[u8],
+        live: u16,
         t_max: &[f32; PACKET],
         first_pack: u32,
         count: u32,
@@ -451,7 +456,7 @@ pub mod sixteen {
             origin: [0, 1, 2].map(|axis| join(&low.0[axis], &high.0[axis])),
             shear: [0, 1, 2].map(|axis| join(&low.1[axis], &high.1[axis])),
             cut,
-            live: ((1u32 << chunk.len()) - 1) as u16,
+            live: live & ((1u32 << chunk.len()) - 1) as u16,
         };
         let first_pack = first_pack as usize;
         let packs = (count as usize).div_ceil(LANES);
@@ -622,7 +627,7 @@ mod tests {
         #[inline(always)]
         fn run<const AVX2: bool>(self) -> LaneHits {
             self.group
-                .intersect::<AVX2>(self.pack, self.lane, &self.t_max)
+                .intersect::<AVX2>(self.pack, self.lane, &self.t_max, u32::MAX)
         }
     }
 
@@ -903,6 +908,13 @@ mod tests {
                 at += run;
                 let size = 1 + round % sixteen::WIDE;
                 for chunk in run_rays.chunks(size) {
+                    // Every lane, or some (a packet's fixed group with some rays outside
+                    // the leaf's box).
+                    let live = if round % 5 == 0 {
+                        (next() * 65536.0) as i32 as u16
+                    } else {
+                        u16::MAX
+                    };
                     let mut found = Vec::new();
                     // SAFETY: the CPU has AVX-512F (checked above).
                     unsafe {
@@ -910,6 +922,7 @@ mod tests {
                             &packed,
                             &sheared,
                             chunk,
+                            live,
                             &limits,
                             0,
                             12,
@@ -927,6 +940,9 @@ mod tests {
                     };
                     let mut expected = Vec::new();
                     for (l, &r) in chunk.iter().enumerate() {
+                        if live & (1 << l) == 0 {
+                            continue;
+                        }
                         let r = r as usize;
                         for pack in &packed.packs {
                             let alone =

@@ -541,13 +541,14 @@ use rewrite_lanes_by_lane as rewrite_lanes;
 
 impl PackedTriangles {
     /// [`PackedTriangles::hits_in_leaf`] for a group of rays at once: each triangle of the
-    /// leaf is tested across the rays of `rays` (the same answers as each ray alone), and
-    /// `hit(lane, slot, source, t, bary)` is called for every ray and triangle that cross
-    /// with `t` in `[0, t_max)` of that ray's lane.
+    /// leaf is tested across the rays of `rays` in the lanes `live` (`u32::MAX`: all; the
+    /// same answers as each ray alone), and `hit(lane, slot, source, t, bary)` is called for
+    /// every such ray and triangle that cross with `t` in `[0, t_max)` of that ray's lane.
     #[inline(always)]
     pub fn hits_in_leaf_across<const AVX: bool>(
         &self,
         rays: &ShearedLanes,
+        live: u32,
         first_pack: u32,
         count: u32,
         t_max: &crate::simd::F32x8,
@@ -557,7 +558,7 @@ impl PackedTriangles {
         let packs = (count as usize).div_ceil(LANES);
         for pack in &self.packs[first_pack..first_pack + packs] {
             for lane in 0..pack.live as usize {
-                let found = rays.intersect::<AVX>(pack, lane, t_max);
+                let found = rays.intersect::<AVX>(pack, lane, t_max, live);
                 let mut mask = found.mask;
                 while mask != 0 {
                     let l = mask.trailing_zeros() as usize;

@@ -36,7 +36,7 @@ mod walk;
 /// One `f32` per child lane of a node.
 pub use crate::simd::F32x8 as Lanes;
 pub use node::WideNode;
-pub use packet::{GatheredLeaf, RayPacket};
+pub use packet::{GatheredLeaf, RayPacket, listed, rays_below};
 pub use refit::{LeafLanes, Parts};
 pub use walk::{LeafVisit, RayBoxes};
 

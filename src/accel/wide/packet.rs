@@ -198,12 +198,30 @@ impl RayPacket {
         RayBoxes::from_inverse(at(&self.origin), at(&self.inverse))
     }
 
+    /// The rays from `first` on that enter lane `lane` of `node` before their limits: bit `r`
+    /// for ray `r`. Eight rays are tested at once ([`F32x8`]), or sixteen in the AVX2 copy
+    /// where the CPU has AVX-512 ([`sixteen_rays`]: the same operations lane by lane, so the
+    /// same rays).
+    #[inline(always)]
+    fn entering<const AVX: bool>(
+        &self,
+        node: &WideNode,
+        lane: usize,
+        first: usize,
+        limits: &[f32; PACKET],
+    ) -> u64 {
+        #[cfg(target_arch = "x86_64")]
+        if AVX && simd::avx512() {
+            // SAFETY: `simd::avx512()` holds only where the CPU has AVX-512F.
+            return unsafe { sixteen_rays::entering(self, node, lane, first, limits) };
+        }
+        self.entering_by_eight::<AVX>(node, lane, first, limits)
+    }
+
     /// Calls `each(ray, &mut limit)` for every ray from `first` on that enters lane `lane`
-    /// of `node` before its limit, in ray order; returns whether any did. Eight rays are
-    /// tested at once ([`F32x8`]), or sixteen in the AVX2 copy where the CPU has AVX-512
-    /// ([`sixteen_rays`]: the same operations lane by lane, so the same rays), all of a
-    /// group before the first of them is handed to `each`. (`each` changes only the limit
-    /// of the ray it is handed, so the group size changes no ray's test.)
+    /// of `node` before its limit ([`RayPacket::entering`]), in ray order, after all of
+    /// them are tested; returns whether any did. (`each` changes only the limit of the ray
+    /// it is handed, so testing all before handing any changes no ray's test.)
     #[inline(always)]
     fn enter_leaf<const AVX: bool>(
         &self,
@@ -211,61 +229,61 @@ impl RayPacket {
         lane: usize,
         first: usize,
         limits: &mut [f32; PACKET],
-        each: impl FnMut(usize, &mut f32),
+        mut each: impl FnMut(usize, &mut f32),
     ) -> bool {
-        #[cfg(target_arch = "x86_64")]
-        if AVX && simd::avx512() {
-            // SAFETY: `simd::avx512()` holds only where the CPU has AVX-512F.
-            return unsafe { sixteen_rays::enter_leaf(self, node, lane, first, limits, each) };
+        let entering = self.entering::<AVX>(node, lane, first, limits);
+        let mut bits = entering;
+        while bits != 0 {
+            let r = bits.trailing_zeros() as usize;
+            bits &= bits - 1;
+            each(r, &mut limits[r]);
         }
-        self.enter_leaf_by_eight::<AVX>(node, lane, first, limits, each)
+        entering != 0
     }
 
-    /// [`RayPacket::enter_leaf`] eight rays at a time.
+    /// [`RayPacket::entering`] eight rays at a time.
     #[inline(always)]
-    fn enter_leaf_by_eight<const AVX: bool>(
+    fn entering_by_eight<const AVX: bool>(
         &self,
         node: &WideNode,
         lane: usize,
         first: usize,
-        limits: &mut [f32; PACKET],
-        each: impl FnMut(usize, &mut f32),
-    ) -> bool {
+        limits: &[f32; PACKET],
+    ) -> u64 {
         let lower = [0, 1, 2].map(|axis| F32x8::splat(node.bounds[axis][lane]));
         let upper = [0, 1, 2].map(|axis| F32x8::splat(node.bounds[axis + 3][lane]));
-        self.hand_entering::<8>(first, limits, each, |at, limits| {
-            self.enter_box::<AVX>(&lower, &upper, at, limits)
-        })
+        // The group loop written out: as a closure handed to `entering_by_groups` the test
+        // was compiled on its own, without the AVX2 copy's target features.
+        let mut entering = 0u64;
+        for at in (first / 8 * 8..self.len).step_by(8) {
+            entering |= u64::from(self.enter_box::<AVX>(&lower, &upper, at, limits)) << at;
+        }
+        self.from_first(entering, first)
+    }
+
+    /// The rays of `entering` from `first` on and below `len`: rays before `first` are not
+    /// the subtree's; slots past `len` are no rays.
+    #[inline(always)]
+    fn from_first(&self, entering: u64, first: usize) -> u64 {
+        entering & rays_below(self.len) & !rays_below(first)
     }
 
     /// The group loop of a leaf's box test, `WIDTH_OF_GROUP` rays per group: `enter(at,
-    /// limits)` gives the mask of the rays from `at` that enter the box, and each of them
-    /// from `first` on (and below `len`) is handed to `each`, in ray order, after the whole
-    /// group is tested; returns whether any was.
+    /// limits)` gives the mask of the rays from `at` that enter the box; the rays from
+    /// `first` on (and below `len`) among them, as a mask over the packet.
     #[inline(always)]
-    fn hand_entering<const WIDTH_OF_GROUP: usize>(
+    fn entering_by_groups<const WIDTH_OF_GROUP: usize>(
         &self,
         first: usize,
-        limits: &mut [f32; PACKET],
-        mut each: impl FnMut(usize, &mut f32),
+        limits: &[f32; PACKET],
         mut enter: impl FnMut(usize, &[f32; PACKET]) -> u32,
-    ) -> bool {
-        let all = (1u32 << WIDTH_OF_GROUP) - 1;
-        let mut any = false;
+    ) -> u64 {
+        let mut entering = 0u64;
         for group in first / WIDTH_OF_GROUP..self.len.div_ceil(WIDTH_OF_GROUP) {
             let at = group * WIDTH_OF_GROUP;
-            let mut mask = enter(at, limits);
-            // Rays before `first` are not this subtree's; slots past `len` are no rays.
-            mask &= (all << first.saturating_sub(at).min(WIDTH_OF_GROUP)) & all;
-            mask &= (1u32 << (self.len - at).min(WIDTH_OF_GROUP)) - 1;
-            any |= mask != 0;
-            while mask != 0 {
-                let k = mask.trailing_zeros() as usize;
-                mask &= mask - 1;
-                each(at + k, &mut limits[at + k]);
-            }
+            entering |= u64::from(enter(at, limits)) << at;
         }
-        any
+        self.from_first(entering, first)
     }
 
     /// The slab test of one box (`lower`, `upper`, splatted) for the eight rays from `at`:
@@ -302,7 +320,7 @@ mod sixteen_rays {
 
     use super::{PACKET, ROBUST_FAR, RayPacket, WideNode};
 
-    /// [`RayPacket::enter_leaf`] sixteen rays at a time: per ray, `enter_box`'s operations
+    /// [`RayPacket::entering`] sixteen rays at a time: per ray, `enter_box`'s operations
     /// in the same order on the same operands (`_mm512_min_ps` and `_mm512_max_ps` pick
     /// between NaN and zero operands as their AVX2 forms do), so the same rays enter.
     ///
@@ -310,18 +328,17 @@ mod sixteen_rays {
     /// The CPU must have AVX-512F.
     #[inline]
     #[target_feature(enable = "avx512f")]
-    pub(super) unsafe fn enter_leaf(
+    pub(super) unsafe fn entering(
         packet: &RayPacket,
         node: &WideNode,
         lane: usize,
         first: usize,
-        limits: &mut [f32; PACKET],
-        each: impl FnMut(usize, &mut f32),
-    ) -> bool {
+        limits: &[f32; PACKET],
+    ) -> u64 {
         let lower = [0, 1, 2].map(|axis| _mm512_set1_ps(node.bounds[axis][lane]));
         let upper = [0, 1, 2].map(|axis| _mm512_set1_ps(node.bounds[axis + 3][lane]));
         let robust_far = _mm512_set1_ps(ROBUST_FAR);
-        packet.hand_entering::<16>(first, limits, each, |at, limits| {
+        packet.entering_by_groups::<16>(first, limits, |at, limits| {
             // SAFETY (loads): `at + 16 <= PACKET`, within each row.
             let sixteen = |row: &[f32; PACKET]| unsafe { _mm512_loadu_ps(row[at..].as_ptr()) };
             let mut near = _mm512_set1_ps(0.0);
@@ -975,6 +992,35 @@ pub trait GatheredLeaf {
         count: u32,
         limits: &mut [f32; PACKET],
     );
+
+    /// [`GatheredLeaf::visit`] for the rays of the mask `entering` (bit `r` for ray `r`,
+    /// not 0), as the packet walk finds them; by default listed in ray order and visited.
+    /// A leaf that tests rays in fixed groups of lanes can take the mask as it is.
+    #[inline(always)]
+    fn visit_entering<const AVX: bool>(
+        &mut self,
+        entering: u64,
+        leaf_ref: u32,
+        count: u32,
+        limits: &mut [f32; PACKET],
+    ) {
+        let mut buffer = [0u8; PACKET];
+        let rays = listed(entering, &mut buffer);
+        self.visit::<AVX>(rays, leaf_ref, count, limits);
+    }
+}
+
+/// The rays of the mask `rays` (bit `r` for ray `r`) as a list in ray order, in `buffer`.
+#[inline(always)]
+pub fn listed(rays: u64, buffer: &mut [u8; PACKET]) -> &[u8] {
+    let mut n = 0;
+    let mut bits = rays;
+    while bits != 0 {
+        buffer[n] = bits.trailing_zeros() as u8;
+        bits &= bits - 1;
+        n += 1;
+    }
+    &buffer[..n]
 }
 
 impl<F: FnMut(&[u8], u32, u32, &mut [f32; PACKET])> GatheredLeaf for F {
@@ -1043,17 +1089,12 @@ impl<G: GatheredLeaf> PacketLeaf for Gathered<G> {
         count: u32,
         limits: &mut [f32; PACKET],
     ) -> bool {
-        let mut rays = [0u8; PACKET];
-        let mut inside = 0;
-        packet.enter_leaf::<AVX>(node, lane, first, limits, |r, _| {
-            rays[inside] = r as u8;
-            inside += 1;
-        });
-        if inside > 0 {
+        let entering = packet.entering::<AVX>(node, lane, first, limits);
+        if entering != 0 {
             self.0
-                .visit::<AVX>(&rays[..inside], leaf_ref, count, limits);
+                .visit_entering::<AVX>(entering, leaf_ref, count, limits);
         }
-        inside > 0
+        entering != 0
     }
 
     fn enter_all<const AVX: bool>(
@@ -1069,6 +1110,14 @@ impl<G: GatheredLeaf> PacketLeaf for Gathered<G> {
         }
     }
 }
+
+/// The rays `0..n` of a packet as a mask (bit `r` for ray `r`; `n` up to [`PACKET`]).
+#[inline(always)]
+pub fn rays_below(n: usize) -> u64 {
+    if n >= 64 { u64::MAX } else { (1u64 << n) - 1 }
+}
+
+const _: () = assert!(PACKET == 64, "a packet's rays are the bits of a u64");
 
 /// The lanes of `node` that hold a child.
 #[inline(always)]
@@ -1159,9 +1208,11 @@ mod tests {
         assert!(compared > 5_000, "{compared}");
     }
 
-    /// A box of no thickness (an axis-aligned quad's) met head-on at exactly a ray's limit:
-    /// the boundary case of the leaf box test (entry distance equal to the limit counts as
-    /// entered), in every copy of the test, against each ray alone.
+    /// The rays of a mask over a packet, in ray order.
+    fn rays_of(mask: u64) -> impl Iterator<Item = usize> {
+        (0..PACKET).filter(move |&r| mask & (1 << r) != 0)
+    }
+
     /// The rays from `first` on that enter lane `lane` of `node` (with `limits`), as each
     /// copy of the leaf box test this CPU can run finds them: `(copy, rays)` for the
     /// baseline, then AVX2 and AVX-512 where the CPU has them.
@@ -1180,14 +1231,18 @@ mod tests {
         let mut copies = vec![(
             "baseline",
             run(&|l, found| {
-                packet.enter_leaf_by_eight::<false>(node, lane, first, l, |r, _| found.push(r));
+                found.extend(rays_of(
+                    packet.entering_by_eight::<false>(node, lane, first, l),
+                ));
             }),
         )];
         if crate::simd::Isa::cpu_has_avx2() {
             copies.push((
                 "AVX2",
                 run(&|l, found| {
-                    packet.enter_leaf_by_eight::<true>(node, lane, first, l, |r, _| found.push(r));
+                    found.extend(rays_of(
+                        packet.entering_by_eight::<true>(node, lane, first, l),
+                    ));
                 }),
             ));
         }
@@ -1197,15 +1252,17 @@ mod tests {
                 "AVX-512",
                 run(&|l, found| {
                     // SAFETY: the CPU has AVX-512F (checked just above).
-                    unsafe {
-                        sixteen_rays::enter_leaf(packet, node, lane, first, l, |r, _| found.push(r))
-                    };
+                    let entering = unsafe { sixteen_rays::entering(packet, node, lane, first, l) };
+                    found.extend(rays_of(entering));
                 }),
             ));
         }
         copies
     }
 
+    /// A box of no thickness (an axis-aligned quad's) met head-on at exactly a ray's limit:
+    /// the boundary case of the leaf box test (entry distance equal to the limit counts as
+    /// entered), in every copy of the test, against each ray alone.
     #[test]
     fn a_leaf_box_met_exactly_at_the_limit_is_entered_in_every_copy() {
         let mut node = WideNode::UNUSED;
