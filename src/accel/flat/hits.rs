@@ -114,7 +114,12 @@ impl Accel {
             accel: self,
             within,
             sheared: &query.sheared,
-            one_permutation: groups_of_one_permutation(&query.sheared, n),
+            // Only a packet walk hands a leaf its rays as a mask.
+            one_permutation: if packet {
+                groups_of_one_permutation(&query.sheared, n)
+            } else {
+                0
+            },
             len: n,
             best: &mut query.best,
         };
@@ -149,7 +154,7 @@ impl Accel {
         let mut at = 0;
         for run in runs {
             // More rays than one group of eight: sixteen at a time where the CPU has
-            // AVX-512 (a primary packet's leaf is handed 25 rays on average).
+            // AVX-512.
             #[cfg(target_arch = "x86_64")]
             if AVX && run > RAYS && crate::simd::avx512() {
                 for chunk in order[at..at + run].chunks(sixteen::WIDE) {
@@ -245,7 +250,12 @@ impl Accel {
                 let mut leaf = AnyHitPacketLeaf {
                     accel: self,
                     sheared: &q.sheared,
-                    one_permutation: groups_of_one_permutation(&q.sheared, n),
+                    // Only the packet walk (converging rays) hands a leaf a mask.
+                    one_permutation: if converging {
+                        groups_of_one_permutation(&q.sheared, n)
+                    } else {
+                        0
+                    },
                     len: n,
                     t_max: &ceilings,
                     visit,
@@ -387,8 +397,9 @@ fn keep_if_closer(
 }
 
 /// The closest-hit leaf test of a packet: a few rays test the leaf one by one, more test
-/// each triangle across them, in the packet's fixed groups of [`RAYS`] where a group's rays
-/// share one axis permutation (as a primary packet's mostly all do).
+/// each triangle across them; in a packet walk, in the packet's fixed groups of [`RAYS`]
+/// where a group's rays share one axis permutation (as a primary packet's mostly all do) and
+/// at least [`FIXED_GROUP_MIN`] of them are inside the leaf.
 struct ClosestPacketLeaf<'a> {
     accel: &'a Accel,
     within: &'a Within<'a>,
@@ -438,6 +449,26 @@ fn in_fixed_groups(entering: u64, one_permutation: u64) -> u64 {
     fixed
 }
 
+/// Group tests in fixed lanes on this thread, for tests to see that they ran: closest-hit
+/// groups of eight, of sixteen, and occlusion groups of eight.
+#[cfg(test)]
+thread_local! {
+    pub(super) static FIXED_GROUP_TESTS: std::cell::Cell<[usize; 3]> =
+        const { std::cell::Cell::new([0; 3]) };
+}
+
+/// Counts a group test in fixed lanes of kind `kind` (see [`FIXED_GROUP_TESTS`]); nothing
+/// outside tests.
+#[inline(always)]
+fn count_fixed_group(_kind: usize) {
+    #[cfg(test)]
+    FIXED_GROUP_TESTS.with(|c| {
+        let mut counts = c.get();
+        counts[_kind] += 1;
+        c.set(counts);
+    });
+}
+
 /// Ray `r` at index `r`: the ray numbers of a packet's fixed groups, as the lists the
 /// group tests take.
 const RAY_NUMBERS: [u8; PACKET] = {
@@ -478,6 +509,7 @@ impl ClosestPacketLeaf<'_> {
                     && self.one_permutation & one == one
                     && self.sheared[at].axes_word() == self.sheared[end - 1].axes_word()
                 {
+                    count_fixed_group(1);
                     let mut improved = 0u32;
                     // SAFETY: `simd::avx512()` holds only where the CPU has AVX-512F.
                     unsafe {
@@ -523,6 +555,7 @@ impl ClosestPacketLeaf<'_> {
         count: u32,
         limits: &mut [f32; PACKET],
     ) {
+        count_fixed_group(0);
         let chunk = &RAY_NUMBERS[at..(at + RAYS).min(self.len)];
         // Transposed at each leaf: kept from leaf to leaf (made once a packet), the lanes
         // were read back from memory in each triangle test, which cost more.
@@ -595,7 +628,8 @@ impl GatheredLeaf for ClosestPacketLeaf<'_> {
         }
         let rest = entering & !fixed;
         if rest != 0 {
-            // Rays of groups with several permutations: gathered and sorted by permutation.
+            // Rays of groups with several permutations or fewer than `FIXED_GROUP_MIN`
+            // rays inside: listed, then sorted by permutation.
             let mut buffer = [0u8; PACKET];
             let rays = listed(rest, &mut buffer);
             self.accel.closest_in_leaf_across::<AVX>(
@@ -678,8 +712,8 @@ impl<F: FnMut(usize, u32, f32) -> bool> GatheredLeaf for &mut AnyHitPacketLeaf<'
             return self.visit::<AVX>(rays, first, count, limits);
         }
         if rest != 0 {
-            // Rays of groups with several permutations: gathered and sorted by permutation
-            // (more than one ray enters: fewer in all would have gone the way above).
+            // Rays of groups with several permutations or fewer than `FIXED_GROUP_MIN`
+            // rays inside: listed, then sorted by permutation.
             let mut buffer = [0u8; PACKET];
             let rays = listed(rest, &mut buffer);
             self.visit_across::<AVX>(rays, first, count, limits);
@@ -691,6 +725,7 @@ impl<F: FnMut(usize, u32, f32) -> bool> GatheredLeaf for &mut AnyHitPacketLeaf<'
             if live == 0 {
                 continue;
             }
+            count_fixed_group(2);
             let chunk = &RAY_NUMBERS[at..(at + RAYS).min(self.len)];
             let lanes = &ShearedLanes::of_rays::<AVX>(self.sheared, chunk);
             let cut = F32x8(

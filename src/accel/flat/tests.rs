@@ -382,29 +382,64 @@ fn packets_whose_groups_mix_axis_permutations_answer_as_single_rays() {
             .count();
         (uniform, rays.len().div_ceil(RAYS) - uniform)
     };
-    let eye = Vec3A::new(0.5, -0.25, 0.0);
-    let camera: Vec<(Vec3A, Vec3A)> = (0..64)
-        .map(|i| {
-            let (x, y) = ((i % 8) as f32 - 3.5, (i / 8) as f32 - 3.5);
-            let spread = if i < 32 { 0.05 } else { 0.45 };
-            (eye, Vec3A::new(x * spread, y * 0.05, -1.0).normalize())
-        })
-        .collect();
-    let mut found = 0;
-    for rays in [&camera[..], &camera[..45], &camera[5..50]] {
-        let (uniform, mixed) = groups(rays);
-        assert!(
-            uniform > 0 && mixed > 0,
-            "{uniform} groups of one permutation, {mixed} not"
-        );
-        let mut hits = vec![None; rays.len()];
-        accel.closest_hits(rays, f32::INFINITY, &mut hits);
-        for (&(o, d), hit) in rays.iter().zip(&hits) {
-            assert_eq!(*hit, accel.closest_hit(o, d, f32::INFINITY));
-            found += hit.is_some() as usize;
+    use super::hits::FIXED_GROUP_TESTS;
+    FIXED_GROUP_TESTS.with(|c| c.set([0; 3]));
+    let (mut found, mut kinds) = (0, (0, 0));
+    // Cameras inside the soup, looking down -z, up +y and along +x.
+    for (eye, forward, right, up) in [
+        (
+            Vec3A::new(0.5, -0.25, 0.0),
+            Vec3A::NEG_Z,
+            Vec3A::X,
+            Vec3A::Y,
+        ),
+        (Vec3A::new(-3.0, 2.0, 6.0), Vec3A::NEG_Z, Vec3A::X, Vec3A::Y),
+        (Vec3A::new(4.0, -6.0, -2.0), Vec3A::Y, Vec3A::Z, Vec3A::X),
+        (Vec3A::new(-7.0, 1.0, 3.0), Vec3A::X, Vec3A::Y, Vec3A::Z),
+    ] {
+        let camera: Vec<(Vec3A, Vec3A)> = (0..64)
+            .map(|i| {
+                let (x, y) = ((i % 8) as f32 - 3.5, (i / 8) as f32 - 3.5);
+                let spread = if i < 32 { 0.05 } else { 0.45 };
+                let direction = forward + right * (x * spread) + up * (y * 0.05);
+                (eye, direction.normalize())
+            })
+            .collect();
+        // The last two end in a group of one permutation cut short (5 rays; 13 in the
+        // last block of sixteen).
+        for rays in [
+            &camera[..],
+            &camera[..45],
+            &camera[5..50],
+            &camera[..29],
+            &camera[3..32],
+        ] {
+            let (uniform, mixed) = groups(rays);
+            kinds = (kinds.0 + uniform, kinds.1 + mixed);
+            let mut hits = vec![None; rays.len()];
+            accel.closest_hits(rays, f32::INFINITY, &mut hits);
+            for (&(o, d), hit) in rays.iter().zip(&hits) {
+                assert_eq!(*hit, accel.closest_hit(o, d, f32::INFINITY));
+                found += hit.is_some() as usize;
+            }
         }
     }
     assert!(found > 100, "too few hits ({found})");
+    assert!(
+        kinds.0 > 0 && kinds.1 > 0,
+        "{} groups of one permutation, {} not",
+        kinds.0,
+        kinds.1
+    );
+    let [eight, sixteen, _] = FIXED_GROUP_TESTS.with(|c| c.get());
+    println!("closest hits: {eight} group tests of eight in fixed lanes, {sixteen} of sixteen");
+    assert!(eight + sixteen > 100, "the fixed groups hardly ran");
+    if crate::simd::avx512() {
+        assert!(
+            sixteen > 0,
+            "no block of sixteen in fixed lanes on an AVX-512 CPU"
+        );
+    }
     // Rows 0 and 1: y is every ray's largest axis; 2 to 4: some x, some y; 5 to 7: x.
     let light = Vec3A::new(40.0, 40.0, 1.0);
     let converging: Vec<(Vec3A, Vec3A, f32)> = (0..64)
@@ -416,7 +451,8 @@ fn packets_whose_groups_mix_axis_permutations_answer_as_single_rays() {
         })
         .collect();
     let mut met = 0;
-    for rays in [&converging[..], &converging[..30]] {
+    // The last ends in a group of one permutation cut short (5 rays).
+    for rays in [&converging[..], &converging[..30], &converging[..45]] {
         let pairs: Vec<(Vec3A, Vec3A)> = rays.iter().map(|&(o, d, _)| (o, d)).collect();
         let limits: Vec<f32> = rays.iter().map(|r| r.2).collect();
         assert!(crate::accel::wide::RayPacket::new(&[]).set_converging(&pairs, &limits));
@@ -449,6 +485,11 @@ fn packets_whose_groups_mix_axis_permutations_answer_as_single_rays() {
         }
     }
     assert!(met > 100, "too few hits met ({met})");
+    let occlusion = FIXED_GROUP_TESTS.with(|c| c.get())[2];
+    assert!(
+        occlusion > 100,
+        "{occlusion} occlusion group tests in fixed lanes"
+    );
 }
 
 /// A bundle of nearly parallel rays from different origins (no common apex, so the masked

@@ -14,8 +14,10 @@
 //! every CPU, in the baseline copy and the AVX2 copy where there is one.
 //!
 //! The rays of a group must share the axis permutation of Woop et al. (the axis where the
-//! direction is largest, and its sign): [`runs_by_permutation`] orders a leaf's rays so, and
-//! [`ShearedLanes::of_rays`] makes a group's lanes.
+//! direction is largest, and its sign). A group is either eight of a packet's own rays
+//! (rays 8g to 8g + 7) that share one, tested in place with the rays outside the leaf's box
+//! masked off (the `live` lanes), or a list of rays that [`runs_by_permutation`] orders so;
+//! either way [`ShearedLanes::of_rays`] makes the group's lanes.
 
 use glam::Vec2;
 
@@ -620,6 +622,7 @@ mod tests {
         pack: &'a TrianglePack,
         lane: usize,
         t_max: F32x8,
+        live: u32,
     }
 
     impl simd::Kernel for Intersect<'_> {
@@ -627,7 +630,7 @@ mod tests {
         #[inline(always)]
         fn run<const AVX2: bool>(self) -> LaneHits {
             self.group
-                .intersect::<AVX2>(self.pack, self.lane, &self.t_max, u32::MAX)
+                .intersect::<AVX2>(self.pack, self.lane, &self.t_max, self.live)
         }
     }
 
@@ -662,12 +665,19 @@ mod tests {
                 limits[members[l.min(members.len() - 1)]]
             }));
             for lane in 0..4 {
+                // Every lane, or some (a packet's fixed group with rays outside the leaf).
+                let live = if round % 3 == 0 {
+                    (0x9e37_79b9u32.wrapping_mul((round * 4 + lane) as u32 + 1) >> 13) & 0xff
+                } else {
+                    u32::MAX
+                };
                 let run = |avx2: bool| {
                     let k = Intersect {
                         group: &group,
                         pack,
                         lane,
                         t_max,
+                        live,
                     };
                     if avx2 {
                         simd::run_avx2_if_available(k)
@@ -678,7 +688,7 @@ mod tests {
                 for hits in [run(false), run(true)].into_iter().flatten() {
                     for (l, &r) in members.iter().enumerate() {
                         let alone = rays[r].intersect_pack(pack, 4, limits[r]);
-                        let hit_alone = alone.mask & (1 << lane) != 0;
+                        let hit_alone = alone.mask & (1 << lane) != 0 && live & (1 << l) != 0;
                         assert_eq!(
                             hits.mask & (1 << l) != 0,
                             hit_alone,

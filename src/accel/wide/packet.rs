@@ -756,10 +756,11 @@ impl WideBvh {
         self.traverse_packet_with(packet, limits, EachRay(leaf));
     }
 
-    /// [`WideBvh::traverse_packet`] calling the leaf once with all the rays that enter it
-    /// (in ray order): `leaf(rays, leaf_ref, count, limits)`. For leaves whose work is
-    /// cheaper for many rays together than one ray at a time (a top-level leaf: the rays
-    /// enter its instance as a packet of their own).
+    /// [`WideBvh::traverse_packet`] calling the leaf once with all the rays that enter it:
+    /// [`GatheredLeaf::visit_entering`] with their mask (by default listed in ray order for
+    /// `leaf(rays, leaf_ref, count, limits)`). For leaves whose work is cheaper for many
+    /// rays together than one ray at a time (a top-level leaf: the rays enter its instance
+    /// as a packet of their own; a triangle leaf: each triangle tested across the rays).
     pub fn traverse_packet_gathered(
         &self,
         packet: &RayPacket,
@@ -973,8 +974,9 @@ trait PacketLeaf {
     );
 }
 
-/// A leaf run once with every ray of a packet inside its box (in ray order):
-/// `visit(rays, leaf_ref, count, limits)`. `AVX` is true in the walk's AVX2 copy, so a leaf
+/// A leaf run once with every ray of a packet inside its box: `visit(rays, leaf_ref, count,
+/// limits)` with the rays in ray order, or, from the packet walk, `visit_entering` with
+/// their mask (which lists them for `visit` unless the leaf takes the mask). `AVX` is true in the walk's AVX2 copy, so a leaf
 /// test that computes across rays can use [`crate::simd::F32x8`]'s AVX operations. Closures
 /// implement it (ignoring `AVX`).
 pub trait GatheredLeaf {
