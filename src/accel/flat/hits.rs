@@ -449,15 +449,15 @@ fn in_fixed_groups(entering: u64, one_permutation: u64) -> u64 {
     fixed
 }
 
-/// Group tests in fixed lanes on this thread, for tests to see that they ran: closest-hit
-/// groups of eight, of sixteen, and occlusion groups of eight.
 #[cfg(test)]
 thread_local! {
+    /// Group tests in fixed lanes on this thread, for tests to see that they ran:
+    /// closest-hit groups of eight, of sixteen, and occlusion groups of eight.
     pub(super) static FIXED_GROUP_TESTS: std::cell::Cell<[usize; 3]> =
         const { std::cell::Cell::new([0; 3]) };
 }
 
-/// Counts a group test in fixed lanes of kind `kind` (see [`FIXED_GROUP_TESTS`]); nothing
+/// Counts a group test in fixed lanes of kind `kind` (see `FIXED_GROUP_TESTS`); nothing
 /// outside tests.
 #[inline(always)]
 fn count_fixed_group(_kind: usize) {
