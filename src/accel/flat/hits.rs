@@ -449,6 +449,18 @@ fn in_fixed_groups(entering: u64, one_permutation: u64) -> u64 {
     fixed
 }
 
+/// How a packet leaf takes the rays `entering`: `None` to list them all (fewer than
+/// [`ACROSS_RAYS_MIN`] in all, or no group for fixed lanes), else the rays tested in their
+/// fixed groups ([`in_fixed_groups`]) and the rest, to list.
+#[inline(always)]
+fn split_entering(entering: u64, one_permutation: u64) -> Option<(u64, u64)> {
+    let fixed = in_fixed_groups(entering, one_permutation);
+    if (entering.count_ones() as usize) < ACROSS_RAYS_MIN || fixed == 0 {
+        return None;
+    }
+    Some((fixed, entering & !fixed))
+}
+
 #[cfg(test)]
 thread_local! {
     /// Group tests in fixed lanes on this thread, for tests to see that they ran:
@@ -620,13 +632,11 @@ impl GatheredLeaf for ClosestPacketLeaf<'_> {
         count: u32,
         limits: &mut [f32; PACKET],
     ) {
-        let fixed = in_fixed_groups(entering, self.one_permutation);
-        if (entering.count_ones() as usize) < ACROSS_RAYS_MIN || fixed == 0 {
+        let Some((fixed, rest)) = split_entering(entering, self.one_permutation) else {
             let mut buffer = [0u8; PACKET];
             let rays = listed(entering, &mut buffer);
             return self.visit::<AVX>(rays, first, count, limits);
-        }
-        let rest = entering & !fixed;
+        };
         if rest != 0 {
             // Rays of groups with several permutations or fewer than `FIXED_GROUP_MIN`
             // rays inside: listed, then sorted by permutation.
@@ -704,13 +714,11 @@ impl<F: FnMut(usize, u32, f32) -> bool> GatheredLeaf for &mut AnyHitPacketLeaf<'
         count: u32,
         limits: &mut [f32; PACKET],
     ) {
-        let fixed = in_fixed_groups(entering, self.one_permutation);
-        let rest = entering & !fixed;
-        if (entering.count_ones() as usize) < ACROSS_RAYS_MIN || fixed == 0 {
+        let Some((fixed, rest)) = split_entering(entering, self.one_permutation) else {
             let mut buffer = [0u8; PACKET];
             let rays = listed(entering, &mut buffer);
             return self.visit::<AVX>(rays, first, count, limits);
-        }
+        };
         if rest != 0 {
             // Rays of groups with several permutations or fewer than `FIXED_GROUP_MIN`
             // rays inside: listed, then sorted by permutation.
