@@ -450,13 +450,16 @@ pub fn fast_log2(x: f32) -> f32 {
     if x > f32::MAX {
         return 128.0;
     }
-    let bits = x.to_bits();
-    let mut exponent = ((bits >> 23) as i32 - 127) as f32;
-    let mut m = f32::from_bits((bits & 0x007f_ffff) | 0x3f80_0000);
-    if m > std::f32::consts::SQRT_2 {
-        m *= 0.5;
-        exponent += 1.0;
-    }
+    // x = 2^e m with m in [1, 2); where m > sqrt(2) (in f32) it reads as 2^(e + 1) (m / 2).
+    // Both in the bits, without a branch (which half a hit's length falls in is as good as
+    // random): subtracting the bits of `sqrt(2)`'s successor, less one exponent, borrows
+    // from the exponent exactly when m <= sqrt(2), so the exponent field of `shifted` is
+    // e + 1 or e and its low bits are m's mantissa moved by that offset; adding the offset
+    // back gives m / 2 or m.
+    const OFFSET: u32 = std::f32::consts::SQRT_2.to_bits() + 1 - (1 << 23);
+    let shifted = x.to_bits().wrapping_sub(OFFSET) as i32;
+    let exponent = (shifted >> 23) as f32;
+    let m = f32::from_bits((shifted as u32 & 0x007f_ffff) + OFFSET);
     let s = (m - 1.0) / (m + 1.0);
     let s2 = s * s;
     exponent + s * (2.885_39 + s2 * (0.961_796_7 + s2 * (0.577_078 + s2 * 0.412_198_6)))
@@ -560,6 +563,57 @@ mod tests {
         assert_eq!(LodMethod::Cones.bytes_per_ray(), 12);
         assert_eq!(LodMethod::Diffs.bytes_per_ray(), 48);
         assert_eq!(LodMethod::DiffsEwa.bytes_per_ray(), 48);
+    }
+
+    /// `fast_log2`'s mantissa reduction as a branch, as it was first written: the bit form
+    /// gives the same exponent and mantissa, so the same bits, for every positive normal
+    /// float (all 2^31 - 2^24 - 2^23 of them are too many for a test; every mantissa near
+    /// the `sqrt(2)` threshold and at the ends, under every exponent, and a stride of the
+    /// rest).
+    #[test]
+    fn fast_log2_reduces_the_mantissa_as_the_branch_did() {
+        let branch = |x: f32| {
+            if !(x >= f32::MIN_POSITIVE) {
+                return -126.0;
+            }
+            if x > f32::MAX {
+                return 128.0;
+            }
+            let bits = x.to_bits();
+            let mut exponent = ((bits >> 23) as i32 - 127) as f32;
+            let mut m = f32::from_bits((bits & 0x007f_ffff) | 0x3f80_0000);
+            if m > std::f32::consts::SQRT_2 {
+                m *= 0.5;
+                exponent += 1.0;
+            }
+            let s = (m - 1.0) / (m + 1.0);
+            let s2 = s * s;
+            exponent + s * (2.885_39 + s2 * (0.961_796_7 + s2 * (0.577_078 + s2 * 0.412_198_6)))
+        };
+        let threshold = std::f32::consts::SQRT_2.to_bits() & 0x007f_ffff;
+        let mut compared = 0u64;
+        for field in 1u32..255 {
+            let near = (threshold - 300..threshold + 300)
+                .chain(0..300)
+                .chain(0x7f_fed4..0x80_0000);
+            for mantissa in near.chain((0..0x80_0000).step_by(997)) {
+                let x = f32::from_bits((field << 23) | mantissa);
+                assert_eq!(fast_log2(x).to_bits(), branch(x).to_bits(), "{x:e}");
+                compared += 1;
+            }
+        }
+        for x in [
+            0.0,
+            -0.0,
+            -1.0,
+            1e-40,
+            f32::NAN,
+            f32::INFINITY,
+            f32::MIN_POSITIVE,
+        ] {
+            assert_eq!(fast_log2(x).to_bits(), branch(x).to_bits(), "{x:e}");
+        }
+        assert!(compared > 2_000_000, "{compared}");
     }
 
     #[test]

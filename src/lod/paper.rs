@@ -17,10 +17,11 @@ pub struct PathLength(pub f32);
 
 impl PathLength {
     /// `log2(P_l) - log2 P_b`, finite for any input (a zero or non-finite path length
-    /// cannot occur for a real hit, but must not produce NaN).
+    /// cannot occur for a real hit, but must not produce NaN: `fast_log2` gives -126 for
+    /// zero, negative, subnormal and NaN lengths, its value at `f32::MIN_POSITIVE`).
     #[inline]
     pub fn paper_level(self, log2_pb: f32) -> f32 {
-        finite_level(fast_log2(self.0.max(f32::MIN_POSITIVE)) - log2_pb)
+        finite_level(fast_log2(self.0) - log2_pb)
     }
 }
 
@@ -64,6 +65,27 @@ mod tests {
     fn level_is_log2_path_minus_constant() {
         assert_eq!(PathLength(8.0).paper_level(1.0), 2.0);
         assert_eq!(PathLength(0.5).paper_level(-1.0), 0.0);
+    }
+
+    /// Lengths below the smallest normal read as that length (the level of the finest
+    /// footprint there is), the same bits.
+    #[test]
+    fn tiny_zero_negative_and_nan_lengths_read_as_the_smallest_normal() {
+        let smallest = PathLength(f32::MIN_POSITIVE).paper_level(0.5);
+        assert_eq!(smallest, -126.5);
+        for pl in [
+            0.0,
+            -0.0,
+            -1.0,
+            1e-40,
+            f32::MIN_POSITIVE.next_down(),
+            f32::NAN,
+        ] {
+            assert_eq!(
+                PathLength(pl).paper_level(0.5).to_bits(),
+                smallest.to_bits()
+            );
+        }
     }
 
     #[test]

@@ -349,6 +349,15 @@ impl FrameScene<'_> {
         }
     }
 
+    /// The second value of [`Self::biased_level`] alone (the lookup's level), the same bits.
+    #[inline(always)]
+    fn lookup_level(&self, footprint: &Footprint, pyramid: &MipPyramid) -> f32 {
+        match footprint {
+            Footprint::Base => 0.0,
+            f => clamped_biased_level(f.level(), self.lod_bias, pyramid),
+        }
+    }
+
     /// Makes the surface of a hit (of a ray from `origin` along `direction` carrying `lod`,
     /// after `depth` bounces), looks up its texture and appends the shadow rays its direct
     /// light needs to `requests` (in light order).
@@ -580,10 +589,9 @@ impl FrameScene<'_> {
         let uv = interpolate_uv(lod_hit.triangle.uvs, lod_hit.bary);
         let pyramid = &texture.pyramid;
         let footprint = lod.footprint(lod_hit, &self.lod_camera, pyramid.base_size());
-        let (_, level) = self.biased_level(&footprint, pyramid);
-        counters.mip_histogram[MipPyramid::split_level(level).0.min(MIP_LEVELS - 1)] += 1;
+        let level = self.lookup_level(&footprint, pyramid);
         let sampler = texture.sampler;
-        match footprint {
+        let lookup = match footprint {
             Footprint::Base => TexelLookup::Planned {
                 texture: t,
                 plan: pyramid.plan_bilinear(0, uv, sampler),
@@ -606,17 +614,24 @@ impl FrameScene<'_> {
                 major,
                 minor,
             },
-        }
+        };
+        // A plan knows its level (the same `split_level` of the same clamped level).
+        let read = match &lookup {
+            TexelLookup::Planned { plan, .. } => plan.level(),
+            _ => MipPyramid::split_level(level).0,
+        };
+        counters.mip_histogram[read.min(MIP_LEVELS - 1)] += 1;
+        lookup
     }
 
     /// The filtered base-colour texel of a lookup (white when untextured).
     #[inline(always)]
     fn texel(&self, lookup: &TexelLookup) -> Vec3A {
-        let texel = match lookup {
-            TexelLookup::Untextured => return Vec3A::ONE,
+        match lookup {
+            TexelLookup::Untextured => Vec3A::ONE,
             TexelLookup::Planned { texture, plan } => self.textures[*texture as usize]
                 .pyramid
-                .sample_planned(plan),
+                .sample_planned_colour(plan),
             &TexelLookup::Anisotropic {
                 texture,
                 uv,
@@ -626,7 +641,7 @@ impl FrameScene<'_> {
             } => {
                 let texture = &self.textures[texture as usize];
                 let pyramid = &texture.pyramid;
-                pyramid.sample_anisotropic(uv, level, axis, taps, texture.sampler)
+                Vec3A::from_vec4(pyramid.sample_anisotropic(uv, level, axis, taps, texture.sampler))
             }
             &TexelLookup::Elliptical {
                 texture,
@@ -639,10 +654,15 @@ impl FrameScene<'_> {
                 // The bias scales the ellipse, so its minor axis fits the biased level.
                 let scale = self.lod_bias.exp2();
                 let pyramid = &texture.pyramid;
-                pyramid.sample_ewa(uv, level, (major, minor), scale, texture.sampler)
+                Vec3A::from_vec4(pyramid.sample_ewa(
+                    uv,
+                    level,
+                    (major, minor),
+                    scale,
+                    texture.sampler,
+                ))
             }
-        };
-        Vec3A::new(texel.x, texel.y, texel.z)
+        }
     }
 
     /// What reaches a surface through a shadow ray that met the glass surfaces `glass`
@@ -683,6 +703,15 @@ impl FrameScene<'_> {
     pub(super) fn passes_through(&self, m: u32, glass_so_far: usize) -> bool {
         self.materials[m as usize].transmission > 0.0 && glass_so_far < MAX_SHADOW_GLASS
     }
+}
+
+/// `pyramid.clamp_level(finite_level(level + bias))`, the same bits, as `clamp_level`
+/// alone: it already sends NaN to 0 and the infinities to the ends, and its range `[0,
+/// last]` lies inside `finite_level`'s, so the first clamp never changes what the second
+/// gives. One clamp less on every textured hit.
+#[inline(always)]
+fn clamped_biased_level(level: f32, bias: f32, pyramid: &MipPyramid) -> f32 {
+    pyramid.clamp_level(level + bias)
 }
 
 /// Lambert + Blinn-Phong from every light whose shadow ray `requests` holds (in light
@@ -745,6 +774,45 @@ impl<L: RayLod> Children<'_, L> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::lod::COARSEST_LEVEL;
+
+    /// The lookup's level with one clamp is the level with both, bit for bit, for levels and
+    /// biases of every kind (non-finite, signed zeros, past either end, huge) and pyramids
+    /// of one level to the most.
+    #[test]
+    fn one_clamp_gives_the_level_of_two() {
+        let values = [
+            f32::NAN,
+            f32::INFINITY,
+            f32::NEG_INFINITY,
+            0.0,
+            -0.0,
+            0.3,
+            -0.3,
+            1.0,
+            7.99,
+            13.5,
+            COARSEST_LEVEL,
+            -COARSEST_LEVEL,
+            2000.0,
+            -2000.0,
+            f32::MAX,
+            f32::MIN,
+            1e-40,
+        ];
+        for size in [1u32, 2, 300, 16384] {
+            let pyramid =
+                MipPyramid::from_linear_rgba(size, 1, vec![glam::Vec4::ONE; size as usize])
+                    .unwrap();
+            for level in values {
+                for bias in [0.0, -0.0, 1.5, -1.5, -1e30, f32::NAN] {
+                    let both = pyramid.clamp_level(finite_level(level + bias));
+                    let one = clamped_biased_level(level, bias, &pyramid);
+                    assert_eq!(one.to_bits(), both.to_bits(), "{level} {bias} {size}");
+                }
+            }
+        }
+    }
 
     /// Bottom-up combination is the recursion's arithmetic: direct steps, then the grouped
     /// glass term summed from zero and added once.

@@ -122,12 +122,23 @@ impl Srgb8Tables {
     /// The texel of pixel `codes` (red, green, blue, alpha).
     #[inline(always)]
     pub(super) fn texel(&self, codes: [u8; 4]) -> Vec4 {
+        self.texel_in::<true>(codes)
+    }
+
+    /// [`Srgb8Tables::texel`], with alpha decoded only when `ALPHA` (else 0): a lookup whose
+    /// caller keeps the colour alone saves one table read a texel.
+    #[inline(always)]
+    pub(super) fn texel_in<const ALPHA: bool>(&self, codes: [u8; 4]) -> Vec4 {
         let t = self.decode;
         Vec4::new(
             t[codes[0] as usize],
             t[codes[1] as usize],
             t[codes[2] as usize],
-            t[ALPHA_OFFSET + codes[3] as usize],
+            if ALPHA {
+                t[ALPHA_OFFSET + codes[3] as usize]
+            } else {
+                0.0
+            },
         )
     }
 

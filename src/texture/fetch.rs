@@ -30,9 +30,10 @@ pub(super) fn level_blend(lower: Vec4, upper: Vec4, frac: f32) -> Vec4 {
     lower * (1.0 - frac) + upper * frac
 }
 
-/// The four texels of `taps`, decoded.
+/// The four texels of `taps`, decoded (an 8-bit level's alpha only when `ALPHA`; the
+/// blends work lane by lane, so the colour channels are the same bits either way).
 #[inline(always)]
-fn texels(level: &MipLevel, taps: &BilinearTaps) -> [Vec4; 4] {
+fn texels<const ALPHA: bool>(level: &MipLevel, taps: &BilinearTaps) -> [Vec4; 4] {
     let [i00, i10, i01, i11] = taps.texels.map(|i| i as usize);
     // The storage is matched once per lookup, not once per texel.
     match &level.texels {
@@ -40,28 +41,32 @@ fn texels(level: &MipLevel, taps: &BilinearTaps) -> [Vec4; 4] {
         Texels::Srgb8 { codes, tables } => {
             let c = codes.flat();
             [
-                tables.texel(c[i00]),
-                tables.texel(c[i10]),
-                tables.texel(c[i01]),
-                tables.texel(c[i11]),
+                tables.texel_in::<ALPHA>(c[i00]),
+                tables.texel_in::<ALPHA>(c[i10]),
+                tables.texel_in::<ALPHA>(c[i01]),
+                tables.texel_in::<ALPHA>(c[i11]),
             ]
         }
     }
 }
 
-/// Bilinear lookup in one level at `taps`.
+/// Bilinear lookup in one level at `taps` (alpha as [`texels`] decodes it).
 #[inline(always)]
-pub(super) fn bilinear(level: &MipLevel, taps: &BilinearTaps) -> Vec4 {
-    bilinear_blend(texels(level, taps), taps.fx, taps.fy)
+pub(super) fn bilinear<const ALPHA: bool>(level: &MipLevel, taps: &BilinearTaps) -> Vec4 {
+    bilinear_blend(texels::<ALPHA>(level, taps), taps.fx, taps.fy)
 }
 
 /// Trilinear lookup: bilinear in `levels[0]` and `levels[1]` at their taps, blended by
 /// `frac` (the weight of `levels[1]`).
 #[inline(always)]
-pub(super) fn trilinear(levels: [&MipLevel; 2], taps: &[BilinearTaps; 2], frac: f32) -> Vec4 {
+pub(super) fn trilinear<const ALPHA: bool>(
+    levels: [&MipLevel; 2],
+    taps: &[BilinearTaps; 2],
+    frac: f32,
+) -> Vec4 {
     level_blend(
-        bilinear(levels[0], &taps[0]),
-        bilinear(levels[1], &taps[1]),
+        bilinear::<ALPHA>(levels[0], &taps[0]),
+        bilinear::<ALPHA>(levels[1], &taps[1]),
         frac,
     )
 }

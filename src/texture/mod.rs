@@ -200,12 +200,16 @@ impl MipLevel {
         }
     }
 
-    /// Hints the cache to load the texel at storage index `i` (nothing when out of range).
+    /// Hints the cache to load the texel at storage index `i`. Unchecked: a prefetch never
+    /// faults, so an index out of range only hints a useless line (planned taps are always
+    /// in range), and a lookup's eight hints cost no bounds checks.
     #[inline(always)]
     fn prefetch(&self, i: usize) {
         match &self.texels {
-            Texels::Linear(t) => crate::simd::prefetch(t, i),
-            Texels::Srgb8 { codes, .. } => crate::simd::prefetch(codes.flat(), i),
+            Texels::Linear(t) => crate::simd::prefetch_ptr(t.as_ptr().wrapping_add(i)),
+            Texels::Srgb8 { codes, .. } => {
+                crate::simd::prefetch_ptr(codes.flat().as_ptr().wrapping_add(i))
+            }
         }
     }
 

@@ -24,7 +24,7 @@
 //! overlap that work; the two steps compute exactly what the one-step lookup computes (it
 //! is written as them).
 
-use glam::{Vec2, Vec4};
+use glam::{Vec2, Vec3A, Vec4};
 
 use super::taps::BilinearTaps;
 use super::{MipLevel, MipPyramid, Sampler, WrapMode, fetch};
@@ -127,7 +127,7 @@ pub(super) fn wrap(i: i64, n: i64, mode: WrapMode) -> usize {
 /// Trilinear lookup at `lod` (see [`MipPyramid::sample_trilinear`]).
 #[inline(always)]
 fn trilinear<const AVX2: bool>(pyramid: &MipPyramid, uv: Vec2, lod: f32, sampler: Sampler) -> Vec4 {
-    filter_planned(pyramid, &plan_trilinear::<AVX2>(pyramid, uv, lod, sampler))
+    filter_planned::<true>(pyramid, &plan_trilinear::<AVX2>(pyramid, uv, lod, sampler))
 }
 
 /// Where a bilinear or trilinear lookup reads: its level (or two levels, blended by
@@ -142,6 +142,14 @@ pub struct PlannedLookup {
     blend: bool,
     frac: f32,
     taps: [BilinearTaps; 2],
+}
+
+impl PlannedLookup {
+    /// The level the lookup reads (the lower of two when it blends).
+    #[inline(always)]
+    pub fn level(&self) -> usize {
+        self.level as usize
+    }
 }
 
 /// The plan of a bilinear lookup in level `k` (in range).
@@ -184,28 +192,29 @@ fn plan_trilinear<const AVX2: bool>(
     }
 }
 
-/// The lookup `plan` describes.
+/// The lookup `plan` describes (an 8-bit level's alpha decoded only when `ALPHA`).
 #[inline(always)]
-fn filter_planned(pyramid: &MipPyramid, plan: &PlannedLookup) -> Vec4 {
+fn filter_planned<const ALPHA: bool>(pyramid: &MipPyramid, plan: &PlannedLookup) -> Vec4 {
     let k = plan.level as usize;
     if !plan.blend {
-        return fetch::bilinear(&pyramid.levels[k], &plan.taps[0]);
+        return fetch::bilinear::<ALPHA>(&pyramid.levels[k], &plan.taps[0]);
     }
     let (lower, upper) = (&pyramid.levels[k], &pyramid.levels[k + 1]);
-    fetch::trilinear([lower, upper], &plan.taps, plan.frac)
+    fetch::trilinear::<ALPHA>([lower, upper], &plan.taps, plan.frac)
 }
 
 /// Hints the cache to load the texels `plan` reads.
 #[inline(always)]
 fn prefetch_planned(pyramid: &MipPyramid, plan: &PlannedLookup) {
     let k = plan.level as usize;
-    for (level, taps) in pyramid.levels[k..=k + usize::from(plan.blend)]
-        .iter()
-        .zip(&plan.taps)
-    {
+    let prefetch_taps = |level: &MipLevel, taps: &BilinearTaps| {
         for i in taps.texels {
             level.prefetch(i as usize);
         }
+    };
+    prefetch_taps(&pyramid.levels[k], &plan.taps[0]);
+    if plan.blend {
+        prefetch_taps(&pyramid.levels[k + 1], &plan.taps[1]);
     }
 }
 
@@ -221,7 +230,7 @@ impl Kernel for Bilinear<'_> {
     #[inline(always)]
     fn run<const AVX2: bool>(self) -> Vec4 {
         let taps = BilinearTaps::new_in::<AVX2>(self.level, self.uv, self.sampler);
-        fetch::bilinear(self.level, &taps)
+        fetch::bilinear::<true>(self.level, &taps)
     }
 }
 
@@ -261,17 +270,18 @@ impl Kernel for PlanTrilinear<'_> {
     }
 }
 
-/// [`MipPyramid::sample_planned`] as a kernel.
-struct Planned<'a> {
+/// [`MipPyramid::sample_planned`] as a kernel, or [`MipPyramid::sample_planned_colour`]
+/// without `ALPHA` (its alpha lane then meaningless).
+struct Planned<'a, const ALPHA: bool> {
     pyramid: &'a MipPyramid,
     plan: &'a PlannedLookup,
 }
 
-impl Kernel for Planned<'_> {
+impl<const ALPHA: bool> Kernel for Planned<'_, ALPHA> {
     type Output = Vec4;
     #[inline(always)]
     fn run<const AVX2: bool>(self) -> Vec4 {
-        filter_planned(self.pyramid, self.plan)
+        filter_planned::<ALPHA>(self.pyramid, self.plan)
     }
 }
 
@@ -374,10 +384,23 @@ impl MipPyramid {
     /// # Panics
     /// If `plan` names a level this pyramid does not have (planned on another pyramid).
     pub fn sample_planned(&self, plan: &PlannedLookup) -> Vec4 {
-        dispatch(Planned {
+        dispatch(Planned::<true> {
             pyramid: self,
             plan,
         })
+    }
+
+    /// The colour of [`Self::sample_planned`] (its first three channels, the same bits),
+    /// for a caller that has no use for alpha: an 8-bit image's alpha codes are not
+    /// decoded, one table read fewer a texel.
+    ///
+    /// # Panics
+    /// As [`Self::sample_planned`].
+    pub fn sample_planned_colour(&self, plan: &PlannedLookup) -> Vec3A {
+        Vec3A::from_vec4(dispatch(Planned::<false> {
+            pyramid: self,
+            plan,
+        }))
     }
 
     /// Anisotropic lookup: the mean of `taps` trilinear lookups at `lod`, placed at the
@@ -954,18 +977,38 @@ mod tests {
                 assert_eq!(plans.1, plan_bilinear::<false>(p, clamped, uv, s));
                 assert_eq!(plans.0, plan_trilinear::<true>(p, uv, lod, s));
                 assert_eq!(plans.1, plan_bilinear::<true>(p, clamped, uv, s));
+                // The level a plan reports (the renderer's histogram reads it).
+                let lower = MipPyramid::split_level(p.clamp_level(lod)).0;
+                assert_eq!((plans.0.level(), plans.1.level()), (lower, clamped));
                 let planned = || {
                     (
-                        Planned {
+                        Planned::<true> {
                             pyramid: p,
                             plan: &plans.0,
                         },
-                        Planned {
+                        Planned::<true> {
                             pyramid: p,
                             plan: &plans.1,
                         },
                     )
                 };
+                // The colour alone: the same bits in its three channels, in both copies.
+                for (plan, want) in [(&plans.0, want), (&plans.1, want_bilinear)] {
+                    let colour = || Planned::<false> { pyramid: p, plan };
+                    let got = [
+                        Some(run_baseline(colour())),
+                        run_avx2_if_available(colour()),
+                    ];
+                    for got in got.into_iter().flatten() {
+                        let got = Vec4::from((Vec3A::from_vec4(got), want.w));
+                        assert!(same_bits(got, want), "colour at {uv} lod {lod} {s:?}");
+                    }
+                    let got = Vec4::from((p.sample_planned_colour(plan), want.w));
+                    assert!(
+                        same_bits(got, want),
+                        "public colour at {uv} lod {lod} {s:?}"
+                    );
+                }
                 let (pt, pb) = planned();
                 let planned_baseline = (run_baseline(pt), run_baseline(pb));
                 let (pt, pb) = planned();

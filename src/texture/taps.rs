@@ -14,9 +14,11 @@
 //! - in f64, `x = p - 0.5` is exact too (at most 48 significant bits), so `x - floor(x)` is
 //!   the same real number, and its conversion to f32 rounds nothing.
 //!
-//! Everything else (other sides, `|p| < 0.5`, huge or non-finite coordinates, Clamp and
-//! Mirror outside the image) goes to `sample::axis_in`. The tests check the shortcut against
-//! it on edge and random coordinates (`shortcut_is_exactly_the_f64_axis`).
+//! Other sides take the f64 formula itself, on both axes of a level at once in SSE2's two
+//! f64 lanes ([`two_axes`]). Everything else (`|p| < 0.5`, huge or non-finite coordinates,
+//! Clamp and Mirror outside the image) goes to `sample::axis_in`. The tests check both
+//! against it on edge and random coordinates (`shortcut_is_exactly_the_f64_axis`,
+//! `two_axes_are_exactly_the_f64_axis`).
 
 use glam::Vec2;
 
@@ -54,6 +56,12 @@ impl BilinearTaps {
     /// same bits in each, see [`axis_taps_in`]).
     #[inline(always)]
     pub fn new_in<const AVX2: bool>(level: &MipLevel, uv: Vec2, sampler: Sampler) -> BilinearTaps {
+        if !(level.width.is_power_of_two() && level.height.is_power_of_two()) {
+            let repeat = [sampler.wrap_s, sampler.wrap_t].map(|m| m == WrapMode::Repeat);
+            if let Some([x, y]) = two_axes([uv.x, uv.y], [level.width, level.height], repeat) {
+                return Self::of_axes(level, x, y);
+            }
+        }
         Self::of_axes(
             level,
             axis_taps_in::<AVX2>(uv.x, level.width, sampler.wrap_s),
@@ -181,6 +189,101 @@ fn four_axes(
         _mm_storeu_ps(weight.as_mut_ptr(), frac);
         Some((first, second, weight))
     }
+}
+
+/// `sample::axis_in` on a level's two axes at once (`t` the coordinates, `sides` the
+/// level's width and height), in f64 as that computes them, for sides of any size: the
+/// same indices and the same weight bits; `None` when a lane is not a moderate finite
+/// coordinate (`|t * n - 0.5| >= 2^30`) or leaves the image under a mode other than
+/// Repeat (`repeat[i]` false), for `axis_in` to take.
+///
+/// Why: the f32 shortcut holds only for sides that are powers of two, and images of other
+/// sizes are common (BART Kitchen's floor is 1044 texels square, tiled), so their lookups
+/// went through `axis_in` one axis at a time, with a 64-bit division for every tiled one.
+/// Here SSE2's two f64 lanes do both axes, and the Repeat remainder is
+/// `x0 - n * floor(x0 / n)`, exact: for `|x0| < 2^30` and `n <= 2^14` the quotient
+/// `x0 / n` is at least `1 / n` from any integer it does not equal, far more than its
+/// rounding error, so its floor is the integer quotient; the product and the difference
+/// are integers below 2^31, exact in f64.
+#[cfg(target_arch = "x86_64")]
+#[inline(always)]
+fn two_axes(t: [f32; 2], sides: [u32; 2], repeat: [bool; 2]) -> Option<[AxisTaps; 2]> {
+    use std::arch::x86_64::*;
+    // SAFETY: SSE2 is part of x86_64, and these intrinsics only compute on registers and
+    // store local arrays of two or four lanes.
+    unsafe {
+        let n = _mm_setr_pd(f64::from(sides[0]), f64::from(sides[1]));
+        let t = _mm_setr_pd(f64::from(t[0]), f64::from(t[1]));
+        // `axis_in`'s `t * n - 0.5`, exact (a 24-bit by 15-bit product).
+        let x = _mm_sub_pd(_mm_mul_pd(t, n), _mm_set1_pd(0.5));
+        // Moderate and finite (NaN fails the comparison), so the conversions to i32 below
+        // are exact.
+        let magnitude = _mm_andnot_pd(_mm_set1_pd(-0.0), x);
+        if _mm_movemask_pd(_mm_cmplt_pd(magnitude, _mm_set1_pd(TWO_AXES_BELOW))) != 0b11 {
+            return None;
+        }
+        let x0 = floor_moderate(x);
+        let frac = _mm_cvtpd_ps(_mm_sub_pd(x, x0));
+        let one = _mm_set1_pd(1.0);
+        let next = _mm_add_pd(x0, one);
+        // Both texels inside: `0 <= x0` and `x0 + 1 < n`.
+        let inside = _mm_and_pd(_mm_cmpge_pd(x0, _mm_setzero_pd()), _mm_cmplt_pd(next, n));
+        let repeat = _mm_castsi128_pd(_mm_setr_epi32(
+            -i32::from(repeat[0]),
+            -i32::from(repeat[0]),
+            -i32::from(repeat[1]),
+            -i32::from(repeat[1]),
+        ));
+        if _mm_movemask_pd(_mm_or_pd(repeat, inside)) != 0b11 {
+            return None;
+        }
+        // Repeat: the Euclidean remainder of `x0` and of `x0 + 1` (the second is 0 at
+        // `n - 1`); inside the image they are `x0` and `x0 + 1` themselves.
+        let wrapped = _mm_sub_pd(x0, _mm_mul_pd(floor_moderate(_mm_div_pd(x0, n)), n));
+        let wrapped_next = _mm_add_pd(wrapped, one);
+        let wrapped_next = _mm_andnot_pd(_mm_cmpeq_pd(wrapped_next, n), wrapped_next);
+        let select = |wrapped: __m128d, plain: __m128d| {
+            _mm_or_pd(_mm_and_pd(repeat, wrapped), _mm_andnot_pd(repeat, plain))
+        };
+        let (mut first, mut second, mut weight) = ([0i32; 4], [0i32; 4], [0.0f32; 4]);
+        _mm_storeu_si128(
+            first.as_mut_ptr().cast(),
+            _mm_cvttpd_epi32(select(wrapped, x0)),
+        );
+        _mm_storeu_si128(
+            second.as_mut_ptr().cast(),
+            _mm_cvttpd_epi32(select(wrapped_next, next)),
+        );
+        _mm_storeu_ps(weight.as_mut_ptr(), frac);
+        let axis = |i: usize| (first[i] as usize, second[i] as usize, weight[i]);
+        Some([axis(0), axis(1)])
+    }
+}
+
+/// Largest `|t * n - 0.5|` [`two_axes`] takes: its floors convert through `i32`.
+const TWO_AXES_BELOW: f64 = 1_073_741_824.0; // 2^30
+
+/// `floor(x)` lane by lane for `|x| < 2^31`, in SSE2 (the rounding instruction is SSE4.1):
+/// the truncation, one less where it rounded up. Exact; `x` is never `-0.0` here (see
+/// [`two_axes`]: `t * n - 0.5` and `x0 / n` with `x0` an integer of either sign), so the
+/// sign of a zero floor does not matter.
+#[cfg(target_arch = "x86_64")]
+#[inline(always)]
+fn floor_moderate(x: std::arch::x86_64::__m128d) -> std::arch::x86_64::__m128d {
+    use std::arch::x86_64::*;
+    // SAFETY: SSE2 is part of x86_64; the intrinsics compute on registers only.
+    unsafe {
+        let truncated = _mm_cvtepi32_pd(_mm_cvttpd_epi32(x));
+        let rounded_up = _mm_cmpgt_pd(truncated, x);
+        _mm_sub_pd(truncated, _mm_and_pd(rounded_up, _mm_set1_pd(1.0)))
+    }
+}
+
+/// [`two_axes`] where there is no SSE2: `None` (each axis alone).
+#[cfg(not(target_arch = "x86_64"))]
+#[inline(always)]
+fn two_axes(_: [f32; 2], _: [u32; 2], _: [bool; 2]) -> Option<[AxisTaps; 2]> {
+    None
 }
 
 /// [`four_axes`] where there is no SSE2: no shortcut (each level alone).
@@ -336,6 +439,61 @@ mod tests {
         assert!(shortcut > 30_000, "{shortcut}");
     }
 
+    /// Both axes of a level in f64 lanes: `axis`'s indices and weight bits on every lane
+    /// they take, at the edge and random coordinates above, on sides of every kind (not
+    /// powers of two, 1, the largest), under every pair of wrap modes; and they do take
+    /// many.
+    #[test]
+    fn two_axes_are_exactly_the_f64_axis() {
+        let modes = [
+            WrapMode::Repeat,
+            WrapMode::ClampToEdge,
+            WrapMode::MirroredRepeat,
+        ];
+        let mut seed = 0x5851_f42d_4c95_7f2d_u64;
+        let (mut compared, mut taken) = (0, 0);
+        for sides in [
+            [1044, 1044],
+            [522, 3],
+            [1, 7],
+            [1000, 16384],
+            [12, 20],
+            [1024, 333],
+        ] {
+            let us = hard_coordinates(sides[0], &mut seed);
+            let vs = hard_coordinates(sides[1], &mut seed);
+            for (i, &u) in us.iter().enumerate() {
+                let t = [u, vs[(i * 13) % vs.len()]];
+                for wrap_s in modes {
+                    for wrap_t in modes {
+                        let mode = [wrap_s, wrap_t];
+                        let repeat = mode.map(|m| m == WrapMode::Repeat);
+                        compared += 1;
+                        let Some(got) = two_axes(t, sides, repeat) else {
+                            continue;
+                        };
+                        taken += 1;
+                        for k in 0..2 {
+                            let want = axis(t[k], sides[k], mode[k]);
+                            assert_eq!(
+                                (got[k].0, got[k].1, got[k].2.to_bits()),
+                                (want.0, want.1, want.2.to_bits()),
+                                "t {:e}, n {}, {:?}",
+                                t[k],
+                                sides[k],
+                                mode[k]
+                            );
+                        }
+                    }
+                }
+            }
+        }
+        // (Most pairs leave the image under Clamp or Mirror on an axis: those are `axis_in`'s.)
+        #[cfg(target_arch = "x86_64")]
+        assert!(taken > 20_000, "{taken} of {compared}");
+        assert!(compared > 50_000, "{compared}");
+    }
+
     #[test]
     fn taps_read_the_four_texels_around_the_point() {
         let level = level(8, 4);
@@ -397,13 +555,24 @@ mod tests {
                 for wrap_s in modes {
                     for wrap_t in modes {
                         let sampler = Sampler { wrap_s, wrap_t };
-                        let alone = [
-                            BilinearTaps::new(a, uv, sampler),
-                            BilinearTaps::new(b, uv, sampler),
-                        ];
+                        // Each level alone, one axis at a time in f64.
+                        let reference = |l: &MipLevel| {
+                            BilinearTaps::of_axes(
+                                l,
+                                axis(uv.x, l.width, wrap_s),
+                                axis(uv.y, l.height, wrap_t),
+                            )
+                        };
+                        let alone = [reference(a), reference(b)];
                         let bits = |t: [BilinearTaps; 2]| {
                             t.map(|t| (t.texels, t.fx.to_bits(), t.fy.to_bits()))
                         };
+                        for copy in [
+                            [a, b].map(|l| BilinearTaps::new_in::<false>(l, uv, sampler)),
+                            [a, b].map(|l| BilinearTaps::new_in::<true>(l, uv, sampler)),
+                        ] {
+                            assert_eq!(bits(copy), bits(alone), "{uv} {sampler:?}");
+                        }
                         for pair in [
                             BilinearTaps::pair_in::<false>([a, b], uv, sampler),
                             BilinearTaps::pair_in::<true>([a, b], uv, sampler),
