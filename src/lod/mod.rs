@@ -567,9 +567,8 @@ mod tests {
 
     /// `fast_log2`'s mantissa reduction as a branch, as it was first written: the bit form
     /// gives the same exponent and mantissa, so the same bits, for every positive normal
-    /// float (all 2^31 - 2^24 - 2^23 of them are too many for a test; every mantissa near
-    /// the `sqrt(2)` threshold and at the ends, under every exponent, and a stride of the
-    /// rest).
+    /// float (all 2^31 - 2^24 of them are too many for a test; every mantissa near the
+    /// `sqrt(2)` threshold and at the ends, under every exponent, and a stride of the rest).
     #[test]
     fn fast_log2_reduces_the_mantissa_as_the_branch_did() {
         let branch = |x: f32| {

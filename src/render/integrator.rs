@@ -338,18 +338,19 @@ impl FrameScene<'_> {
         combine.evaluate(|child| children[child as usize])
     }
 
-    /// The method's level with the bias, and the level the pyramid lookup uses.
+    /// The method's level with the bias, and the level the pyramid lookup uses
+    /// ([`Self::lookup_level`]).
     pub(super) fn biased_level(&self, footprint: &Footprint, pyramid: &MipPyramid) -> (f32, f32) {
         match footprint {
             Footprint::Base => (0.0, 0.0),
-            f => {
-                let level = finite_level(f.level() + self.lod_bias);
-                (level, pyramid.clamp_level(level))
-            }
+            f => (
+                finite_level(f.level() + self.lod_bias),
+                self.lookup_level(f, pyramid),
+            ),
         }
     }
 
-    /// The second value of [`Self::biased_level`] alone (the lookup's level), the same bits.
+    /// The level a lookup uses: the second value of [`Self::biased_level`].
     #[inline(always)]
     fn lookup_level(&self, footprint: &Footprint, pyramid: &MipPyramid) -> f32 {
         match footprint {

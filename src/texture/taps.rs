@@ -14,9 +14,10 @@
 //! - in f64, `x = p - 0.5` is exact too (at most 48 significant bits), so `x - floor(x)` is
 //!   the same real number, and its conversion to f32 rounds nothing.
 //!
-//! Other sides take the f64 formula itself, on both axes of a level at once in SSE2's two
-//! f64 lanes ([`two_axes`]). Everything else (`|p| < 0.5`, huge or non-finite coordinates,
-//! Clamp and Mirror outside the image) goes to `sample::axis_in`. The tests check both
+//! A level whose sides are not both powers of two takes the f64 formula itself, on both
+//! axes at once in SSE2's two f64 lanes ([`two_axes`]). Everything else (on a power-of-two
+//! side `|p| < 0.5`; huge or non-finite coordinates; Clamp and Mirror outside the image)
+//! goes to `sample::axis_in`, one axis at a time. The tests check both
 //! against it on edge and random coordinates (`shortcut_is_exactly_the_f64_axis`,
 //! `two_axes_are_exactly_the_f64_axis`).
 
@@ -194,14 +195,14 @@ fn four_axes(
 /// `sample::axis_in` on a level's two axes at once (`t` the coordinates, `sides` the
 /// level's width and height), in f64 as that computes them, for sides of any size: the
 /// same indices and the same weight bits; `None` when a lane is not a moderate finite
-/// coordinate (`|t * n - 0.5| >= 2^30`) or leaves the image under a mode other than
+/// coordinate (`|t * n - 0.5| >= 2^30`), or leaves the image under a mode other than
 /// Repeat (`repeat[i]` false), for `axis_in` to take.
 ///
 /// Why: the f32 shortcut holds only for sides that are powers of two, and images of other
 /// sizes are common (BART Kitchen's floor is 1044 texels square, tiled), so their lookups
 /// went through `axis_in` one axis at a time, with a 64-bit division for every tiled one.
 /// Here SSE2's two f64 lanes do both axes, and the Repeat remainder is
-/// `x0 - n * floor(x0 / n)`, exact: for `|x0| < 2^30` and `n <= 2^14` the quotient
+/// `x0 - n * floor(x0 / n)`, exact: for `|x0| <= 2^30` and `n <= 2^14` the quotient
 /// `x0 / n` is at least `1 / n` from any integer it does not equal, far more than its
 /// rounding error, so its floor is the integer quotient; the product and the difference
 /// are integers below 2^31, exact in f64.
@@ -214,7 +215,8 @@ fn two_axes(t: [f32; 2], sides: [u32; 2], repeat: [bool; 2]) -> Option<[AxisTaps
     unsafe {
         let n = _mm_setr_pd(f64::from(sides[0]), f64::from(sides[1]));
         let t = _mm_setr_pd(f64::from(t[0]), f64::from(t[1]));
-        // `axis_in`'s `t * n - 0.5`, exact (a 24-bit by 15-bit product).
+        // `axis_in`'s `t * n - 0.5`, the same two operations (the product is exact: 24 by
+        // 15 bits).
         let x = _mm_sub_pd(_mm_mul_pd(t, n), _mm_set1_pd(0.5));
         // Moderate and finite (NaN fails the comparison), so the conversions to i32 below
         // are exact.
@@ -460,8 +462,24 @@ mod tests {
             [12, 20],
             [1024, 333],
         ] {
-            let us = hard_coordinates(sides[0], &mut seed);
+            let mut us = hard_coordinates(sides[0], &mut seed);
             let vs = hard_coordinates(sides[1], &mut seed);
+            // Around the lanes' limit `|t * n - 0.5| < 2^30`, on both sides of zero.
+            for p in [
+                TWO_AXES_BELOW - 4096.0,
+                TWO_AXES_BELOW,
+                TWO_AXES_BELOW + 4096.0,
+            ] {
+                let t = (p / f64::from(sides[0])) as f32;
+                us.extend([
+                    t,
+                    t.next_down(),
+                    t.next_up(),
+                    -t,
+                    -t.next_down(),
+                    -t.next_up(),
+                ]);
+            }
             for (i, &u) in us.iter().enumerate() {
                 let t = [u, vs[(i * 13) % vs.len()]];
                 for wrap_s in modes {
