@@ -345,7 +345,7 @@ impl FrameScene<'_> {
             Footprint::Base => (0.0, 0.0),
             f => (
                 finite_level(f.level() + self.lod_bias),
-                self.lookup_level(f, pyramid),
+                clamped_biased_level(f.level(), self.lod_bias, pyramid),
             ),
         }
     }

@@ -17,8 +17,8 @@
 //! A level whose sides are not both powers of two takes the f64 formula itself, on both
 //! axes at once in SSE2's two f64 lanes ([`two_axes`]). Everything else (on a power-of-two
 //! side `|p| < 0.5`; huge or non-finite coordinates; Clamp and Mirror outside the image)
-//! goes to `sample::axis_in`, one axis at a time. The tests check both
-//! against it on edge and random coordinates (`shortcut_is_exactly_the_f64_axis`,
+//! goes to `sample::axis_in`, one axis at a time. The tests check both against it on edge
+//! and random coordinates (`shortcut_is_exactly_the_f64_axis`,
 //! `two_axes_are_exactly_the_f64_axis`).
 
 use glam::Vec2;
@@ -361,6 +361,13 @@ mod tests {
     use crate::texture::WrapMode;
     use glam::Vec4;
 
+    /// Every wrap mode.
+    const MODES: [WrapMode; 3] = [
+        WrapMode::Repeat,
+        WrapMode::ClampToEdge,
+        WrapMode::MirroredRepeat,
+    ];
+
     fn level(w: u32, h: u32) -> MipLevel {
         MipLevel::linear(w, h, vec![Vec4::ZERO; (w * h) as usize])
     }
@@ -409,11 +416,7 @@ mod tests {
         let mut shortcut = 0;
         for n in [1u32, 2, 8, 512, 1024, 16384, 1044, 3, 1000] {
             for t in hard_coordinates(n, &mut seed) {
-                for mode in [
-                    WrapMode::Repeat,
-                    WrapMode::ClampToEdge,
-                    WrapMode::MirroredRepeat,
-                ] {
+                for mode in MODES {
                     let want = axis(t, n, mode);
                     // Both copies' formulas (the floors by truncation and by rounding),
                     // bit for bit, the weight included.
@@ -447,11 +450,6 @@ mod tests {
     /// many.
     #[test]
     fn two_axes_are_exactly_the_f64_axis() {
-        let modes = [
-            WrapMode::Repeat,
-            WrapMode::ClampToEdge,
-            WrapMode::MirroredRepeat,
-        ];
         let mut seed = 0x5851_f42d_4c95_7f2d_u64;
         let (mut compared, mut taken) = (0, 0);
         for sides in [
@@ -482,8 +480,8 @@ mod tests {
             }
             for (i, &u) in us.iter().enumerate() {
                 let t = [u, vs[(i * 13) % vs.len()]];
-                for wrap_s in modes {
-                    for wrap_t in modes {
+                for wrap_s in MODES {
+                    for wrap_t in MODES {
                         let mode = [wrap_s, wrap_t];
                         let repeat = mode.map(|m| m == WrapMode::Repeat);
                         compared += 1;
@@ -558,11 +556,6 @@ mod tests {
         ] {
             pairs.push([level(w, h), level(w2, h2)]);
         }
-        let modes = [
-            WrapMode::Repeat,
-            WrapMode::ClampToEdge,
-            WrapMode::MirroredRepeat,
-        ];
         let mut seed = 0x9d2c_5680_1b87_3a4f_u64;
         let (mut compared, mut four_at_once) = (0, 0);
         for [a, b] in &pairs {
@@ -570,8 +563,8 @@ mod tests {
             let vs = hard_coordinates(a.height, &mut seed);
             for (i, &u) in us.iter().enumerate() {
                 let uv = Vec2::new(u, vs[(i * 7) % vs.len()]);
-                for wrap_s in modes {
-                    for wrap_t in modes {
+                for wrap_s in MODES {
+                    for wrap_t in MODES {
                         let sampler = Sampler { wrap_s, wrap_t };
                         // Each level alone, one axis at a time in f64.
                         let reference = |l: &MipLevel| {

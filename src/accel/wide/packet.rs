@@ -976,9 +976,9 @@ trait PacketLeaf {
 
 /// A leaf run once with every ray of a packet inside its box: `visit(rays, leaf_ref, count,
 /// limits)` with the rays in ray order, or, from the packet walk, `visit_entering` with
-/// their mask (which lists them for `visit` unless the leaf takes the mask). `AVX` is true in the walk's AVX2 copy, so a leaf
-/// test that computes across rays can use [`crate::simd::F32x8`]'s AVX operations. Closures
-/// implement it (ignoring `AVX`).
+/// their mask (which lists them for `visit` unless the leaf takes the mask). `AVX` is true
+/// in the walk's AVX2 copy, so a leaf test that computes across rays can use
+/// [`crate::simd::F32x8`]'s AVX operations. Closures implement it (ignoring `AVX`).
 pub trait GatheredLeaf {
     /// Whether `visit` may stop a ray (set its limit below 0, as any-hit leaves do). A
     /// masked walk looks for stopped rays after each leaf only where it may: closest-hit
