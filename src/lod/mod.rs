@@ -444,11 +444,13 @@ pub trait RayLod: Copy + Send + Sync {
 /// Non-positive and NaN inputs give -126 (the finest level after clamping), +inf gives 128.
 #[inline]
 pub fn fast_log2(x: f32) -> f32 {
-    if !(x >= f32::MIN_POSITIVE) {
-        return -126.0;
-    }
-    if x > f32::MAX {
-        return 128.0;
+    // Positive normal finite `x` is exactly the bits `MIN_POSITIVE..=MAX`: one unsigned
+    // comparison lets them through (negative values have the sign bit, NaN and the
+    // infinities the largest exponent, zero and subnormals the smallest).
+    const NORMAL_FIRST: u32 = f32::MIN_POSITIVE.to_bits();
+    const NORMAL_COUNT: u32 = f32::MAX.to_bits() - NORMAL_FIRST + 1;
+    if x.to_bits().wrapping_sub(NORMAL_FIRST) >= NORMAL_COUNT {
+        return if x > f32::MAX { 128.0 } else { -126.0 };
     }
     // x = 2^e m with m in [1, 2); where m > sqrt(2) (in f32) it reads as 2^(e + 1) (m / 2).
     // Both in the bits, without a branch (which half a hit's length falls in is as good as
@@ -633,6 +635,20 @@ mod tests {
         assert_eq!(fast_log2(-3.0), -126.0);
         assert_eq!(fast_log2(f32::NAN), -126.0);
         assert_eq!(fast_log2(f32::INFINITY), 128.0);
+        // The ends of the one comparison that lets positive normal values through.
+        assert_eq!(fast_log2(f32::MIN_POSITIVE), -126.0);
+        assert!((fast_log2(f32::MAX) - 128.0).abs() < 1e-5);
+        for outside in [
+            f32::MIN_POSITIVE.next_down(),
+            f32::from_bits(1),
+            -0.0,
+            -f32::MIN_POSITIVE,
+            f32::MIN,
+            f32::NEG_INFINITY,
+            -f32::NAN,
+        ] {
+            assert_eq!(fast_log2(outside), -126.0, "{outside:e}");
+        }
     }
 
     #[test]

@@ -13,6 +13,7 @@ use glam::Vec4;
 
 use super::taps::BilinearTaps;
 use super::{MipLevel, Texels};
+use crate::simd::F32x8;
 
 /// The bilinear blend of one level's four texels (in [`BilinearTaps::texels`] order): the
 /// formula of every lookup.
@@ -57,16 +58,50 @@ pub(super) fn bilinear<const ALPHA: bool>(level: &MipLevel, taps: &BilinearTaps)
 }
 
 /// Trilinear lookup: bilinear in `levels[0]` and `levels[1]` at their taps, blended by
-/// `frac` (the weight of `levels[1]`).
+/// `frac` (the weight of `levels[1]`). The AVX2 copy makes both levels' bilinear blends at
+/// once ([`two_bilinear_blends`]).
 #[inline(always)]
-pub(super) fn trilinear<const ALPHA: bool>(
+pub(super) fn trilinear<const ALPHA: bool, const AVX2: bool>(
     levels: [&MipLevel; 2],
     taps: &[BilinearTaps; 2],
     frac: f32,
 ) -> Vec4 {
-    level_blend(
-        bilinear::<ALPHA>(levels[0], &taps[0]),
-        bilinear::<ALPHA>(levels[1], &taps[1]),
-        frac,
-    )
+    let [lower, upper] = if AVX2 {
+        two_bilinear_blends(
+            [
+                texels::<ALPHA>(levels[0], &taps[0]),
+                texels::<ALPHA>(levels[1], &taps[1]),
+            ],
+            taps,
+        )
+    } else {
+        [
+            bilinear::<ALPHA>(levels[0], &taps[0]),
+            bilinear::<ALPHA>(levels[1], &taps[1]),
+        ]
+    };
+    level_blend(lower, upper, frac)
+}
+
+/// [`bilinear_blend`] of two levels' texels in the eight lanes of AVX (the first level's
+/// channels in lanes 0 to 3, the second's in 4 to 7): the same operations on the same
+/// operands lane by lane, so the same bits, in half the arithmetic instructions. Only
+/// called from the AVX2 copy.
+#[inline(always)]
+fn two_bilinear_blends(texels: [[Vec4; 4]; 2], taps: &[BilinearTaps; 2]) -> [Vec4; 2] {
+    let [a, b] = texels;
+    let pair = |i: usize| {
+        F32x8(std::array::from_fn(|l| {
+            if l < 4 { a[i][l] } else { b[i][l - 4] }
+        }))
+    };
+    let weights = |w: [f32; 2]| F32x8(std::array::from_fn(|l| w[l / 4]));
+    let fx = weights([taps[0].fx, taps[1].fx]);
+    let fy = weights([taps[0].fy, taps[1].fy]);
+    let one = F32x8::splat(1.0);
+    let (gx, gy) = (one.sub::<true>(fx), one.sub::<true>(fy));
+    let row0 = pair(0).mul::<true>(gx).add::<true>(pair(1).mul::<true>(fx));
+    let row1 = pair(2).mul::<true>(gx).add::<true>(pair(3).mul::<true>(fx));
+    let both = row0.mul::<true>(gy).add::<true>(row1.mul::<true>(fy)).0;
+    [0, 4].map(|l| Vec4::new(both[l], both[l + 1], both[l + 2], both[l + 3]))
 }

@@ -310,8 +310,26 @@ impl MipPyramid {
 
     /// Maps any level to [0, last]: NaN -> 0, +inf -> last, negative -> 0.
     pub fn clamp_level(&self, lod: f32) -> f32 {
-        // `f32::max` returns the non-NaN operand, so NaN becomes 0 here.
-        lod.max(0.0).min((self.levels.len() - 1) as f32)
+        // `f32::max` returns the non-NaN operand, so NaN becomes 0 here. The last level's
+        // number through `u32` (at most 14, see `MAX_SIZE`): one conversion, where x86-64
+        // converts a `usize` with a sign test and two paths.
+        lod.max(0.0).min((self.levels.len() - 1) as u32 as f32)
+    }
+
+    /// [`Self::split_level`] of [`Self::clamp_level`]: the level a lookup at `lod` reads
+    /// and the fraction towards the next one.
+    #[inline(always)]
+    pub fn clamp_and_split_level(&self, lod: f32) -> (usize, f32) {
+        let lod = self.clamp_level(lod);
+        // In `[0, last]` (finite, at most 14) truncation is the floor and needs no
+        // saturation: on x86-64 one conversion instruction, not `as u32`'s conversion,
+        // two comparisons and two selects.
+        #[cfg(target_arch = "x86_64")]
+        // SAFETY: SSE is part of x86_64; the intrinsics compute on registers only.
+        let k = unsafe { std::arch::x86_64::_mm_cvttss_si32(std::arch::x86_64::_mm_set_ss(lod)) };
+        #[cfg(not(target_arch = "x86_64"))]
+        let k = lod as i32;
+        (k as usize, lod - k as f32)
     }
 
     /// The level below `lod` (a level in `[0, last]`, as [`Self::clamp_level`] gives it)
@@ -321,8 +339,8 @@ impl MipPyramid {
         // In `[0, last]` truncation is the floor. Through `u32`: x86-64 converts an `f32`
         // to a `usize` with two conversions and a select (no unsigned 64-bit conversion
         // before AVX-512), to a `u32` with one, and both saturate (NaN gives 0).
-        let k = lod as u32 as usize;
-        (k, lod - k as f32)
+        let k = lod as u32;
+        (k as usize, lod - k as f32)
     }
 }
 

@@ -127,7 +127,7 @@ pub(super) fn wrap(i: i64, n: i64, mode: WrapMode) -> usize {
 /// Trilinear lookup at `lod` (see [`MipPyramid::sample_trilinear`]).
 #[inline(always)]
 fn trilinear<const AVX2: bool>(pyramid: &MipPyramid, uv: Vec2, lod: f32, sampler: Sampler) -> Vec4 {
-    filter_planned::<true>(pyramid, &plan_trilinear::<AVX2>(pyramid, uv, lod, sampler))
+    filter_planned::<true, AVX2>(pyramid, &plan_trilinear::<AVX2>(pyramid, uv, lod, sampler))
 }
 
 /// Where a bilinear or trilinear lookup reads: its level (or two levels, blended by
@@ -177,7 +177,7 @@ fn plan_trilinear<const AVX2: bool>(
     lod: f32,
     sampler: Sampler,
 ) -> PlannedLookup {
-    let (k, frac) = MipPyramid::split_level(pyramid.clamp_level(lod));
+    let (k, frac) = pyramid.clamp_and_split_level(lod);
     let levels = &pyramid.levels;
     if frac == 0.0 || k + 1 >= levels.len() {
         // Integer level (including 0, magnification, and the last level): no blend, so
@@ -194,13 +194,16 @@ fn plan_trilinear<const AVX2: bool>(
 
 /// The lookup `plan` describes (an 8-bit level's alpha decoded only when `ALPHA`).
 #[inline(always)]
-fn filter_planned<const ALPHA: bool>(pyramid: &MipPyramid, plan: &PlannedLookup) -> Vec4 {
+fn filter_planned<const ALPHA: bool, const AVX2: bool>(
+    pyramid: &MipPyramid,
+    plan: &PlannedLookup,
+) -> Vec4 {
     let k = plan.level as usize;
     if !plan.blend {
         return fetch::bilinear::<ALPHA>(&pyramid.levels[k], &plan.taps[0]);
     }
     let (lower, upper) = (&pyramid.levels[k], &pyramid.levels[k + 1]);
-    fetch::trilinear::<ALPHA>([lower, upper], &plan.taps, plan.frac)
+    fetch::trilinear::<ALPHA, AVX2>([lower, upper], &plan.taps, plan.frac)
 }
 
 /// Hints the cache to load the texels `plan` reads.
@@ -281,7 +284,7 @@ impl<const ALPHA: bool> Kernel for Planned<'_, ALPHA> {
     type Output = Vec4;
     #[inline(always)]
     fn run<const AVX2: bool>(self) -> Vec4 {
-        filter_planned::<ALPHA>(self.pyramid, self.plan)
+        filter_planned::<ALPHA, AVX2>(self.pyramid, self.plan)
     }
 }
 
@@ -705,6 +708,39 @@ mod tests {
         assert_eq!(p.clamp_level(f32::INFINITY), last as f32);
         assert_eq!(p.clamp_level(-3.0), 0.0);
         assert_eq!(p.clamp_level(1.25), 1.25);
+        // Clamped and split in one step (the plans' way, one conversion without
+        // saturation): the split of the clamped level, bit for bit, everywhere.
+        let lasts = [
+            last as f32,
+            (last as f32).next_down(),
+            (last as f32).next_up(),
+        ];
+        for lod in [
+            f32::NAN,
+            -f32::NAN,
+            f32::INFINITY,
+            f32::NEG_INFINITY,
+            -0.0,
+            0.0,
+        ]
+        .into_iter()
+        .chain([
+            f32::MIN_POSITIVE,
+            1e-30,
+            0.5,
+            1.0,
+            1.0f32.next_down(),
+            2.75,
+            1e9,
+            -1e9,
+        ])
+        .chain(lasts)
+        {
+            let (k, frac) = p.clamp_and_split_level(lod);
+            let (want_k, want_frac) = MipPyramid::split_level(p.clamp_level(lod));
+            assert_eq!((k, frac.to_bits()), (want_k, want_frac.to_bits()), "{lod}");
+            assert!(k <= last && (0.0..1.0).contains(&frac), "{lod}");
+        }
     }
 
     #[test]
@@ -971,11 +1007,14 @@ mod tests {
                 let clamped = level.min(p.level_count() - 1);
                 // Planned and filtered later: the public plans (which also prefetch, in
                 // the AVX2 copy where the CPU has it) are the baseline copy's plans, and
-                // so is the other copy's, run here outside its kernel.
+                // so is the other copy's, run here outside its kernel (where the CPU has
+                // AVX2: a pair of levels whose sides are not powers of two takes AVX).
                 let plans = (p.plan_trilinear(uv, lod, s), p.plan_bilinear(level, uv, s));
                 assert_eq!(plans.0, plan_trilinear::<false>(p, uv, lod, s));
                 assert_eq!(plans.1, plan_bilinear::<false>(p, clamped, uv, s));
-                assert_eq!(plans.0, plan_trilinear::<true>(p, uv, lod, s));
+                if crate::simd::Isa::cpu_has_avx2() {
+                    assert_eq!(plans.0, plan_trilinear::<true>(p, uv, lod, s));
+                }
                 assert_eq!(plans.1, plan_bilinear::<true>(p, clamped, uv, s));
                 // The level a plan reports (the renderer's histogram reads it).
                 let lower = MipPyramid::split_level(p.clamp_level(lod)).0;

@@ -113,6 +113,15 @@ impl BilinearTaps {
                 ];
             }
         }
+        #[cfg(target_arch = "x86_64")]
+        if AVX2 {
+            let repeat = [sampler.wrap_s, sampler.wrap_t].map(|m| m == WrapMode::Repeat);
+            // SAFETY: `AVX2` is true only in the copy `simd::dispatch` runs where the CPU has
+            // AVX2 (and in tests that check the CPU first).
+            if let Some([xa, ya, xb, yb]) = unsafe { four_axes_f64([uv.x, uv.y], sides, repeat) } {
+                return [Self::of_axes(a, xa, ya), Self::of_axes(b, xb, yb)];
+            }
+        }
         // Written out, not `levels.map`: a closure the compiler leaves out of line loses
         // the AVX2 copy's rounding instructions (its floors became library calls).
         [
@@ -260,6 +269,71 @@ fn two_axes(t: [f32; 2], sides: [u32; 2], repeat: [bool; 2]) -> Option<[AxisTaps
         let axis = |i: usize| (first[i] as usize, second[i] as usize, weight[i]);
         Some([axis(0), axis(1)])
     }
+}
+
+/// [`two_axes`] on both levels of a pair at once, in AVX's four f64 lanes (`sides` the
+/// levels' widths and heights, `t` the coordinates, `repeat` per axis as there): the same
+/// operations lane by lane, so the same indices and weight bits, or `None` where
+/// `two_axes` gives `None` for either level. The floors are the rounding instruction's
+/// (exact, as [`floor_moderate`] is, and no lane is `-0.0`, see there).
+///
+/// Why: a trilinear lookup in an image whose sides are not powers of two (BART Kitchen's
+/// floor) computed the two levels' axes one level at a time.
+///
+/// # Safety
+/// The CPU must have AVX.
+#[cfg(target_arch = "x86_64")]
+#[inline]
+#[target_feature(enable = "avx")]
+unsafe fn four_axes_f64(t: [f32; 2], sides: [u32; 4], repeat: [bool; 2]) -> Option<[AxisTaps; 4]> {
+    use std::arch::x86_64::*;
+    let n = _mm256_setr_pd(
+        f64::from(sides[0]),
+        f64::from(sides[1]),
+        f64::from(sides[2]),
+        f64::from(sides[3]),
+    );
+    let [u, v] = t.map(f64::from);
+    let x = _mm256_sub_pd(
+        _mm256_mul_pd(_mm256_setr_pd(u, v, u, v), n),
+        _mm256_set1_pd(0.5),
+    );
+    let magnitude = _mm256_andnot_pd(_mm256_set1_pd(-0.0), x);
+    let moderate = _mm256_cmp_pd::<_CMP_LT_OQ>(magnitude, _mm256_set1_pd(TWO_AXES_BELOW));
+    if _mm256_movemask_pd(moderate) != 0b1111 {
+        return None;
+    }
+    let x0 = _mm256_floor_pd(x);
+    let frac = _mm256_cvtpd_ps(_mm256_sub_pd(x, x0));
+    let one = _mm256_set1_pd(1.0);
+    let next = _mm256_add_pd(x0, one);
+    let inside = _mm256_and_pd(
+        _mm256_cmp_pd::<_CMP_GE_OQ>(x0, _mm256_setzero_pd()),
+        _mm256_cmp_pd::<_CMP_LT_OQ>(next, n),
+    );
+    let [s, t] = repeat.map(|r| -i64::from(r));
+    let repeat = _mm256_castsi256_pd(_mm256_setr_epi64x(s, t, s, t));
+    if _mm256_movemask_pd(_mm256_or_pd(repeat, inside)) != 0b1111 {
+        return None;
+    }
+    let wrapped = _mm256_sub_pd(x0, _mm256_mul_pd(_mm256_floor_pd(_mm256_div_pd(x0, n)), n));
+    let wrapped_next = _mm256_add_pd(wrapped, one);
+    let wrapped_next = _mm256_andnot_pd(_mm256_cmp_pd::<_CMP_EQ_OQ>(wrapped_next, n), wrapped_next);
+    let (mut first, mut second, mut weight) = ([0i32; 4], [0i32; 4], [0.0f32; 4]);
+    // SAFETY: unaligned stores of four lanes into local arrays of four.
+    unsafe {
+        _mm_storeu_si128(
+            first.as_mut_ptr().cast(),
+            _mm256_cvttpd_epi32(_mm256_blendv_pd(x0, wrapped, repeat)),
+        );
+        _mm_storeu_si128(
+            second.as_mut_ptr().cast(),
+            _mm256_cvttpd_epi32(_mm256_blendv_pd(next, wrapped_next, repeat)),
+        );
+        _mm_storeu_ps(weight.as_mut_ptr(), frac);
+    }
+    let axis = |i: usize| (first[i] as usize, second[i] as usize, weight[i]);
+    Some([axis(0), axis(1), axis(2), axis(3)])
 }
 
 /// Largest `|t * n - 0.5|` [`two_axes`] takes: its floors convert through `i32`.
@@ -524,8 +598,9 @@ mod tests {
         assert_eq!(taps.fx, 0.5);
     }
 
-    /// The taps of a pair of levels, four axes at a time where they can be, are each
-    /// level's own taps bit for bit, with both copies' formulas: on pairs of float levels of any sizes
+    /// The taps of a pair of levels, four axes at a time where they can be (f32 lanes, or in
+    /// the AVX2 copy f64 lanes), are each level's own taps bit for bit, with both copies'
+    /// formulas: on pairs of float levels of any sizes
     /// (powers of two or not, sides of 1), on consecutive 8-bit levels (blocked storage),
     /// at the edge and random coordinates above, under every pair of wrap modes.
     #[test]
@@ -557,7 +632,8 @@ mod tests {
             pairs.push([level(w, h), level(w2, h2)]);
         }
         let mut seed = 0x9d2c_5680_1b87_3a4f_u64;
-        let (mut compared, mut four_at_once) = (0, 0);
+        let avx2 = crate::simd::Isa::cpu_has_avx2();
+        let (mut compared, mut four_at_once, mut f64_at_once) = (0, 0, 0);
         for [a, b] in &pairs {
             let us = hard_coordinates(a.width, &mut seed);
             let vs = hard_coordinates(a.height, &mut seed);
@@ -584,10 +660,11 @@ mod tests {
                         ] {
                             assert_eq!(bits(copy), bits(alone), "{uv} {sampler:?}");
                         }
-                        for pair in [
-                            BilinearTaps::pair_in::<false>([a, b], uv, sampler),
-                            BilinearTaps::pair_in::<true>([a, b], uv, sampler),
-                        ] {
+                        let pair = BilinearTaps::pair_in::<false>([a, b], uv, sampler);
+                        assert_eq!(bits(pair), bits(alone), "{uv} {sampler:?}");
+                        // The AVX2 copy's formula (it takes AVX) where the CPU has it.
+                        if avx2 {
+                            let pair = BilinearTaps::pair_in::<true>([a, b], uv, sampler);
                             assert_eq!(bits(pair), bits(alone), "{uv} {sampler:?}");
                         }
                         compared += 1;
@@ -595,10 +672,17 @@ mod tests {
                         let scaled = [0, 1, 2, 3].map(|i| [uv.x, uv.y][i % 2] * sides[i] as f32);
                         let repeat =
                             [wrap_s, wrap_t, wrap_s, wrap_t].map(|m| m == WrapMode::Repeat);
-                        four_at_once += usize::from(
-                            sides.iter().all(|n| n.is_power_of_two())
-                                && four_axes(scaled, sides.map(|n| n as i32 - 1), repeat).is_some(),
-                        );
+                        let f32_lanes = sides.iter().all(|n| n.is_power_of_two())
+                            && four_axes(scaled, sides.map(|n| n as i32 - 1), repeat).is_some();
+                        four_at_once += usize::from(f32_lanes);
+                        #[cfg(target_arch = "x86_64")]
+                        if avx2 && !f32_lanes {
+                            let two_levels = [repeat[0], repeat[1]];
+                            // SAFETY: the CPU has AVX2 (checked above).
+                            let f64_lanes =
+                                unsafe { four_axes_f64([uv.x, uv.y], sides, two_levels) };
+                            f64_at_once += usize::from(f64_lanes.is_some());
+                        }
                     }
                 }
             }
@@ -611,6 +695,12 @@ mod tests {
             compared - four_at_once > 20_000,
             "{four_at_once} of {compared}"
         );
+        // And the AVX2 copy's f64 lanes for both levels, where the f32 ones do not apply.
+        if avx2 {
+            assert!(f64_at_once > 10_000, "{f64_at_once} of {compared}");
+        } else {
+            println!("no AVX2 on this CPU: the AVX2 copy's pair taps were not compared");
+        }
     }
 
     #[test]
