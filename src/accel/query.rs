@@ -143,6 +143,9 @@ impl PacketQuery {
     /// up to `t_max[r]`: the packet with interval bounds when the rays converge on one
     /// point, each ray's own slab constants (for the masked walk) when they do not. Returns
     /// whether the packet has bounds.
+    // Always inlined: the tile kernel (`render::tile::TraceTile`) calls it, and so gets it
+    // compiled into each of its SIMD copies.
+    #[inline(always)]
     pub(super) fn fill_occlusion(&mut self, rays: &[(Vec3A, Vec3A)], t_max: &[f32]) -> bool {
         let n = rays.len().min(PACKET).min(t_max.len());
         let converging = self.packet.set_converging(&rays[..n], &t_max[..n]);
@@ -156,6 +159,9 @@ impl PacketQuery {
     /// one point behind them (`extent`: the largest coordinate of the tree's boxes), each
     /// ray's own slab constants (for the masked walk) when they do not. Returns whether the
     /// packet has bounds.
+    // Always inlined: the tile kernel (`render::tile::TraceTile`) calls it, and so gets it
+    // compiled into each of its SIMD copies.
+    #[inline(always)]
     pub(super) fn fill_masked(&mut self, rays: &[(Vec3A, Vec3A)], t_max: f32, extent: f32) -> bool {
         let n = rays.len().min(PACKET);
         let bounded = self.packet.set_with_apex(&rays[..n], extent);
@@ -166,6 +172,7 @@ impl PacketQuery {
     }
 
     /// Each ray's hit-test constants, and its own slab constants when it walks `masked`.
+    #[inline(always)]
     fn fill_ray_constants(&mut self, rays: &[(Vec3A, Vec3A)], masked: bool) {
         ShearedRay::fill(&mut self.sheared, rays);
         if masked {

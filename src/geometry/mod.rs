@@ -132,7 +132,9 @@ impl FrameTriangles {
 
     /// [`FrameTriangles::hit_triangle`] written field by field into `out` (see
     /// [`HitTriangle::UNSET`] for why).
-    #[inline]
+    // Always inlined: the tile kernel (`render::tile::TraceTile`) calls it, and so gets it
+    // compiled into each of its SIMD copies.
+    #[inline(always)]
     pub fn write_hit_triangle(
         &self,
         slot: usize,

@@ -18,7 +18,7 @@ use crate::colour::srgb8_encoder;
 use crate::lod::{RayLod, with_lod_state};
 use crate::render::camera::Camera;
 use crate::render::integrator::{FrameScene, TraceCounters};
-use crate::render::tile::{TileBuffers, trace_tile};
+use crate::render::tile::{TileBuffers, TraceTile};
 
 /// A tile's side in pixels. A tile traces each bounce's rays together, so a larger tile
 /// fills the packets of its deeper bounces (mirror rays off a few mirrors, shadow rays
@@ -175,15 +175,15 @@ fn render_tiles<L: RayLod>(
             };
             let tile = tile as u32;
             let origin = ((tile % tiles_x) * TILE, (tile / tiles_x) * TILE);
-            trace_tile::<L>(
+            crate::simd::dispatch(TraceTile {
                 scene,
                 camera,
                 spp,
-                origin,
-                &mut counters,
+                corner: origin,
+                counters: &mut counters,
                 buffers,
-                &mut rows,
-            );
+                rows: &mut rows,
+            });
             counters
         })
         .collect()

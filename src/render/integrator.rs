@@ -123,8 +123,8 @@ enum TexelLookup {
     /// A bilinear or trilinear lookup in texture `texture`, its taps computed (`none`,
     /// `paper` and every method that picks one level).
     Planned { texture: u32, plan: PlannedLookup },
-    /// An anisotropic lookup (`Footprint::Anisotropic` at the biased, clamped `level`),
-    /// made in full when filtered.
+    /// An anisotropic lookup (`Footprint::Anisotropic` at the biased `level`, which the
+    /// lookup clamps), made in full when filtered.
     Anisotropic {
         texture: u32,
         uv: Vec2,
@@ -132,8 +132,8 @@ enum TexelLookup {
         axis: Vec2,
         taps: u32,
     },
-    /// An EWA lookup (`Footprint::Elliptical` at the biased, clamped `level`), made in full
-    /// when filtered.
+    /// An EWA lookup (`Footprint::Elliptical` at the biased `level`, which the lookup
+    /// clamps), made in full when filtered.
     Elliptical {
         texture: u32,
         uv: Vec2,
@@ -338,8 +338,8 @@ impl FrameScene<'_> {
         combine.evaluate(|child| children[child as usize])
     }
 
-    /// The method's level with the bias, and the level the pyramid lookup uses
-    /// ([`Self::lookup_level`]).
+    /// The method's level with the bias, and the level the pyramid lookup reads (what it
+    /// makes of [`Self::lookup_level`] by clamping).
     pub(super) fn biased_level(&self, footprint: &Footprint, pyramid: &MipPyramid) -> (f32, f32) {
         match footprint {
             Footprint::Base => (0.0, 0.0),
@@ -350,12 +350,15 @@ impl FrameScene<'_> {
         }
     }
 
-    /// The level a lookup uses: the second value of [`Self::biased_level`].
+    /// The level a lookup asks for: the method's level plus the bias, not clamped. Every
+    /// lookup of a pyramid clamps its level itself, to the second value of
+    /// [`Self::biased_level`] (the same bits, see [`clamped_biased_level`]), so a hit's level
+    /// is clamped once, by the lookup.
     #[inline(always)]
-    fn lookup_level(&self, footprint: &Footprint, pyramid: &MipPyramid) -> f32 {
+    fn lookup_level(&self, footprint: &Footprint) -> f32 {
         match footprint {
             Footprint::Base => 0.0,
-            f => clamped_biased_level(f.level(), self.lod_bias, pyramid),
+            f => f.level() + self.lod_bias,
         }
     }
 
@@ -382,7 +385,8 @@ impl FrameScene<'_> {
     /// [`Self::arrive`] with the hit's triangle already read (`FrameScene::hit_triangle`,
     /// which also settled `hit`).
     #[allow(clippy::too_many_arguments)]
-    #[inline]
+    // Always inlined: part of the tile kernel (`TraceTile`), compiled into each SIMD copy.
+    #[inline(always)]
     pub(super) fn arrive_at<L: RayLod>(
         &self,
         triangle: &HitTriangle,
@@ -420,6 +424,8 @@ impl FrameScene<'_> {
     }
 
     /// The shadow ray toward every light that shines on the surface's side.
+    // Always inlined: part of the tile kernel (`TraceTile`), compiled into each SIMD copy.
+    #[inline(always)]
     fn request_shadows(
         &self,
         surface: &SurfacePoint,
@@ -449,6 +455,8 @@ impl FrameScene<'_> {
     /// into `combine` (in place, where the caller keeps it), whose steps name the spawned
     /// rays as `first_child`, `first_child + 1`, ... in the order they are appended to
     /// `spawned` (after the rays it already holds).
+    // Always inlined: part of the tile kernel (`TraceTile`), compiled into each SIMD copy.
+    #[inline(always)]
     pub(super) fn finish<L: RayLod>(
         &self,
         arrival: &Arrival<L>,
@@ -573,7 +581,8 @@ impl FrameScene<'_> {
     /// misses (the texel loads were the hottest lines of a BART Kitchen frame). Decided
     /// here and filtered in `finish`, with the same inputs and the same function, the
     /// result is the same bits and the misses overlap the shadow rays.
-    #[inline]
+    // Always inlined: part of the tile kernel (`TraceTile`), compiled into each SIMD copy.
+    #[inline(always)]
     fn texel_lookup<L: RayLod>(
         &self,
         lod_hit: &SurfaceHit,
@@ -590,7 +599,7 @@ impl FrameScene<'_> {
         let uv = interpolate_uv(lod_hit.triangle.uvs, lod_hit.bary);
         let pyramid = &texture.pyramid;
         let footprint = lod.footprint(lod_hit, &self.lod_camera, pyramid.base_size());
-        let level = self.lookup_level(&footprint, pyramid);
+        let level = self.lookup_level(&footprint);
         let sampler = texture.sampler;
         let lookup = match footprint {
             Footprint::Base => TexelLookup::Planned {
@@ -616,10 +625,10 @@ impl FrameScene<'_> {
                 minor,
             },
         };
-        // A plan knows its level (the same `split_level` of the same clamped level).
+        // A plan knows its level (the same split of the same clamped level).
         let read = match &lookup {
             TexelLookup::Planned { plan, .. } => plan.level(),
-            _ => MipPyramid::split_level(level).0,
+            _ => pyramid.clamp_and_split_level(level).0,
         };
         counters.mip_histogram[read.min(MIP_LEVELS - 1)] += 1;
         lookup

@@ -192,7 +192,9 @@ impl SceneBvh<'_> {
 
     /// [`SceneBvh::hit_triangle`] written field by field into `out` (see
     /// [`HitTriangle::UNSET`] for why).
-    #[inline]
+    // Always inlined: the tile kernel (`render::tile::TraceTile`) calls it, and so gets it
+    // compiled into each of its SIMD copies.
+    #[inline(always)]
     pub fn write_hit_triangle(
         &self,
         hit: &mut Hit,
@@ -225,7 +227,7 @@ impl SceneBvh<'_> {
     }
 
     /// [`SceneBvh::triangle`] written field by field into `out`.
-    #[inline]
+    #[inline(always)]
     fn write_triangle(&self, at: TriangleRef, out: &mut HitTriangle) {
         let slot = at.slot as usize;
         let i = match self {

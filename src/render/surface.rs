@@ -40,6 +40,8 @@ pub(super) struct Refraction {
 impl SurfacePoint {
     /// The point where `hit` (of a ray from `origin` along unit `direction`) lies on
     /// `triangle`, oriented towards the ray.
+    // Always inlined: part of the tile kernel (`TraceTile`), compiled into each SIMD copy.
+    #[inline(always)]
     pub(super) fn at(
         triangle: &HitTriangle,
         hit: &Hit,

@@ -34,6 +34,7 @@ use crate::render::integrator::{
     Arrival, Combine, FrameScene, MAX_SHADOW_GLASS, ShadowRequest, Spawned, TraceCounters,
 };
 use crate::render::ray_log::RayClass;
+use crate::simd::Kernel;
 
 /// Where a ray waiting to be traced belongs: its vertex, the sample it serves, and how
 /// deep it is (the ray itself is the entry of the same index in the bounce's rays).
@@ -104,10 +105,45 @@ impl<L: RayLod> Default for TileBuffers<L> {
     }
 }
 
+/// [`trace_tile`] as a kernel: the tile's loop and everything it inlines (the surfaces,
+/// shading, the bookkeeping of vertices and shadow requests) compiled into each SIMD copy,
+/// so that the copy with AVX2 runs it too, and the kernels it calls (walks, texture
+/// lookups) can be inlined into it. The same bits in both copies: no operation is fused.
+///
+/// Why: about a third of a BART Kitchen frame's instructions are this loop's, and the
+/// baseline copy computes them with SSE2 alone (two-operand forms and their register
+/// copies, floors as library calls, masks counted bit by bit).
+pub(super) struct TraceTile<'a, 'b, L: RayLod> {
+    pub scene: &'a FrameScene<'a>,
+    pub camera: &'a Camera,
+    pub spp: u32,
+    pub corner: (u32, u32),
+    pub counters: &'a mut TraceCounters,
+    pub buffers: &'a mut TileBuffers<L>,
+    pub rows: &'a mut [&'b mut [Vec3]],
+}
+
+impl<L: RayLod> Kernel for TraceTile<'_, '_, L> {
+    type Output = ();
+    #[inline(always)]
+    fn run<const AVX2: bool>(self) {
+        trace_tile(
+            self.scene,
+            self.camera,
+            self.spp,
+            self.corner,
+            self.counters,
+            self.buffers,
+            self.rows,
+        )
+    }
+}
+
 /// Renders the tile whose corner is `(x0, y0)` into `rows` (its rows of the frame, top to
 /// bottom, each as wide as the tile), tracing its pixels in the order of [`tile_pixels`],
 /// with the LOD state `L`, using `buffers` for its lists.
-pub(super) fn trace_tile<L: RayLod>(
+#[inline(always)]
+fn trace_tile<L: RayLod>(
     scene: &FrameScene,
     camera: &Camera,
     spp: u32,
@@ -231,6 +267,8 @@ pub(super) fn trace_tile<L: RayLod>(
 /// [`PACKET`] (an 8 x 8 block of a whole tile at one sample per pixel), their hits into
 /// `hits` and each hit's triangle into `triangles` (all three cleared first).
 #[allow(clippy::too_many_arguments)]
+// Always inlined: part of the tile kernel (`TraceTile`), compiled into each SIMD copy.
+#[inline(always)]
 fn primary_bounce<L: RayLod>(
     scene: &FrameScene,
     camera: &Camera,
@@ -274,6 +312,8 @@ fn primary_bounce<L: RayLod>(
 /// as packets of up to [`PACKET`] (`SceneBvh::closest_hits_scattered`: each ray finds
 /// exactly what it finds alone), their hits into `hits` and each hit's triangle into
 /// `triangles` (both cleared first).
+// Always inlined: part of the tile kernel (`TraceTile`), compiled into each SIMD copy.
+#[inline(always)]
 fn trace_bounce<L: RayLod>(
     scene: &FrameScene,
     rays: &[Spawned<L>],
@@ -340,6 +380,8 @@ fn trace_packets<L: RayLod>(
 /// Traces every request's shadow ray and fills in its transmittance: per light, the
 /// requests in the order they were made, as packets of up to [`PACKET`]. `of_light` and
 /// `pixel_of` are working lists (their contents on entry do not matter).
+// Always inlined: part of the tile kernel (`TraceTile`), compiled into each SIMD copy.
+#[inline(always)]
 fn trace_shadows<L: RayLod>(
     scene: &FrameScene,
     waiting: &[Waiting<L>],

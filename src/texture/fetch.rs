@@ -13,7 +13,6 @@ use glam::Vec4;
 
 use super::taps::BilinearTaps;
 use super::{MipLevel, Texels};
-use crate::simd::F32x8;
 
 /// The bilinear blend of one level's four texels (in [`BilinearTaps::texels`] order): the
 /// formula of every lookup.
@@ -66,42 +65,47 @@ pub(super) fn trilinear<const ALPHA: bool, const AVX2: bool>(
     taps: &[BilinearTaps; 2],
     frac: f32,
 ) -> Vec4 {
-    let [lower, upper] = if AVX2 {
-        two_bilinear_blends(
-            [
-                texels::<ALPHA>(levels[0], &taps[0]),
-                texels::<ALPHA>(levels[1], &taps[1]),
-            ],
-            taps,
-        )
-    } else {
-        [
-            bilinear::<ALPHA>(levels[0], &taps[0]),
-            bilinear::<ALPHA>(levels[1], &taps[1]),
-        ]
-    };
+    #[cfg(target_arch = "x86_64")]
+    if AVX2 {
+        let texels = [
+            texels::<ALPHA>(levels[0], &taps[0]),
+            texels::<ALPHA>(levels[1], &taps[1]),
+        ];
+        // SAFETY: `AVX2` is true only in the copy `simd::dispatch` runs where the CPU has
+        // AVX2 (and in tests that check the CPU first).
+        let [lower, upper] = unsafe { two_bilinear_blends(texels, taps) };
+        return level_blend(lower, upper, frac);
+    }
+    let lower = bilinear::<ALPHA>(levels[0], &taps[0]);
+    let upper = bilinear::<ALPHA>(levels[1], &taps[1]);
     level_blend(lower, upper, frac)
 }
 
 /// [`bilinear_blend`] of two levels' texels in the eight lanes of AVX (the first level's
 /// channels in lanes 0 to 3, the second's in 4 to 7): the same operations on the same
-/// operands lane by lane, so the same bits, in half the arithmetic instructions. Only
-/// called from the AVX2 copy.
-#[inline(always)]
-fn two_bilinear_blends(texels: [[Vec4; 4]; 2], taps: &[BilinearTaps; 2]) -> [Vec4; 2] {
+/// operands lane by lane, so the same bits, in half the arithmetic instructions.
+///
+/// # Safety
+/// The CPU must have AVX.
+#[cfg(target_arch = "x86_64")]
+#[inline]
+#[target_feature(enable = "avx")]
+unsafe fn two_bilinear_blends(texels: [[Vec4; 4]; 2], taps: &[BilinearTaps; 2]) -> [Vec4; 2] {
+    use std::arch::x86_64::*;
     let [a, b] = texels;
-    let pair = |i: usize| {
-        F32x8(std::array::from_fn(|l| {
-            if l < 4 { a[i][l] } else { b[i][l - 4] }
-        }))
-    };
-    let weights = |w: [f32; 2]| F32x8(std::array::from_fn(|l| w[l / 4]));
-    let fx = weights([taps[0].fx, taps[1].fx]);
-    let fy = weights([taps[0].fy, taps[1].fy]);
-    let one = F32x8::splat(1.0);
-    let (gx, gy) = (one.sub::<true>(fx), one.sub::<true>(fy));
-    let row0 = pair(0).mul::<true>(gx).add::<true>(pair(1).mul::<true>(fx));
-    let row1 = pair(2).mul::<true>(gx).add::<true>(pair(3).mul::<true>(fx));
-    let both = row0.mul::<true>(gy).add::<true>(row1.mul::<true>(fy)).0;
-    [0, 4].map(|l| Vec4::new(both[l], both[l + 1], both[l + 2], both[l + 3]))
+    let t00 = _mm256_set_m128(b[0].into(), a[0].into());
+    let t10 = _mm256_set_m128(b[1].into(), a[1].into());
+    let t01 = _mm256_set_m128(b[2].into(), a[2].into());
+    let t11 = _mm256_set_m128(b[3].into(), a[3].into());
+    let fx = _mm256_set_m128(_mm_set1_ps(taps[1].fx), _mm_set1_ps(taps[0].fx));
+    let fy = _mm256_set_m128(_mm_set1_ps(taps[1].fy), _mm_set1_ps(taps[0].fy));
+    let one = _mm256_set1_ps(1.0);
+    let (gx, gy) = (_mm256_sub_ps(one, fx), _mm256_sub_ps(one, fy));
+    let row0 = _mm256_add_ps(_mm256_mul_ps(t00, gx), _mm256_mul_ps(t10, fx));
+    let row1 = _mm256_add_ps(_mm256_mul_ps(t01, gx), _mm256_mul_ps(t11, fx));
+    let both = _mm256_add_ps(_mm256_mul_ps(row0, gy), _mm256_mul_ps(row1, fy));
+    [
+        _mm256_castps256_ps128(both).into(),
+        _mm256_extractf128_ps::<1>(both).into(),
+    ]
 }

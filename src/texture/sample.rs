@@ -361,6 +361,9 @@ impl MipPyramid {
     ///
     /// Planned in the kernels' SIMD copy: a plan is mostly floors and conversions, which the
     /// AVX2 copy's rounding instructions shorten (the same bits in every copy).
+    // Always inlined: the tile kernel (`render::tile::TraceTile`) calls it, and so gets it
+    // compiled into each of its SIMD copies.
+    #[inline(always)]
     pub fn plan_bilinear(&self, level: usize, uv: Vec2, sampler: Sampler) -> PlannedLookup {
         dispatch(PlanBilinear {
             pyramid: self,
@@ -372,6 +375,9 @@ impl MipPyramid {
 
     /// [`Self::plan_bilinear`] for [`Self::sample_trilinear`] (one level or two, chosen as
     /// the lookup chooses them).
+    // Always inlined: the tile kernel (`render::tile::TraceTile`) calls it, and so gets it
+    // compiled into each of its SIMD copies.
+    #[inline(always)]
     pub fn plan_trilinear(&self, uv: Vec2, lod: f32, sampler: Sampler) -> PlannedLookup {
         dispatch(PlanTrilinear {
             pyramid: self,
@@ -399,6 +405,9 @@ impl MipPyramid {
     ///
     /// # Panics
     /// As [`Self::sample_planned`].
+    // Always inlined: the tile kernel (`render::tile::TraceTile`) calls it, and so gets it
+    // compiled into each of its SIMD copies.
+    #[inline(always)]
     pub fn sample_planned_colour(&self, plan: &PlannedLookup) -> Vec3A {
         Vec3A::from_vec4(dispatch(Planned::<false> {
             pyramid: self,

@@ -154,7 +154,7 @@ impl RayPacket {
     }
 
     /// The rays' slab constants, without interval bounds.
-    #[inline]
+    #[inline(always)]
     fn set_rays(&mut self, rays: &[(Vec3A, Vec3A)]) {
         let len = rays.len().min(PACKET);
         self.len = len;
@@ -501,6 +501,7 @@ impl Frustum {
 
     /// The bounds of the first `len` inverse directions of `inverse[axis][ray]` from the
     /// given front and back origins, or `None` when one is NaN.
+    #[inline(always)]
     fn over_inverses(
         front_origin: [Lanes; 3],
         back_origin: [Lanes; 3],
