@@ -1,14 +1,19 @@
 //! Which SIMD copy of a hot loop runs: the one place that decides.
 //!
 //! The release binary is built for the x86-64 baseline (SSE2), so it runs on any x86-64
-//! CPU; the hot loops (BVH walks, packets, the batched `log2`, texture filtering, and the frame
-//! update's skinning, slot-order write and `log2 P_b` walk) are compiled a second time with AVX2 enabled and the copy is chosen at run time, once per
-//! process ([`Isa::current`]). A loop takes part by implementing [`Kernel`]: its `run` is
-//! generic over `AVX2` and `#[inline(always)]`, so [`dispatch`] inlines it whole into a
-//! function compiled with AVX2 (where `AVX2` is true) or into the baseline caller. Code
-//! inside may branch on `AVX2` to use AVX intrinsics ([`F32x8`]); it must
-//! compute the same bits either way (no fused multiply-add is formed in either copy), which
-//! the tests of every such kernel check against the baseline copy or a scalar reference.
+//! CPU; the hot loops (a film tile's whole loop of rays, surfaces, shading and texture
+//! lookups, the BVH walks and packets, the batched `log2`, and the frame update's skinning,
+//! slot-order write and `log2 P_b` walk) are compiled a second time with AVX2 and the
+//! integer instructions that come with it (POPCNT, LZCNT, BMI1, BMI2; not FMA) enabled, and
+//! the copy is chosen at run time, once per process ([`Isa::current`]). A loop takes part
+//! by implementing [`Kernel`]: its `run` is generic over `AVX2` and `#[inline(always)]`, so
+//! [`dispatch`] inlines it whole into a function compiled with AVX2 (where `AVX2` is true)
+//! or into the baseline caller; what a kernel calls out of line is compiled for the
+//! baseline, so the tile loop's helpers are `#[inline(always)]`. Code inside may branch on
+//! `AVX2` to use AVX intrinsics ([`F32x8`]); it must compute the same bits either way (no
+//! fused multiply-add is formed in either copy), which the tests of every such kernel check
+//! against the baseline copy or a scalar reference, and the identity frames check for the
+//! tile loop.
 //!
 //! `MIPRAY_SIMD=baseline` forces the baseline copy on any CPU, for comparisons and for
 //! testing the baseline path on a machine that has AVX2; `MIPRAY_SIMD=avx2` keeps the AVX2
