@@ -452,7 +452,7 @@ fn aff_scene_renders_at_its_own_frame_times() {
     assert!(String::from_utf8_lossy(&info.stdout).contains("skinned or morphing"));
 }
 
-/// The AVX2 copy (chosen where the CPU has AVX2: the tile loop with its surfaces, shading
+/// The AVX2 copy (chosen where the CPU has AVX2 and its integer extensions: the tile loop with its surfaces, shading
 /// and texture lookups, and the walks) and the x86-64 baseline copy (`MIPRAY_SIMD=baseline`)
 /// render byte-identical frames, under both BVH layouts: our kitchen has glass, mirrors and
 /// textures, so closest-hit, shadow and packet walks and trilinear lookups all run.

@@ -182,8 +182,8 @@ pub fn run_avx2_if_available<K: Kernel>(kernel: K) -> Option<K::Output> {
 }
 
 /// `kernel`'s AVX2 copy: `run::<true>` and everything it inlines compiled with AVX2 and
-/// the integer instructions every CPU with AVX2 also has (x86-64-v3 without FMA, which
-/// would change floating-point bits): a mask's `count_ones` is one `popcnt` instead of a
+/// the integer instructions every CPU with AVX2 also has (of x86-64-v3, all but FMA, which
+/// would change floating-point bits, F16C and MOVBE): a mask's `count_ones` is one `popcnt` instead of a
 /// dozen shifts and adds, `trailing_zeros` one `tzcnt` instead of a `bsf` and a zero test,
 /// and the hot loops count and scan ray masks at every node and leaf. Integer results are
 /// the same whichever instructions compute them.

@@ -1,8 +1,10 @@
 //! The texels of a lookup, read, decoded and blended: one level (bilinear) or two
 //! (trilinear).
 //!
-//! One formula for both copies of a `simd::Kernel`: each texel's four channels are read from
-//! the decoding table one by one. An AVX2 copy that decoded two texels with one gather from
+//! The same arithmetic in both copies of a `simd::Kernel`: each texel's four channels are read
+//! from the decoding table one by one, and a trilinear lookup's two bilinear blends are the
+//! same operations lane by lane, four lanes at a time in the baseline copy and both levels in
+//! AVX's eight lanes in the AVX2 copy. An AVX2 copy that decoded two texels with one gather from
 //! the table (and blended two texels per 8-lane operation) was slower on an AMD Zen 4
 //! (`cargo bench --bench texture_filter`: trilinear 47-60 ns a lookup against 40-47 with
 //! per-channel loads; not measured on other CPUs, but Intel's microcode mitigation of Gather

@@ -14,8 +14,9 @@
 //! where that is exact (`taps.rs`).
 //!
 //! Each public lookup is one `simd::Kernel`: the coordinates, the texel reads and the blends
-//! are compiled into a baseline and an AVX2 copy from one formula (`fetch.rs`), so the two
-//! compute the same bits.
+//! are compiled into a baseline and an AVX2 copy of the same arithmetic (`fetch.rs`,
+//! `taps.rs`; the AVX2 copy does some of it in wider lanes), so the two compute the same
+//! bits.
 //!
 //! A bilinear or trilinear lookup can also be made in two steps: planned (its levels and
 //! taps computed, and the cache asked for its texels) and, later, filtered

@@ -17,9 +17,11 @@
 //! A level whose sides are not both powers of two takes the f64 formula itself, on both
 //! axes at once in SSE2's two f64 lanes ([`two_axes`]). Everything else (on a power-of-two
 //! side `|p| < 0.5`; huge or non-finite coordinates; Clamp and Mirror outside the image)
-//! goes to `sample::axis_in`, one axis at a time. The tests check both against it on edge
-//! and random coordinates (`shortcut_is_exactly_the_f64_axis`,
-//! `two_axes_are_exactly_the_f64_axis`).
+//! goes to `sample::axis_in`, one axis at a time. The AVX2 copy takes a trilinear lookup's
+//! two levels' four axes in AVX's four f64 lanes ([`four_axes_f64`]) where the f32 shortcut
+//! does not take them all. The tests check each against it on edge and random coordinates
+//! (`shortcut_is_exactly_the_f64_axis`, `two_axes_are_exactly_the_f64_axis`,
+//! `a_pair_of_levels_has_each_levels_own_taps`).
 
 use glam::Vec2;
 
@@ -85,7 +87,8 @@ impl BilinearTaps {
     /// [`BilinearTaps::new_in`] in two levels at once (a trilinear lookup's), the same bits
     /// as one level at a time: where the shortcut applies to all four axes (both levels'
     /// sides powers of two, see the module note), their floors, fractions and wraps are
-    /// computed four lanes at a time ([`four_axes`]); otherwise each level alone.
+    /// computed four lanes at a time ([`four_axes`]); otherwise, in the AVX2 copy, the f64
+    /// formula on the four axes at once ([`four_axes_f64`]); otherwise each level alone.
     ///
     /// Why: the second level of a trilinear lookup made it cost nearly two bilinear ones;
     /// on x86-64 the four axes take about the instructions of two.
@@ -633,7 +636,9 @@ mod tests {
         }
         let mut seed = 0x9d2c_5680_1b87_3a4f_u64;
         let avx2 = crate::simd::Isa::cpu_has_avx2();
-        let (mut compared, mut four_at_once, mut f64_at_once) = (0, 0, 0);
+        let (mut compared, mut four_at_once) = (0, 0);
+        #[cfg_attr(not(target_arch = "x86_64"), allow(unused_mut))]
+        let mut f64_at_once = 0;
         for [a, b] in &pairs {
             let us = hard_coordinates(a.width, &mut seed);
             let vs = hard_coordinates(a.height, &mut seed);
