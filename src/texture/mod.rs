@@ -316,8 +316,8 @@ impl MipPyramid {
         lod.max(0.0).min((self.levels.len() - 1) as u32 as f32)
     }
 
-    /// [`Self::split_level`] of [`Self::clamp_level`]: the level a lookup at `lod` reads
-    /// and the fraction towards the next one.
+    /// The level a lookup at `lod` reads, after [`Self::clamp_level`], and the fraction
+    /// towards the next one.
     #[inline(always)]
     pub fn clamp_and_split_level(&self, lod: f32) -> (usize, f32) {
         let lod = self.clamp_level(lod);
@@ -333,8 +333,9 @@ impl MipPyramid {
     }
 
     /// The level below `lod` (a level in `[0, last]`, as [`Self::clamp_level`] gives it)
-    /// and the fraction towards the next one.
-    #[inline(always)]
+    /// and the fraction towards the next one: the plain form of
+    /// [`Self::clamp_and_split_level`], kept as the tests' reference for it.
+    #[cfg(test)]
     pub fn split_level(lod: f32) -> (usize, f32) {
         // In `[0, last]` truncation is the floor. Through `u32`: x86-64 converts an `f32`
         // to a `usize` with two conversions and a select (no unsigned 64-bit conversion
