@@ -282,7 +282,9 @@ impl FrameScene<'_> {
     /// Radiance of the primary ray through film point `(px, py)` of `camera`, traced depth
     /// first one ray at a time (its shadow rays too), with the LOD state of method `L`: the
     /// reference the film's breadth-first tiles are tested against (they must agree bit for
-    /// bit). It allocates per hit; the film does not use it.
+    /// bit). It allocates per hit, and its texture lookups run in the baseline SIMD copy
+    /// (the same bits as the AVX2 copy the tiles use where the CPU has it); the film does
+    /// not use it.
     pub fn primary_radiance<L: RayLod>(
         &self,
         camera: &crate::render::Camera,
@@ -330,7 +332,7 @@ impl FrameScene<'_> {
         }
         let mut spawned = Vec::new();
         let mut combine = Combine::EMPTY;
-        self.finish(&arrival, &requests, 0, &mut spawned, &mut combine);
+        self.finish::<L, false>(&arrival, &requests, 0, &mut spawned, &mut combine);
         let children: Vec<Vec3A> = spawned
             .iter()
             .map(|s| self.radiance_depth_first(s.origin, s.direction, s.lod, depth + 1, counters))
@@ -377,17 +379,18 @@ impl FrameScene<'_> {
         counters: &mut TraceCounters,
     ) -> Arrival<L> {
         let triangle = self.hit_triangle(&mut hit, origin, direction);
-        self.arrive_at(
+        self.arrive_at::<L, false>(
             &triangle, hit, origin, direction, lod, depth, requests, counters,
         )
     }
 
     /// [`Self::arrive`] with the hit's triangle already read (`FrameScene::hit_triangle`,
-    /// which also settled `hit`).
+    /// which also settled `hit`). The texture lookup is planned in the SIMD copy `AVX2`
+    /// names: the caller's own (true only in the AVX2 copy, as in `simd::Kernel::run`).
     #[allow(clippy::too_many_arguments)]
     // Always inlined: part of the tile kernel (`TraceTile`), compiled into each SIMD copy.
     #[inline(always)]
-    pub(super) fn arrive_at<L: RayLod>(
+    pub(super) fn arrive_at<L: RayLod, const AVX2: bool>(
         &self,
         triangle: &HitTriangle,
         hit: Hit,
@@ -402,7 +405,7 @@ impl FrameScene<'_> {
         let lod_hit = surface.lod_hit(triangle, &hit, direction);
         lod.arrive(&lod_hit);
         let material = &self.materials[triangle.material as usize];
-        let lookup = self.texel_lookup(&lod_hit, material, &lod, counters);
+        let lookup = self.texel_lookup::<L, AVX2>(&lod_hit, material, &lod, counters);
         let lit = match material.model {
             // The energy-weighted model lights only what is not fully transmissive.
             ShadingModel::EnergyWeighted => 1.0 - material.transmission > 0.0,
@@ -454,10 +457,11 @@ impl FrameScene<'_> {
     /// them) and spawns the reflected and refracted rays: writes the vertex's [`Combine`]
     /// into `combine` (in place, where the caller keeps it), whose steps name the spawned
     /// rays as `first_child`, `first_child + 1`, ... in the order they are appended to
-    /// `spawned` (after the rays it already holds).
+    /// `spawned` (after the rays it already holds). The texture lookup is filtered in the
+    /// SIMD copy `AVX2` names (as in [`Self::arrive_at`]).
     // Always inlined: part of the tile kernel (`TraceTile`), compiled into each SIMD copy.
     #[inline(always)]
-    pub(super) fn finish<L: RayLod>(
+    pub(super) fn finish<L: RayLod, const AVX2: bool>(
         &self,
         arrival: &Arrival<L>,
         requests: &[ShadowRequest],
@@ -476,7 +480,7 @@ impl FrameScene<'_> {
         };
         match material.model {
             ShadingModel::EnergyWeighted => {
-                let albedo = Vec3A::from(material.base_color) * self.texel(&arrival.lookup);
+                let albedo = Vec3A::from(material.base_color) * self.texel::<AVX2>(&arrival.lookup);
                 let opaque = 1.0 - material.transmission;
                 let mut color = Vec3A::ZERO;
                 if opaque > 0.0 {
@@ -500,7 +504,7 @@ impl FrameScene<'_> {
                 }
             }
             ShadingModel::Additive { ambient } => {
-                let texel = self.texel(&arrival.lookup);
+                let texel = self.texel::<AVX2>(&arrival.lookup);
                 let diffuse = Vec3A::from(material.base_color) * texel;
                 let ambient = Vec3A::from(ambient) * texel;
                 let mut color = self.additive_ambient * ambient;
@@ -583,7 +587,7 @@ impl FrameScene<'_> {
     /// result is the same bits and the misses overlap the shadow rays.
     // Always inlined: part of the tile kernel (`TraceTile`), compiled into each SIMD copy.
     #[inline(always)]
-    fn texel_lookup<L: RayLod>(
+    fn texel_lookup<L: RayLod, const AVX2: bool>(
         &self,
         lod_hit: &SurfaceHit,
         material: &Material,
@@ -604,11 +608,11 @@ impl FrameScene<'_> {
         let lookup = match footprint {
             Footprint::Base => TexelLookup::Planned {
                 texture: t,
-                plan: pyramid.plan_bilinear(0, uv, sampler),
+                plan: pyramid.plan_bilinear_in::<AVX2>(0, uv, sampler),
             },
             Footprint::Level(_) => TexelLookup::Planned {
                 texture: t,
-                plan: pyramid.plan_trilinear(uv, level, sampler),
+                plan: pyramid.plan_trilinear_in::<AVX2>(uv, level, sampler),
             },
             Footprint::Anisotropic { axis, taps, .. } => TexelLookup::Anisotropic {
                 texture: t,
@@ -634,14 +638,15 @@ impl FrameScene<'_> {
         lookup
     }
 
-    /// The filtered base-colour texel of a lookup (white when untextured).
+    /// The filtered base-colour texel of a lookup (white when untextured); a planned lookup
+    /// filtered in the SIMD copy `AVX2` names (as in [`Self::arrive_at`]).
     #[inline(always)]
-    fn texel(&self, lookup: &TexelLookup) -> Vec3A {
+    fn texel<const AVX2: bool>(&self, lookup: &TexelLookup) -> Vec3A {
         match lookup {
             TexelLookup::Untextured => Vec3A::ONE,
             TexelLookup::Planned { texture, plan } => self.textures[*texture as usize]
                 .pyramid
-                .sample_planned_colour(plan),
+                .sample_planned_colour_in::<AVX2>(plan),
             &TexelLookup::Anisotropic {
                 texture,
                 uv,

@@ -106,9 +106,10 @@ impl<L: RayLod> Default for TileBuffers<L> {
 }
 
 /// [`trace_tile`] as a kernel: the tile's loop and everything it inlines (the surfaces,
-/// shading, the bookkeeping of vertices and shadow requests) compiled into each SIMD copy,
-/// so that the copy with AVX2 runs it too, and the kernels it calls (walks, texture
-/// lookups) can be inlined into it. The same bits in both copies: no operation is fused.
+/// shading, the bookkeeping of vertices and shadow requests, a planned texture lookup's
+/// plan and filter, which take the tile's copy as `AVX2`) compiled into each SIMD copy, so
+/// that the copy with AVX2 runs it too. The walks, called once per packet or batch, go
+/// through their own dispatch. The same bits in both copies: no operation is fused.
 ///
 /// Why: about a third of a BART Kitchen frame's instructions are this loop's, and the
 /// baseline copy computes them with SSE2 alone (two-operand forms and their register
@@ -127,7 +128,7 @@ impl<L: RayLod> Kernel for TraceTile<'_, '_, L> {
     type Output = ();
     #[inline(always)]
     fn run<const AVX2: bool>(self) {
-        trace_tile(
+        trace_tile::<L, AVX2>(
             self.scene,
             self.camera,
             self.spp,
@@ -141,9 +142,10 @@ impl<L: RayLod> Kernel for TraceTile<'_, '_, L> {
 
 /// Renders the tile whose corner is `(x0, y0)` into `rows` (its rows of the frame, top to
 /// bottom, each as wide as the tile), tracing its pixels in the order of [`tile_pixels`],
-/// with the LOD state `L`, using `buffers` for its lists.
+/// with the LOD state `L`, using `buffers` for its lists; its texture lookups run in the
+/// SIMD copy `AVX2` names (the kernel's own).
 #[inline(always)]
-fn trace_tile<L: RayLod>(
+fn trace_tile<L: RayLod, const AVX2: bool>(
     scene: &FrameScene,
     camera: &Camera,
     spp: u32,
@@ -191,7 +193,7 @@ fn trace_tile<L: RayLod>(
             };
             let triangle = hit_triangles.next().expect("a triangle per hit");
             let first = requests.len();
-            let arrival = scene.arrive_at(
+            let arrival = scene.arrive_at::<L, AVX2>(
                 triangle,
                 hit,
                 ray.origin,
@@ -218,7 +220,7 @@ fn trace_tile<L: RayLod>(
             let first_child = vertices.len() as u32;
             // Written in place: a combine made on the stack and then copied stalled on
             // reading its small fields' fresh stores back as 16-byte loads.
-            scene.finish(
+            scene.finish::<L, AVX2>(
                 &w.arrival,
                 &requests[w.first..w.end],
                 first_child,

@@ -362,30 +362,62 @@ impl MipPyramid {
     ///
     /// Planned in the kernels' SIMD copy: a plan is mostly floors and conversions, which the
     /// AVX2 copy's rounding instructions shorten (the same bits in every copy).
-    // Always inlined: the tile kernel (`render::tile::TraceTile`) calls it, and so gets it
-    // compiled into each of its SIMD copies.
-    #[inline(always)]
     pub fn plan_bilinear(&self, level: usize, uv: Vec2, sampler: Sampler) -> PlannedLookup {
-        dispatch(PlanBilinear {
+        dispatch(self.plan_bilinear_kernel(level, uv, sampler))
+    }
+
+    /// [`Self::plan_bilinear`] in the SIMD copy `AVX2` names, for a kernel that runs in that
+    /// copy already (`AVX2` true only there, as in [`Kernel::run`]).
+    ///
+    /// Why: the tile kernel (`render::tile::TraceTile`) plans a lookup per textured hit;
+    /// through [`dispatch`] each plan was a call out of the tile's copy, its arguments and
+    /// result passed through memory and the caller's registers saved around it.
+    #[inline(always)]
+    pub(crate) fn plan_bilinear_in<const AVX2: bool>(
+        &self,
+        level: usize,
+        uv: Vec2,
+        sampler: Sampler,
+    ) -> PlannedLookup {
+        self.plan_bilinear_kernel(level, uv, sampler).run::<AVX2>()
+    }
+
+    #[inline(always)]
+    fn plan_bilinear_kernel(&self, level: usize, uv: Vec2, sampler: Sampler) -> PlanBilinear<'_> {
+        PlanBilinear {
             pyramid: self,
             level: level.min(self.levels.len() - 1),
             uv,
             sampler,
-        })
+        }
     }
 
     /// [`Self::plan_bilinear`] for [`Self::sample_trilinear`] (one level or two, chosen as
     /// the lookup chooses them).
-    // Always inlined: the tile kernel (`render::tile::TraceTile`) calls it, and so gets it
-    // compiled into each of its SIMD copies.
-    #[inline(always)]
     pub fn plan_trilinear(&self, uv: Vec2, lod: f32, sampler: Sampler) -> PlannedLookup {
-        dispatch(PlanTrilinear {
+        dispatch(self.plan_trilinear_kernel(uv, lod, sampler))
+    }
+
+    /// [`Self::plan_trilinear`] in the SIMD copy `AVX2` names (as
+    /// [`Self::plan_bilinear_in`]).
+    #[inline(always)]
+    pub(crate) fn plan_trilinear_in<const AVX2: bool>(
+        &self,
+        uv: Vec2,
+        lod: f32,
+        sampler: Sampler,
+    ) -> PlannedLookup {
+        self.plan_trilinear_kernel(uv, lod, sampler).run::<AVX2>()
+    }
+
+    #[inline(always)]
+    fn plan_trilinear_kernel(&self, uv: Vec2, lod: f32, sampler: Sampler) -> PlanTrilinear<'_> {
+        PlanTrilinear {
             pyramid: self,
             uv,
             lod,
             sampler,
-        })
+        }
     }
 
     /// The lookup `plan` describes (planned on this pyramid): bit for bit what the
@@ -406,14 +438,25 @@ impl MipPyramid {
     ///
     /// # Panics
     /// As [`Self::sample_planned`].
-    // Always inlined: the tile kernel (`render::tile::TraceTile`) calls it, and so gets it
-    // compiled into each of its SIMD copies.
-    #[inline(always)]
     pub fn sample_planned_colour(&self, plan: &PlannedLookup) -> Vec3A {
         Vec3A::from_vec4(dispatch(Planned::<false> {
             pyramid: self,
             plan,
         }))
+    }
+
+    /// [`Self::sample_planned_colour`] in the SIMD copy `AVX2` names (as
+    /// [`Self::plan_bilinear_in`]).
+    ///
+    /// # Panics
+    /// As [`Self::sample_planned`].
+    #[inline(always)]
+    pub(crate) fn sample_planned_colour_in<const AVX2: bool>(&self, plan: &PlannedLookup) -> Vec3A {
+        let planned = Planned::<false> {
+            pyramid: self,
+            plan,
+        };
+        Vec3A::from_vec4(planned.run::<AVX2>())
     }
 
     /// Anisotropic lookup: the mean of `taps` trilinear lookups at `lod`, placed at the
