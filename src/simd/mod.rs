@@ -9,7 +9,10 @@
 //! by implementing [`Kernel`]: its `run` is generic over `AVX2` and `#[inline(always)]`, so
 //! [`dispatch`] inlines it whole into a function compiled with AVX2 (where `AVX2` is true)
 //! or into the baseline caller; what a kernel calls out of line is compiled for the
-//! baseline, so the tile loop's helpers are `#[inline(always)]`. Code inside may branch on
+//! baseline, so the tile loop's helpers are `#[inline(always)]`. A kernel called often from
+//! inside another (a tile's texture lookups) runs as `run::<AVX2>` with the caller's `AVX2`:
+//! a `dispatch` there would leave the caller's copy for an out-of-line call to the callee's,
+//! arguments and result through memory. Code inside may branch on
 //! `AVX2` to use AVX intrinsics ([`F32x8`]); it must compute the same bits either way (no
 //! fused multiply-add is formed in either copy), which the tests of every such kernel check
 //! against the baseline copy or a scalar reference, and the identity frames check for the
