@@ -128,7 +128,8 @@ pub(super) fn wrap(i: i64, n: i64, mode: WrapMode) -> usize {
 /// Trilinear lookup at `lod` (see [`MipPyramid::sample_trilinear`]).
 #[inline(always)]
 fn trilinear<const AVX2: bool>(pyramid: &MipPyramid, uv: Vec2, lod: f32, sampler: Sampler) -> Vec4 {
-    filter_planned::<true, AVX2>(pyramid, &plan_trilinear::<AVX2>(pyramid, uv, lod, sampler))
+    let plan = plan_trilinear::<AVX2, false>(pyramid, uv, lod, sampler);
+    filter_planned::<true, AVX2>(pyramid, &plan)
 }
 
 /// Where a bilinear or trilinear lookup reads: its level (or two levels, blended by
@@ -153,15 +154,20 @@ impl PlannedLookup {
     }
 }
 
-/// The plan of a bilinear lookup in level `k` (in range).
+/// The plan of a bilinear lookup in level `k` (in range), its texels hinted to the cache
+/// when `PREFETCH` (see [`MipLevel::prefetch_texels`]).
 #[inline(always)]
-fn plan_bilinear<const AVX2: bool>(
+fn plan_bilinear<const AVX2: bool, const PREFETCH: bool>(
     pyramid: &MipPyramid,
     k: usize,
     uv: Vec2,
     sampler: Sampler,
 ) -> PlannedLookup {
-    let taps = BilinearTaps::new_in::<AVX2>(&pyramid.levels[k], uv, sampler);
+    let level = &pyramid.levels[k];
+    let taps = BilinearTaps::new_in::<AVX2>(level, uv, sampler);
+    if PREFETCH {
+        level.prefetch_texels(taps.texels);
+    }
     PlannedLookup {
         level: k as u32,
         blend: false,
@@ -170,9 +176,10 @@ fn plan_bilinear<const AVX2: bool>(
     }
 }
 
-/// The plan of a trilinear lookup at `lod`.
+/// The plan of a trilinear lookup at `lod`, its texels hinted to the cache when `PREFETCH`
+/// (in the levels at hand, not looked up again).
 #[inline(always)]
-fn plan_trilinear<const AVX2: bool>(
+fn plan_trilinear<const AVX2: bool, const PREFETCH: bool>(
     pyramid: &MipPyramid,
     uv: Vec2,
     lod: f32,
@@ -183,13 +190,19 @@ fn plan_trilinear<const AVX2: bool>(
     if frac == 0.0 || k + 1 >= levels.len() {
         // Integer level (including 0, magnification, and the last level): no blend, so
         // integer LODs agree exactly with `sample_bilinear`.
-        return plan_bilinear::<AVX2>(pyramid, k, uv, sampler);
+        return plan_bilinear::<AVX2, PREFETCH>(pyramid, k, uv, sampler);
+    }
+    let (lower, upper) = (&levels[k], &levels[k + 1]);
+    let taps = BilinearTaps::pair_in::<AVX2>([lower, upper], uv, sampler);
+    if PREFETCH {
+        lower.prefetch_texels(taps[0].texels);
+        upper.prefetch_texels(taps[1].texels);
     }
     PlannedLookup {
         level: k as u32,
         blend: true,
         frac,
-        taps: BilinearTaps::pair_in::<AVX2>([&levels[k], &levels[k + 1]], uv, sampler),
+        taps,
     }
 }
 
@@ -205,21 +218,6 @@ fn filter_planned<const ALPHA: bool, const AVX2: bool>(
     }
     let (lower, upper) = (&pyramid.levels[k], &pyramid.levels[k + 1]);
     fetch::trilinear::<ALPHA, AVX2>([lower, upper], &plan.taps, plan.frac)
-}
-
-/// Hints the cache to load the texels `plan` reads.
-#[inline(always)]
-fn prefetch_planned(pyramid: &MipPyramid, plan: &PlannedLookup) {
-    let k = plan.level as usize;
-    let prefetch_taps = |level: &MipLevel, taps: &BilinearTaps| {
-        for i in taps.texels {
-            level.prefetch(i as usize);
-        }
-    };
-    prefetch_taps(&pyramid.levels[k], &plan.taps[0]);
-    if plan.blend {
-        prefetch_taps(&pyramid.levels[k + 1], &plan.taps[1]);
-    }
 }
 
 /// [`MipPyramid::sample_bilinear`] as a kernel.
@@ -250,9 +248,7 @@ impl Kernel for PlanBilinear<'_> {
     type Output = PlannedLookup;
     #[inline(always)]
     fn run<const AVX2: bool>(self) -> PlannedLookup {
-        let plan = plan_bilinear::<AVX2>(self.pyramid, self.level, self.uv, self.sampler);
-        prefetch_planned(self.pyramid, &plan);
-        plan
+        plan_bilinear::<AVX2, true>(self.pyramid, self.level, self.uv, self.sampler)
     }
 }
 
@@ -268,9 +264,7 @@ impl Kernel for PlanTrilinear<'_> {
     type Output = PlannedLookup;
     #[inline(always)]
     fn run<const AVX2: bool>(self) -> PlannedLookup {
-        let plan = plan_trilinear::<AVX2>(self.pyramid, self.uv, self.lod, self.sampler);
-        prefetch_planned(self.pyramid, &plan);
-        plan
+        plan_trilinear::<AVX2, true>(self.pyramid, self.uv, self.lod, self.sampler)
     }
 }
 
@@ -1063,12 +1057,12 @@ mod tests {
                 // so is the other copy's, run here outside its kernel (where the CPU has
                 // AVX2: a pair of levels whose sides are not powers of two takes AVX).
                 let plans = (p.plan_trilinear(uv, lod, s), p.plan_bilinear(level, uv, s));
-                assert_eq!(plans.0, plan_trilinear::<false>(p, uv, lod, s));
-                assert_eq!(plans.1, plan_bilinear::<false>(p, clamped, uv, s));
+                assert_eq!(plans.0, plan_trilinear::<false, false>(p, uv, lod, s));
+                assert_eq!(plans.1, plan_bilinear::<false, false>(p, clamped, uv, s));
                 if crate::simd::Isa::cpu_has_avx2() {
-                    assert_eq!(plans.0, plan_trilinear::<true>(p, uv, lod, s));
+                    assert_eq!(plans.0, plan_trilinear::<true, false>(p, uv, lod, s));
                 }
-                assert_eq!(plans.1, plan_bilinear::<true>(p, clamped, uv, s));
+                assert_eq!(plans.1, plan_bilinear::<true, false>(p, clamped, uv, s));
                 // The level a plan reports (the renderer's histogram reads it).
                 let lower = MipPyramid::split_level(p.clamp_level(lod)).0;
                 assert_eq!((plans.0.level(), plans.1.level()), (lower, clamped));

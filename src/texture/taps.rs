@@ -59,7 +59,7 @@ impl BilinearTaps {
     /// same bits in each, see [`axis_taps_in`]).
     #[inline(always)]
     pub fn new_in<const AVX2: bool>(level: &MipLevel, uv: Vec2, sampler: Sampler) -> BilinearTaps {
-        if !(level.width.is_power_of_two() && level.height.is_power_of_two()) {
+        if !level.sides_power_of_two() {
             let repeat = [sampler.wrap_s, sampler.wrap_t].map(|m| m == WrapMode::Repeat);
             if let Some([x, y]) = two_axes([uv.x, uv.y], [level.width, level.height], repeat) {
                 return Self::of_axes(level, x, y);
@@ -100,7 +100,7 @@ impl BilinearTaps {
     ) -> [BilinearTaps; 2] {
         let [a, b] = levels;
         let sides = [a.width, a.height, b.width, b.height];
-        if sides.iter().all(|n| n.is_power_of_two()) {
+        if a.sides_power_of_two() && b.sides_power_of_two() {
             let [wa, ha, wb, hb] = sides.map(|n| n as f32);
             let scaled = [uv.x * wa, uv.y * ha, uv.x * wb, uv.y * hb];
             let repeat = [sampler.wrap_s, sampler.wrap_t].map(|m| m == WrapMode::Repeat);
