@@ -101,13 +101,8 @@ impl BilinearTaps {
         let [a, b] = levels;
         let sides = [a.width, a.height, b.width, b.height];
         if a.sides_power_of_two() && b.sides_power_of_two() {
-            let [wa, ha, wb, hb] = sides.map(|n| n as f32);
-            let scaled = [uv.x * wa, uv.y * ha, uv.x * wb, uv.y * hb];
             let repeat = [sampler.wrap_s, sampler.wrap_t].map(|m| m == WrapMode::Repeat);
-            let lasts = sides.map(|n| n as i32 - 1);
-            if let Some((i0, i1, frac)) =
-                four_axes(scaled, lasts, [repeat[0], repeat[1], repeat[0], repeat[1]])
-            {
+            if let Some((i0, i1, frac)) = four_axes(uv, sides, repeat) {
                 // Lane `lane`'s axis; every index is in `0..n` (wrapped, or inside).
                 let axis = |lane: usize| (i0[lane] as usize, i1[lane] as usize, frac[lane]);
                 return [
@@ -134,23 +129,33 @@ impl BilinearTaps {
     }
 }
 
-/// [`axis_taps_in`]'s shortcut on four axes at once: for `p[i] = t * n` on an axis of
-/// `n = lasts[i] + 1` texels (a power of two), the two texel indices and the weight of
-/// the second, the same bits as the shortcut gives each; `None` when the shortcut does
-/// not apply to every axis (a `|p|` outside `[0.5, 2^23)` or NaN, or a lookup that leaves
-/// the image under a mode other than Repeat, `repeat[i]` false).
+/// [`axis_taps_in`]'s shortcut on two levels' four axes at once (`sides`: the two levels'
+/// widths and heights, each a power of two; `repeat`: whether the s and t axes repeat):
+/// for `p = t * n` on each axis, the two texel indices and the weight of the second, the
+/// same bits as the shortcut gives each; `None` when the shortcut does not apply to every
+/// axis (a `|p|` outside `[0.5, 2^23)` or NaN, or a lookup that leaves the image under a
+/// mode other than Repeat).
 #[cfg(target_arch = "x86_64")]
 #[inline(always)]
 fn four_axes(
-    p: [f32; 4],
-    lasts: [i32; 4],
-    repeat: [bool; 4],
+    uv: Vec2,
+    sides: [u32; 4],
+    repeat: [bool; 2],
 ) -> Option<([i32; 4], [i32; 4], [f32; 4])> {
     use std::arch::x86_64::*;
     // SAFETY: SSE2 is part of x86_64, and these intrinsics only compute on registers and
-    // load and store local arrays of four lanes.
+    // store local arrays of four lanes.
     unsafe {
-        let p = _mm_loadu_ps(p.as_ptr());
+        // The sides in integer lanes (at most `MAX_SIZE`, so exact as i32 and as f32):
+        // `t * n` is the product each axis computes alone, and the masks below are `n - 1`,
+        // made in the lanes rather than lane by lane and loaded.
+        let n = _mm_setr_epi32(
+            sides[0] as i32,
+            sides[1] as i32,
+            sides[2] as i32,
+            sides[3] as i32,
+        );
+        let p = _mm_mul_ps(_mm_setr_ps(uv.x, uv.y, uv.x, uv.y), _mm_cvtepi32_ps(n));
         let magnitude = _mm_and_ps(p, _mm_castsi128_ps(_mm_set1_epi32(i32::MAX)));
         let fits = _mm_and_ps(
             _mm_cmpge_ps(magnitude, _mm_set1_ps(0.5)),
@@ -170,13 +175,9 @@ fn four_axes(
         let frac = _mm_add_ps(_mm_sub_ps(r, _mm_cvtepi32_ps(h)), _mm_set1_ps(0.5));
         // Repeat wraps with the side's mask (two's complement: the Euclidean remainder for
         // negative `x0` too); other modes need both texels inside, `0 <= x0 < last`.
-        let last = _mm_loadu_si128(lasts.as_ptr().cast());
-        let repeat = _mm_setr_epi32(
-            -i32::from(repeat[0]),
-            -i32::from(repeat[1]),
-            -i32::from(repeat[2]),
-            -i32::from(repeat[3]),
-        );
+        let last = _mm_sub_epi32(n, _mm_set1_epi32(1));
+        let (repeat_s, repeat_t) = (-i32::from(repeat[0]), -i32::from(repeat[1]));
+        let repeat = _mm_setr_epi32(repeat_s, repeat_t, repeat_s, repeat_t);
         let inside = _mm_andnot_si128(
             _mm_cmplt_epi32(x0, _mm_setzero_si128()),
             _mm_cmplt_epi32(x0, last),
@@ -368,7 +369,7 @@ fn two_axes(_: [f32; 2], _: [u32; 2], _: [bool; 2]) -> Option<[AxisTaps; 2]> {
 /// [`four_axes`] where there is no SSE2: no shortcut (each level alone).
 #[cfg(not(target_arch = "x86_64"))]
 #[inline(always)]
-fn four_axes(_: [f32; 4], _: [i32; 4], _: [bool; 4]) -> Option<([i32; 4], [i32; 4], [f32; 4])> {
+fn four_axes(_: Vec2, _: [u32; 4], _: [bool; 2]) -> Option<([i32; 4], [i32; 4], [f32; 4])> {
     None
 }
 
@@ -674,15 +675,12 @@ mod tests {
                         }
                         compared += 1;
                         let sides = [a.width, a.height, b.width, b.height];
-                        let scaled = [0, 1, 2, 3].map(|i| [uv.x, uv.y][i % 2] * sides[i] as f32);
-                        let repeat =
-                            [wrap_s, wrap_t, wrap_s, wrap_t].map(|m| m == WrapMode::Repeat);
+                        let two_levels = [wrap_s, wrap_t].map(|m| m == WrapMode::Repeat);
                         let f32_lanes = sides.iter().all(|n| n.is_power_of_two())
-                            && four_axes(scaled, sides.map(|n| n as i32 - 1), repeat).is_some();
+                            && four_axes(uv, sides, two_levels).is_some();
                         four_at_once += usize::from(f32_lanes);
                         #[cfg(target_arch = "x86_64")]
                         if avx2 && !f32_lanes {
-                            let two_levels = [repeat[0], repeat[1]];
                             // SAFETY: the CPU has AVX2 (checked above).
                             let f64_lanes =
                                 unsafe { four_axes_f64([uv.x, uv.y], sides, two_levels) };
