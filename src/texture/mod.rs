@@ -171,6 +171,17 @@ impl MipLevel {
         self.sides_power_of_two
     }
 
+    /// For a level of 8-bit codes, the storage distance from one row of 4 x 4 blocks to
+    /// the next (so [`MipLevel::row_start`] of `y` is `(y >> 2) * stride + (y & 3) * 4`);
+    /// `None` for float texels. At most `MAX_SIZE / 4 * 16 = 2^16`.
+    #[inline(always)]
+    pub(super) fn block_row_stride(&self) -> Option<u32> {
+        match &self.texels {
+            Texels::Srgb8 { codes, .. } => Some((codes.blocks_across * 16) as u32),
+            Texels::Linear(_) => None,
+        }
+    }
+
     /// Texel number `i` (`y * width + x`) as linear RGBA, whatever the storage.
     #[inline(always)]
     pub fn texel(&self, i: usize) -> Vec4 {
