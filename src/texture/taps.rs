@@ -89,6 +89,8 @@ impl BilinearTaps {
     /// sides powers of two, see the module note), their floors, fractions and wraps are
     /// computed four lanes at a time ([`four_axes`]); otherwise, in the AVX2 copy, the f64
     /// formula on the four axes at once ([`four_axes_f64`]); otherwise each level alone.
+    /// From either four-lane form, two levels of 8-bit codes get their storage indices in
+    /// lanes too ([`blocked_pair_texels`]).
     ///
     /// Why: the second level of a trilinear lookup made it cost nearly two bilinear ones;
     /// on x86-64 the four axes take about the instructions of two.
@@ -100,40 +102,35 @@ impl BilinearTaps {
     ) -> [BilinearTaps; 2] {
         let [a, b] = levels;
         let sides = [a.width, a.height, b.width, b.height];
-        if a.sides_power_of_two() && b.sides_power_of_two() {
-            let repeat = [sampler.wrap_s, sampler.wrap_t].map(|m| m == WrapMode::Repeat);
-            if let Some((i0, i1, frac)) = four_axes(uv, sides, repeat) {
-                if let (Some(sa), Some(sb)) = (a.block_row_stride(), b.block_row_stride()) {
-                    let [ta, tb] = blocked_pair_texels(i0, i1, [sa, sb]);
-                    return [
-                        BilinearTaps {
-                            texels: ta,
-                            fx: frac[0],
-                            fy: frac[1],
-                        },
-                        BilinearTaps {
-                            texels: tb,
-                            fx: frac[2],
-                            fy: frac[3],
-                        },
-                    ];
-                }
-                // Lane `lane`'s axis; every index is in `0..n` (wrapped, or inside).
-                let axis = |lane: usize| (i0[lane] as usize, i1[lane] as usize, frac[lane]);
-                return [
-                    Self::of_axes(a, axis(0), axis(1)),
-                    Self::of_axes(b, axis(2), axis(3)),
-                ];
-            }
-        }
+        let repeat = [sampler.wrap_s, sampler.wrap_t].map(|m| m == WrapMode::Repeat);
+        let axes = if a.sides_power_of_two() && b.sides_power_of_two() {
+            four_axes(uv, sides, repeat)
+        } else {
+            None
+        };
         #[cfg(target_arch = "x86_64")]
-        if AVX2 {
-            let repeat = [sampler.wrap_s, sampler.wrap_t].map(|m| m == WrapMode::Repeat);
-            // SAFETY: `AVX2` is true only in the copy `simd::dispatch` runs where the CPU has
-            // AVX2 (and in tests that check the CPU first).
-            if let Some([xa, ya, xb, yb]) = unsafe { four_axes_f64([uv.x, uv.y], sides, repeat) } {
-                return [Self::of_axes(a, xa, ya), Self::of_axes(b, xb, yb)];
+        let axes = match axes {
+            // SAFETY: `AVX2` is true only in the copy `simd::dispatch` runs where the CPU
+            // has AVX2 (and in tests that check the CPU first).
+            None if AVX2 => unsafe { four_axes_f64([uv.x, uv.y], sides, repeat) },
+            axes => axes,
+        };
+        if let Some((i0, i1, frac)) = axes {
+            let taps = |texels, lane: usize| BilinearTaps {
+                texels,
+                fx: frac[lane],
+                fy: frac[lane + 1],
+            };
+            if let (Some(sa), Some(sb)) = (a.block_row_stride(), b.block_row_stride()) {
+                let [ta, tb] = blocked_pair_texels(i0, i1, [sa, sb]);
+                return [taps(ta, 0), taps(tb, 2)];
             }
+            // Lane `lane`'s axis; every index is in `0..n` (wrapped, or inside).
+            let axis = |lane: usize| (i0[lane] as usize, i1[lane] as usize, frac[lane]);
+            return [
+                Self::of_axes(a, axis(0), axis(1)),
+                Self::of_axes(b, axis(2), axis(3)),
+            ];
         }
         // Written out, not `levels.map`: a closure the compiler leaves out of line loses
         // the AVX2 copy's rounding instructions (its floors became library calls).
@@ -292,8 +289,9 @@ fn two_axes(t: [f32; 2], sides: [u32; 2], repeat: [bool; 2]) -> Option<[AxisTaps
 
 /// [`two_axes`] on both levels of a pair at once, in AVX's four f64 lanes (`sides` the
 /// levels' widths and heights, `t` the coordinates, `repeat` per axis as there): the same
-/// operations lane by lane, so the same indices and weight bits, or `None` where
-/// `two_axes` gives `None` for either level. The floors are the rounding instruction's
+/// operations lane by lane, so the same indices and weight bits (in [`four_axes`]'s lanes:
+/// the first level's x and y, then the second's), or `None` where `two_axes` gives `None`
+/// for either level. The floors are the rounding instruction's
 /// (exact, as [`floor_moderate`] is, and no lane is `-0.0`, see there).
 ///
 /// Why: a trilinear lookup in an image whose sides are not powers of two (BART Kitchen's
@@ -304,7 +302,11 @@ fn two_axes(t: [f32; 2], sides: [u32; 2], repeat: [bool; 2]) -> Option<[AxisTaps
 #[cfg(target_arch = "x86_64")]
 #[inline]
 #[target_feature(enable = "avx")]
-unsafe fn four_axes_f64(t: [f32; 2], sides: [u32; 4], repeat: [bool; 2]) -> Option<[AxisTaps; 4]> {
+unsafe fn four_axes_f64(
+    t: [f32; 2],
+    sides: [u32; 4],
+    repeat: [bool; 2],
+) -> Option<([i32; 4], [i32; 4], [f32; 4])> {
     use std::arch::x86_64::*;
     let n = _mm256_setr_pd(
         f64::from(sides[0]),
@@ -351,8 +353,7 @@ unsafe fn four_axes_f64(t: [f32; 2], sides: [u32; 4], repeat: [bool; 2]) -> Opti
         );
         _mm_storeu_ps(weight.as_mut_ptr(), frac);
     }
-    let axis = |i: usize| (first[i] as usize, second[i] as usize, weight[i]);
-    Some([axis(0), axis(1), axis(2), axis(3)])
+    Some((first, second, weight))
 }
 
 /// Largest `|t * n - 0.5|` [`two_axes`] takes: its floors convert through `i32`.
@@ -382,8 +383,9 @@ fn two_axes(_: [f32; 2], _: [u32; 2], _: [bool; 2]) -> Option<[AxisTaps; 2]> {
 }
 
 /// The storage indices of two levels of 8-bit codes (block row strides `strides`) at the
-/// texel indices [`four_axes`] gives (`i0`, `i1`: lanes x and y of the first level, then
-/// of the second, each in `0..n`): what [`BilinearTaps::of_axes`] computes for each level,
+/// texel indices [`four_axes`] or [`four_axes_f64`] gives (`i0`, `i1`: lanes x and y of the
+/// first level, then of the second, each in `0..n`): what [`BilinearTaps::of_axes`]
+/// computes for each level,
 /// `row_start(y) + column_offset(x)` with `row_start(y) = (y >> 2) * stride + (y & 3) * 4`
 /// and `column_offset(x) = (x >> 2) * 16 + (x & 3)`, in integer lanes. Every index is
 /// below 2^29 (`MAX_SIZE` texels a side), so the 32-bit lanes hold it exactly.
