@@ -444,14 +444,11 @@ pub trait RayLod: Copy + Send + Sync {
 /// Non-positive and NaN inputs give -126 (the finest level after clamping), +inf gives 128.
 #[inline]
 pub fn fast_log2(x: f32) -> f32 {
-    // Positive normal finite `x` is exactly the bits `MIN_POSITIVE..=MAX`: one unsigned
-    // comparison lets them through (negative values have the sign bit, NaN and the
-    // infinities the largest exponent, zero and subnormals the smallest).
-    const NORMAL_FIRST: u32 = f32::MIN_POSITIVE.to_bits();
-    const NORMAL_COUNT: u32 = f32::MAX.to_bits() - NORMAL_FIRST + 1;
-    if x.to_bits().wrapping_sub(NORMAL_FIRST) >= NORMAL_COUNT {
-        return if x > f32::MAX { 128.0 } else { -126.0 };
-    }
+    // Zero, subnormals, negative values and NaN read as `MIN_POSITIVE` (one `maxss`: the
+    // constant is never NaN, so `f32::max` needs no NaN fix-up), whose bits below give
+    // exactly -126; +inf stays, and its bits below give exactly 128 (exponent field 255,
+    // mantissa 0). Every other input is positive normal finite and passes unchanged.
+    let x = x.max(f32::MIN_POSITIVE);
     // x = 2^e m with m in [1, 2); where m > sqrt(2) (in f32) it reads as 2^(e + 1) (m / 2).
     // Both in the bits, without a branch (which half a hit's length falls in is as good as
     // random): subtracting the bits of `sqrt(2)`'s successor, less one exponent, borrows
@@ -614,6 +611,15 @@ mod tests {
         ] {
             assert_eq!(fast_log2(x).to_bits(), branch(x).to_bits(), "{x:e}");
         }
+        // And a stride through every bit pattern: both signs, zeros, subnormals, NaNs of
+        // any payload, the infinities.
+        for bits in (0..=u32::MAX)
+            .step_by(65_521)
+            .chain([0x7fff_ffff, 0xffff_ffff])
+        {
+            let x = f32::from_bits(bits);
+            assert_eq!(fast_log2(x).to_bits(), branch(x).to_bits(), "{bits:#x}");
+        }
         assert!(compared > 2_000_000, "{compared}");
     }
 
@@ -635,7 +641,7 @@ mod tests {
         assert_eq!(fast_log2(-3.0), -126.0);
         assert_eq!(fast_log2(f32::NAN), -126.0);
         assert_eq!(fast_log2(f32::INFINITY), 128.0);
-        // The ends of the one comparison that lets positive normal values through.
+        // The ends of the range that passes the guard unchanged, and just outside it.
         assert_eq!(fast_log2(f32::MIN_POSITIVE), -126.0);
         assert!((fast_log2(f32::MAX) - 128.0).abs() < 1e-5);
         for outside in [

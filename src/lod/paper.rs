@@ -10,18 +10,26 @@
 
 use glam::Vec3A;
 
-use super::{Footprint, LodCamera, LodMethod, RayLod, SurfaceHit, fast_log2, finite_level};
+use super::{Footprint, LodCamera, LodMethod, RayLod, SurfaceHit, fast_log2};
 
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct PathLength(pub f32);
 
 impl PathLength {
-    /// `log2(P_l) - log2 P_b`, finite for any input (a zero or non-finite path length
-    /// cannot occur for a real hit, but must not produce NaN: `fast_log2` gives -126 for
-    /// zero, negative, subnormal and NaN lengths, its value at `f32::MIN_POSITIVE`).
+    /// `log2(P_l) - log2 P_b`, finite for any path length and any finite `log2_pb` (a
+    /// hit's always is: a triangle's is within `±LOG2_PB_LIMIT`, see `pb.rs`).
+    /// `fast_log2` is within `[-126, 128]` for any input: a zero or non-finite path length
+    /// cannot occur for a real hit, but must not produce NaN, and zero, negative, subnormal
+    /// and NaN lengths give -126, its value at `f32::MIN_POSITIVE`.
+    ///
+    /// Not clamped to a finite range here (`finite_level`): the level is finite already,
+    /// and every lookup clamps it to its pyramid's levels (`MipPyramid::clamp_level`, which
+    /// also sends a NaN to 0), so a clamp to `±COARSEST_LEVEL` first changes nothing a
+    /// lookup reads; it cost six instructions a textured hit.
     #[inline]
     pub fn paper_level(self, log2_pb: f32) -> f32 {
-        finite_level(fast_log2(self.0) - log2_pb)
+        debug_assert!(log2_pb.is_finite(), "log2 P_b {log2_pb}");
+        fast_log2(self.0) - log2_pb
     }
 }
 
@@ -88,12 +96,23 @@ mod tests {
         }
     }
 
+    /// Finite for every path length and every `log2 P_b` a triangle can have, and what a
+    /// lookup reads of it is what it read of the level clamped to `±COARSEST_LEVEL` first.
     #[test]
     fn level_never_nan_or_infinite() {
-        for pl in [0.0, -1.0, f32::NAN, f32::INFINITY, 1e-30, 1e30] {
-            for pb in [LOG2_PB_LIMIT, -LOG2_PB_LIMIT, 0.0, 7.5, f32::NAN] {
+        let pyramid =
+            crate::texture::MipPyramid::from_linear_rgba(64, 64, vec![glam::Vec4::ONE; 64 * 64])
+                .unwrap();
+        for pl in [0.0, -1.0, f32::NAN, f32::INFINITY, f32::MAX, 1e-30, 1e30] {
+            for pb in [LOG2_PB_LIMIT, -LOG2_PB_LIMIT, 0.0, -0.0, 7.5, -130.0, 130.0] {
                 let l = PathLength(pl).paper_level(pb);
                 assert!(l.is_finite(), "path {pl} log2_pb {pb} -> {l}");
+                let clamped_first = pyramid.clamp_level(crate::lod::finite_level(l));
+                assert_eq!(
+                    pyramid.clamp_level(l).to_bits(),
+                    clamped_first.to_bits(),
+                    "path {pl} log2_pb {pb}"
+                );
             }
         }
     }
