@@ -149,11 +149,7 @@ impl BilinearTaps {
 /// mode other than Repeat).
 #[cfg(target_arch = "x86_64")]
 #[inline(always)]
-fn four_axes(
-    uv: Vec2,
-    sides: [u32; 4],
-    repeat: [bool; 2],
-) -> Option<([i32; 4], [i32; 4], [f32; 4])> {
+fn four_axes(uv: Vec2, sides: [u32; 4], repeat: [bool; 2]) -> Option<FourAxes> {
     use std::arch::x86_64::*;
     // SAFETY: SSE2 is part of x86_64, and these intrinsics only compute on registers and
     // store local arrays of four lanes.
@@ -291,8 +287,8 @@ fn two_axes(t: [f32; 2], sides: [u32; 2], repeat: [bool; 2]) -> Option<[AxisTaps
 /// levels' widths and heights, `t` the coordinates, `repeat` per axis as there): the same
 /// operations lane by lane, so the same indices and weight bits (in [`four_axes`]'s lanes:
 /// the first level's x and y, then the second's), or `None` where `two_axes` gives `None`
-/// for either level. The floors are the rounding instruction's
-/// (exact, as [`floor_moderate`] is, and no lane is `-0.0`, see there).
+/// for either level. The floors are the rounding instruction's (exact, as
+/// [`floor_moderate`] is, and no lane is `-0.0`, see there).
 ///
 /// Why: a trilinear lookup in an image whose sides are not powers of two (BART Kitchen's
 /// floor) computed the two levels' axes one level at a time.
@@ -302,11 +298,7 @@ fn two_axes(t: [f32; 2], sides: [u32; 2], repeat: [bool; 2]) -> Option<[AxisTaps
 #[cfg(target_arch = "x86_64")]
 #[inline]
 #[target_feature(enable = "avx")]
-unsafe fn four_axes_f64(
-    t: [f32; 2],
-    sides: [u32; 4],
-    repeat: [bool; 2],
-) -> Option<([i32; 4], [i32; 4], [f32; 4])> {
+unsafe fn four_axes_f64(t: [f32; 2], sides: [u32; 4], repeat: [bool; 2]) -> Option<FourAxes> {
     use std::arch::x86_64::*;
     let n = _mm256_setr_pd(
         f64::from(sides[0]),
@@ -385,9 +377,9 @@ fn two_axes(_: [f32; 2], _: [u32; 2], _: [bool; 2]) -> Option<[AxisTaps; 2]> {
 /// The storage indices of two levels of 8-bit codes (block row strides `strides`) at the
 /// texel indices [`four_axes`] or [`four_axes_f64`] gives (`i0`, `i1`: lanes x and y of the
 /// first level, then of the second, each in `0..n`): what [`BilinearTaps::of_axes`]
-/// computes for each level,
-/// `row_start(y) + column_offset(x)` with `row_start(y) = (y >> 2) * stride + (y & 3) * 4`
-/// and `column_offset(x) = (x >> 2) * 16 + (x & 3)`, in integer lanes. Every index is
+/// computes for each level, `row_start(y) + column_offset(x)` with
+/// `row_start(y) = (y >> 2) * stride + (y & 3) * 4` and
+/// `column_offset(x) = (x >> 2) * 16 + (x & 3)`, in integer lanes. Every index is
 /// below 2^29 (`MAX_SIZE` texels a side), so the 32-bit lanes hold it exactly.
 ///
 /// Why: one by one, the two levels' row starts and column offsets (each matching the
@@ -459,9 +451,13 @@ fn blocked_pair_texels(i0: [i32; 4], i1: [i32; 4], strides: [u32; 2]) -> [[u32; 
 /// [`four_axes`] where there is no SSE2: no shortcut (each level alone).
 #[cfg(not(target_arch = "x86_64"))]
 #[inline(always)]
-fn four_axes(_: Vec2, _: [u32; 4], _: [bool; 2]) -> Option<([i32; 4], [i32; 4], [f32; 4])> {
+fn four_axes(_: Vec2, _: [u32; 4], _: [bool; 2]) -> Option<FourAxes> {
     None
 }
+
+/// Two levels' four axes in lanes (the first level's x and y, then the second's): each
+/// lane's two texel indices, in `0..n`, and the weight of the second.
+type FourAxes = ([i32; 4], [i32; 4], [f32; 4]);
 
 /// Largest `|t * n|` the f32 shortcut takes (see the module note).
 const F32_EXACT_BELOW: f32 = 8_388_608.0; // 2^23
