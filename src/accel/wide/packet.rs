@@ -116,8 +116,23 @@ impl RayPacket {
     #[inline(always)]
     pub fn set_converging(&mut self, rays: &[(Vec3A, Vec3A)], t_max: &[f32]) -> bool {
         let len = rays.len().min(t_max.len()).min(PACKET);
-        self.frustum = Frustum::converging(&rays[..len], &t_max[..len]);
-        self.set_rays_if_bounded(&rays[..len])
+        // The rows first (the directions in `inverse` until inverted): the bounds are made
+        // from them four rays at a time. Padded with ray 0 to a whole group of four.
+        self.set_rows(&rays[..len]);
+        let mut limits = [0.0f32; PACKET];
+        limits[..len].copy_from_slice(&t_max[..len]);
+        for row in self.origin.iter_mut().chain(&mut self.inverse) {
+            repeat_first_to_group_end(row, len);
+        }
+        repeat_first_to_group_end(&mut limits, len);
+        self.frustum = Frustum::converging(&self.origin, &self.inverse, &limits, len);
+        if self.frustum.is_some() {
+            self.invert_directions();
+        } else {
+            // Without bounds the packet walks masked, which never reads the rows.
+            self.len = 0;
+        }
+        self.frustum.is_some()
     }
 
     /// Refills the packet with `rays` (at most [`PACKET`]) and gives it interval bounds when
@@ -159,10 +174,17 @@ impl RayPacket {
     /// The rays' slab constants, without interval bounds.
     #[inline(always)]
     fn set_rays(&mut self, rays: &[(Vec3A, Vec3A)]) {
+        self.set_rows(rays);
+        self.invert_directions();
+    }
+
+    /// The rays' origins and directions as rows, the directions in `inverse` (see
+    /// [`RayPacket::invert_directions`]).
+    #[inline(always)]
+    fn set_rows(&mut self, rays: &[(Vec3A, Vec3A)]) {
         let len = rays.len().min(PACKET);
         self.len = len;
-        // Four rays at a time: their origins and directions transposed into rows (x86-64),
-        // the directions inverted there (the same IEEE division as one at a time).
+        // Four rays at a time: their origins and directions transposed into rows (x86-64).
         #[cfg(target_arch = "x86_64")]
         let whole = {
             for (group, four) in rays[..len].chunks_exact(4).enumerate() {
@@ -171,7 +193,7 @@ impl RayPacket {
                 let directions = simd::transpose4([0, 1, 2, 3].map(|k| four[k].1.into()));
                 for axis in 0..3 {
                     Vec4::from(origins[axis]).write_to_slice(&mut self.origin[axis][at..at + 4]);
-                    safe_inverse4(Vec4::from(directions[axis]))
+                    Vec4::from(directions[axis])
                         .write_to_slice(&mut self.inverse[axis][at..at + 4]);
                 }
             }
@@ -179,16 +201,21 @@ impl RayPacket {
         };
         #[cfg(not(target_arch = "x86_64"))]
         let whole = 0;
-        // The rest ray by ray into the rows, inverted four at a time (a last, partial group
-        // inverts whatever its slots past `len` hold: no ray reads them).
         for (i, &(origin, direction)) in rays[..len].iter().enumerate().skip(whole) {
             for axis in 0..3 {
                 self.origin[axis][i] = origin[axis];
                 self.inverse[axis][i] = direction[axis];
             }
         }
+    }
+
+    /// Inverts the directions [`RayPacket::set_rows`] left in `inverse`, four at a time (the
+    /// same IEEE division as one at a time; a last, partial group inverts whatever its slots
+    /// past `len` hold: no ray reads them).
+    #[inline(always)]
+    fn invert_directions(&mut self) {
         for row in &mut self.inverse {
-            for group in row[whole..len.next_multiple_of(4)].chunks_exact_mut(4) {
+            for group in row[..self.len.next_multiple_of(4)].chunks_exact_mut(4) {
                 safe_inverse4(Vec4::from_slice(group)).write_to_slice(group);
             }
         }
@@ -402,61 +429,76 @@ impl Frustum {
     /// the grown box's backward segment in real numbers, whose rounded slab distances lie
     /// within the bounds (one shared origin, as in [`Frustum::of`]): the test never drops a
     /// box a ray enters. The leaves' boxes are still tested by each ray forward, as alone.
+    ///
+    /// Takes the rays as rows (`origin[axis][ray]`, `direction[axis][ray]`, `t_max[ray]`),
+    /// the slots of the last group of four past `len` repeating ray 0, and works four rays
+    /// at a time: the packet's setup is per packet, and ray by ray it was as costly as a
+    /// fifth of the walk it sets up.
     #[inline(always)]
-    fn converging(rays: &[(Vec3A, Vec3A)], t_max: &[f32]) -> Option<Frustum> {
-        let len = rays.len().min(t_max.len()).min(PACKET);
+    fn converging(
+        origin: &[[f32; PACKET]; 3],
+        direction: &[[f32; PACKET]; 3],
+        t_max: &[f32; PACKET],
+        len: usize,
+    ) -> Option<Frustum> {
+        let len = len.min(PACKET);
         if len == 0 {
             return None;
         }
-        let (mut low, mut high) = (Vec3A::INFINITY, Vec3A::NEG_INFINITY);
-        let (mut origin_low, mut origin_high) = (Vec3A::INFINITY, Vec3A::NEG_INFINITY);
-        // Per component, the largest magnitude of the origins, of the ends and of the reaches.
-        // `x.max(largest)` keeps `largest` where `x` is NaN (as `f32::max` and SSE's `maxps`
-        // both do), so each stays free of NaN; three of them make three short chains, where
-        // one scalar `max` per value through a single `scale` was the function's hottest path.
-        let mut largest = [Vec3A::ZERO; 3];
-        for (&(origin, direction), &t) in rays[..len].iter().zip(t_max) {
-            let reach = direction * t;
-            let end = origin + reach;
-            low = low.min(end);
-            high = high.max(end);
-            origin_low = origin_low.min(origin);
-            origin_high = origin_high.max(origin);
-            largest[0] = origin.abs().max(largest[0]);
-            largest[1] = end.abs().max(largest[1]);
-            largest[2] = reach.abs().max(largest[2]);
-        }
-        let scale = largest[0].max(largest[1]).max(largest[2]).max_element();
-        // Catches infinite ends (a directional light's rays have no end). A NaN origin is
-        // caught below: its row inverts to NaN, which `over_inverses` refuses.
-        if !(scale < f32::MAX) {
-            return None;
-        }
-        let apex = (low + high) * 0.5;
-        let margin = (high - low).max_element() * 0.5 + scale * CONVERGING_SLACK;
-        // The reversed segments' directions, `origin - apex`, as rows; the slots of the last
-        // group of four past `len` repeat ray 0, so the groups below see only the packet's.
-        let mut backwards = [[0.0f32; PACKET]; 3];
-        for (r, &(origin, _)) in rays[..len].iter().enumerate() {
-            for (row, value) in backwards.iter_mut().zip((origin - apex).to_array()) {
-                row[r] = value;
+        let groups = len.next_multiple_of(4);
+        let four = |row: &[f32; PACKET], at: usize| Vec4::from_slice(&row[at..at + 4]);
+        let (mut low, mut high) = ([Vec4::INFINITY; 3], [Vec4::NEG_INFINITY; 3]);
+        let (mut origin_low, mut origin_high) = ([Vec4::INFINITY; 3], [Vec4::NEG_INFINITY; 3]);
+        // The largest magnitude of the origins, of the ends and of the reaches. `x.max(largest)`
+        // keeps `largest` where `x` is NaN (SSE's `maxps`), so each stays free of NaN; NaN
+        // and infinite ends are caught by `unsound`, which `end - end` makes NaN for them.
+        let mut largest = [Vec4::ZERO; 3];
+        let mut unsound = Vec4::ZERO;
+        for at in (0..groups).step_by(4) {
+            let t = four(t_max, at);
+            for axis in 0..3 {
+                let o = four(&origin[axis], at);
+                let reach = four(&direction[axis], at) * t;
+                let end = o + reach;
+                low[axis] = low[axis].min(end);
+                high[axis] = high[axis].max(end);
+                origin_low[axis] = origin_low[axis].min(o);
+                origin_high[axis] = origin_high[axis].max(o);
+                largest[0] = o.abs().max(largest[0]);
+                largest[1] = end.abs().max(largest[1]);
+                largest[2] = reach.abs().max(largest[2]);
+                unsound += end - end;
             }
         }
-        for row in &mut backwards {
-            let first = row[0];
-            row[len..len.next_multiple_of(4)].fill(first);
+        let scale = largest[0].max(largest[1]).max(largest[2]).max_element();
+        // Infinite or NaN ends (a directional light's rays have no end). A NaN origin is
+        // caught below too: its row inverts to NaN, which `over_inverses` refuses.
+        if !(scale < f32::MAX) || unsound.cmpne(Vec4::ZERO).any() {
+            return None;
         }
-        // Four rays at a time: the shortest segment, and the spread of the unit directions.
+        let reduce = |rows: [Vec4; 3], f: fn(Vec4) -> f32| Vec3A::from(rows.map(f));
+        let (low, high) = (
+            reduce(low, Vec4::min_element),
+            reduce(high, Vec4::max_element),
+        );
+        let origin_low = reduce(origin_low, Vec4::min_element);
+        let origin_high = reduce(origin_high, Vec4::max_element);
+        let apex = (low + high) * 0.5;
+        let margin = (high - low).max_element() * 0.5 + scale * CONVERGING_SLACK;
+        // The reversed segments' directions, `origin - apex`, as rows; four rays at a time
+        // with them, the shortest segment and the spread of the unit directions.
+        let mut backwards = [[0.0f32; PACKET]; 3];
         let (mut spread_low, mut spread_high) = ([Vec4::INFINITY; 3], [Vec4::NEG_INFINITY; 3]);
         let mut shortest = Vec4::INFINITY;
-        for at in (0..len).step_by(4) {
-            let b = [0, 1, 2].map(|axis| Vec4::from_slice(&backwards[axis][at..at + 4]));
+        for at in (0..groups).step_by(4) {
+            let b = [0, 1, 2].map(|axis| four(&origin[axis], at) - Vec4::splat(apex[axis]));
             let length = (b[0] * b[0] + b[1] * b[1] + b[2] * b[2]).sqrt();
             shortest = shortest.min(length);
             for axis in 0..3 {
                 let unit = b[axis] / length;
                 spread_low[axis] = spread_low[axis].min(unit);
                 spread_high[axis] = spread_high[axis].max(unit);
+                safe_inverse4(b[axis]).write_to_slice(&mut backwards[axis][at..at + 4]);
             }
         }
         let shortest = shortest.min_element();
@@ -467,11 +509,6 @@ impl Frustum {
         let fans_out = spread.into_iter().fold(0.0f32, f32::max) > CONVERGING_SPREAD_MAX;
         if !(margin <= shortest * CONVERGING_MARGIN_MAX) || fans_out {
             return None;
-        }
-        for row in &mut backwards {
-            for group in row[..len.next_multiple_of(4)].chunks_exact_mut(4) {
-                safe_inverse4(Vec4::from_slice(group)).write_to_slice(group);
-            }
         }
         let splat = [0, 1, 2].map(|axis| Lanes::splat(apex[axis]));
         let mut frustum = Frustum::over_inverses(splat, splat, &backwards, len)?;
@@ -715,6 +752,14 @@ fn closest_point_of_lines(p: Vec3A, u: Vec3A, q: Vec3A, v: Vec3A) -> Option<Vec3
     let t = (a * e - b * d) / denominator;
     let point = ((p + u * s) + (q + v * t)) * 0.5;
     point.is_finite().then_some(point)
+}
+
+/// Repeats `row[0]` in the slots from `len` to the end of its group of four, so that a
+/// pass four at a time over the first `len` slots sees only their values.
+#[inline(always)]
+fn repeat_first_to_group_end(row: &mut [f32; PACKET], len: usize) {
+    let first = row[0];
+    row[len..len.next_multiple_of(4).min(PACKET)].fill(first);
 }
 
 /// The margin of [`Frustum::converging`] beyond the spread of the segments' ends, as a
