@@ -110,29 +110,16 @@ impl RayPacket {
     /// [`Frustum::converging`]. Returns whether it has them; without them the walk is the
     /// ranged one (a packet from several origins), and the masked walk suits such rays
     /// better.
-    // Always inlined, with `Frustum::converging`: the tile kernel (`render::tile::TraceTile`)
-    // calls it through `PacketQuery::fill_occlusion`, and as a call it ran in the baseline
-    // copy (SSE2, two-operand forms), about 2% of a BART Kitchen frame's instructions.
-    #[inline(always)]
+    ///
+    /// In the copy [`simd::dispatch`] chooses: the same operations, which the AVX2 copy
+    /// encodes with three operands (SSE2's copy spends a move on most of them, and spills).
+    #[inline]
     pub fn set_converging(&mut self, rays: &[(Vec3A, Vec3A)], t_max: &[f32]) -> bool {
-        let len = rays.len().min(t_max.len()).min(PACKET);
-        // The rows first (the directions in `inverse` until inverted): the bounds are made
-        // from them four rays at a time. Padded with ray 0 to a whole group of four.
-        self.set_rows(&rays[..len]);
-        let mut limits = [0.0f32; PACKET];
-        limits[..len].copy_from_slice(&t_max[..len]);
-        for row in self.origin.iter_mut().chain(&mut self.inverse) {
-            repeat_first_to_group_end(row, len);
-        }
-        repeat_first_to_group_end(&mut limits, len);
-        self.frustum = Frustum::converging(&self.origin, &self.inverse, &limits, len);
-        if self.frustum.is_some() {
-            self.invert_directions();
-        } else {
-            // Without bounds the packet walks masked, which never reads the rows.
-            self.len = 0;
-        }
-        self.frustum.is_some()
+        simd::dispatch(SetConverging {
+            packet: self,
+            rays,
+            t_max,
+        })
     }
 
     /// Refills the packet with `rays` (at most [`PACKET`]) and gives it interval bounds when
@@ -384,6 +371,40 @@ mod sixteen_rays {
             let ceiling = _mm512_min_ps(_mm512_mul_ps(far, robust_far), sixteen(limits));
             u32::from(_mm512_cmp_ps_mask::<_CMP_LE_OQ>(near, ceiling))
         })
+    }
+}
+
+/// [`RayPacket::set_converging`] as a [`simd::Kernel`].
+struct SetConverging<'a> {
+    packet: &'a mut RayPacket,
+    rays: &'a [(Vec3A, Vec3A)],
+    t_max: &'a [f32],
+}
+
+impl simd::Kernel for SetConverging<'_> {
+    type Output = bool;
+
+    #[inline(always)]
+    fn run<const AVX2: bool>(self) -> bool {
+        let (packet, rays, t_max) = (self.packet, self.rays, self.t_max);
+        let len = rays.len().min(t_max.len()).min(PACKET);
+        // The rows first (the directions in `inverse` until inverted): the bounds are made
+        // from them four rays at a time. Padded with ray 0 to a whole group of four.
+        packet.set_rows(&rays[..len]);
+        let mut limits = [0.0f32; PACKET];
+        limits[..len].copy_from_slice(&t_max[..len]);
+        for row in packet.origin.iter_mut().chain(&mut packet.inverse) {
+            repeat_first_to_group_end(row, len);
+        }
+        repeat_first_to_group_end(&mut limits, len);
+        packet.frustum = Frustum::converging(&packet.origin, &packet.inverse, &limits, len);
+        if packet.frustum.is_some() {
+            packet.invert_directions();
+        } else {
+            // Without bounds the packet walks masked, which never reads the rows.
+            packet.len = 0;
+        }
+        packet.frustum.is_some()
     }
 }
 
