@@ -1669,6 +1669,86 @@ mod tests {
         assert!(!RayPacket::new(&[]).set_converging(&[], &[]));
     }
 
+    /// What a packet's bounds hold, as bits (for comparing two packets' bounds).
+    fn bounds_bits(packet: &RayPacket) -> Option<Vec<u32>> {
+        let f = packet.frustum.as_ref()?;
+        let lanes = |rows: &[Lanes; 3]| rows.iter().map(|l| l.0[0].to_bits()).collect::<Vec<_>>();
+        let mut bits = lanes(&f.front_origin);
+        bits.extend(lanes(&f.back_origin));
+        bits.extend(lanes(&f.inverse_min));
+        bits.extend(lanes(&f.inverse_max));
+        bits.extend(f.reach_low.iter().chain(&f.reach_high).map(|v| v.to_bits()));
+        bits.extend([
+            f.agreeing,
+            f.reaching,
+            f.fixed_limit.unwrap_or(-1.0).to_bits(),
+        ]);
+        bits.extend([f.start.to_bits(), f.limit_shift.to_bits()]);
+        bits.extend(f.front.iter().chain(&f.back).map(|p| p.row() as u32));
+        Some(bits)
+    }
+
+    /// The bounds are made four rays at a time with the last group padded by ray 0: a
+    /// packet of any length gets the same bounds whatever an earlier, larger packet left
+    /// in its slots, and the same as its rays in another order's first ray repeated (the
+    /// bounds are a fold over the rays). One broken ray anywhere (a NaN or infinite limit,
+    /// a NaN direction or origin) takes the bounds away.
+    #[test]
+    fn converging_bounds_depend_only_on_the_packets_own_rays() {
+        let mut next = stream(0x3c6ef372fe94f82b);
+        let (mut bounded, mut refused) = (0, 0);
+        for _ in 0..60 {
+            let (rays, limits) = shadow_rays(&mut next, 0.0, false);
+            let fresh = |rays: &[(Vec3A, Vec3A)], limits: &[f32]| {
+                let mut packet = RayPacket::new(&[]);
+                let has = packet.set_converging(rays, limits);
+                assert_eq!(has, packet.frustum.is_some());
+                bounds_bits(&packet)
+            };
+            let alone = fresh(&rays, &limits);
+            // Slots filled first by 64 rays from elsewhere, pointing every way.
+            let stale: Vec<(Vec3A, Vec3A)> = (0..PACKET)
+                .map(|_| {
+                    let d = Vec3A::new(next(), next(), next()) + Vec3A::splat(1e-3);
+                    (Vec3A::new(next(), next(), next()) * 50.0, d)
+                })
+                .collect();
+            let mut reused = RayPacket::new(&stale);
+            reused.set_converging(&stale, &[1e3; PACKET]);
+            reused.set_converging(&rays, &limits);
+            assert_eq!(bounds_bits(&reused), alone, "{} rays", rays.len());
+            // The rays reversed after the first: the same folds, the same bounds.
+            let mut reordered = vec![rays[0]];
+            reordered.extend(rays[1..].iter().rev());
+            let mut reordered_limits = vec![limits[0]];
+            reordered_limits.extend(limits[1..].iter().rev());
+            assert_eq!(fresh(&reordered, &reordered_limits), alone);
+            if alone.is_none() {
+                continue;
+            }
+            bounded += 1;
+            let r = (next().abs() * rays.len() as f32) as usize % rays.len();
+            for broken in 0..4 {
+                let (mut rays, mut limits) = (rays.clone(), limits.clone());
+                match broken {
+                    0 => limits[r] = f32::NAN,
+                    1 => limits[r] = f32::INFINITY,
+                    2 => rays[r].1.y = f32::NAN,
+                    _ => rays[r].0.z = f32::NAN,
+                }
+                assert!(
+                    fresh(&rays, &limits).is_none(),
+                    "ray {r} broken by {broken}"
+                );
+                refused += 1;
+            }
+        }
+        assert!(
+            bounded > 20 && refused > 80,
+            "{bounded} bounded, {refused} refused"
+        );
+    }
+
     /// The node tests are checked on every CPU: the baseline copy's slab test against the
     /// scalar test of each lane's box alone (`RayBoxes::enters_box`), and where the CPU has
     /// AVX2, the AVX2 copy's node tests (a ray's slab test, a packet's interval test) against
