@@ -24,6 +24,9 @@ pub struct F32x8(pub [f32; WIDTH]);
 use std::arch::x86_64::{_CMP_EQ_OQ, _CMP_GT_OQ, _CMP_LT_OQ, _CMP_NEQ_UQ};
 
 impl F32x8 {
+    /// Lanes per vector ([`WIDTH`]), for code that names the type rather than the module.
+    pub const LANES: usize = WIDTH;
+
     #[inline(always)]
     pub fn splat(v: f32) -> F32x8 {
         F32x8([v; WIDTH])
@@ -100,6 +103,63 @@ impl F32x8 {
             return unsafe { avx::div(self, other) };
         }
         self.zip(other, |a, b| a / b)
+    }
+
+    /// `|self|` (the sign bit cleared; NaN stays NaN).
+    #[inline(always)]
+    pub fn abs<const AVX: bool>(self) -> F32x8 {
+        #[cfg(target_arch = "x86_64")]
+        if AVX {
+            // SAFETY: as in `sub`.
+            return unsafe { avx::abs(self) };
+        }
+        F32x8(self.0.map(f32::abs))
+    }
+
+    /// The correctly rounded square root of each lane (IEEE `sqrt`).
+    #[inline(always)]
+    pub fn sqrt<const AVX: bool>(self) -> F32x8 {
+        #[cfg(target_arch = "x86_64")]
+        if AVX {
+            // SAFETY: as in `sub`.
+            return unsafe { avx::sqrt(self) };
+        }
+        F32x8(self.0.map(f32::sqrt))
+    }
+
+    /// `1 / self`, except where `|self| < 1e-30`: there `1e30` with `self`'s sign, so that a
+    /// slab distance stays finite (the lanes of `accel::wide::walk::safe_inverse4`, bit for
+    /// bit).
+    #[inline(always)]
+    pub fn safe_inverse<const AVX: bool>(self) -> F32x8 {
+        #[cfg(target_arch = "x86_64")]
+        if AVX {
+            // SAFETY: as in `sub`.
+            return unsafe { avx::safe_inverse(self) };
+        }
+        F32x8(self.0.map(|x| {
+            if x.abs() < 1e-30 {
+                1e30f32.copysign(x)
+            } else {
+                1.0 / x
+            }
+        }))
+    }
+
+    /// The least lane (`a < b ? a : b` folded from lane 0; meant for lanes without NaN).
+    #[inline(always)]
+    pub fn min_lane(self) -> f32 {
+        self.0
+            .into_iter()
+            .fold(f32::INFINITY, |a, b| if b < a { b } else { a })
+    }
+
+    /// The largest lane (as [`F32x8::min_lane`]).
+    #[inline(always)]
+    pub fn max_lane(self) -> f32 {
+        self.0
+            .into_iter()
+            .fold(f32::NEG_INFINITY, |a, b| if b > a { b } else { a })
     }
 
     /// Bit `lane` set where `self < other` (false for NaN).
@@ -239,6 +299,29 @@ mod avx {
 
     #[inline]
     #[target_feature(enable = "avx")]
+    pub fn abs(a: F32x8) -> F32x8 {
+        store(_mm256_andnot_ps(_mm256_set1_ps(-0.0), load(a)))
+    }
+
+    #[inline]
+    #[target_feature(enable = "avx")]
+    pub fn sqrt(a: F32x8) -> F32x8 {
+        store(_mm256_sqrt_ps(load(a)))
+    }
+
+    #[inline]
+    #[target_feature(enable = "avx")]
+    pub fn safe_inverse(a: F32x8) -> F32x8 {
+        let x = load(a);
+        let sign = _mm256_set1_ps(-0.0);
+        let tiny = _mm256_cmp_ps::<_CMP_LT_OQ>(_mm256_andnot_ps(sign, x), _mm256_set1_ps(1e-30));
+        let huge = _mm256_or_ps(_mm256_and_ps(sign, x), _mm256_set1_ps(1e30));
+        let inverse = _mm256_div_ps(_mm256_set1_ps(1.0), x);
+        store(_mm256_blendv_ps(inverse, huge, tiny))
+    }
+
+    #[inline]
+    #[target_feature(enable = "avx")]
     pub fn cmp_mask<const PREDICATE: i32>(a: F32x8, b: F32x8) -> u32 {
         _mm256_movemask_ps(_mm256_cmp_ps::<PREDICATE>(load(a), load(b))) as u32
     }
@@ -359,6 +442,24 @@ mod tests {
                     .collect();
                 let (kept_lanes, kept_mask) = a.kept_where_le::<false>(b);
                 assert_eq!((bits(kept_lanes).to_vec(), kept_mask), (kept, le));
+                if j == 0 {
+                    assert_eq!(bits(a.abs::<false>()), bits(F32x8(a.0.map(f32::abs))));
+                    assert_eq!(bits(a.sqrt::<false>()), bits(F32x8(a.0.map(f32::sqrt))));
+                    // The walk's four-lane inverse (`safe_inverse4`), written out in glam.
+                    let four = |at: usize| {
+                        let x = glam::Vec4::from_slice(&a.0[at..at + 4]);
+                        let tiny = x.abs().cmplt(glam::Vec4::splat(1e-30));
+                        let huge = glam::Vec4::splat(1e30).copysign(x);
+                        glam::Vec4::select(tiny, huge, glam::Vec4::ONE / x).to_array()
+                    };
+                    let reference = F32x8([four(0), four(4)].concat().try_into().unwrap());
+                    assert_eq!(bits(a.safe_inverse::<false>()), bits(reference));
+                    if avx2 {
+                        assert_eq!(bits(a.abs::<true>()), bits(a.abs::<false>()));
+                        assert_eq!(bits(a.sqrt::<true>()), bits(a.sqrt::<false>()));
+                        assert_eq!(bits(a.safe_inverse::<true>()), bits(reference));
+                    }
+                }
                 if avx2 {
                     let (avx_lanes, avx_mask) = a.kept_where_le::<true>(b);
                     assert_eq!((bits(avx_lanes), avx_mask), (bits(kept_lanes), kept_mask));

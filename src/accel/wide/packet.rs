@@ -389,7 +389,7 @@ impl simd::Kernel for SetConverging<'_> {
         let (packet, rays, t_max) = (self.packet, self.rays, self.t_max);
         let len = rays.len().min(t_max.len()).min(PACKET);
         // The rows first (the directions in `inverse` until inverted): the bounds are made
-        // from them four rays at a time. Padded with ray 0 to a whole group of four.
+        // from them eight rays at a time. Padded with ray 0 to a whole group of eight.
         packet.set_rows(&rays[..len]);
         let mut limits = [0.0f32; PACKET];
         limits[..len].copy_from_slice(&t_max[..len]);
@@ -397,7 +397,7 @@ impl simd::Kernel for SetConverging<'_> {
             repeat_first_to_group_end(row, len);
         }
         repeat_first_to_group_end(&mut limits, len);
-        packet.frustum = Frustum::converging(&packet.origin, &packet.inverse, &limits, len);
+        packet.frustum = Frustum::converging::<AVX2>(&packet.origin, &packet.inverse, &limits, len);
         if packet.frustum.is_some() {
             packet.invert_directions();
         } else {
@@ -452,11 +452,12 @@ impl Frustum {
     /// box a ray enters. The leaves' boxes are still tested by each ray forward, as alone.
     ///
     /// Takes the rays as rows (`origin[axis][ray]`, `direction[axis][ray]`, `t_max[ray]`),
-    /// the slots of the last group of four past `len` repeating ray 0, and works four rays
-    /// at a time: the packet's setup is per packet, and ray by ray it was as costly as a
-    /// fifth of the walk it sets up.
+    /// the slots of the last group of eight past `len` repeating ray 0, and works eight rays
+    /// at a time ([`Lanes`]; one AVX instruction per operation in the AVX2 copy): the setup
+    /// is per packet, and four rays at a time in SSE2 it took 57 instructions a ray, an
+    /// eighth of a shadow ray's walk.
     #[inline(always)]
-    fn converging(
+    fn converging<const AVX: bool>(
         origin: &[[f32; PACKET]; 3],
         direction: &[[f32; PACKET]; 3],
         t_max: &[f32; PACKET],
@@ -466,65 +467,79 @@ impl Frustum {
         if len == 0 {
             return None;
         }
-        let groups = len.next_multiple_of(4);
-        let four = |row: &[f32; PACKET], at: usize| Vec4::from_slice(&row[at..at + 4]);
-        let (mut low, mut high) = ([Vec4::INFINITY; 3], [Vec4::NEG_INFINITY; 3]);
-        let (mut origin_low, mut origin_high) = ([Vec4::INFINITY; 3], [Vec4::NEG_INFINITY; 3]);
+        let groups = len.next_multiple_of(Lanes::LANES);
+        let eight = |row: &[f32; PACKET], at: usize| {
+            Lanes(row[at..at + Lanes::LANES].try_into().expect("eight slots"))
+        };
+        let (mut low, mut high) = (
+            [Lanes::splat(f32::INFINITY); 3],
+            [Lanes::splat(f32::NEG_INFINITY); 3],
+        );
+        let (mut origin_low, mut origin_high) = (low, high);
         // The largest magnitude of the origins, of the ends and of the reaches. `x.max(largest)`
-        // keeps `largest` where `x` is NaN (SSE's `maxps`), so each stays free of NaN; NaN
-        // and infinite ends are caught by `unsound`, which `end - end` makes NaN for them.
-        let mut largest = [Vec4::ZERO; 3];
-        let mut unsound = Vec4::ZERO;
-        for at in (0..groups).step_by(4) {
-            let t = four(t_max, at);
+        // keeps `largest` where `x` is NaN (SSE's and AVX's `max`), so each stays free of NaN;
+        // NaN and infinite ends are caught by `unsound`, which `end - end` makes NaN for them.
+        let mut largest = [Lanes::splat(0.0); 3];
+        let mut unsound = Lanes::splat(0.0);
+        for at in (0..groups).step_by(Lanes::LANES) {
+            let t = eight(t_max, at);
             for axis in 0..3 {
-                let o = four(&origin[axis], at);
-                let reach = four(&direction[axis], at) * t;
-                let end = o + reach;
-                low[axis] = low[axis].min(end);
-                high[axis] = high[axis].max(end);
-                origin_low[axis] = origin_low[axis].min(o);
-                origin_high[axis] = origin_high[axis].max(o);
-                largest[0] = o.abs().max(largest[0]);
-                largest[1] = end.abs().max(largest[1]);
-                largest[2] = reach.abs().max(largest[2]);
-                unsound += end - end;
+                let o = eight(&origin[axis], at);
+                let reach = eight(&direction[axis], at).mul::<AVX>(t);
+                let end = o.add::<AVX>(reach);
+                low[axis] = low[axis].min::<AVX>(end);
+                high[axis] = high[axis].max::<AVX>(end);
+                origin_low[axis] = origin_low[axis].min::<AVX>(o);
+                origin_high[axis] = origin_high[axis].max::<AVX>(o);
+                largest[0] = o.abs::<AVX>().max::<AVX>(largest[0]);
+                largest[1] = end.abs::<AVX>().max::<AVX>(largest[1]);
+                largest[2] = reach.abs::<AVX>().max::<AVX>(largest[2]);
+                unsound = unsound.add::<AVX>(end.sub::<AVX>(end));
             }
         }
-        let scale = largest[0].max(largest[1]).max(largest[2]).max_element();
+        let scale = largest[0]
+            .max::<AVX>(largest[1])
+            .max::<AVX>(largest[2])
+            .max_lane();
         // Infinite or NaN ends (a directional light's rays have no end). A NaN origin is
         // caught below too: its row inverts to NaN, which `over_inverses` refuses.
-        if !(scale < f32::MAX) || unsound.cmpne(Vec4::ZERO).any() {
+        if !(scale < f32::MAX) || unsound.ne_mask::<AVX>(Lanes::splat(0.0)) != 0 {
             return None;
         }
-        let reduce = |rows: [Vec4; 3], f: fn(Vec4) -> f32| Vec3A::from(rows.map(f));
-        let (low, high) = (
-            reduce(low, Vec4::min_element),
-            reduce(high, Vec4::max_element),
-        );
-        let origin_low = reduce(origin_low, Vec4::min_element);
-        let origin_high = reduce(origin_high, Vec4::max_element);
+        let reduce = |rows: [Lanes; 3], f: fn(Lanes) -> f32| Vec3A::from(rows.map(f));
+        let (low, high) = (reduce(low, Lanes::min_lane), reduce(high, Lanes::max_lane));
+        let origin_low = reduce(origin_low, Lanes::min_lane);
+        let origin_high = reduce(origin_high, Lanes::max_lane);
         let apex = (low + high) * 0.5;
         let margin = (high - low).max_element() * 0.5 + scale * CONVERGING_SLACK;
-        // The reversed segments' directions, `origin - apex`, as rows; four rays at a time
+        // The reversed segments' directions, `origin - apex`, as rows; eight rays at a time
         // with them, the shortest segment and the spread of the unit directions.
         let mut backwards = [[0.0f32; PACKET]; 3];
-        let (mut spread_low, mut spread_high) = ([Vec4::INFINITY; 3], [Vec4::NEG_INFINITY; 3]);
-        let mut shortest = Vec4::INFINITY;
-        for at in (0..groups).step_by(4) {
-            let b = [0, 1, 2].map(|axis| four(&origin[axis], at) - Vec4::splat(apex[axis]));
-            let length = (b[0] * b[0] + b[1] * b[1] + b[2] * b[2]).sqrt();
-            shortest = shortest.min(length);
+        let (mut spread_low, mut spread_high) = (
+            [Lanes::splat(f32::INFINITY); 3],
+            [Lanes::splat(f32::NEG_INFINITY); 3],
+        );
+        let mut shortest = Lanes::splat(f32::INFINITY);
+        for at in (0..groups).step_by(Lanes::LANES) {
+            let b =
+                [0, 1, 2].map(|axis| eight(&origin[axis], at).sub::<AVX>(Lanes::splat(apex[axis])));
+            let squared = b[0]
+                .mul::<AVX>(b[0])
+                .add::<AVX>(b[1].mul::<AVX>(b[1]))
+                .add::<AVX>(b[2].mul::<AVX>(b[2]));
+            let length = squared.sqrt::<AVX>();
+            shortest = shortest.min::<AVX>(length);
             for axis in 0..3 {
-                let unit = b[axis] / length;
-                spread_low[axis] = spread_low[axis].min(unit);
-                spread_high[axis] = spread_high[axis].max(unit);
-                safe_inverse4(b[axis]).write_to_slice(&mut backwards[axis][at..at + 4]);
+                let unit = b[axis].div::<AVX>(length);
+                spread_low[axis] = spread_low[axis].min::<AVX>(unit);
+                spread_high[axis] = spread_high[axis].max::<AVX>(unit);
+                backwards[axis][at..at + Lanes::LANES]
+                    .copy_from_slice(&b[axis].safe_inverse::<AVX>().0);
             }
         }
-        let shortest = shortest.min_element();
+        let shortest = shortest.min_lane();
         let spread =
-            [0, 1, 2].map(|axis| spread_high[axis].max_element() - spread_low[axis].min_element());
+            [0, 1, 2].map(|axis| spread_high[axis].max_lane() - spread_low[axis].min_lane());
         // Rays whose far ends scatter (directional lights, rays from several bounces) or
         // whose directions fan out: their bounds would keep nearly every box.
         let fans_out = spread.into_iter().fold(0.0f32, f32::max) > CONVERGING_SPREAD_MAX;
@@ -775,17 +790,21 @@ fn closest_point_of_lines(p: Vec3A, u: Vec3A, q: Vec3A, v: Vec3A) -> Option<Vec3
     point.is_finite().then_some(point)
 }
 
-/// Repeats `row[0]` in the slots from `len` to the end of its group of four, so that a
-/// pass four at a time over the first `len` slots sees only their values.
+/// Repeats `row[0]` in the slots from `len` to the end of its group of eight ([`Lanes`]),
+/// so that a pass eight (or four) at a time over the first `len` slots sees only their
+/// values.
 #[inline(always)]
 fn repeat_first_to_group_end(row: &mut [f32; PACKET], len: usize) {
     let first = row[0];
-    row[len..len.next_multiple_of(4).min(PACKET)].fill(first);
+    row[len..len.next_multiple_of(Lanes::LANES).min(PACKET)].fill(first);
 }
 
 /// The margin of [`Frustum::converging`] beyond the spread of the segments' ends, as a
 /// fraction of the largest coordinate or length involved (2^-16).
 const CONVERGING_SLACK: f32 = 1.0 / 65536.0;
+
+// The bounds' passes take whole groups of eight slots.
+const _: () = assert!(PACKET % Lanes::LANES == 0);
 
 /// Converging rays get bounds only when the margin is at most this fraction of the
 /// shortest segment: beyond it the grown boxes keep most of what a ray alone would skip.
@@ -1690,9 +1709,9 @@ mod tests {
 
     /// The bounds are made four rays at a time with the last group padded by ray 0: a
     /// packet of any length gets the same bounds whatever an earlier, larger packet left
-    /// in its slots, and the same as its rays in another order's first ray repeated (the
-    /// bounds are a fold over the rays). One broken ray anywhere (a NaN or infinite limit,
-    /// a NaN direction or origin) takes the bounds away.
+    /// in its slots, the same in every SIMD copy, and the same for its rays in another order
+    /// (the bounds are a fold over the rays). One broken ray anywhere (a NaN or infinite
+    /// limit, a NaN direction or origin) takes the bounds away.
     #[test]
     fn converging_bounds_depend_only_on_the_packets_own_rays() {
         let mut next = stream(0x3c6ef372fe94f82b);
@@ -1706,6 +1725,25 @@ mod tests {
                 bounds_bits(&packet)
             };
             let alone = fresh(&rays, &limits);
+            // Each SIMD copy of the setup makes the same bounds.
+            let copy = |avx2: bool| {
+                let mut packet = RayPacket::new(&[]);
+                let kernel = SetConverging {
+                    packet: &mut packet,
+                    rays: &rays,
+                    t_max: &limits,
+                };
+                if avx2 {
+                    crate::simd::run_avx2_if_available(kernel)?;
+                } else {
+                    crate::simd::run_baseline(kernel);
+                }
+                Some(bounds_bits(&packet))
+            };
+            assert_eq!(copy(false), Some(alone.clone()));
+            if let Some(avx2) = copy(true) {
+                assert_eq!(avx2, alone);
+            }
             // Slots filled first by 64 rays from elsewhere, pointing every way.
             let stale: Vec<(Vec3A, Vec3A)> = (0..PACKET)
                 .map(|_| {
