@@ -162,6 +162,35 @@ pub(super) struct Arrival<L: RayLod> {
 }
 
 impl<L: RayLod> Arrival<L> {
+    /// The arrival at `hit` on `triangle` of a ray along `direction` carrying `lod` after
+    /// `depth` bounces, not yet made: [`FrameScene::arrive_at`] makes its surface, moves its
+    /// LOD state and plans its lookup, in place.
+    ///
+    /// Why in place: an arrival made on the stack and then pushed onto a tile's list (208
+    /// bytes a waiting hit for `paper`) was copied field by field from where its values had
+    /// been spilled across the lookup's planning and the shadow requests: 59 instructions a
+    /// hit, 2.4% of a BART Kitchen frame's. Written where it is kept, each value is stored
+    /// once, when it is made.
+    #[inline(always)]
+    pub(super) fn unmade(
+        triangle: &HitTriangle,
+        hit: Hit,
+        direction: Vec3A,
+        lod: L,
+        depth: u32,
+    ) -> Arrival<L> {
+        Arrival {
+            hit,
+            triangle: L::Kept::keep(triangle),
+            surface: SurfacePoint::UNSET,
+            direction,
+            lod,
+            material: triangle.material,
+            lookup: TexelLookup::Untextured,
+            depth,
+        }
+    }
+
     /// Bounces before this hit.
     pub(super) fn depth(&self) -> u32 {
         self.depth
@@ -379,50 +408,44 @@ impl FrameScene<'_> {
         counters: &mut TraceCounters,
     ) -> Arrival<L> {
         let triangle = self.hit_triangle(&mut hit, origin, direction);
-        self.arrive_at::<L, false>(
-            &triangle, hit, origin, direction, lod, depth, requests, counters,
-        )
+        let mut arrival = Arrival::unmade(&triangle, hit, direction, lod, depth);
+        self.arrive_at::<L, false>(&triangle, origin, &mut arrival, requests, counters);
+        arrival
     }
 
-    /// [`Self::arrive`] with the hit's triangle already read (`FrameScene::hit_triangle`,
-    /// which also settled `hit`). The texture lookup is planned in the SIMD copy `AVX2`
-    /// names: the caller's own (true only in the AVX2 copy, as in `simd::Kernel::run`).
-    #[allow(clippy::too_many_arguments)]
+    /// [`Self::arrive`] in place: makes `arrival` ([`Arrival::unmade`] from `triangle`, the
+    /// hit's triangle as `FrameScene::hit_triangle` read it, which also settled the hit) for
+    /// the ray from `origin`. The texture lookup is planned in the SIMD copy `AVX2` names:
+    /// the caller's own (true only in the AVX2 copy, as in `simd::Kernel::run`).
     // Always inlined: part of the tile kernel (`TraceTile`), compiled into each SIMD copy.
     #[inline(always)]
     pub(super) fn arrive_at<L: RayLod, const AVX2: bool>(
         &self,
         triangle: &HitTriangle,
-        hit: Hit,
         origin: Vec3A,
-        direction: Vec3A,
-        mut lod: L,
-        depth: u32,
+        arrival: &mut Arrival<L>,
         requests: &mut Vec<ShadowRequest>,
         counters: &mut TraceCounters,
-    ) -> Arrival<L> {
-        let surface = SurfacePoint::at(triangle, &hit, origin, direction);
-        let lod_hit = surface.lod_hit(triangle, &hit, direction);
-        lod.arrive(&lod_hit);
+    ) {
+        let (hit, direction) = (arrival.hit, arrival.direction);
+        arrival.surface = SurfacePoint::at(triangle, &hit, origin, direction);
+        let lod_hit = arrival.surface.lod_hit(triangle, &hit, direction);
+        arrival.lod.arrive(&lod_hit);
         let material = &self.materials[triangle.material as usize];
-        let lookup = self.texel_lookup::<L, AVX2>(&lod_hit, material, &lod, counters);
+        self.texel_lookup::<L, AVX2>(
+            &lod_hit,
+            material,
+            &arrival.lod,
+            counters,
+            &mut arrival.lookup,
+        );
         let lit = match material.model {
             // The energy-weighted model lights only what is not fully transmissive.
             ShadingModel::EnergyWeighted => 1.0 - material.transmission > 0.0,
             ShadingModel::Additive { .. } => true,
         };
         if lit {
-            self.request_shadows(&surface, requests, counters);
-        }
-        Arrival {
-            material: triangle.material,
-            hit,
-            triangle: L::Kept::keep(triangle),
-            surface,
-            direction,
-            lod,
-            lookup,
-            depth,
+            self.request_shadows(&arrival.surface, requests, counters);
         }
     }
 
@@ -577,7 +600,9 @@ impl FrameScene<'_> {
     }
 
     /// Decides the base-colour lookup at a hit (its texture, coordinates and level; none
-    /// when untextured) and hints the cache to load the texels it will read.
+    /// when untextured) into `out` and hints the cache to load the texels it will read.
+    /// Written in place, as its arrival is (`Arrival::unmade`): returned, a plan was copied
+    /// into the arrival from the stack, 21 instructions a hit.
     ///
     /// Why the lookup is split from its filtering: a hit's texel is needed only when the
     /// hit is finished, after the tile's shadow rays are traced, and its texels are
@@ -593,19 +618,21 @@ impl FrameScene<'_> {
         material: &Material,
         lod: &L,
         counters: &mut TraceCounters,
-    ) -> TexelLookup {
+        out: &mut TexelLookup,
+    ) {
         let Some((t, texture)) = material
             .base_color_texture
             .and_then(|t| Some((t as u32, self.textures.get(t)?)))
         else {
-            return TexelLookup::Untextured;
+            *out = TexelLookup::Untextured;
+            return;
         };
         let uv = interpolate_uv(lod_hit.triangle.uvs, lod_hit.bary);
         let pyramid = &texture.pyramid;
         let footprint = lod.footprint(lod_hit, &self.lod_camera, pyramid.base_size());
         let level = self.lookup_level(&footprint);
         let sampler = texture.sampler;
-        let lookup = match footprint {
+        *out = match footprint {
             Footprint::Base => TexelLookup::Planned {
                 texture: t,
                 plan: pyramid.plan_bilinear_in::<AVX2>(0, uv, sampler),
@@ -630,12 +657,11 @@ impl FrameScene<'_> {
             },
         };
         // A plan knows its level (the same split of the same clamped level).
-        let read = match &lookup {
+        let read = match out {
             TexelLookup::Planned { plan, .. } => plan.level(),
             _ => pyramid.clamp_and_split_level(level).0,
         };
         counters.mip_histogram[read.min(MIP_LEVELS - 1)] += 1;
-        lookup
     }
 
     /// The filtered base-colour texel of a lookup (white when untextured); a planned lookup

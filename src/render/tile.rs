@@ -193,23 +193,17 @@ fn trace_tile<L: RayLod, const AVX2: bool>(
             };
             let triangle = hit_triangles.next().expect("a triangle per hit");
             let first = requests.len();
-            let arrival = scene.arrive_at::<L, AVX2>(
-                triangle,
-                hit,
-                ray.origin,
-                ray.direction,
-                ray.lod,
-                pending.depth,
-                requests,
-                counters,
-            );
+            // Made in place (see `Arrival::unmade`).
             waiting.push(Waiting {
-                arrival,
+                arrival: Arrival::unmade(triangle, hit, ray.direction, ray.lod, pending.depth),
                 vertex: pending.vertex,
                 pixel: pending.pixel,
                 first,
-                end: requests.len(),
+                end: first,
             });
+            let w = waiting.last_mut().expect("a waiting hit was just pushed");
+            scene.arrive_at::<L, AVX2>(triangle, ray.origin, &mut w.arrival, requests, counters);
+            w.end = requests.len();
         }
         trace_shadows(scene, waiting, requests, counters, of_light, pixel_of);
         // Finish every hit and spawn the next bounce.
