@@ -126,23 +126,30 @@ impl FrameTriangles {
         by_vertex: Option<&dyn VertexNormals>,
     ) -> HitTriangle {
         let mut triangle = HitTriangle::UNSET;
-        self.write_hit_triangle(slot, positions, by_vertex, &mut triangle);
+        self.write_hit_triangle(
+            slot,
+            (positions, self.source[slot]),
+            by_vertex,
+            &mut triangle,
+        );
         triangle
     }
 
     /// [`FrameTriangles::hit_triangle`] written field by field into `out` (see
-    /// [`HitTriangle::UNSET`] for why).
+    /// [`HitTriangle::UNSET`] for why), with the slot's vertices and source triangle as its
+    /// tree holds them (`source` is `self.source[slot]`; a hit's walk has just read the
+    /// tree's copy, where the array is one more line to wait for).
     // Always inlined: the tile kernel (`render::tile::TraceTile`) calls it, and so gets it
     // compiled into each of its SIMD copies.
     #[inline(always)]
     pub fn write_hit_triangle(
         &self,
         slot: usize,
-        positions: [Vec3A; 3],
+        (positions, source): ([Vec3A; 3], u32),
         by_vertex: Option<&dyn VertexNormals>,
         out: &mut HitTriangle,
     ) {
-        let source = self.source[slot];
+        debug_assert_eq!(source, self.source[slot], "slot {slot}'s source");
         out.normals = match by_vertex.and_then(|v| v.normals(source, &positions)) {
             Some(normals) => normals,
             None => self.normals[slot],

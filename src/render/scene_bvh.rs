@@ -238,7 +238,7 @@ impl SceneBvh<'_> {
             } => {
                 return triangles.write_hit_triangle(
                     slot,
-                    accel.triangle(at.slot),
+                    accel.triangle_and_source(at.slot),
                     *by_vertex,
                     out,
                 );
@@ -246,7 +246,7 @@ impl SceneBvh<'_> {
             SceneBvh::TwoLevel(i) if at.instance == Hit::WORLD => {
                 return i.world_triangles.write_hit_triangle(
                     slot,
-                    i.world.triangle(at.slot),
+                    i.world.triangle_and_source(at.slot),
                     i.by_vertex,
                     out,
                 );

@@ -181,6 +181,13 @@ impl Accel {
         self.triangles.triangle(slot)
     }
 
+    /// [`Accel::triangle`] and the source triangle the tree was built with for slot `slot`
+    /// (read from the hit-test pack, whose lines a hit's walk has just read).
+    #[inline]
+    pub fn triangle_and_source(&self, slot: u32) -> ([Vec3A; 3], u32) {
+        self.triangles.triangle_and_source(slot)
+    }
+
     /// `lod::cross_squared` of the triangles of slot `slot`'s hit-test pack, four lanes at
     /// once, with the slots its live lanes hold (lane `i` holds slot `slots.start + i`; the
     /// lanes past them are padding).

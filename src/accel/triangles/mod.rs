@@ -221,6 +221,15 @@ impl PackedTriangles {
         self.packs[at / LANES].get(at % LANES)
     }
 
+    /// The stored triangle of `slot` and the source triangle its lane reports for ties
+    /// (what the builder's `triangle(slot)` gave, see [`PackedTriangles::push_leaf`]).
+    #[inline]
+    pub fn triangle_and_source(&self, slot: u32) -> ([Vec3A; 3], u32) {
+        let at = self.lane_of_slot[slot as usize] as usize;
+        let pack = &self.packs[at / LANES];
+        (pack.get(at % LANES), pack.source[at % LANES])
+    }
+
     /// [`TrianglePack::cross_squared`] of slot `slot`'s pack, with the slots its live lanes
     /// hold: lane `i` holds slot `slots.start + i` (a pack's live lanes are consecutive
     /// slots).
