@@ -214,20 +214,26 @@ impl PackedTriangles {
         self.packs[at / LANES].set(at % LANES, tri);
     }
 
+    /// Slot `slot`'s pack and its lane there.
+    #[inline(always)]
+    fn pack_and_lane(&self, slot: u32) -> (&TrianglePack, usize) {
+        let at = self.lane_of_slot[slot as usize] as usize;
+        (&self.packs[at / LANES], at % LANES)
+    }
+
     /// The stored triangle of `slot` (the bits that were written).
     #[inline]
     pub fn triangle(&self, slot: u32) -> [Vec3A; 3] {
-        let at = self.lane_of_slot[slot as usize] as usize;
-        self.packs[at / LANES].get(at % LANES)
+        let (pack, lane) = self.pack_and_lane(slot);
+        pack.get(lane)
     }
 
     /// The stored triangle of `slot` and the source triangle its lane reports for ties
     /// (what the builder's `triangle(slot)` gave, see [`PackedTriangles::push_leaf`]).
     #[inline]
     pub fn triangle_and_source(&self, slot: u32) -> ([Vec3A; 3], u32) {
-        let at = self.lane_of_slot[slot as usize] as usize;
-        let pack = &self.packs[at / LANES];
-        (pack.get(at % LANES), pack.source[at % LANES])
+        let (pack, lane) = self.pack_and_lane(slot);
+        (pack.get(lane), pack.source[lane])
     }
 
     /// [`TrianglePack::cross_squared`] of slot `slot`'s pack, with the slots its live lanes
@@ -235,7 +241,7 @@ impl PackedTriangles {
     /// slots).
     #[inline(always)]
     pub fn pack_cross_squared(&self, slot: u32) -> (Range<u32>, [f64; LANES]) {
-        let pack = &self.packs[self.lane_of_slot[slot as usize] as usize / LANES];
+        let (pack, _) = self.pack_and_lane(slot);
         let slots = pack.first_slot..pack.first_slot + pack.live;
         (slots, pack.cross_squared())
     }
