@@ -175,6 +175,22 @@ fn bad_options_are_refused() {
         &["render", "tri.gltf", "--threads", "0"],
         &["render", "tri.gltf", "--threads", "100000"],
         &["bench", "tri.gltf", "--threads", "1,100000"],
+        &[
+            "bench",
+            "tri.gltf",
+            "--rays",
+            "primary",
+            "--min-sample-ms",
+            "nan",
+        ],
+        &[
+            "bench",
+            "tri.gltf",
+            "--rays",
+            "primary",
+            "--min-sample-ms",
+            "1e9",
+        ],
         &["render", "no-such-scene"],
     ] {
         let out = mipray(args, dir.path());
@@ -190,6 +206,13 @@ fn bad_options_are_refused() {
             "{args:?}: {}",
             stderr(&out)
         );
+        if args.contains(&"--min-sample-ms") {
+            assert!(
+                stderr(&out).contains("--min-sample-ms") && stderr(&out).contains("0 to 60000"),
+                "{}",
+                stderr(&out)
+            );
+        }
         if args.contains(&"--threads") {
             assert!(
                 stderr(&out).contains("must be 1 to 1024"),

@@ -49,6 +49,13 @@ pub struct BenchArgs {
     /// which see the whole process.
     #[arg(long, value_enum, default_value = "both", requires = "rays")]
     pub api: RayApi,
+    /// With `--rays`: the least time one timed sample takes, in milliseconds. A class of
+    /// rays traced faster is traced again, back to back, until that much time has gone by,
+    /// and the sample is the time of one pass (a small class is so timed warm, as a
+    /// profiler or Embree's repeated calls see it). 0: one pass a sample, for an
+    /// instruction count that must grow by exactly one pass with each repeat.
+    #[arg(long, default_value_t = 20.0, requires = "rays")]
+    pub min_sample_ms: f64,
     /// BVH layouts and policies, comma separated, as `render --bvh` (whole frames: each is a
     /// configuration; `--rays primary|shadow|all`: the first; a ray file is always traced on
     /// the flat tree, whose slots are the faces its answers name).
@@ -80,6 +87,13 @@ pub fn bench(args: &BenchArgs) -> Result<()> {
             "bench needs 1 to {MAX_REPEATS} repeats and at least one method"
         )));
     }
+    if !(args.min_sample_ms.is_finite() && (0.0..=60_000.0).contains(&args.min_sample_ms)) {
+        return Err(usage(format!(
+            "--min-sample-ms {}: give 0 to 60000 milliseconds",
+            args.min_sample_ms
+        )));
+    }
+    let min_sample = std::time::Duration::from_secs_f64(args.min_sample_ms / 1e3);
     let Some(&first_bvh) = args.bvh.first() else {
         return Err(usage(
             "--bvh: give at least one of auto, flat, two-level, rebuild".into(),
@@ -126,6 +140,7 @@ pub fn bench(args: &BenchArgs) -> Result<()> {
             args.api,
             &threads,
             args.repeats,
+            min_sample,
         )?;
         print!("{}", ray_file_table(&rates));
         return Ok(());
@@ -156,6 +171,7 @@ pub fn bench(args: &BenchArgs) -> Result<()> {
             args.api,
             &threads,
             args.repeats,
+            min_sample,
         )?;
         print!("{}", ray_table(&rates));
         return Ok(());

@@ -11,9 +11,9 @@
 # each side runs once with 1 repetition of its tracing and once with 3, and the difference
 # over twice the class's rays is what one more pass over the rays costs: loading, building
 # and everything else that does not repeat cancels.
-#   mipray: `mipray bench SCENE --rays CLASS_FILE --api packets --threads 1` (the packets the
-#     film traces: primary rays by tile, shadow rays by light, bounce rays in spawn order),
-#     on a file holding that class's rays alone.
+#   mipray: `mipray bench SCENE --rays CLASS_FILE --api packets --threads 1 --min-sample-ms 0`
+#     (one pass a repetition; the packets the film traces: primary rays by tile, shadow rays
+#     by light, bounce rays in spawn order), on a file holding that class's rays alone.
 #   Embree: `embree_ray_file ... REPS BUILD:CLASS:API` (this folder) with the build and API
 #     that were fastest for the class in a timed run just before (refittable or static
 #     high-quality build; single rays or 4-, 8-, 16-wide packets).
@@ -69,7 +69,7 @@ for file in "$ex"/class_*.bin; do
   echo "$class: counting mipray packets and Embree $best" >&2
   for reps in 1 3; do
     count_instructions "mipray_$class" $reps "$bin" bench "$scene" --frames "$frame" --size "$size" \
-      --lights "$lights" --rays "$file" --api packets --threads 1 --repeats $reps
+      --lights "$lights" --rays "$file" --api packets --threads 1 --repeats $reps --min-sample-ms 0
     count_instructions "embree_$class" $reps "$anchor" "$obj" "$rays" "$width" $reps "$best"
   done
   echo "$best" > "$ex/embree_$class.best"

@@ -9,7 +9,9 @@
 # `mipray export --rays` records the frame's rays (primary, shadow, reflection, refraction:
 # every ray of a render at depth 5 with LIGHTS lights, default 1). Each round then runs
 # `mipray bench --rays FILE --threads 1 --repeats 3` and `embree_ray_file` (this folder; 3
-# repetitions of every build and API) on that file, alternately. Per class: mipray's fastest
+# repetitions of every build and API) on that file, alternately; on both sides a repetition
+# is one pass over a class's rays, or passes back to back until 20 ms have gone by (only
+# a class as small as Kitchen's glass rays takes more than one). Per class: mipray's fastest
 # way (packets or single), Embree's single-ray API (rtcIntersect1/rtcOccluded1) and its best
 # API (single, or 4/8/16-wide packets of the class's rays grouped by pixel block and bounce),
 # each the best of its two builds (refittable, static high quality); figures are the median
