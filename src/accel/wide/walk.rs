@@ -344,8 +344,9 @@ impl<L: LeafVisit, const ORDERED: bool> simd::Kernel for Walk<'_, L, ORDERED> {
 ///
 /// Branch-free: each lane's key is its distance's bits (non-negative floats order as
 /// integers) with the lane's tie rank in the three lowest bits, lanes not set sort last,
-/// and a sorting network orders the eight keys ([`SORT_EIGHT`]); two entered lanes, the
-/// most common case after one, take a single comparison. The insertion sort this replaces
+/// and a sorting network orders the eight keys ([`sort_eight`]); two entered lanes, the
+/// most common case after one, take a single comparison, and three or four the keys of
+/// those lanes alone in a network of four ([`sort_four`]). The insertion sort this replaces
 /// branched on every comparison and mispredicted often (its compare was the hottest line
 /// of single-ray traversal). Distances within eight ulps may come out in either order,
 /// which only changes the order of visits, never what a query finds.
@@ -367,6 +368,11 @@ pub(super) fn lanes_near_to_far<const HIGH_LANE_FIRST: bool>(
     let key = |lane: usize| (near[lane].to_bits() & (0x7fff_ffff & !RANK)) | rank(lane as u32);
     let n = mask.count_ones() as usize;
     let mut lanes = [0; WIDTH];
+    if n <= 1 {
+        // The one lane (or none: the count says so, and lane 0 is never read).
+        lanes[0] = mask.trailing_zeros() as usize % WIDTH;
+        return (lanes, n);
+    }
     if n == 2 {
         let a = mask.trailing_zeros() as usize;
         let b = (mask & (mask - 1)).trailing_zeros() as usize;
@@ -374,6 +380,25 @@ pub(super) fn lanes_near_to_far<const HIGH_LANE_FIRST: bool>(
         lanes[0] = if a_first { a } else { b };
         lanes[1] = if a_first { b } else { a };
         return (lanes, 2);
+    }
+    if n <= 4 {
+        // Three or four lanes (n is at least 3 here): their keys gathered by the mask's bits and sorted by a
+        // network of four (five exchanges), not the eight keys of every lane by nineteen.
+        let mut rest = mask;
+        let mut next_key = || {
+            let lane = rest.trailing_zeros() as usize;
+            rest &= rest.wrapping_sub(1);
+            key(lane)
+        };
+        let mut keys = [next_key(), next_key(), next_key(), u32::MAX];
+        if n == 4 {
+            keys[3] = next_key();
+        }
+        sort_four(&mut keys);
+        for (lane, k) in lanes.iter_mut().zip(keys).take(n) {
+            *lane = rank(k & RANK) as usize;
+        }
+        return (lanes, n);
     }
     let mut keys: [u32; WIDTH] = std::array::from_fn(|lane| {
         if mask & (1 << lane) != 0 {
@@ -387,6 +412,23 @@ pub(super) fn lanes_near_to_far<const HIGH_LANE_FIRST: bool>(
         *lane = rank(k & RANK) as usize;
     }
     (lanes, n)
+}
+
+/// Sorts four keys with a sorting network of 5 exchanges, the fewest possible.
+/// `tests::the_four_key_network_sorts_every_zero_one_input` checks it.
+#[inline(always)]
+fn sort_four(k: &mut [u32; 4]) {
+    #[inline(always)]
+    fn exchange(k: &mut [u32; 4], i: usize, j: usize) {
+        let (a, b) = (k[i], k[j]);
+        k[i] = a.min(b);
+        k[j] = a.max(b);
+    }
+    exchange(k, 0, 1);
+    exchange(k, 2, 3);
+    exchange(k, 0, 2);
+    exchange(k, 1, 3);
+    exchange(k, 1, 2);
 }
 
 /// Sorts eight keys with a sorting network of 19 exchanges, the fewest possible (Knuth,
@@ -735,6 +777,59 @@ mod tests {
                 keys.windows(2).all(|w| w[0] <= w[1]),
                 "{bits:08b} -> {keys:?}"
             );
+        }
+    }
+
+    #[test]
+    fn the_four_key_network_sorts_every_zero_one_input() {
+        for bits in 0u32..16 {
+            let mut keys: [u32; 4] = std::array::from_fn(|i| (bits >> i) & 1);
+            sort_four(&mut keys);
+            assert!(
+                keys.windows(2).all(|w| w[0] <= w[1]),
+                "{bits:04b} -> {keys:?}"
+            );
+        }
+    }
+
+    /// Every mask of entered lanes (so every count, the short paths' and the network's)
+    /// comes out as a plain sort by distance (to eight ulps, as the keys hold it), then by
+    /// the tie rule, orders it.
+    #[test]
+    fn every_mask_is_ordered_as_a_plain_sort_orders_it() {
+        let mut seed = 7u32;
+        for round in 0..64 {
+            let near = Lanes(std::array::from_fn(|_| {
+                seed = seed.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
+                // Few distinct values, so that ties are common; zeros as a ray leaving a
+                // surface sees them.
+                if round % 2 == 0 {
+                    (seed >> 29) as f32
+                } else {
+                    (seed >> 8) as f32 * 1e-3
+                }
+            }));
+            for mask in 0u32..(1 << WIDTH) {
+                for high_first in [true, false] {
+                    let mut want: Vec<usize> =
+                        (0..WIDTH).filter(|l| mask & (1 << l) != 0).collect();
+                    // Distances as the keys take them: their bits less the lowest three.
+                    let distance = |l: usize| near.0[l].to_bits() & 0x7fff_fff8;
+                    want.sort_by(|&a, &b| {
+                        distance(a).cmp(&distance(b)).then(if high_first {
+                            b.cmp(&a)
+                        } else {
+                            a.cmp(&b)
+                        })
+                    });
+                    let (lanes, n) = if high_first {
+                        lanes_near_to_far::<true>(near, mask)
+                    } else {
+                        lanes_near_to_far::<false>(near, mask)
+                    };
+                    assert_eq!(&lanes[..n], &want[..], "mask {mask:08b} near {:?}", near.0);
+                }
+            }
         }
     }
 
