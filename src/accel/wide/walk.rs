@@ -382,8 +382,9 @@ pub(super) fn lanes_near_to_far<const HIGH_LANE_FIRST: bool>(
         return (lanes, 2);
     }
     if n <= 4 {
-        // Three or four lanes (n is at least 3 here): their keys gathered by the mask's bits and sorted by a
-        // network of four (five exchanges), not the eight keys of every lane by nineteen.
+        // Three or four lanes (n is at least 3 here): their keys gathered by the mask's
+        // bits and sorted by a network of four (five exchanges), not the eight keys of
+        // every lane by nineteen.
         let mut rest = mask;
         let mut next_key = || {
             let lane = rest.trailing_zeros() as usize;
