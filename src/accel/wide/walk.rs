@@ -419,12 +419,6 @@ pub(super) fn lanes_near_to_far<const HIGH_LANE_FIRST: bool>(
 /// `tests::the_four_key_network_sorts_every_zero_one_input` checks it.
 #[inline(always)]
 fn sort_four(k: &mut [u32; 4]) {
-    #[inline(always)]
-    fn exchange(k: &mut [u32; 4], i: usize, j: usize) {
-        let (a, b) = (k[i], k[j]);
-        k[i] = a.min(b);
-        k[j] = a.max(b);
-    }
     exchange(k, 0, 1);
     exchange(k, 2, 3);
     exchange(k, 0, 2);
@@ -438,12 +432,6 @@ fn sort_four(k: &mut [u32; 4]) {
 /// `tests::the_eight_key_network_sorts_every_zero_one_input` checks it.
 #[inline(always)]
 fn sort_eight(k: &mut [u32; 8]) {
-    #[inline(always)]
-    fn exchange(k: &mut [u32; 8], i: usize, j: usize) {
-        let (a, b) = (k[i], k[j]);
-        k[i] = a.min(b);
-        k[j] = a.max(b);
-    }
     exchange(k, 0, 2);
     exchange(k, 1, 3);
     exchange(k, 4, 6);
@@ -463,6 +451,15 @@ fn sort_eight(k: &mut [u32; 8]) {
     exchange(k, 1, 2);
     exchange(k, 3, 4);
     exchange(k, 5, 6);
+}
+
+/// One comparator of a sorting network: keys `i` and `j` put in order (straight-line
+/// minimum and maximum, no branch).
+#[inline(always)]
+fn exchange<const N: usize>(k: &mut [u32; N], i: usize, j: usize) {
+    let (a, b) = (k[i], k[j]);
+    k[i] = a.min(b);
+    k[j] = a.max(b);
 }
 
 /// Of the entered children (`mask`), returns the nearest and pushes the others so that the
@@ -771,24 +768,23 @@ mod tests {
     /// every sequence.
     #[test]
     fn the_eight_key_network_sorts_every_zero_one_input() {
-        for bits in 0u32..256 {
-            let mut keys: [u32; 8] = std::array::from_fn(|i| (bits >> i) & 1);
-            sort_eight(&mut keys);
-            assert!(
-                keys.windows(2).all(|w| w[0] <= w[1]),
-                "{bits:08b} -> {keys:?}"
-            );
-        }
+        assert_sorts_every_zero_one_input(sort_eight);
     }
 
     #[test]
     fn the_four_key_network_sorts_every_zero_one_input() {
-        for bits in 0u32..16 {
-            let mut keys: [u32; 4] = std::array::from_fn(|i| (bits >> i) & 1);
-            sort_four(&mut keys);
+        assert_sorts_every_zero_one_input(sort_four);
+    }
+
+    /// `sort` orders each of the `2^N` sequences of zeros and ones.
+    fn assert_sorts_every_zero_one_input<const N: usize>(sort: fn(&mut [u32; N])) {
+        for bits in 0u32..(1 << N) {
+            let mut keys: [u32; N] = std::array::from_fn(|i| (bits >> i) & 1);
+            sort(&mut keys);
             assert!(
                 keys.windows(2).all(|w| w[0] <= w[1]),
-                "{bits:04b} -> {keys:?}"
+                "{bits:0width$b} -> {keys:?}",
+                width = N
             );
         }
     }
