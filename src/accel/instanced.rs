@@ -593,8 +593,14 @@ impl TwoLevelAccel {
             .wide
             .traverse_packet(packet, object_limits, |s, first, count, limit| {
                 let r = inside[s] as usize;
-                mesh.accel
-                    .closest_in_leaf(&within, &sheared[s], first, count, limit, &mut best[r]);
+                mesh.accel.closest_in_leaf::<false>(
+                    &within,
+                    &sheared[s],
+                    first,
+                    count,
+                    limit,
+                    &mut best[r],
+                );
             });
         for (s, &r) in inside.iter().enumerate() {
             limits[r as usize] = object_limits[s];

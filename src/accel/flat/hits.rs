@@ -199,7 +199,7 @@ impl Accel {
     /// Tests a leaf for a closest-hit query: keeps the nearest hit (ties to the lowest source
     /// triangle) and lowers `limit` to it.
     #[inline(always)]
-    pub(in crate::accel) fn closest_in_leaf(
+    pub(in crate::accel) fn closest_in_leaf<const AVX: bool>(
         &self,
         within: &Within,
         ray: &ShearedRay,
@@ -210,7 +210,7 @@ impl Accel {
     ) {
         let cut = *limit;
         self.triangles
-            .hits_in_leaf(ray, first, count, cut, |slot, source, t, bary| {
+            .hits_in_leaf::<AVX>(ray, first, count, cut, |slot, source, t, bary| {
                 if keep_if_closer(within, best, slot, source, t, bary) {
                     // Keep visiting boxes that start at `t` (up to rounding), where a tie
                     // may hide.
@@ -299,11 +299,39 @@ impl Accel {
         t_max: f32,
         mut visit: impl FnMut(u32, f32) -> bool,
     ) -> bool {
-        self.wide
-            .traverse_unordered(ray, t_max, |first: u32, count: u32, _: &mut f32| {
-                self.triangles
-                    .hits_in_leaf(sheared, first, count, t_max, |slot, _, t, _| visit(slot, t))
-            })
+        self.wide.traverse_unordered(
+            ray,
+            t_max,
+            AnyHitLeaf {
+                accel: self,
+                sheared,
+                t_max,
+                visit: &mut visit,
+            },
+        )
+    }
+}
+
+/// The any-hit leaf test of one ray as a [`LeafVisit`], compiled into the walk as
+/// [`ClosestLeaf`] is.
+struct AnyHitLeaf<'a, F> {
+    accel: &'a Accel,
+    sheared: &'a ShearedRay,
+    t_max: f32,
+    visit: &'a mut F,
+}
+
+impl<F: FnMut(u32, f32) -> bool> LeafVisit for AnyHitLeaf<'_, F> {
+    #[inline(always)]
+    fn visit<const AVX: bool>(&mut self, first: u32, count: u32, _: &mut f32) -> bool {
+        let visit = &mut self.visit;
+        self.accel.triangles.hits_in_leaf::<AVX>(
+            self.sheared,
+            first,
+            count,
+            self.t_max,
+            |slot, _, t, _| visit(slot, t),
+        )
     }
 }
 
@@ -319,9 +347,15 @@ struct ClosestLeaf<'a> {
 
 impl LeafVisit for ClosestLeaf<'_> {
     #[inline(always)]
-    fn visit(&mut self, first: u32, count: u32, limit: &mut f32) -> bool {
-        self.accel
-            .closest_in_leaf(self.within, self.sheared, first, count, limit, self.best);
+    fn visit<const AVX: bool>(&mut self, first: u32, count: u32, limit: &mut f32) -> bool {
+        self.accel.closest_in_leaf::<AVX>(
+            self.within,
+            self.sheared,
+            first,
+            count,
+            limit,
+            self.best,
+        );
         *self.end = *limit;
         true
     }
@@ -602,7 +636,7 @@ impl GatheredLeaf for ClosestPacketLeaf<'_> {
         if rays.len() < ACROSS_RAYS_MIN {
             for &r in rays {
                 let r = r as usize;
-                self.accel.closest_in_leaf(
+                self.accel.closest_in_leaf::<AVX>(
                     self.within,
                     &self.sheared[r],
                     first,
@@ -689,7 +723,7 @@ impl<F: FnMut(usize, u32, f32) -> bool> GatheredLeaf for &mut AnyHitPacketLeaf<'
             for &r in rays {
                 let r = r as usize;
                 let visit = &mut self.visit;
-                let finished = !self.accel.triangles.hits_in_leaf(
+                let finished = !self.accel.triangles.hits_in_leaf::<AVX>(
                     &self.sheared[r],
                     first,
                     count,

@@ -20,6 +20,8 @@ use glam::{Vec2, Vec3A, Vec4};
 use obvhs::aabb::Aabb;
 
 mod across_rays;
+#[cfg(target_arch = "x86_64")]
+mod two_packs;
 
 #[cfg(target_arch = "x86_64")]
 pub use across_rays::sixteen;
@@ -297,9 +299,12 @@ impl PackedTriangles {
     }
 
     /// Tests the `count` triangles of the leaf whose packs start at `first_pack` and calls
-    /// `hit(slot, source, t, bary)` for each one the ray crosses with `t` in `[0, t_max)`.
+    /// `hit(slot, source, t, bary)` for each one the ray crosses with `t` in `[0, t_max)`,
+    /// pack by pack, lane by lane, until `hit` returns false (then returns false). In the
+    /// AVX2 copy (`AVX`) a leaf of two packs is tested in one pass of eight lanes
+    /// (`two_packs`), with the same hits in the same order.
     #[inline(always)]
-    pub fn hits_in_leaf(
+    pub fn hits_in_leaf<const AVX: bool>(
         &self,
         ray: &ShearedRay,
         first_pack: u32,
@@ -308,8 +313,25 @@ impl PackedTriangles {
         mut hit: impl FnMut(u32, u32, f32, Vec2) -> bool,
     ) -> bool {
         let first_pack = first_pack as usize;
-        let packs = (count as usize).div_ceil(LANES);
-        for pack in &self.packs[first_pack..first_pack + packs] {
+        let packs = &self.packs[first_pack..first_pack + (count as usize).div_ceil(LANES)];
+        #[cfg(target_arch = "x86_64")]
+        if let (true, [low, high]) = (AVX, packs) {
+            // SAFETY: `AVX` is true only in the copy `simd::dispatch` runs where the CPU has
+            // AVX2 (and in tests that check the CPU first).
+            let found = unsafe { two_packs::intersect(ray, [low, high], t_max) };
+            let mut mask = found.mask;
+            while mask != 0 {
+                let l = mask.trailing_zeros() as usize;
+                mask &= mask - 1;
+                let (pack, lane) = (if l < LANES { low } else { high }, l % LANES);
+                let slot = pack.first_slot + lane as u32;
+                if !hit(slot, pack.source[lane], found.t[l], found.bary[l]) {
+                    return false;
+                }
+            }
+            return true;
+        }
+        for pack in packs {
             let found = ray.intersect_pack(pack, pack.live as usize, t_max);
             let mut mask = found.mask;
             while mask != 0 {
@@ -1160,7 +1182,7 @@ mod tests {
         assert_eq!(packed.packs.len(), 2);
         let ray = ShearedRay::new(Vec3A::new(0.0, 0.0, 1.0), Vec3A::NEG_Z);
         let mut seen = Vec::new();
-        packed.hits_in_leaf(&ray, 0, 3, f32::INFINITY, |slot, source, t, bary| {
+        packed.hits_in_leaf::<false>(&ray, 0, 3, f32::INFINITY, |slot, source, t, bary| {
             assert_eq!(source, slot);
             assert_eq!(
                 Some((t, bary)),
@@ -1176,12 +1198,63 @@ mod tests {
         assert_eq!(seen, vec![0, 1]);
         // The limit cuts the farther one; stopping early is reported.
         let mut near = Vec::new();
-        packed.hits_in_leaf(&ray, 0, 3, 3.5, |slot, _, _, _| {
+        packed.hits_in_leaf::<false>(&ray, 0, 3, 3.5, |slot, _, _, _| {
             near.push(slot);
             true
         });
         assert_eq!(near, vec![0]);
-        assert!(!packed.hits_in_leaf(&ray, 0, 3, f32::INFINITY, |_, _, _, _| false));
+        assert!(!packed.hits_in_leaf::<false>(&ray, 0, 3, f32::INFINITY, |_, _, _, _| false));
+    }
+
+    /// A leaf of two packs reports, in the AVX2 copy's eight-lane test, the same hits in the
+    /// same order as pack by pack, and stops after the same hit.
+    #[test]
+    fn a_leaf_of_two_packs_reports_the_same_hits_in_either_copy() {
+        if !crate::simd::Isa::cpu_has_avx2() {
+            println!("skipped: this CPU has no AVX2");
+            return;
+        }
+        // Seven triangles stacked along the ray (some missed, one with a shared edge on the
+        // ray's line) and one more leaf after them.
+        let layer = |x: f32, z: f32| tri([x - 1.0, -1.0, z], [x + 1.0, -1.0, z], [x, 1.0, z]);
+        let mut positions: Vec<[Vec3A; 3]> = (0..7)
+            .map(|i| layer(if i == 3 { 5.0 } else { 0.0 }, -1.0 - i as f32))
+            .collect();
+        positions[5] = tri([0.0, -1.0, -6.0], [2.0, -1.0, -6.0], [0.0, 1.0, -6.0]);
+        positions.push(layer(0.0, -9.0));
+        let packed = PackedTriangles::pack(&positions, [(0, 7), (7, 1)].into_iter());
+        assert_eq!(packed.packs.len(), 3);
+        let hits = |avx: bool, ray: &ShearedRay, stop_after: usize| {
+            let mut seen = Vec::new();
+            let mut record = |slot: u32, source: u32, t: f32, bary: Vec2| {
+                seen.push((
+                    slot,
+                    source,
+                    t.to_bits(),
+                    bary.x.to_bits(),
+                    bary.y.to_bits(),
+                ));
+                seen.len() < stop_after
+            };
+            let finished = if avx {
+                packed.hits_in_leaf::<true>(ray, 0, 7, f32::INFINITY, &mut record)
+            } else {
+                packed.hits_in_leaf::<false>(ray, 0, 7, f32::INFINITY, &mut record)
+            };
+            (finished, seen)
+        };
+        for origin in [
+            Vec3A::new(0.0, 0.0, 1.0),
+            Vec3A::new(0.0, -0.5, 1.0),
+            Vec3A::new(0.3, 0.2, 1.0),
+        ] {
+            let ray = ShearedRay::new(origin, Vec3A::new(0.01, 0.0, -1.0));
+            let all = hits(false, &ray, usize::MAX);
+            assert!(all.1.len() >= 5, "{origin}: only {} hits", all.1.len());
+            for stop_after in [1, 2, 5, usize::MAX] {
+                assert_eq!(hits(true, &ray, stop_after), hits(false, &ray, stop_after));
+            }
+        }
     }
 
     #[test]

@@ -25,16 +25,18 @@ use super::{ROBUST_FAR, WIDTH, WideBvh};
 use crate::simd;
 
 /// What a walk does at a leaf: `visit(first, count, &mut t_max)` may shrink `t_max` and
-/// returns false to stop the walk. Closures implement it; a query whose leaf work should be
-/// compiled into the walk itself (the closest-hit leaf test, into the AVX2 copy) implements
-/// it on a struct with an `#[inline(always)]` method, which a closure cannot carry.
+/// returns false to stop the walk. `AVX` is the walk's copy ([`simd::Kernel`]), so the leaf
+/// test may use AVX where it is true. Closures implement it (and ignore `AVX`); a query
+/// whose leaf work should be compiled into the walk itself (the closest-hit and any-hit leaf
+/// tests, into the AVX2 copy) implements it on a struct with an `#[inline(always)]` method,
+/// which a closure cannot carry.
 pub trait LeafVisit {
-    fn visit(&mut self, first: u32, count: u32, t_max: &mut f32) -> bool;
+    fn visit<const AVX: bool>(&mut self, first: u32, count: u32, t_max: &mut f32) -> bool;
 }
 
 impl<F: FnMut(u32, u32, &mut f32) -> bool> LeafVisit for F {
     #[inline(always)]
-    fn visit(&mut self, first: u32, count: u32, t_max: &mut f32) -> bool {
+    fn visit<const AVX: bool>(&mut self, first: u32, count: u32, t_max: &mut f32) -> bool {
         self(first, count, t_max)
     }
 }
@@ -233,7 +235,8 @@ impl WideBvh {
         if let Some((first, count)) = self.root_leaf {
             let mut leaf = leaf;
             let mut t = t_max;
-            return leaf.visit(first, count, &mut t);
+            // A tree of one leaf: no walk, so no SIMD copy chosen; the baseline test.
+            return leaf.visit::<false>(first, count, &mut t);
         }
         if self.nodes.is_empty() {
             return true;
@@ -296,7 +299,7 @@ impl WideBvh {
                     }
                 }
                 ChildRef::Leaf { first, count } => {
-                    if !leaf.visit(first, count, &mut t_max) {
+                    if !leaf.visit::<AVX>(first, count, &mut t_max) {
                         return false;
                     }
                 }
