@@ -325,7 +325,8 @@ impl PackedTriangles {
                 mask &= mask - 1;
                 let (pack, lane) = (if l < LANES { low } else { high }, l % LANES);
                 let slot = pack.first_slot + lane as u32;
-                if !hit(slot, pack.source[lane], found.t[l], found.bary[l]) {
+                let bary = Vec2::new(found.u[l], found.v[l]);
+                if !hit(slot, pack.source[lane], found.t[l], bary) {
                     return false;
                 }
             }

@@ -14,23 +14,27 @@
 
 use std::arch::x86_64::*;
 
-use glam::Vec2;
-
 use super::{LANES, ShearedRay, TrianglePack, intersect_beyond_f32};
 
 /// Lanes of a two-pack test.
 pub(super) const WIDE: usize = 2 * LANES;
 
 /// What a two-pack test found: bit `l` of `mask` for lane `l % 4` of pack `l / 4`, with the
-/// hit's distance and barycentrics in `t[l]`, `bary[l]`.
+/// hit's distance and barycentrics in `t[l]`, `u[l]`, `v[l]` (other lanes hold anything).
 pub(super) struct PairHits {
     pub mask: u32,
     pub t: [f32; WIDE],
-    pub bary: [Vec2; WIDE],
+    pub u: [f32; WIDE],
+    pub v: [f32; WIDE],
 }
 
 /// The test of `ray` against the live lanes of `packs` with `t` in `[0, t_max)`: lane for
-/// lane [`ShearedRay::intersect_pack`] of each pack.
+/// lane [`ShearedRay::intersect_pack`] of each pack. The rare lanes (an edge function of
+/// exactly zero, a distance beyond f32's range) are finished out of line (cold), and the
+/// common lanes are accepted by vector compares, so the common path is short. The function
+/// itself stays a call from the walk: written as an always-inlined function whose AVX
+/// intrinsics would inline into the walk's AVX2 copy, it left them as calls (the
+/// closures carry no target features) and cost half again as many instructions a glass ray.
 ///
 /// # Safety
 /// The CPU must have AVX.
@@ -46,7 +50,7 @@ pub(super) unsafe fn intersect(
     let origin = ray.origin.map(|o| _mm256_set1_ps(o));
     // Coordinate `axis` of vertex `vertex` of the eight triangles.
     let row = |vertex: usize, axis: usize| {
-        let [low, high] = packs.map(|p| p.v[vertex][axis]);
+        let [low, high] = packs.map(|p| &p.v[vertex][axis]);
         // SAFETY: each row is four f32 (16 bytes), read unaligned.
         unsafe { _mm256_set_m128(_mm_loadu_ps(high.as_ptr()), _mm_loadu_ps(low.as_ptr())) }
     };
@@ -62,43 +66,19 @@ pub(super) unsafe fn intersect(
     let (bx, by, bz) = sheared(1);
     let (cx, cy, cz) = sheared(2);
     let edge = |p, q, r, s| _mm256_sub_ps(_mm256_mul_ps(p, q), _mm256_mul_ps(r, s));
-    let mut u = edge(cx, by, cy, bx);
-    let mut v = edge(ax, cy, ay, cx);
-    let mut w = edge(bx, ay, by, ax);
+    let mut uvw = [
+        edge(cx, by, cy, bx),
+        edge(ax, cy, ay, cx),
+        edge(bx, ay, by, ax),
+    ];
     let live_mask = lanes_below(packs[0].live) | lanes_below(packs[1].live) << LANES;
     let zero = _mm256_setzero_ps();
-    let mask_of = |m: __m256| _mm256_movemask_ps(m) as u32;
     let is_zero = |x| mask_of(_mm256_cmp_ps::<_CMP_EQ_OQ>(x, zero));
-    let on_edge = (is_zero(u) | is_zero(v) | is_zero(w)) & live_mask;
+    let on_edge = (is_zero(uvw[0]) | is_zero(uvw[1]) | is_zero(uvw[2])) & live_mask;
     if on_edge != 0 {
-        // Exactly on an edge in f32: decided in f64, as `intersect_pack` decides it.
-        let lanes = |x: __m256| {
-            let mut out = [0.0f32; WIDE];
-            // SAFETY: `out` holds eight f32.
-            unsafe { _mm256_storeu_ps(out.as_mut_ptr(), x) };
-            out
-        };
-        let (mut u8, mut v8, mut w8) = (lanes(u), lanes(v), lanes(w));
-        let [ax, ay, bx, by, cx, cy] = [ax, ay, bx, by, cx, cy].map(lanes);
-        let mut bits = on_edge;
-        while bits != 0 {
-            let l = bits.trailing_zeros() as usize;
-            bits &= bits - 1;
-            let f =
-                |a: f32, b: f32, c: f32, d: f32| (a as f64 * b as f64 - c as f64 * d as f64) as f32;
-            u8[l] = f(cx[l], by[l], cy[l], bx[l]);
-            v8[l] = f(ax[l], cy[l], ay[l], cx[l]);
-            w8[l] = f(bx[l], ay[l], by[l], ax[l]);
-        }
-        // SAFETY: each array holds eight f32.
-        (u, v, w) = unsafe {
-            (
-                _mm256_loadu_ps(u8.as_ptr()),
-                _mm256_loadu_ps(v8.as_ptr()),
-                _mm256_loadu_ps(w8.as_ptr()),
-            )
-        };
+        edges_in_f64(&mut uvw, [ax, ay, bx, by, cx, cy], on_edge);
     }
+    let [u, v, w] = uvw;
     let below = |x| mask_of(_mm256_cmp_ps::<_CMP_LT_OS>(x, zero));
     let above = |x| mask_of(_mm256_cmp_ps::<_CMP_GT_OS>(x, zero));
     let negative = below(u) | below(v) | below(w);
@@ -118,45 +98,98 @@ pub(super) unsafe fn intersect(
     let mut hits = PairHits {
         mask: 0,
         t: [0.0; WIDE],
-        bary: [Vec2::ZERO; WIDE],
+        u: [0.0; WIDE],
+        v: [0.0; WIDE],
     };
     if inside == 0 {
         return hits;
     }
     let inverse = _mm256_div_ps(_mm256_set1_ps(1.0), det);
-    let (mut t, mut v8, mut w8) = ([0.0f32; WIDE], [0.0f32; WIDE], [0.0f32; WIDE]);
+    let t = _mm256_mul_ps(t_scaled, inverse);
     // SAFETY: each array holds eight f32.
     unsafe {
-        _mm256_storeu_ps(t.as_mut_ptr(), _mm256_mul_ps(t_scaled, inverse));
-        _mm256_storeu_ps(v8.as_mut_ptr(), _mm256_mul_ps(v, inverse));
-        _mm256_storeu_ps(w8.as_mut_ptr(), _mm256_mul_ps(w, inverse));
+        _mm256_storeu_ps(hits.t.as_mut_ptr(), t);
+        _mm256_storeu_ps(hits.u.as_mut_ptr(), _mm256_mul_ps(v, inverse));
+        _mm256_storeu_ps(hits.v.as_mut_ptr(), _mm256_mul_ps(w, inverse));
     }
     // `x - x` is zero exactly when `x` is finite.
     let finite = is_zero(_mm256_sub_ps(det, det)) & is_zero(_mm256_sub_ps(t_scaled, t_scaled));
-    let mut bits = inside;
+    // `intersect_pack`'s `t >= 0 && t < t_max && t.is_finite()`, ordered compares all (false
+    // for NaN).
+    let in_range = mask_of(_mm256_cmp_ps::<_CMP_GE_OQ>(t, zero))
+        & mask_of(_mm256_cmp_ps::<_CMP_LT_OQ>(t, _mm256_set1_ps(t_max)))
+        & is_zero(_mm256_sub_ps(t, t));
+    hits.mask = inside & finite & in_range;
+    let beyond = inside & !finite;
+    if beyond != 0 {
+        beyond_f32(ray, packs, t_max, beyond, &mut hits);
+    }
+    hits
+}
+
+/// The lanes' bits of a compare's result.
+#[inline]
+#[target_feature(enable = "avx")]
+fn mask_of(m: __m256) -> u32 {
+    _mm256_movemask_ps(m) as u32
+}
+
+/// Recomputes in f64 the edge functions `uvw` of the lanes `on_edge` (one of them exactly
+/// zero in f32) from the sheared vertices `ax, ay, bx, by, cx, cy`, as `intersect_pack`
+/// recomputes them.
+#[cold]
+#[inline(never)]
+#[target_feature(enable = "avx")]
+fn edges_in_f64(uvw: &mut [__m256; 3], vertices: [__m256; 6], on_edge: u32) {
+    let lanes = |x: __m256| {
+        let mut out = [0.0f32; WIDE];
+        // SAFETY: `out` holds eight f32.
+        unsafe { _mm256_storeu_ps(out.as_mut_ptr(), x) };
+        out
+    };
+    let [mut u, mut v, mut w] = uvw.map(lanes);
+    let [ax, ay, bx, by, cx, cy] = vertices.map(lanes);
+    let mut bits = on_edge;
     while bits != 0 {
         let l = bits.trailing_zeros() as usize;
         bits &= bits - 1;
-        let found = if finite & (1 << l) != 0 {
-            (t[l] >= 0.0 && t[l] < t_max && t[l].is_finite())
-                .then(|| (t[l], Vec2::new(v8[l], w8[l])))
-        } else {
-            intersect_beyond_f32(
-                ray.origin,
-                ray.shear,
-                ray.k,
-                packs[l / LANES],
-                l % LANES,
-                t_max,
-            )
-        };
+        let f = |a: f32, b: f32, c: f32, d: f32| (a as f64 * b as f64 - c as f64 * d as f64) as f32;
+        u[l] = f(cx[l], by[l], cy[l], bx[l]);
+        v[l] = f(ax[l], cy[l], ay[l], cx[l]);
+        w[l] = f(bx[l], ay[l], by[l], ax[l]);
+    }
+    // SAFETY: each array holds eight f32.
+    *uvw = [u, v, w].map(|x| unsafe { _mm256_loadu_ps(x.as_ptr()) });
+}
+
+/// Decides in f64 the lanes `beyond` (inside the triangle, with a determinant or distance
+/// beyond f32's range), as `intersect_pack` decides them, into `hits`.
+#[cold]
+#[inline(never)]
+fn beyond_f32(
+    ray: &ShearedRay,
+    packs: [&TrianglePack; 2],
+    t_max: f32,
+    beyond: u32,
+    hits: &mut PairHits,
+) {
+    let mut bits = beyond;
+    while bits != 0 {
+        let l = bits.trailing_zeros() as usize;
+        bits &= bits - 1;
+        let found = intersect_beyond_f32(
+            ray.origin,
+            ray.shear,
+            ray.k,
+            packs[l / LANES],
+            l % LANES,
+            t_max,
+        );
         if let Some((t, bary)) = found {
             hits.mask |= 1 << l;
-            hits.t[l] = t;
-            hits.bary[l] = bary;
+            (hits.t[l], hits.u[l], hits.v[l]) = (t, bary.x, bary.y);
         }
     }
-    hits
 }
 
 /// The mask of a pack's first `live` lanes.
@@ -218,8 +251,8 @@ mod tests {
             hit_a == hit_b
                 && (!hit_a
                     || (a.t[i].to_bits() == b.t[l].to_bits()
-                        && a.bary[i].x.to_bits() == b.bary[l].x.to_bits()
-                        && a.bary[i].y.to_bits() == b.bary[l].y.to_bits()))
+                        && a.bary[i].x.to_bits() == b.u[l].to_bits()
+                        && a.bary[i].y.to_bits() == b.v[l].to_bits()))
         })
     }
 
