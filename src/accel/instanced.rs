@@ -656,7 +656,7 @@ impl TwoLevelAccel {
     /// mask of the rays stopped early. In the order of [`TwoLevelAccel::visit_hits`]: the
     /// world tree walked by the packet ([`Accel::visit_hits_packet`]), then the top-level
     /// trees walked masked by the rays it did not stop, each instance entered by at least
-    /// [`INSTANCE_PACKET`] of them as an object-space packet of its own (fewer one by one),
+    /// `INSTANCE_PACKET` of them as an object-space packet of its own (fewer one by one),
     /// then the collapsed instances ray by ray: each ray meets exactly the triangles it meets
     /// alone (or is stopped, as alone).
     pub fn visit_hits_packet(

@@ -1,18 +1,18 @@
 //! Acceleration structures: what rays are traced against, arranged by algorithm.
 //!
-//! - [`flat`]: one tree over the frame's world-space triangles. obvhs builds a binary tree
+//! - `flat`: one tree over the frame's world-space triangles. obvhs builds a binary tree
 //!   (without spatial splits, so it can be refitted; past [`BUILD_CHUNK_TRIANGLES`] a chunk
 //!   at a time under median splits, which bounds the builder's memory), which is collapsed
-//!   into the 8-wide tree rays walk and refits update ([`wide`]); the triangle arrays are
+//!   into the 8-wide tree rays walk and refits update (`wide`); the triangle arrays are
 //!   permuted into the tree's slot order after a build, so a leaf's slot range indexes them
 //!   directly, and the positions move into the tree's packs, their only copy from then on.
-//! - [`query`]: the answers (`Hit`, `TriangleRef`) and the per-query state every tree shares
+//! - `query`: the answers (`Hit`, `TriangleRef`) and the per-query state every tree shares
 //!   (the best hit so far and its tie rule, a packet's reusable buffers).
-//! - [`instanced`]: the two-level structure: object-space trees of shared meshes placed by
+//! - `instanced`: the two-level structure: object-space trees of shared meshes placed by
 //!   instances under a top-level tree.
-//! - [`policy`]: when to refit and when to rebuild.
-//! - [`triangles`]: triangles packed four per SIMD test, watertight.
-//! - [`wide`]: the 8-wide tree itself: node layout and collapse, refit and SAH, the walks,
+//! - `policy`: when to refit and when to rebuild.
+//! - `triangles`: triangles packed four per SIMD test, watertight.
+//! - `wide`: the 8-wide tree itself: node layout and collapse, refit and SAH, the walks,
 //!   packets, lanes.
 //!
 //! Which SIMD copy of the walks runs is decided in one place, [`crate::simd`].

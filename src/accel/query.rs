@@ -18,7 +18,7 @@ pub struct Hit {
     /// Triangle slot (BVH order) in the triangles of `instance`'s tree.
     pub triangle: u32,
     /// [`Hit::WORLD`] for a triangle of the world-space tree (every hit of a flat BVH);
-    /// otherwise the instance of a [`TwoLevelAccel`] whose object-space tree holds it.
+    /// otherwise the instance of a `TwoLevelAccel` whose object-space tree holds it.
     pub instance: u32,
     pub t: f32,
     /// Barycentric weights of vertices 1 and 2.

@@ -124,7 +124,7 @@ pub struct RayRate {
 }
 
 /// Traces the rays of every frame of `renderer`'s scene for each thread count, `repeats`
-/// times (each a sample of at least `min_sample`, see [`timed_in`]), and reports the rate
+/// times (each a sample of at least `min_sample`, see `timed_in`), and reports the rate
 /// per kind.
 pub fn run_ray_bench(
     renderer: &mut Renderer,
@@ -397,7 +397,7 @@ impl FileKernel {
 
 /// Traces the rays of a ray file (`mipray export --rays`) on frame `frame` of the
 /// renderer's scene, class by class, on the kernels `api` names, for each thread count,
-/// `repeats` times (each a sample of at least `min_sample`, see [`timed_in`]); checks
+/// `repeats` times (each a sample of at least `min_sample`, see `timed_in`); checks
 /// every answer against the recorded one.
 ///
 /// # Errors

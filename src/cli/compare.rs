@@ -1,6 +1,10 @@
 //! `mipray compare`: every LOD method on the same frames, time against error from a
 //! supersampled reference (see `crate::compare`).
 
+// The options' doc comments are the command's `--help` text, where `<scene>` is a
+// placeholder the user reads, not an HTML tag.
+#![allow(rustdoc::invalid_html_tags)]
+
 use std::path::PathBuf;
 
 use anyhow::Result;

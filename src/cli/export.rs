@@ -1,5 +1,9 @@
 //! `mipray export`: each frame's world-space triangles (OBJ or PLY), camera and lights.
 
+// The options' doc comments are the command's `--help` text, where `<scene>` is a
+// placeholder the user reads, not an HTML tag.
+#![allow(rustdoc::invalid_html_tags)]
+
 use std::path::PathBuf;
 
 use anyhow::Result;

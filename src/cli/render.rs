@@ -1,5 +1,9 @@
 //! `mipray render` (and no arguments at all): an animation to an image sequence.
 
+// The options' doc comments are the command's `--help` text, where `<scene>` is a
+// placeholder the user reads, not an HTML tag.
+#![allow(rustdoc::invalid_html_tags)]
+
 use std::path::PathBuf;
 use std::process::ExitCode;
 

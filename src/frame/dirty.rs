@@ -99,7 +99,7 @@ impl DirtySet {
     /// Lists the source triangles of `visited` (increasing, disjoint ranges) whose entry in
     /// `source_motion` is set, in source order, as their slots (`slot_of_source`) with that
     /// motion, and clears those entries: the parallel counterpart of [`Self::mark`] called
-    /// in that order. A range [`Listed::DeformedByBit`] is not listed: its moved slots are
+    /// in that order. A range `Listed::DeformedByBit` is not listed: its moved slots are
     /// the set bits no listed entry has (only with `bits_set`), counted as unlisted.
     /// The listed ranges are cut into chunks that are counted, then filled at their offsets,
     /// on rayon's threads; every read is sequential. Precondition: the set was just

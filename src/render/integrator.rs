@@ -8,10 +8,10 @@
 //! integrator is generic over that state, so each method pays only for its own.
 //!
 //! Shading a hit is split in two steps so that a tile can trace its rays breadth first
-//! (`render::tile`): [`FrameScene::arrive`] makes the surface, looks up the texture and asks
-//! for the shadow rays ([`ShadowRequest`]); once those are traced, [`FrameScene::finish`]
+//! (`render::tile`): `FrameScene::arrive` makes the surface, looks up the texture and asks
+//! for the shadow rays (`ShadowRequest`); once those are traced, `FrameScene::finish`
 //! sums the direct light and spawns the reflected and refracted rays, and records how the
-//! hit's radiance combines with theirs ([`Combine`]). Evaluated bottom up, `Combine` performs
+//! hit's radiance combines with theirs (`Combine`). Evaluated bottom up, `Combine` performs
 //! the same floating-point operations in the same order as a depth-first recursion would
 //! (`color += weight * child`, the glass terms summed from zero before they are added), so
 //! the image does not depend on the order in which rays are traced.

@@ -24,7 +24,7 @@ pub struct F32x8(pub [f32; WIDTH]);
 use std::arch::x86_64::{_CMP_EQ_OQ, _CMP_GT_OQ, _CMP_LT_OQ, _CMP_NEQ_UQ};
 
 impl F32x8 {
-    /// Lanes per vector ([`WIDTH`]), for code that names the type rather than the module.
+    /// Lanes per vector (`WIDTH`), for code that names the type rather than the module.
     pub const LANES: usize = WIDTH;
 
     #[inline(always)]

@@ -55,7 +55,7 @@ pub struct Sampler {
 ///
 /// Texels are named two ways: by their row-major number `y * width + x` ([`MipLevel::texel`],
 /// [`MipLevel::texels`]: the public order), and by where the storage keeps them
-/// ([`MipLevel::row_start`] + [`MipLevel::column_offset`]: what a lookup's taps hold).
+/// (`MipLevel::row_start` + `MipLevel::column_offset`: what a lookup's taps hold).
 /// The two agree for float levels; 8-bit levels keep their codes in 4 x 4 blocks.
 #[derive(Debug, Clone)]
 pub struct MipLevel {
@@ -253,7 +253,7 @@ impl MipLevel {
         (0..self.width as usize * self.height as usize).map(|i| self.texel(i))
     }
 
-    /// Whether the level keeps 8-bit codes (see [`Texels`]).
+    /// Whether the level keeps 8-bit codes (see `Texels`).
     pub fn is_8bit(&self) -> bool {
         matches!(self.texels, Texels::Srgb8 { .. })
     }

@@ -415,7 +415,7 @@ impl SlotLanes<'_> {
         }
     }
 
-    /// The box of the leaf of `count` slots from slot `first` ([`PackedTriangles::leaf_box`],
+    /// The box of the leaf of `count` slots from slot `first` (`PackedTriangles::leaf_box`,
     /// the same bits), read through the lanes.
     ///
     /// # Safety

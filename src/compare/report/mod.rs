@@ -2,7 +2,7 @@
 //!
 //! - `compare.csv`: one row per method, in report order, with the columns
 //!   `method,bytes_per_ray,ms_per_frame,overhead_pct,psnr,ssim,flip,lod_bias,lod_rms,lod_under,flicker`
-//!   (the means over the frame range; see [`MethodSummary`]).
+//!   (the means over the frame range; see `MethodSummary`).
 //! - `compare_frames.csv`: long format, one row per (method, frame), with the columns
 //!   `method,frame,ms,psnr,ssim,flip,lod_bias,lod_rms,lod_under,lod_pixels,flicker`;
 //!   `flicker` is empty for the first frame of the range, which has no previous frame.
