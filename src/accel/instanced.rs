@@ -593,6 +593,8 @@ impl TwoLevelAccel {
             .wide
             .traverse_packet(packet, object_limits, |s, first, count, limit| {
                 let r = inside[s] as usize;
+                // A closure is not told the walk's copy: the four-lane pack tests, which
+                // give the same bits as the eight-lane one.
                 mesh.accel.closest_in_leaf::<false>(
                     &within,
                     &sheared[s],
