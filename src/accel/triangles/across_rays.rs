@@ -605,7 +605,7 @@ fn edge_function<const AVX: bool>(p: F32x8, q: F32x8, r: F32x8, s: F32x8) -> F32
 
 /// An edge function recomputed in f64 and rounded once (for a lane where it was exactly 0).
 #[inline(always)]
-fn edge_function_f64(p: f32, q: f32, r: f32, s: f32) -> f32 {
+pub(super) fn edge_function_f64(p: f32, q: f32, r: f32, s: f32) -> f32 {
     (p as f64 * q as f64 - r as f64 * s as f64) as f32
 }
 

@@ -14,6 +14,7 @@
 
 use std::arch::x86_64::*;
 
+use super::across_rays::edge_function_f64;
 use super::{LANES, ShearedRay, TrianglePack, intersect_beyond_f32};
 
 /// Lanes of a two-pack test.
@@ -153,10 +154,9 @@ fn edges_in_f64(uvw: &mut [__m256; 3], vertices: [__m256; 6], on_edge: u32) {
     while bits != 0 {
         let l = bits.trailing_zeros() as usize;
         bits &= bits - 1;
-        let f = |a: f32, b: f32, c: f32, d: f32| (a as f64 * b as f64 - c as f64 * d as f64) as f32;
-        u[l] = f(cx[l], by[l], cy[l], bx[l]);
-        v[l] = f(ax[l], cy[l], ay[l], cx[l]);
-        w[l] = f(bx[l], ay[l], by[l], ax[l]);
+        u[l] = edge_function_f64(cx[l], by[l], cy[l], bx[l]);
+        v[l] = edge_function_f64(ax[l], cy[l], ay[l], cx[l]);
+        w[l] = edge_function_f64(bx[l], ay[l], by[l], ax[l]);
     }
     // SAFETY: each array holds eight f32.
     *uvw = [u, v, w].map(|x| unsafe { _mm256_loadu_ps(x.as_ptr()) });
@@ -204,18 +204,12 @@ mod tests {
 
     use super::*;
     use crate::accel::triangles::PackHits;
-
-    fn xorshift(state: &mut u64) -> f32 {
-        *state ^= *state << 13;
-        *state ^= *state >> 7;
-        *state ^= *state << 17;
-        (*state >> 40) as f32 / (1u64 << 24) as f32
-    }
+    use crate::accel::wide::test_support::uniform;
 
     /// A pack of `live` triangles: random ones, or (every third pack) triangles sharing
     /// edges and vertices on a grid the rays are aimed at, so edge functions of exactly zero
     /// and ties occur.
-    fn pack(state: &mut u64, live: u32, on_grid: bool, scale: f32) -> TrianglePack {
+    fn pack(unit: &mut impl FnMut() -> f32, live: u32, on_grid: bool, scale: f32) -> TrianglePack {
         let mut p = TrianglePack {
             live,
             first_slot: 0,
@@ -223,10 +217,7 @@ mod tests {
         };
         for lane in 0..live as usize {
             let tri: [Vec3A; 3] = if on_grid {
-                let (x, y) = (
-                    (xorshift(state) * 4.0).floor(),
-                    (xorshift(state) * 4.0).floor(),
-                );
+                let (x, y) = ((unit() * 4.0).floor(), (unit() * 4.0).floor());
                 let z = 5.0;
                 [
                     Vec3A::new(x, y, z),
@@ -235,7 +226,7 @@ mod tests {
                 ]
             } else {
                 std::array::from_fn(|_| {
-                    Vec3A::new(xorshift(state), xorshift(state), xorshift(state) + 1.0) * scale
+                    Vec3A::new(unit(), unit(), unit() + 1.0) * scale
                         - Vec3A::new(0.5, 0.5, 0.0) * scale
                 })
             };
@@ -262,7 +253,7 @@ mod tests {
             println!("skipped: this CPU has no AVX");
             return;
         }
-        let mut state = 0x2545_f491_4f6c_dd1d_u64;
+        let mut unit = uniform(0x2545_f491_4f6c_dd1d, 0.0, 1.0);
         let (mut hits, mut on_edges) = (0, 0);
         for round in 0..6000 {
             let on_grid = round % 3 == 0;
@@ -270,21 +261,18 @@ mod tests {
             // f64 test.
             let scale = if round % 7 == 0 { 3e13 } else { 1.0 };
             let live = [1 + round % 4, 1 + (round / 4) % 4].map(|l| l as u32);
-            let packs = live.map(|l| pack(&mut state, l, on_grid, scale));
+            let packs = live.map(|l| pack(&mut unit, l, on_grid, scale));
             let origin = if on_grid {
                 // Aimed at grid points and edge midpoints.
-                let (x, y) = (
-                    (xorshift(&mut state) * 8.0).floor() / 2.0,
-                    (xorshift(&mut state) * 8.0).floor() / 2.0,
-                );
+                let (x, y) = ((unit() * 8.0).floor() / 2.0, (unit() * 8.0).floor() / 2.0);
                 Vec3A::new(x, y, 0.0)
             } else {
-                Vec3A::new(xorshift(&mut state) - 0.5, xorshift(&mut state) - 0.5, 0.0) * 0.2
+                Vec3A::new(unit() - 0.5, unit() - 0.5, 0.0) * 0.2
             };
             let direction = if on_grid {
                 Vec3A::Z
             } else {
-                Vec3A::new(xorshift(&mut state) - 0.5, xorshift(&mut state) - 0.5, 1.0)
+                Vec3A::new(unit() - 0.5, unit() - 0.5, 1.0)
             };
             let ray = ShearedRay::new(origin, direction);
             let t_max = if round % 5 == 0 {
