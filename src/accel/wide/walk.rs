@@ -279,11 +279,25 @@ impl WideBvh {
         &self,
         stack: &mut [MaybeUninit<StackEntry>],
         ray: &RayBoxes,
+        t_max: f32,
+        leaf: impl LeafVisit,
+    ) -> bool {
+        self.walk_from::<ORDERED, AVX>(stack, ray, t_max, leaf, ChildRef::Node(0))
+    }
+
+    /// [`WideBvh::walk`] of the subtree `start` alone (a masked walk hands a subtree that few
+    /// of its rays enter to each of them this way): the same loop, the same stack bound.
+    #[inline(always)]
+    pub(super) fn walk_from<const ORDERED: bool, const AVX: bool>(
+        &self,
+        stack: &mut [MaybeUninit<StackEntry>],
+        ray: &RayBoxes,
         mut t_max: f32,
         mut leaf: impl LeafVisit,
+        start: ChildRef,
     ) -> bool {
         let mut top = 0usize;
-        let mut current = ChildRef::Node(0);
+        let mut current = start;
         loop {
             match current {
                 ChildRef::Node(index) => {
