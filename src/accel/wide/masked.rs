@@ -33,7 +33,7 @@
 //! fetches more than on the test.
 //!
 //! A subtree that at most [`ALONE_MAX_RAYS`] of the packet's rays enter is handed to each of
-//! them in turn, to walk alone (`WideBvh::walk_from`, the single ray's walk and its order
+//! them in turn, to walk alone (`WideBvh::walk`, the single ray's walk and its order
 //! of visits), as Embree's hybrid packet walks switch to single rays below a few active
 //! ones. Past the first levels a bounce's rays part ways, and a node with a mask of two or
 //! three rays cost the masked walk a test per ray plus the masks' bookkeeping (gathering,
@@ -260,30 +260,14 @@ impl WideBvh {
                 }
                 ChildRef::Node(index) => {
                     if mask.count_ones() <= alone_max {
-                        let mut bits = mask;
-                        while bits != 0 {
-                            let r = bits.trailing_zeros() as usize;
-                            bits &= bits - 1;
-                            let limit = limits[r];
-                            let one = OneRayLeaf {
-                                leaf: &mut *leaf,
-                                ray: r as u8,
-                                limits: &mut *limits,
-                            };
-                            let start = ChildRef::Node(index);
-                            self.walk_from::<ORDERED, AVX>(
-                                &mut alone_stack,
-                                &rays[r],
-                                limit,
-                                one,
-                                start,
-                            );
-                            if L::STOPS_RAYS {
-                                let limit = limits[r];
-                                let stopped = limit < 0.0 || limit.is_nan();
-                                alive &= !(u64::from(stopped) << r);
-                            }
-                        }
+                        alive &= !self.walk_each_alone::<AVX, ORDERED, L>(
+                            &mut alone_stack,
+                            rays,
+                            limits,
+                            leaf,
+                            mask,
+                            index,
+                        );
                         // Limits may have shrunk: pending leaves are tested again when popped.
                         leaves_visited = leaves_visited.wrapping_add(1);
                         if L::STOPS_RAYS && alive == 0 {
@@ -363,6 +347,40 @@ impl WideBvh {
                 }
             }
         }
+    }
+}
+
+impl WideBvh {
+    /// Each ray of `mask` walks the subtree of node `index` alone (the single ray's walk),
+    /// its leaves handed to `leaf` for it alone. Returns the rays that stopped (any hit).
+    #[inline(always)]
+    fn walk_each_alone<const AVX: bool, const ORDERED: bool, L: GatheredLeaf>(
+        &self,
+        stack: &mut [MaybeUninit<StackEntry>],
+        rays: &[RayBoxes],
+        limits: &mut [f32; PACKET],
+        leaf: &mut L,
+        mask: u64,
+        index: u32,
+    ) -> u64 {
+        let mut stopped = 0u64;
+        let mut bits = mask;
+        while bits != 0 {
+            let r = bits.trailing_zeros() as usize;
+            bits &= bits - 1;
+            let limit = limits[r];
+            let one = OneRayLeaf {
+                leaf: &mut *leaf,
+                ray: r as u8,
+                limits: &mut *limits,
+            };
+            self.walk::<ORDERED, AVX>(stack, &rays[r], limit, one, ChildRef::Node(index));
+            if L::STOPS_RAYS {
+                let limit = limits[r];
+                stopped |= u64::from(limit < 0.0 || limit.is_nan()) << r;
+            }
+        }
+        stopped
     }
 }
 

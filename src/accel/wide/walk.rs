@@ -274,21 +274,11 @@ impl WideBvh {
 
     /// The traversal loop. The stack holds at most `depth * (WIDTH - 1) + 1` entries: each
     /// level pushes at most `WIDTH - 1` siblings.
+    ///
+    /// The walk covers the subtree `start`: the root for a ray's own query, a node for a ray
+    /// of a masked walk that walks that subtree alone.
     #[inline(always)]
-    fn walk<const ORDERED: bool, const AVX: bool>(
-        &self,
-        stack: &mut [MaybeUninit<StackEntry>],
-        ray: &RayBoxes,
-        t_max: f32,
-        leaf: impl LeafVisit,
-    ) -> bool {
-        self.walk_from::<ORDERED, AVX>(stack, ray, t_max, leaf, ChildRef::Node(0))
-    }
-
-    /// [`WideBvh::walk`] of the subtree `start` alone (a masked walk hands a subtree that few
-    /// of its rays enter to each of them this way): the same loop, the same stack bound.
-    #[inline(always)]
-    pub(super) fn walk_from<const ORDERED: bool, const AVX: bool>(
+    pub(super) fn walk<const ORDERED: bool, const AVX: bool>(
         &self,
         stack: &mut [MaybeUninit<StackEntry>],
         ray: &RayBoxes,
@@ -351,8 +341,13 @@ impl<L: LeafVisit, const ORDERED: bool> simd::Kernel for Walk<'_, L, ORDERED> {
 
     #[inline(always)]
     fn run<const AVX2: bool>(self) -> bool {
-        self.bvh
-            .walk::<ORDERED, AVX2>(self.stack, self.ray, self.t_max, self.leaf)
+        self.bvh.walk::<ORDERED, AVX2>(
+            self.stack,
+            self.ray,
+            self.t_max,
+            self.leaf,
+            ChildRef::Node(0),
+        )
     }
 }
 
