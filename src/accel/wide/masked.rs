@@ -348,9 +348,7 @@ impl WideBvh {
             }
         }
     }
-}
 
-impl WideBvh {
     /// Each ray of `mask` walks the subtree of node `index` alone (the single ray's walk),
     /// its leaves handed to `leaf` for it alone. Returns the rays that stopped (any hit).
     #[inline(always)]
