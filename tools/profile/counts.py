@@ -1,0 +1,177 @@
+#!/usr/bin/env python3
+"""Where a run's instructions go, by mipray module, source file and function, inlining resolved.
+
+The deterministic counterpart of `shares.py`: it reads valgrind callgrind's per-instruction
+counts instead of perf's timed samples, so two builds (or two repeat counts of one) compare
+exactly on a VM whose timings drift. As in `shares.py`, each instruction of the binary is
+charged to the innermost frame of its inline chain (`addr2line -i`) that lies in the
+project's `src/` (outside `src/simd/`): the tile kernel is one function in the symbol table,
+but its instructions are charged to the integrator, the texture filter, the walks, and so on.
+
+Usage (needs valgrind and binutils' `addr2line`; the binary must carry line tables, as the
+release profile's does):
+
+    valgrind --tool=callgrind --dump-instr=yes --dump-line=no --compress-pos=no \\
+        --compress-strings=no --callgrind-out-file=A mipray bench ... --repeats 1
+    (the same with --repeats 2 into B)
+    tools/profile/counts.py BINARY B [--minus A] [--per N] [--files N] [--functions N]
+
+With `--minus A`, the counts of A are subtracted address by address (so one pass of the
+bench is left: the load and set-up cancel). `--per N` also prints each figure divided by N
+(for example the frame's shaded hits, or the rays of a class). Instructions outside the
+binary (libm's `powf`, libc's `memset`, the kernel's are not counted by valgrind) are
+listed as `outside the binary`; instructions in the binary with no project frame (a
+dependency or standard-library function that was not inlined) as `not in src/`.
+"""
+
+import argparse
+import collections
+import os
+import subprocess
+import sys
+
+SRC = "/src/"
+NOT_PROJECT = ("/rustc/", "/library/", "/.cargo/", "index.crates.io", "/cargo/registry/")
+
+
+def is_project_file(location):
+    """Whether an `addr2line` location lies in the project's own sources (not `src/simd/`)."""
+    return (
+        SRC in location
+        and not any(part in location for part in NOT_PROJECT)
+        and "/src/simd/" not in location
+    )
+
+
+def read_counts(path, binary):
+    """Per address of `binary`, its own (exclusive) instruction count; and the count outside it."""
+    name = os.path.realpath(binary)
+    inside = collections.Counter()
+    outside = 0
+    current_object = None
+    skip_next = False
+    with open(path, encoding="utf-8", errors="replace") as f:
+        for line in f:
+            if skip_next:
+                # The line after `calls=` carries the call's inclusive cost: the callee's
+                # own lines count it already.
+                skip_next = False
+                continue
+            if line.startswith("ob="):
+                current_object = os.path.realpath(line[3:].strip())
+                continue
+            if line.startswith("calls="):
+                skip_next = True
+                continue
+            if not line.startswith("0x"):
+                continue
+            fields = line.split()
+            if len(fields) < 2:
+                continue
+            count = int(fields[1])
+            if current_object == name:
+                inside[int(fields[0], 16)] += count
+            else:
+                outside += count
+    return inside, outside
+
+
+def main():
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("binary", help="the binary callgrind ran")
+    parser.add_argument("data", help="callgrind output (--dump-instr=yes --compress-pos=no)")
+    parser.add_argument("--minus", metavar="DATA", help="callgrind output to subtract")
+    parser.add_argument("--per", type=float, help="also divide each figure by this")
+    parser.add_argument("--files", type=int, default=20, help="how many files to list")
+    parser.add_argument("--functions", type=int, default=30, help="how many functions")
+    parser.add_argument(
+        "--lines",
+        metavar="FILE",
+        help="also list the busiest lines of the project files whose path contains FILE",
+    )
+    args = parser.parse_args()
+    for path in (args.binary, args.data, args.minus):
+        if path and not os.path.isfile(path):
+            sys.exit(f"{path}: no such file")
+
+    inside, outside = read_counts(args.data, args.binary)
+    if args.minus:
+        less, less_outside = read_counts(args.minus, args.binary)
+        inside.subtract(less)
+        outside -= less_outside
+    addresses = sorted(a for a, c in inside.items() if c != 0)
+    if not addresses:
+        sys.exit(f"{args.data}: no instructions of {args.binary} (was it run from this binary?)")
+    resolved = subprocess.run(
+        ["addr2line", "-i", "-a", "-f", "-C", "-e", args.binary],
+        # callgrind gives an object's addresses as its ELF's virtual addresses (for a
+        # position-independent executable too), which is what addr2line takes.
+        input="\n".join(hex(a) for a in addresses),
+        capture_output=True,
+        text=True,
+        check=True,
+    ).stdout.splitlines()
+    frames = collections.defaultdict(list)
+    current, i = None, 0
+    while i < len(resolved):
+        if resolved[i].startswith("0x"):
+            current = int(resolved[i], 16)
+            i += 1
+            continue
+        location = resolved[i + 1] if i + 1 < len(resolved) else ""
+        frames[current].append((resolved[i], location))
+        i += 2
+
+    modules = collections.Counter()
+    files = collections.Counter()
+    functions = collections.Counter()
+    lines = collections.Counter()
+    for address in addresses:
+        count = inside[address]
+        project = [(f, loc) for f, loc in frames[address] if is_project_file(loc)]
+        if not project:
+            modules["not in src/"] += count
+            continue
+        function, location = project[0]
+        path = location.rsplit(SRC, 1)[1].split(":", 1)[0]
+        parts = path.split("/")
+        modules[parts[0] if len(parts) > 1 else path] += count
+        files[path] += count
+        functions[(path, function.split("<")[0] if function.startswith("mipray") else function)] += count
+        if args.lines and args.lines in path:
+            lines[(location.rsplit(SRC, 1)[1].split(" ", 1)[0], function)] += count
+    modules["outside the binary"] = outside
+    total = sum(modules.values())
+
+    def row(name, count):
+        per = f" | {count / args.per:,.1f}" if args.per else ""
+        return f"| {name} | {count / 1e6:,.1f} M{per} | {100 * count / total:.1f}% |"
+
+    head = " | per" if args.per else ""
+    rule = "---:|" if args.per else ""
+    print(f"{total / 1e6:,.1f} M instructions")
+    print()
+    print(f"| module | instructions{head} | share |")
+    print(f"|---|---:|{rule}---:|")
+    for name, count in modules.most_common():
+        print(row(name, count))
+    print()
+    print(f"| file | instructions{head} | share |")
+    print(f"|---|---:|{rule}---:|")
+    for name, count in files.most_common(args.files):
+        print(row(name, count))
+    print()
+    print(f"| function (file) | instructions{head} | share |")
+    print(f"|---|---:|{rule}---:|")
+    for (path, function), count in functions.most_common(args.functions):
+        print(row(f"`{function[:70]}` ({path})", count))
+    if args.lines:
+        print()
+        print(f"| line (function) | instructions{head} | share |")
+        print(f"|---|---:|{rule}---:|")
+        for (line, function), count in lines.most_common(args.functions):
+            print(row(f"{line} (`{function[:50]}`)", count))
+
+
+if __name__ == "__main__":
+    main()
