@@ -14,10 +14,12 @@ release profile's does):
     valgrind --tool=callgrind --dump-instr=yes --dump-line=no --compress-pos=no \\
         --compress-strings=no --callgrind-out-file=A mipray bench ... --repeats 1
     (the same with --repeats 2 into B)
-    tools/profile/counts.py BINARY B [--minus A] [--per N] [--files N] [--functions N]
+    tools/profile/counts.py BINARY B [--minus A] [--plus C] [--per N] [--files N]
+        [--functions N] [--lines FILE]
 
 With `--minus A`, the counts of A are subtracted address by address (so one pass of the
-bench is left: the load and set-up cancel). `--per N` also prints each figure divided by N
+bench is left: the load and set-up cancel); `--minus` and `--plus` may be given several
+times (one pass of `paper` less one pass of `none`: `P2 --minus P1 --minus N2 --plus N1`). `--per N` also prints each figure divided by N
 (for example the frame's shaded hits, or the rays of a class). Instructions outside the
 binary (libm's `powf`, libc's `memset`, the kernel's are not counted by valgrind) are
 listed as `outside the binary`; instructions in the binary with no project frame (a
@@ -41,6 +43,29 @@ def is_project_file(location):
         and not any(part in location for part in NOT_PROJECT)
         and "/src/simd/" not in location
     )
+
+
+def short_name(function):
+    """A demangled name without generic arguments (`f<T, U>` becomes `f`); the `<impl ...>`
+    and `<T as Trait>` parts of a path stay, with their own generic arguments dropped."""
+    out = []
+    # Per open `<`: whether what it encloses is dropped.
+    dropped = []
+    for i, ch in enumerate(function):
+        inside_dropped = bool(dropped) and dropped[-1]
+        if ch == "<":
+            # After an identifier (or a closing `>`): generic arguments. After `::` or at
+            # the start: a part of the path.
+            after_name = i > 0 and (function[i - 1].isalnum() or function[i - 1] in "_>")
+            dropped.append(inside_dropped or after_name)
+            if not dropped[-1]:
+                out.append(ch)
+        elif ch == ">" and dropped:
+            if not dropped.pop():
+                out.append(ch)
+        elif not inside_dropped:
+            out.append(ch)
+    return "".join(out)
 
 
 def read_counts(path, binary):
@@ -80,7 +105,12 @@ def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("binary", help="the binary callgrind ran")
     parser.add_argument("data", help="callgrind output (--dump-instr=yes --compress-pos=no)")
-    parser.add_argument("--minus", metavar="DATA", help="callgrind output to subtract")
+    parser.add_argument(
+        "--minus", metavar="DATA", action="append", default=[], help="output to subtract"
+    )
+    parser.add_argument(
+        "--plus", metavar="DATA", action="append", default=[], help="output to add"
+    )
     parser.add_argument("--per", type=float, help="also divide each figure by this")
     parser.add_argument("--files", type=int, default=20, help="how many files to list")
     parser.add_argument("--functions", type=int, default=30, help="how many functions")
@@ -90,15 +120,17 @@ def main():
         help="also list the busiest lines of the project files whose path contains FILE",
     )
     args = parser.parse_args()
-    for path in (args.binary, args.data, args.minus):
-        if path and not os.path.isfile(path):
+    for path in [args.binary, args.data, *args.minus, *args.plus]:
+        if not os.path.isfile(path):
             sys.exit(f"{path}: no such file")
 
     inside, outside = read_counts(args.data, args.binary)
-    if args.minus:
-        less, less_outside = read_counts(args.minus, args.binary)
-        inside.subtract(less)
-        outside -= less_outside
+    for sign, paths in ((-1, args.minus), (1, args.plus)):
+        for path in paths:
+            other, other_outside = read_counts(path, args.binary)
+            for address, count in other.items():
+                inside[address] += sign * count
+            outside += sign * other_outside
     addresses = sorted(a for a, c in inside.items() if c != 0)
     if not addresses:
         sys.exit(f"{args.data}: no instructions of {args.binary} (was it run from this binary?)")
@@ -137,9 +169,9 @@ def main():
         parts = path.split("/")
         modules[parts[0] if len(parts) > 1 else path] += count
         files[path] += count
-        functions[(path, function.split("<")[0] if function.startswith("mipray") else function)] += count
+        functions[(path, short_name(function))] += count
         if args.lines and args.lines in path:
-            lines[(location.rsplit(SRC, 1)[1].split(" ", 1)[0], function)] += count
+            lines[(location.rsplit(SRC, 1)[1].split(" ", 1)[0], short_name(function))] += count
     modules["outside the binary"] = outside
     total = sum(modules.values())
 
@@ -164,13 +196,13 @@ def main():
     print(f"| function (file) | instructions{head} | share |")
     print(f"|---|---:|{rule}---:|")
     for (path, function), count in functions.most_common(args.functions):
-        print(row(f"`{function[:70]}` ({path})", count))
+        print(row(f"`{function[-90:]}` ({path})", count))
     if args.lines:
         print()
         print(f"| line (function) | instructions{head} | share |")
         print(f"|---|---:|{rule}---:|")
         for (line, function), count in lines.most_common(args.functions):
-            print(row(f"{line} (`{function[:50]}`)", count))
+            print(row(f"{line} (`{function[-60:]}`)", count))
 
 
 if __name__ == "__main__":
