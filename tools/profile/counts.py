@@ -29,20 +29,11 @@ dependency or standard-library function that was not inlined) as `not in src/`.
 import argparse
 import collections
 import os
-import subprocess
 import sys
 
-SRC = "/src/"
-NOT_PROJECT = ("/rustc/", "/library/", "/.cargo/", "index.crates.io", "/cargo/registry/")
-
-
-def is_project_file(location):
-    """Whether an `addr2line` location lies in the project's own sources (not `src/simd/`)."""
-    return (
-        SRC in location
-        and not any(part in location for part in NOT_PROJECT)
-        and "/src/simd/" not in location
-    )
+# The inline chains and the frame a cost is charged to, as `shares.py` resolves them.
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from shares import charged_frame, inline_frames  # noqa: E402
 
 
 def short_name(function):
@@ -134,44 +125,25 @@ def main():
     addresses = sorted(a for a, c in inside.items() if c != 0)
     if not addresses:
         sys.exit(f"{args.data}: no instructions of {args.binary} (was it run from this binary?)")
-    resolved = subprocess.run(
-        ["addr2line", "-i", "-a", "-f", "-C", "-e", args.binary],
-        # callgrind gives an object's addresses as its ELF's virtual addresses (for a
-        # position-independent executable too), which is what addr2line takes.
-        input="\n".join(hex(a) for a in addresses),
-        capture_output=True,
-        text=True,
-        check=True,
-    ).stdout.splitlines()
-    frames = collections.defaultdict(list)
-    current, i = None, 0
-    while i < len(resolved):
-        if resolved[i].startswith("0x"):
-            current = int(resolved[i], 16)
-            i += 1
-            continue
-        location = resolved[i + 1] if i + 1 < len(resolved) else ""
-        frames[current].append((resolved[i], location))
-        i += 2
-
+    # callgrind gives an object's addresses as its ELF's virtual addresses (for a
+    # position-independent executable too), which is what addr2line takes.
+    frames = inline_frames(args.binary, addresses)
     modules = collections.Counter()
     files = collections.Counter()
     functions = collections.Counter()
     lines = collections.Counter()
     for address in addresses:
         count = inside[address]
-        project = [(f, loc) for f, loc in frames[address] if is_project_file(loc)]
-        if not project:
+        charged = charged_frame(frames[address])
+        if charged is None:
             modules["not in src/"] += count
             continue
-        function, location = project[0]
-        path = location.rsplit(SRC, 1)[1].split(":", 1)[0]
-        parts = path.split("/")
-        modules[parts[0] if len(parts) > 1 else path] += count
+        module, path, line, function = charged
+        modules[module] += count
         files[path] += count
         functions[(path, short_name(function))] += count
         if args.lines and args.lines in path:
-            lines[(location.rsplit(SRC, 1)[1].split(" ", 1)[0], short_name(function))] += count
+            lines[(line, short_name(function))] += count
     modules["outside the binary"] = outside
     total = sum(modules.values())
 

@@ -63,6 +63,39 @@ def run(command, **kwargs):
         sys.exit(f"{' '.join(command)}: exit {e.returncode}: {e.stderr.strip()[:300]}")
 
 
+def inline_frames(binary, addresses):
+    """Per address of `binary` (its ELF virtual addresses), its inline chain, innermost
+    first, as (function, `path:line`) pairs, from `addr2line -i`."""
+    resolved = run(
+        ["addr2line", "-i", "-a", "-f", "-C", "-e", binary],
+        input="\n".join(hex(a) for a in addresses),
+    ).splitlines()
+    frames = collections.defaultdict(list)
+    current, i = None, 0
+    while i < len(resolved):
+        if resolved[i].startswith("0x"):
+            current = int(resolved[i], 16)
+            i += 1
+            continue
+        location = resolved[i + 1] if i + 1 < len(resolved) else ""
+        frames[current].append((resolved[i], location))
+        i += 2
+    return frames
+
+
+def charged_frame(chain):
+    """The frame of an inline chain (as `inline_frames` gives it) that its cost is charged
+    to: (module, path under `src/`, `path:line`, function) of the innermost project frame,
+    or None where the chain has none."""
+    for function, location in chain:
+        if is_project_file(location):
+            line = location.rsplit(SRC, 1)[1].split(" ", 1)[0]
+            path = line.split(":", 1)[0]
+            parts = path.split("/")
+            return (parts[0] if len(parts) > 1 else path), path, line, function
+    return None
+
+
 def text_mapping(data, binary):
     """(runtime start, file offset) of the binary's executable mapping, from the mmap events."""
     events = run(["perf", "script", "-i", data, "--show-mmap-events", "-F", "ip"])
@@ -124,38 +157,19 @@ def main():
     if not in_binary:
         sys.exit(f"{args.data}: none of its {total} samples is in {args.binary}")
 
-    addresses = sorted(in_binary)
-    resolved = run(
-        ["addr2line", "-i", "-a", "-f", "-C", "-e", args.binary],
-        input="\n".join(hex(a) for a in addresses),
-    ).splitlines()
-    # Per address: its frames, innermost first, as (function, file:line) pairs.
-    frames = collections.defaultdict(list)
-    current, i = None, 0
-    while i < len(resolved):
-        if resolved[i].startswith("0x"):
-            current = int(resolved[i], 16)
-            i += 1
-            continue
-        location = resolved[i + 1] if i + 1 < len(resolved) else ""
-        frames[current].append((resolved[i], location))
-        i += 2
-
+    frames = inline_frames(args.binary, sorted(in_binary))
     modules = collections.Counter()
     files = collections.Counter()
     lines = collections.Counter()
     for address, count in in_binary.items():
-        project = [loc for _, loc in frames[address] if is_project_file(loc)]
-        if not project:
+        charged = charged_frame(frames[address])
+        if charged is None:
             modules["not in src/"] += count
             continue
-        path = project[0].rsplit(SRC, 1)[1].split(":", 1)[0]
-        parts = path.split("/")
-        modules[parts[0] if len(parts) > 1 else path] += count
+        module, path, line, function = charged
+        modules[module] += count
         files[path] += count
         if args.lines and args.lines in path:
-            line = project[0].rsplit(SRC, 1)[1].split(" ", 1)[0]
-            function = next(f for f, loc in frames[address] if loc == project[0])
             lines[(line, function)] += count
     modules["outside the binary"] = total - sum(in_binary.values())
 
