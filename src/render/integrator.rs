@@ -109,6 +109,9 @@ pub struct FrameScene<'a> {
 #[derive(Clone, Copy)]
 pub(super) struct Spawned<L> {
     pub(super) class: RayClass,
+    /// Pixel index (`y * width + x`) of the sample the ray serves, for the ray log (in
+    /// the padding after `class` for the cheap LOD states: 48 bytes as before).
+    pub(super) pixel: u32,
     pub(super) origin: Vec3A,
     pub(super) direction: Vec3A,
     pub(super) lod: L,
@@ -189,11 +192,6 @@ impl<L: RayLod> Arrival<L> {
             lookup: TexelLookup::Untextured,
             depth,
         }
-    }
-
-    /// Bounces before this hit.
-    pub(super) fn depth(&self) -> u32 {
-        self.depth
     }
 }
 
@@ -361,7 +359,8 @@ impl FrameScene<'_> {
         }
         let mut spawned = Vec::new();
         let mut combine = Combine::EMPTY;
-        self.finish::<L, false>(&arrival, &requests, 0, &mut spawned, &mut combine);
+        // The pixel only labels the spawned rays for the tile's ray log, unused here.
+        self.finish::<L, false>(&arrival, &requests, 0, 0, &mut spawned, &mut combine);
         let children: Vec<Vec3A> = spawned
             .iter()
             .map(|s| self.radiance_depth_first(s.origin, s.direction, s.lod, depth + 1, counters))
@@ -480,8 +479,9 @@ impl FrameScene<'_> {
     /// them) and spawns the reflected and refracted rays: writes the vertex's [`Combine`]
     /// into `combine` (in place, where the caller keeps it), whose steps name the spawned
     /// rays as `first_child`, `first_child + 1`, ... in the order they are appended to
-    /// `spawned` (after the rays it already holds). The texture lookup is filtered in the
-    /// SIMD copy `AVX2` names (as in [`Self::arrive_at`]).
+    /// `spawned` (after the rays it already holds), each labelled with the sample's `pixel`.
+    /// The texture lookup is filtered in the SIMD copy `AVX2` names (as in
+    /// [`Self::arrive_at`]).
     // Always inlined: part of the tile kernel (`TraceTile`), compiled into each SIMD copy.
     #[inline(always)]
     pub(super) fn finish<L: RayLod, const AVX2: bool>(
@@ -489,6 +489,7 @@ impl FrameScene<'_> {
         arrival: &Arrival<L>,
         requests: &[ShadowRequest],
         first_child: u32,
+        pixel: u32,
         spawned: &mut Vec<Spawned<L>>,
         combine: &mut Combine,
     ) {
@@ -498,6 +499,7 @@ impl FrameScene<'_> {
         let lod_hit = surface.lod_hit(arrival.triangle.triangle(), &arrival.hit, direction);
         let mut children = Children {
             first: first_child,
+            pixel,
             before: spawned.len(),
             spawned,
         };
@@ -791,6 +793,8 @@ fn direct_light(
 /// The rays a hit spawns, numbered from `first` in the order they are pushed.
 struct Children<'a, L> {
     first: u32,
+    /// The pixel of the sample the rays serve.
+    pixel: u32,
     /// How many rays `spawned` held before this hit's.
     before: usize,
     spawned: &'a mut Vec<Spawned<L>>,
@@ -804,6 +808,7 @@ impl<L: RayLod> Children<'_, L> {
         let index = (self.spawned.len() - self.before) as u32;
         self.spawned.push(Spawned {
             class,
+            pixel: self.pixel,
             origin,
             direction,
             lod,

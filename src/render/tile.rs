@@ -36,16 +36,6 @@ use crate::render::integrator::{
 use crate::render::ray_log::RayClass;
 use crate::simd::Kernel;
 
-/// Where a ray waiting to be traced belongs: its vertex, the sample it serves, and how
-/// deep it is (the ray itself is the entry of the same index in the bounce's rays).
-#[derive(Clone, Copy)]
-struct Pending {
-    vertex: u32,
-    /// Pixel index (`y * width + x`) of the sample, for the ray log.
-    pixel: u32,
-    depth: u32,
-}
-
 /// A hit waiting for its shadow rays: its vertex, the sample's pixel, and its requests
 /// (`requests[first..end]`).
 struct Waiting<L: RayLod> {
@@ -64,16 +54,16 @@ struct Waiting<L: RayLod> {
 pub(super) struct TileBuffers<L: RayLod> {
     samples: Vec<(u32, u32, u32)>,
     vertices: Vec<Combine>,
-    /// The bounce's rays, where each belongs, and their hits, in the same order. Each is
-    /// written in place by what makes it (the shading spawns the rays into the next
-    /// bounce's list, the walks write the hits): entries copied from one list into another
-    /// were built or freshly stored with narrow fields and read back as 16-byte loads,
-    /// which the CPU cannot forward (a stall per ray).
+    /// The bounce's rays and their hits, in the same order. Each is written in place by
+    /// what makes it (the shading spawns the rays into the next bounce's list, the walks
+    /// write the hits): entries copied from one list into another were built or freshly
+    /// stored with narrow fields and read back as 16-byte loads, which the CPU cannot
+    /// forward (a stall per ray). A bounce's rays need no list of where they belong: they
+    /// are the vertices numbered from the bounce's first on, in order, all as deep as the
+    /// bounce (see the module doc), and each carries its sample's pixel.
     rays: Vec<Spawned<L>>,
-    pending: Vec<Pending>,
     hits: Vec<Option<Hit>>,
     next_rays: Vec<Spawned<L>>,
-    next_pending: Vec<Pending>,
     waiting: Vec<Waiting<L>>,
     requests: Vec<ShadowRequest>,
     of_light: Vec<usize>,
@@ -92,10 +82,8 @@ impl<L: RayLod> Default for TileBuffers<L> {
             samples: Vec::new(),
             vertices: Vec::new(),
             rays: Vec::new(),
-            pending: Vec::new(),
             hits: Vec::new(),
             next_rays: Vec::new(),
-            next_pending: Vec::new(),
             waiting: Vec::new(),
             requests: Vec::new(),
             of_light: Vec::new(),
@@ -158,10 +146,8 @@ fn trace_tile<L: RayLod, const AVX2: bool>(
         samples,
         vertices,
         rays,
-        pending,
         hits,
         next_rays,
-        next_pending,
         waiting,
         requests,
         of_light,
@@ -178,26 +164,26 @@ fn trace_tile<L: RayLod, const AVX2: bool>(
     debug_assert_eq!(samples.len(), ((x1 - x0) * (y1 - y0) * spp) as usize);
     vertices.clear();
     vertices.resize(samples.len(), Combine::EMPTY);
-    primary_bounce::<L>(
-        scene, camera, spp, samples, counters, rays, pending, hits, triangles,
-    );
+    primary_bounce::<L>(scene, camera, spp, samples, counters, rays, hits, triangles);
+    // The bounce's rays are vertices `first_vertex..` in order, each `depth` bounces deep.
+    let (mut first_vertex, mut depth) = (0u32, 0u32);
     while !rays.is_empty() {
         // Arrive at every hit; a miss is the background.
         waiting.clear();
         requests.clear();
         let mut hit_triangles = triangles.iter();
-        for ((ray, pending), &hit) in rays.iter().zip(pending.iter()).zip(hits.iter()) {
+        for ((vertex, ray), &hit) in (first_vertex..).zip(rays.iter()).zip(hits.iter()) {
             let Some(hit) = hit else {
-                vertices[pending.vertex as usize] = Combine::leaf(scene.background);
+                vertices[vertex as usize] = Combine::leaf(scene.background);
                 continue;
             };
             let triangle = hit_triangles.next().expect("a triangle per hit");
             let first = requests.len();
             // Made in place (see `Arrival::unmade`).
             waiting.push(Waiting {
-                arrival: Arrival::unmade(triangle, hit, ray.direction, ray.lod, pending.depth),
-                vertex: pending.vertex,
-                pixel: pending.pixel,
+                arrival: Arrival::unmade(triangle, hit, ray.direction, ray.lod, depth),
+                vertex,
+                pixel: ray.pixel,
                 first,
                 end: first,
             });
@@ -206,35 +192,29 @@ fn trace_tile<L: RayLod, const AVX2: bool>(
             w.end = requests.len();
         }
         trace_shadows(scene, waiting, requests, counters, of_light, pixel_of);
-        // Finish every hit and spawn the next bounce.
+        // Finish every hit and spawn the next bounce, whose rays are numbered on from the
+        // last vertex in the order they are spawned.
         next_rays.clear();
-        next_pending.clear();
+        let next_first = vertices.len() as u32;
         for w in waiting.iter() {
-            let first_ray = next_rays.len();
-            let first_child = vertices.len() as u32;
             // Written in place: a combine made on the stack and then copied stalled on
             // reading its small fields' fresh stores back as 16-byte loads.
             scene.finish::<L, AVX2>(
                 &w.arrival,
                 &requests[w.first..w.end],
-                first_child,
+                next_first + next_rays.len() as u32,
+                w.pixel,
                 next_rays,
                 &mut vertices[w.vertex as usize],
             );
-            // The children's vertices, filled when their hits are finished; one resize and
-            // one extend each (a push per child rebuilt the empty combine on the stack
-            // around the push's possible growth and copied it).
-            let children = (next_rays.len() - first_ray) as u32;
-            vertices.resize(vertices.len() + children as usize, Combine::EMPTY);
-            next_pending.extend((0..children).map(|k| Pending {
-                vertex: first_child + k,
-                pixel: w.pixel,
-                depth: w.arrival.depth() + 1,
-            }));
         }
+        // The children's vertices, filled when their hits are finished: one resize a
+        // bounce (a push per child rebuilt the empty combine on the stack around the push's
+        // possible growth and copied it; a resize per hit cost a capacity test each).
+        vertices.resize(next_first as usize + next_rays.len(), Combine::EMPTY);
+        (first_vertex, depth) = (next_first, depth + 1);
         std::mem::swap(rays, next_rays);
-        std::mem::swap(pending, next_pending);
-        trace_bounce(scene, rays, pending, counters, hits, triangles);
+        trace_bounce(scene, rays, counters, hits, triangles);
     }
     // Last vertex first: children are numbered after their parents.
     for v in (0..vertices.len()).rev() {
@@ -272,7 +252,6 @@ fn primary_bounce<L: RayLod>(
     samples: &[(u32, u32, u32)],
     counters: &mut TraceCounters,
     rays: &mut Vec<Spawned<L>>,
-    pending: &mut Vec<Pending>,
     hits: &mut Vec<Option<Hit>>,
     triangles: &mut Vec<HitTriangle>,
 ) {
@@ -282,26 +261,15 @@ fn primary_bounce<L: RayLod>(
         let (px, py) = (x as f32 + sx, y as f32 + sy);
         Spawned {
             class: RayClass::Primary,
+            pixel: y * camera.width + x,
             origin: camera.eye,
             direction: camera.primary_direction(px, py),
             lod: L::primary(&scene.lod_camera, px, py),
         }
     }));
-    pending.clear();
-    pending.extend(samples.iter().enumerate().map(|(k, &(x, y, _))| Pending {
-        vertex: k as u32,
-        pixel: y * camera.width + x,
-        depth: 0,
-    }));
-    trace_packets(
-        scene,
-        rays,
-        pending,
-        counters,
-        hits,
-        triangles,
-        |rays, hits| scene.bvh.closest_hits(rays, f32::INFINITY, hits),
-    );
+    trace_packets(scene, rays, counters, hits, triangles, |rays, hits| {
+        scene.bvh.closest_hits(rays, f32::INFINITY, hits)
+    });
 }
 
 /// A bounce's reflected and refracted rays (`rays`, in the order they were spawned) traced
@@ -313,20 +281,13 @@ fn primary_bounce<L: RayLod>(
 fn trace_bounce<L: RayLod>(
     scene: &FrameScene,
     rays: &[Spawned<L>],
-    pending: &[Pending],
     counters: &mut TraceCounters,
     hits: &mut Vec<Option<Hit>>,
     triangles: &mut Vec<HitTriangle>,
 ) {
-    trace_packets(
-        scene,
-        rays,
-        pending,
-        counters,
-        hits,
-        triangles,
-        |rays, hits| scene.bvh.closest_hits_scattered(rays, f32::INFINITY, hits),
-    );
+    trace_packets(scene, rays, counters, hits, triangles, |rays, hits| {
+        scene.bvh.closest_hits_scattered(rays, f32::INFINITY, hits)
+    });
 }
 
 /// `rays` traced by `closest` in packets of up to [`PACKET`], the hits written in place into
@@ -338,7 +299,6 @@ fn trace_bounce<L: RayLod>(
 fn trace_packets<L: RayLod>(
     scene: &FrameScene,
     rays: &[Spawned<L>],
-    pending: &[Pending],
     counters: &mut TraceCounters,
     hits: &mut Vec<Option<Hit>>,
     triangles: &mut Vec<HitTriangle>,
@@ -348,17 +308,16 @@ fn trace_packets<L: RayLod>(
     hits.resize(rays.len(), None);
     triangles.clear();
     let mut packet_rays = [(Vec3A::ZERO, Vec3A::ZERO); PACKET];
-    let packets = rays.chunks(PACKET).zip(pending.chunks(PACKET));
-    for ((packet, packet_pending), packet_hits) in packets.zip(hits.chunks_mut(PACKET)) {
+    for (packet, packet_hits) in rays.chunks(PACKET).zip(hits.chunks_mut(PACKET)) {
         for (traced, ray) in packet_rays.iter_mut().zip(packet) {
             *traced = (ray.origin, ray.direction);
         }
         closest(&packet_rays[..packet.len()], packet_hits);
-        for ((ray, pending), hit) in packet.iter().zip(packet_pending).zip(packet_hits) {
+        for (ray, hit) in packet.iter().zip(packet_hits) {
             counters.rays += 1;
             if let Some(log) = &mut counters.log {
                 log.closest(
-                    pending.pixel,
+                    ray.pixel,
                     ray.class,
                     ray.origin,
                     ray.direction,
