@@ -165,19 +165,21 @@ pub(super) struct Arrival<L: RayLod> {
 }
 
 impl<L: RayLod> Arrival<L> {
-    /// The arrival at `hit` on `triangle` of a ray along `direction` carrying `lod` after
-    /// `depth` bounces, not yet made: [`FrameScene::arrive_at`] makes its surface, moves its
-    /// LOD state and plans its lookup, in place.
+    /// The arrival at `hit` on `triangle` of a ray from `origin` along `direction` carrying
+    /// `lod` after `depth` bounces, its surface made but not the rest:
+    /// [`FrameScene::arrive_at`] moves its LOD state and plans its lookup, in place.
     ///
     /// Why in place: an arrival made on the stack and then pushed onto a tile's list (208
     /// bytes a waiting hit for `paper`) was copied field by field from where its values had
     /// been spilled across the lookup's planning and the shadow requests: 59 instructions a
     /// hit, 2.4% of a BART Kitchen frame's. Written where it is kept, each value is stored
-    /// once, when it is made.
+    /// once, when it is made. The surface is made here, before the push, from values at
+    /// hand: made in place after a placeholder, each of its fields was stored twice.
     #[inline(always)]
     pub(super) fn unmade(
         triangle: &HitTriangle,
         hit: Hit,
+        origin: Vec3A,
         direction: Vec3A,
         lod: L,
         depth: u32,
@@ -185,7 +187,7 @@ impl<L: RayLod> Arrival<L> {
         Arrival {
             hit,
             triangle: L::Kept::keep(triangle),
-            surface: SurfacePoint::UNSET,
+            surface: SurfacePoint::at(triangle, &hit, origin, direction),
             direction,
             lod,
             material: triangle.material,
@@ -407,27 +409,25 @@ impl FrameScene<'_> {
         counters: &mut TraceCounters,
     ) -> Arrival<L> {
         let triangle = self.hit_triangle(&mut hit, origin, direction);
-        let mut arrival = Arrival::unmade(&triangle, hit, direction, lod, depth);
-        self.arrive_at::<L, false>(&triangle, origin, &mut arrival, requests, counters);
+        let mut arrival = Arrival::unmade(&triangle, hit, origin, direction, lod, depth);
+        self.arrive_at::<L, false>(&triangle, &mut arrival, requests, counters);
         arrival
     }
 
     /// [`Self::arrive`] in place: makes `arrival` ([`Arrival::unmade`] from `triangle`, the
-    /// hit's triangle as `FrameScene::hit_triangle` read it, which also settled the hit) for
-    /// the ray from `origin`. The texture lookup is planned in the SIMD copy `AVX2` names:
+    /// hit's triangle as `FrameScene::hit_triangle` read it, which also settled the hit).
+    /// The texture lookup is planned in the SIMD copy `AVX2` names:
     /// the caller's own (true only in the AVX2 copy, as in `simd::Kernel::run`).
     // Always inlined: part of the tile kernel (`TraceTile`), compiled into each SIMD copy.
     #[inline(always)]
     pub(super) fn arrive_at<L: RayLod, const AVX2: bool>(
         &self,
         triangle: &HitTriangle,
-        origin: Vec3A,
         arrival: &mut Arrival<L>,
         requests: &mut Vec<ShadowRequest>,
         counters: &mut TraceCounters,
     ) {
         let (hit, direction) = (arrival.hit, arrival.direction);
-        arrival.surface = SurfacePoint::at(triangle, &hit, origin, direction);
         let lod_hit = arrival.surface.lod_hit(triangle, &hit, direction);
         arrival.lod.arrive(&lod_hit);
         let material = &self.materials[triangle.material as usize];

@@ -38,17 +38,6 @@ pub(super) struct Refraction {
 }
 
 impl SurfacePoint {
-    /// A point not yet made (NaN where it is read): what [`super::integrator::Arrival`]
-    /// holds until its surface is made in place.
-    pub(super) const UNSET: SurfacePoint = SurfacePoint {
-        position: Vec3A::NAN,
-        face_normal: Vec3A::NAN,
-        shading_normal: Vec3A::NAN,
-        normal_sign: f32::NAN,
-        entering: false,
-        epsilon: f32::NAN,
-    };
-
     /// The point where `hit` (of a ray from `origin` along unit `direction`) lies on
     /// `triangle`, oriented towards the ray.
     // Always inlined: part of the tile kernel (`TraceTile`), compiled into each SIMD copy.

@@ -181,14 +181,14 @@ fn trace_tile<L: RayLod, const AVX2: bool>(
             let first = requests.len();
             // Made in place (see `Arrival::unmade`).
             waiting.push(Waiting {
-                arrival: Arrival::unmade(triangle, hit, ray.direction, ray.lod, depth),
+                arrival: Arrival::unmade(triangle, hit, ray.origin, ray.direction, ray.lod, depth),
                 vertex,
                 pixel: ray.pixel,
                 first,
                 end: first,
             });
             let w = waiting.last_mut().expect("a waiting hit was just pushed");
-            scene.arrive_at::<L, AVX2>(triangle, ray.origin, &mut w.arrival, requests, counters);
+            scene.arrive_at::<L, AVX2>(triangle, &mut w.arrival, requests, counters);
             w.end = requests.len();
         }
         trace_shadows(scene, waiting, requests, counters, of_light, pixel_of);
