@@ -46,6 +46,20 @@ pub struct Light {
     pub range: Option<f32>,
     /// Whether irradiance falls off as `1 / d^2` (see [`LightSource::inverse_square`]).
     pub inverse_square: bool,
+    /// A spot's `[cos(outer_cone), cos(inner_cone)]`, taken once when the light is placed
+    /// rather than for every point it lights (two library calls each); unused otherwise.
+    cone_cosines: [f32; 2],
+}
+
+/// `[cos(outer_cone), cos(inner_cone)]` of a spot light (zeros for other kinds).
+fn cone_cosines(kind: LightKind) -> [f32; 2] {
+    match kind {
+        LightKind::Spot {
+            inner_cone,
+            outer_cone,
+        } => [outer_cone.cos(), inner_cone.cos()],
+        LightKind::Point | LightKind::Directional => [0.0; 2],
+    }
 }
 
 /// What a light delivers to a point: unit direction towards the light, distance to it
@@ -73,6 +87,7 @@ impl Light {
             intensity: source.intensity.into(),
             range: source.range,
             inverse_square: source.inverse_square,
+            cone_cosines: cone_cosines(source.kind),
         }
     }
 
@@ -85,6 +100,7 @@ impl Light {
             intensity: Vec3A::splat(intensity),
             range: None,
             inverse_square: true,
+            cone_cosines: cone_cosines(LightKind::Point),
         }
     }
 
@@ -110,13 +126,9 @@ impl Light {
             let x = distance / range;
             falloff *= (1.0 - x * x * x * x).clamp(0.0, 1.0);
         }
-        if let LightKind::Spot {
-            inner_cone,
-            outer_cone,
-        } = self.kind
-        {
+        if let LightKind::Spot { .. } = self.kind {
             let cos_angle = (-to_light).dot(self.direction);
-            let (cos_outer, cos_inner) = (outer_cone.cos(), inner_cone.cos());
+            let [cos_outer, cos_inner] = self.cone_cosines;
             let t = if cos_inner > cos_outer {
                 (cos_angle - cos_outer) / (cos_inner - cos_outer)
             } else {
