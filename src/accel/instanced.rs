@@ -20,7 +20,7 @@ use obvhs::{BvhBuildParams, aabb::Aabb, bvh2::builder::build_bvh2};
 
 use super::query::{Closest, Hit, ObjectPacket, PacketQuery, Within};
 use super::triangles::ShearedRay;
-use super::wide::{PACKET, RayBoxes, WideBvh};
+use super::wide::{LeafSides, PACKET, RayBoxes, WideBvh};
 use super::{Accel, AccelError};
 use crate::geometry::{FrameTriangles, Placement};
 
@@ -115,6 +115,11 @@ impl TopLevel {
 #[derive(Default)]
 pub struct TwoLevelAccel {
     meshes: Vec<MeshBlas>,
+    /// The meshes' trees' leaf sizes together, each mesh's leaves once (object space: an
+    /// instance's scale is not applied), measured when they are built: with the world
+    /// tree's, what decides whether a bounce packet walks with interval bounds
+    /// (`RayPacket::set_with_apex`).
+    mesh_leaf_sides: LeafSides,
     /// `[fixed, moving]`.
     levels: [TopLevel; 2],
 }
@@ -161,8 +166,13 @@ impl TwoLevelAccel {
                 })
             })
             .collect::<Result<Vec<_>, AccelError>>()?;
+        let mesh_leaf_sides = meshes
+            .iter()
+            .map(|mesh| mesh.accel.wide.leaf_sides())
+            .fold(LeafSides::default(), LeafSides::add);
         Ok(TwoLevelAccel {
             meshes,
+            mesh_leaf_sides,
             ..Default::default()
         })
     }
@@ -430,10 +440,11 @@ impl TwoLevelAccel {
             .filter_map(|top| top.tlas.root_box().or(top.single))
             .map(|b| b.min.abs().max(b.max.abs()).max_element())
             .fold(world.extent(), f32::max);
+        let leaf_side = world.wide.leaf_sides().add(self.mesh_leaf_sides).typical();
         PacketQuery::with_filled(
             |_| {},
             |q| {
-                let bounded = q.fill_masked(&rays[..n], t_max, extent);
+                let bounded = q.fill_masked(&rays[..n], t_max, extent, leaf_side);
                 self.closest_hits_filled(world, rays, q, bounded, n);
                 for (hit, best) in hits.iter_mut().zip(&q.best[..n]) {
                     *hit = best.hit;

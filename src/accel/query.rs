@@ -156,15 +156,22 @@ impl PacketQuery {
 
     /// Fills the query for closest hits of `rays` (at most [`PACKET`]) from any origins,
     /// with limit `t_max`: the packet with interval bounds when the rays' lines pass through
-    /// one point behind them (`extent`: the largest coordinate of the tree's boxes), each
-    /// ray's own slab constants (for the masked walk) when they do not. Returns whether the
-    /// packet has bounds.
+    /// one point behind them and the rays lie close enough together to share leaves
+    /// (`extent`: the largest coordinate of the trees' boxes; `leaf_side`: their typical
+    /// leaf's side, see `RayPacket::set_with_apex`), each ray's own slab constants (for the
+    /// masked walk) when they do not. Returns whether the packet has bounds.
     // Always inlined: the tile kernel (`render::tile::TraceTile`) calls it, and so gets it
     // compiled into each of its SIMD copies.
     #[inline(always)]
-    pub(super) fn fill_masked(&mut self, rays: &[(Vec3A, Vec3A)], t_max: f32, extent: f32) -> bool {
+    pub(super) fn fill_masked(
+        &mut self,
+        rays: &[(Vec3A, Vec3A)],
+        t_max: f32,
+        extent: f32,
+        leaf_side: f32,
+    ) -> bool {
         let n = rays.len().min(PACKET);
-        let bounded = self.packet.set_with_apex(&rays[..n], extent);
+        let bounded = self.packet.set_with_apex(&rays[..n], extent, leaf_side);
         self.fill_ray_constants(&rays[..n], !bounded);
         self.best[..n].fill(Closest::default());
         self.limits.fill(t_max);

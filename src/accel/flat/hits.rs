@@ -83,7 +83,8 @@ impl Accel {
         PacketQuery::with_filled(
             |_| {},
             |q| {
-                let bounded = q.fill_masked(&rays[..n], t_max, self.extent());
+                let leaf_side = self.wide.leaf_sides().typical();
+                let bounded = q.fill_masked(&rays[..n], t_max, self.extent(), leaf_side);
                 self.closest_hits_within(&Within::world(), q, bounded, n);
                 for (hit, best) in hits.iter_mut().zip(&q.best[..n]) {
                     *hit = best.hit;

@@ -329,8 +329,11 @@ fn a_packet_finds_what_each_of_its_rays_finds_alone() {
             (on_mirror, d)
         })
         .collect();
-    assert!(crate::accel::wide::RayPacket::new(&[]).set_with_apex(&mirrored, 30.0));
-    assert!(!crate::accel::wide::RayPacket::new(&[]).set_with_apex(&scattered, 30.0));
+    // With this tree's leaves the mirror's packet walks with bounds (the test covers that
+    // walk), and the scattered one masked.
+    let leaf_side = accel.wide.leaf_sides().typical();
+    assert!(crate::accel::wide::RayPacket::new(&[]).set_with_apex(&mirrored, 30.0, leaf_side));
+    assert!(!crate::accel::wide::RayPacket::new(&[]).set_with_apex(&scattered, 30.0, leaf_side));
     let mut found = 0;
     for (rays, t_max) in [
         (&coherent[..], f32::INFINITY),
@@ -511,7 +514,8 @@ fn a_masked_bundle_that_finds_hits_early_finds_each_ray_s_closest() {
                 (origin, direction)
             })
             .collect();
-        assert!(!crate::accel::wide::RayPacket::new(&[]).set_with_apex(&bundle, 30.0));
+        let no_cap = f32::INFINITY;
+        assert!(!crate::accel::wide::RayPacket::new(&[]).set_with_apex(&bundle, 30.0, no_cap));
         let reversed: Vec<(Vec3A, Vec3A)> = bundle.iter().rev().copied().collect();
         let mut found = 0;
         for rays in [&bundle[..], &reversed[..], &bundle[..20]] {

@@ -76,6 +76,7 @@ impl WideBvh {
     /// through [`WideBvh::leaf_lanes_writer`]; tests build trees with this.)
     #[cfg(test)]
     pub fn set_leaf_box(&mut self, at: u32, aabb: &Aabb) {
+        self.boxes_changed();
         if self.root_leaf.is_none() {
             self.set_lane(at, aabb);
         }
@@ -93,6 +94,7 @@ impl WideBvh {
     /// Writes leaf boxes into their lanes from concurrent tasks (a full refit's leaves,
     /// one task per leaf).
     pub fn leaf_lanes_writer(&mut self) -> LeafLanes<'_> {
+        self.boxes_changed();
         LeafLanes {
             nodes: self.nodes.as_mut_ptr(),
             len: self.nodes.len(),
@@ -106,6 +108,7 @@ impl WideBvh {
     /// node's share is taken while the refit has it in cache (every node's lanes are final
     /// when the backward walk reaches it), instead of a second pass over the nodes.
     pub fn refit_inner(&mut self, traversal: f32, intersection: f32) -> Option<f32> {
+        self.boxes_changed();
         let mut runs = vec![0.0f64; self.nodes.len().div_ceil(SAH_CHUNK)];
         for index in (0..self.nodes.len()).rev() {
             let node = &self.nodes[index];
@@ -195,6 +198,7 @@ impl WideBvh {
         traversal: f32,
         intersection: f32,
     ) -> Option<f32> {
+        self.boxes_changed();
         let n = self.nodes.len();
         assert_eq!(parts.owner.len(), n, "parts of another tree");
         let mut weighted = vec![0.0f64; n];
@@ -265,6 +269,7 @@ impl WideBvh {
     /// Refits the leaf in lane `at` (`node * WIDTH + lane`) to `aabb`, then its ancestors
     /// up to the first whose box comes out unchanged (its own ancestors cannot change).
     pub fn refit_leaf(&mut self, at: u32, aabb: &Aabb) {
+        self.boxes_changed();
         if self.root_leaf.is_some() {
             return; // one leaf, no box (see `set_leaf_box`)
         }
@@ -491,6 +496,25 @@ mod tests {
                 assert!(same, "{ours} against {reference}: {node:?}");
             }
         }
+    }
+
+    /// The leaves' sizes are measured again after every kind of refit, not kept from
+    /// before: a leaf grown a thousandfold raises the typical side.
+    #[test]
+    fn leaf_sides_follow_refits() {
+        let binary = build(16);
+        let mut wide = WideBvh::collapse(&binary, |first, _| first);
+        let before = wide.leaf_sides();
+        assert_eq!(before.count as usize, wide.leaf_lanes.len());
+        let huge = Aabb::new(Vec3A::ZERO, Vec3A::splat(1000.0));
+        wide.refit_leaf(wide.leaf_lanes[0], &huge);
+        let after_one = wide.leaf_sides();
+        assert!(after_one.typical() > before.typical(), "{after_one:?} {before:?}");
+        for leaf in 1..wide.leaf_lanes.len() {
+            wide.set_leaf_box(wide.leaf_lanes[leaf], &huge);
+        }
+        wide.refit_inner(1.0, 1.0);
+        assert_eq!(wide.leaf_sides().typical(), 1000.0);
     }
 
     #[test]
