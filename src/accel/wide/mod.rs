@@ -213,7 +213,10 @@ mod tests {
             .fold(LeafSides::default(), LeafSides::add);
         let exact = (0.01f64 * 0.1 * 1.0 * 10.0 * 100.0 * 3.0 * 0.3).powf(1.0 / 7.0);
         let typical = f64::from(mixed.typical());
-        assert!((typical / exact).log2().abs() < 0.1, "{typical} against {exact}");
+        assert!(
+            (typical / exact).log2().abs() < 0.1,
+            "{typical} against {exact}"
+        );
         for degenerate in [0.0, -1.0, 1e-40, f32::INFINITY, f32::NAN] {
             assert_eq!(LeafSides::of_side(degenerate), LeafSides::default());
         }

@@ -509,7 +509,10 @@ mod tests {
         let huge = Aabb::new(Vec3A::ZERO, Vec3A::splat(1000.0));
         wide.refit_leaf(wide.leaf_lanes[0], &huge);
         let after_one = wide.leaf_sides();
-        assert!(after_one.typical() > before.typical(), "{after_one:?} {before:?}");
+        assert!(
+            after_one.typical() > before.typical(),
+            "{after_one:?} {before:?}"
+        );
         for leaf in 1..wide.leaf_lanes.len() {
             wide.set_leaf_box(wide.leaf_lanes[leaf], &huge);
         }
