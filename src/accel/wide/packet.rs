@@ -154,6 +154,17 @@ impl RayPacket {
         self.invert_directions();
     }
 
+    /// [`RayPacket::set_rows`], with the slots from `len` to the end of the last group of
+    /// eight repeating ray 0 (the bounds are decided from the rows eight rays at a time).
+    #[inline(always)]
+    fn set_padded_rows(&mut self, rays: &[(Vec3A, Vec3A)]) {
+        self.set_rows(rays);
+        let len = self.len;
+        for row in self.origin.iter_mut().chain(&mut self.inverse) {
+            repeat_first_to_group_end(row, len);
+        }
+    }
+
     /// The rays' origins and directions as rows, the directions in `inverse` (see
     /// [`RayPacket::invert_directions`]).
     #[inline(always)]
@@ -385,11 +396,8 @@ impl simd::Kernel for SetWithApex<'_> {
         };
         // The rows first (the directions in `inverse` until inverted): the bounds are
         // decided from them eight rays at a time. Padded with ray 0 to a whole group.
-        packet.set_rows(rays);
+        packet.set_padded_rows(rays);
         let len = packet.len;
-        for row in packet.origin.iter_mut().chain(&mut packet.inverse) {
-            repeat_first_to_group_end(row, len);
-        }
         let bounds = ApexBounds::over_rows::<AVX2>(
             apex,
             &packet.origin,
@@ -424,12 +432,9 @@ impl simd::Kernel for SetConverging<'_> {
         let len = rays.len().min(t_max.len()).min(PACKET);
         // The rows first (the directions in `inverse` until inverted): the bounds are made
         // from them eight rays at a time. Padded with ray 0 to a whole group of eight.
-        packet.set_rows(&rays[..len]);
+        packet.set_padded_rows(&rays[..len]);
         let mut limits = [0.0f32; PACKET];
         limits[..len].copy_from_slice(&t_max[..len]);
-        for row in packet.origin.iter_mut().chain(&mut packet.inverse) {
-            repeat_first_to_group_end(row, len);
-        }
         repeat_first_to_group_end(&mut limits, len);
         packet.frustum = Frustum::converging::<AVX2>(&packet.origin, &packet.inverse, &limits, len);
         if packet.frustum.is_some() {
@@ -732,11 +737,8 @@ impl ApexBounds {
     fn behind(rays: &[(Vec3A, Vec3A)], extent: f32, leaf_side: f32) -> Option<ApexBounds> {
         let apex = ApexBounds::apex_of(rays)?;
         let mut packet = RayPacket::new(&[]);
-        packet.set_rows(rays);
+        packet.set_padded_rows(rays);
         let len = packet.len;
-        for row in packet.origin.iter_mut().chain(&mut packet.inverse) {
-            repeat_first_to_group_end(row, len);
-        }
         Self::over_rows::<false>(
             apex,
             &packet.origin,
