@@ -76,7 +76,7 @@ pub struct WideBvh {
 /// largest side (approximated, see [`LeafSides::of_side`]) and how many boxes were summed.
 /// Summaries of several trees add up ([`LeafSides::add`]), and [`LeafSides::typical`] is
 /// their geometric mean: the size of a leaf a ray meets, which decides whether a packet's
-/// rays lie close enough together to share leaves (`packet::ApexBounds::behind`).
+/// rays lie close enough together to share leaves (`packet::ApexBounds::over_rows`).
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct LeafSides {
     log2_sum: f64,

@@ -778,9 +778,10 @@ impl ApexBounds {
     /// Bounds from `apex` for rays from several origins whose lines pass (nearly) through
     /// it, behind them: a tile's rays reflected by a plane mirror, which leave it as if from
     /// the camera's mirror image, decided from the packet's own (forward) rays; `extent` is
-    /// the largest coordinate of the scene's boxes. `None` when there is no such point,
-    /// it is not behind every origin, the rays fan out, or neighbouring rays start more
-    /// than [`APEX_SPACING_MAX_LEAVES`] times `leaf_side` (the tree's typical leaf) apart.
+    /// the largest coordinate of the scene's boxes. `None` when some ray's line does not
+    /// pass near `apex`, it is not behind every origin, the rays fan out, or neighbouring
+    /// rays start more than [`APEX_SPACING_MAX_LEAVES`] times `leaf_side` (the tree's
+    /// typical leaf) apart.
     ///
     /// Why the spacing: the interval walk tests every ray of the packet against each leaf
     /// box its bounds reach. That pays while neighbouring rays are closer than a leaf is
