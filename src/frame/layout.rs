@@ -22,6 +22,11 @@
 //! - copies whose shape changes (a non-uniform scale animation, or a shape only their world
 //!   vertices tell) are merged under the same memory budget: instanced, they would pay a
 //!   stretched `log2 P_b` at every hit on top of the entry cost;
+//! - then, for the scene as a whole: a top-level tree costs every ray a walk
+//!   (`TOP_LEVEL_NS_PER_RAY`) once anything is instanced. When nothing has to be instanced
+//!   to keep memory within the budget, and the copies instanced for their update cost save
+//!   less in total than that walk costs the frame's rays, they are merged too, and the scene
+//!   is traced exactly as under `flat` ([`decide_auto_scene`]);
 //! - a copy's expected ray entries are the frame's rays (pixels x samples x (1 + lights):
 //!   primary rays and a shadow ray per light from each hit) times the share of the film its
 //!   box covers seen from the camera, averaged over [`VIEW_SAMPLES`] times spread evenly over
@@ -43,39 +48,51 @@ use crate::accel::BvhLayout;
 use crate::anim::{AnimationSelection, NodeShape, Pose, moving_nodes};
 use crate::scene::{ChannelTarget, SceneDesc};
 
-// The three time constants were measured together, from one set of runs alternated on the
-// 2-core Intel Xeon VM, quiet (2026-11-26), with two-level shadow and bounce rays walked as
-// packets (when they were traced one ray at a time, `two-level` cost 102-108 ms a frame
-// more than `flat` in the same runs, against 14-19 ms now; the constants were then 173 ns
-// per entry, 1,600 per instance and 110 per merged triangle, taken on a loaded machine):
-//   mipray bench Robot.aff --frames 100..105 --size 800x600 --methods paper --threads 2
-//     --bvh flat,two-level (two runs: render times), and mipray render with the same
-//     arguments, --bvh flat | --bvh two-level, two runs each, alternated (update times,
-//     medians of frames 101..106; BART Robots: 1,340 moving parts of ~28 triangles, 62,490
-//     moving triangles).
+// The four time constants were measured together, from one set of runs alternated on the
+// 2-core AMD EPYC (Zen 4) VM, quiet (2026-12-05), with mirror packets that share no leaves
+// walked masked:
+//   mipray bench Robot.aff --frames 100..106 --size 800x600 --methods paper --threads 2
+//     --lights 1 --repeats 5 --bvh flat,auto,two-level (four runs, the order turned round
+//     in two: render times), and mipray render Robot.aff --frames 100..107 with the same
+//     size, `--lod paper --threads 2`, --bvh flat | --bvh two-level, two runs each,
+//     alternated (update times: total less render, medians of frames 101..107; BART
+//     Robots: 1,340 moving parts of ~28 triangles, 62,490 moving triangles).
+// The earlier set (2026-11-26, a 2-core Intel Xeon VM, before the masked mirror packets)
+// was 11 ns per entry, 1,120 per instance and 63 per merged triangle, without a top-level
+// term; it made `auto` instance 378 of Robots' parts, whose frames then rendered 1.6%
+// slower than `flat`'s (5.1-8.6 ms a frame at 2 threads, in the runs above).
 // Only their ratios matter: the decision compares sums of them.
 
 /// How many times over the animation (its start and end included) the model looks at the
 /// scene through its camera to estimate the rays entering each copy.
 pub const VIEW_SAMPLES: usize = 9;
 
-/// Per-ray cost of entering an instance, in ns per entry the model predicts: the extra
-/// render time of `two-level` over `flat` on Robots (647-655 against 666-668 ms a frame:
-/// 13.8-18.7 ms) over the 1,451,000 entries this model predicts for its 1,340 parts at
-/// 800x600 (`mipray info` lists 696,600 at 640x360).
-pub const ENTRY_NS_PER_RAY: f64 = 11.0;
+/// Per-ray cost of entering an instance, in ns per entry the model predicts. Fitted with
+/// [`TOP_LEVEL_NS_PER_RAY`] to two layouts of BART Robots against `flat`: `two-level`
+/// (1,340 parts instanced, 1,451,000 predicted entries at 800x600) rendered 35.9-42.1 ms a
+/// frame more than `flat` (median 37.2 over about 337 ms), and `auto` with the earlier
+/// constants (378 parts, 91,200 predicted entries) 5.1-8.6 ms more (median 5.5):
+/// (37.2 - 5.5) ms / (1,451,000 - 91,200) entries.
+pub const ENTRY_NS_PER_RAY: f64 = 23.0;
+
+/// Per-ray cost of a top-level tree at all, in ns per ray of the model's count (pixels x
+/// samples x (1 + lights)): every ray walks it once anything is instanced, whether or not
+/// it enters an instance. The rest of the fit above: `auto`'s 5.5 ms less its 91,200
+/// entries at [`ENTRY_NS_PER_RAY`], over the 960,000 rays of an 800x600 frame with one
+/// light.
+pub const TOP_LEVEL_NS_PER_RAY: f64 = 3.5;
 
 /// Per-frame cost of a moving instance beyond its entries, in ns: its placement (inverse
 /// transform, hull boxes) and its share of the top-level rebuild: the `two-level` update
-/// on Robots (median 1.47-1.53 ms a frame, no world triangle moving) over its 1,340
+/// on Robots (median 0.77-0.83 ms a frame, no world triangle moving) over its 1,340
 /// instances.
-pub const PLACE_NS_PER_INSTANCE: f64 = 1_120.0;
+pub const PLACE_NS_PER_INSTANCE: f64 = 600.0;
 
 /// Per-frame cost of a moving triangle merged into the world tree, in ns: writing it,
 /// listing it as dirty, refitting its leaf and shifting its `log2 P_b` (and its part's
-/// share of the per-instance work): the `flat` update on Robots (median 3.90-3.99 ms a
+/// share of the per-instance work): the `flat` update on Robots (median 2.38-2.81 ms a
 /// frame) over its 62,490 moving triangles.
-pub const REFIT_NS_PER_TRIANGLE: f64 = 63.0;
+pub const REFIT_NS_PER_TRIANGLE: f64 = 42.0;
 
 /// Resident bytes of a triangle merged into the world tree (normals, uvs, material,
 /// `log2 P_b`, source, the packs that hold its positions, and its share of the tree; since
@@ -137,6 +154,9 @@ pub enum Reason {
     UpdateCostsMore,
     /// Moving: the rays' entries cost more than updating the triangles merged.
     EntriesCostMore,
+    /// Moving: instancing would save less update time than a top-level tree costs the
+    /// frame's rays, and nothing else needs one.
+    TopLevelCostsMore,
     /// The shape changes: `log2 P_b` is recomputed either way; merged, hits pay no stretch.
     Reshapes,
     /// `--bvh two-level`: every copy an animated node places is an instance.
@@ -152,6 +172,7 @@ impl fmt::Display for Reason {
             Reason::ManyCopies => "copies would cost memory merged",
             Reason::UpdateCostsMore => "update merged costs more than entries",
             Reason::EntriesCostMore => "entries cost more than update merged",
+            Reason::TopLevelCostsMore => "a top-level tree costs the rays more than instancing saves",
             Reason::Reshapes => "shape changes",
             Reason::TwoLevelRule => "--bvh two-level places every moving copy",
         })
@@ -216,7 +237,7 @@ fn fits_merged(copies: usize, triangles: usize) -> bool {
 }
 
 /// The `auto` decision for one mesh primitive when a frame traces `rays` rays (see the
-/// module head).
+/// module head), before the scene's own step ([`decide_auto_scene`]) weighs the top level.
 pub fn decide_auto(mesh: &MeshUse, rays: f64) -> MeshChoice {
     let of = |motion| mesh.copies.iter().filter(move |c| c.motion == motion);
     let count = |motion| of(motion).count();
@@ -240,11 +261,7 @@ pub fn decide_auto(mesh: &MeshUse, rays: f64) -> MeshChoice {
         }
     };
     let similarity = by_memory(CopyMotion::Similarity, {
-        let instanced_ns: f64 = of(CopyMotion::Similarity)
-            .map(|c| PLACE_NS_PER_INSTANCE + ENTRY_NS_PER_RAY * rays * c.ray_share)
-            .sum();
-        let merged_ns = count(CopyMotion::Similarity) as f64 * t as f64 * REFIT_NS_PER_TRIANGLE;
-        if merged_ns > instanced_ns {
+        if instancing_saving_ns(mesh, rays) > 0.0 {
             Choice::instanced(Reason::UpdateCostsMore)
         } else {
             Choice::merged(Reason::EntriesCostMore)
@@ -262,6 +279,50 @@ pub fn decide_auto(mesh: &MeshUse, rays: f64) -> MeshChoice {
         ),
         deformed,
     }
+}
+
+/// Update time a frame saves by instancing `mesh`'s rigidly moving copies rather than
+/// merging them, in ns (negative where instancing costs more): their triangles' update
+/// merged, less their placements and the rays' expected entries instanced.
+fn instancing_saving_ns(mesh: &MeshUse, rays: f64) -> f64 {
+    let rigid = mesh
+        .copies
+        .iter()
+        .filter(|c| c.motion == CopyMotion::Similarity);
+    let instanced_ns: f64 = rigid
+        .clone()
+        .map(|c| PLACE_NS_PER_INSTANCE + ENTRY_NS_PER_RAY * rays * c.ray_share)
+        .sum();
+    let merged_ns = rigid.count() as f64 * mesh.triangles as f64 * REFIT_NS_PER_TRIANGLE;
+    merged_ns - instanced_ns
+}
+
+/// The `auto` decision for every mesh primitive of a scene (see the module head): each
+/// mesh's own ([`decide_auto`]), then the top level's price. When no copy must be an
+/// instance to keep memory within the budget, instancing pays only if the copies
+/// instanced for their update cost save more, together, than a top-level walk costs the
+/// frame's `rays`; otherwise they are merged too, and nothing is instanced.
+pub fn decide_auto_scene(meshes: &[&MeshUse], rays: f64) -> Vec<MeshChoice> {
+    let mut choices: Vec<MeshChoice> = meshes.iter().map(|m| decide_auto(m, rays)).collect();
+    let for_update = Some(Choice::instanced(Reason::UpdateCostsMore));
+    let needed = choices.iter().any(|c| {
+        [c.fixed, c.similarity, c.reshaping, c.deformed]
+            .iter()
+            .flatten()
+            .any(|c| c.instanced && c.reason == Reason::ManyCopies)
+    });
+    let saving: f64 = meshes
+        .iter()
+        .zip(&choices)
+        .filter(|(_, c)| c.similarity == for_update)
+        .map(|(m, _)| instancing_saving_ns(m, rays))
+        .sum();
+    if !needed && saving <= TOP_LEVEL_NS_PER_RAY * rays {
+        for c in choices.iter_mut().filter(|c| c.similarity == for_update) {
+            c.similarity = Some(Choice::merged(Reason::TopLevelCostsMore));
+        }
+    }
+    choices
 }
 
 /// The `--bvh two-level` rule for one mesh primitive: every copy an animated node places is
@@ -402,12 +463,16 @@ impl LayoutPlan {
                 ray_share,
             });
         }
-        for m in &mut meshes {
-            m.choice = match layout {
-                BvhLayout::Flat => MeshChoice::default(),
-                BvhLayout::TwoLevel => decide_two_level(&m.usage),
-                BvhLayout::Auto => decide_auto(&m.usage, rays_per_frame),
-            };
+        let choices: Vec<MeshChoice> = match layout {
+            BvhLayout::Flat => vec![MeshChoice::default(); meshes.len()],
+            BvhLayout::TwoLevel => meshes.iter().map(|m| decide_two_level(&m.usage)).collect(),
+            BvhLayout::Auto => {
+                let usages: Vec<&MeshUse> = meshes.iter().map(|m| &m.usage).collect();
+                decide_auto_scene(&usages, rays_per_frame)
+            }
+        };
+        for (m, choice) in meshes.iter_mut().zip(choices) {
+            m.choice = choice;
         }
         let instanced = geometry
             .instances
@@ -821,6 +886,70 @@ mod tests {
         );
         assert!(!just_below.any_instanced());
         assert!(just_above.any_instanced());
+    }
+
+    #[test]
+    fn instancing_that_saves_less_than_the_top_level_costs_is_dropped() {
+        // Robots-like: parts of 100 triangles, each seen by ~140 rays: each saves a little
+        // update time instanced, but ten of them far less than a top-level walk costs.
+        let part = mesh(100, &[(CopyMotion::Similarity, 0.0003)]);
+        assert!(instancing_saving_ns(&part, RAYS) > 0.0);
+        assert_eq!(
+            decide_auto(&part, RAYS).similarity,
+            Some(Choice::instanced(Reason::UpdateCostsMore))
+        );
+        let parts = vec![&part; 10];
+        for c in decide_auto_scene(&parts, RAYS) {
+            assert_eq!(
+                c.similarity,
+                Some(Choice::merged(Reason::TopLevelCostsMore))
+            );
+            assert!(!c.any_instanced());
+        }
+        // A crowd that must be instanced for memory pays for the top level anyway, so the
+        // parts keep the choice that saves them time.
+        let crowd = mesh(5_000, &vec![(CopyMotion::Similarity, 0.01); 200]);
+        let mut with_crowd = parts.clone();
+        with_crowd.push(&crowd);
+        let choices = decide_auto_scene(&with_crowd, RAYS);
+        assert!(choices.iter().all(MeshChoice::any_instanced));
+        assert_eq!(
+            choices[0].similarity,
+            Some(Choice::instanced(Reason::UpdateCostsMore))
+        );
+        // So does a large rigid mesh whose instancing saves more than the walk costs.
+        let big = mesh(200_000, &[(CopyMotion::Similarity, 0.05)]);
+        let mut with_big = parts.clone();
+        with_big.push(&big);
+        assert!(
+            decide_auto_scene(&with_big, RAYS)
+                .iter()
+                .all(MeshChoice::any_instanced)
+        );
+        // Moving copies merged for their entries, and static ones, are left as they were.
+        let small = mesh(28, &[(CopyMotion::Similarity, 0.002), (CopyMotion::Static, 0.1)]);
+        let alone = decide_auto_scene(&[&small], RAYS);
+        assert_eq!(alone, vec![decide_auto(&small, RAYS)]);
+    }
+
+    #[test]
+    fn the_top_level_cost_decides_between_flat_and_two_level() {
+        // One copy no ray enters: instancing saves its update less its placement, which must
+        // exceed the top level's walk over every ray of the frame.
+        let walk_ns = TOP_LEVEL_NS_PER_RAY * RAYS;
+        let break_even = ((walk_ns + PLACE_NS_PER_INSTANCE) / REFIT_NS_PER_TRIANGLE) as usize;
+        let at = |t: usize| decide_auto_scene(&[&mesh(t, &[(CopyMotion::Similarity, 0.0)])], RAYS);
+        assert_eq!(
+            at(break_even)[0].similarity,
+            Some(Choice::merged(Reason::TopLevelCostsMore))
+        );
+        assert_eq!(
+            at(break_even + 1)[0].similarity,
+            Some(Choice::instanced(Reason::UpdateCostsMore))
+        );
+        // Without rays the walk is free, and the per-mesh choice stands.
+        let part = mesh(100, &[(CopyMotion::Similarity, 0.0)]);
+        assert!(decide_auto_scene(&[&part], 0.0)[0].any_instanced());
     }
 
     #[test]
