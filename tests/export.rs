@@ -963,23 +963,24 @@ fn the_ray_file_records_every_ray_with_answers_brute_force_confirms() {
     }
 }
 
-/// A scene whose moving meshes the default layout places as instances (BART-like robots at
-/// a small size): `export` still writes every triangle `info` counts, its ray file's answers
-/// are those faces (`bench --rays FILE` finds no answer differing), and the library refuses
-/// a renderer with instances instead of writing a partial mesh.
+/// A scene of moving meshes (BART-like robots at a small size): the library refuses a
+/// renderer that places them as instances (`two-level`) instead of writing a partial mesh,
+/// and `export` writes every triangle `info` counts, its ray file's answers those faces
+/// (`bench --rays FILE` finds no answer differing).
 #[test]
 fn a_scene_with_instances_exports_every_triangle_and_its_rays_agree() {
     let count = info_triangle_count("robots");
-    // At this size the default layout places the walking robots' parts as instances (the
-    // premise of the test: checked here, so that a change of the cost model shows).
     let size = "32x24";
     let path = mipray::cli::resolve_scene("robots").expect("robots scene");
     let mut renderer = Renderer::new(
         mipray::cli::load_scene(&path).expect("load robots"),
-        settings(32, 24),
+        RenderSettings {
+            layout: mipray::frame::BvhLayout::TwoLevel,
+            ..settings(32, 24)
+        },
     );
     let instanced = renderer.layout().instanced_meshes();
-    assert!(instanced > 0, "robots at {size} is not instanced by auto");
+    assert!(instanced > 0, "robots at {size} has no instance under two-level");
     let dir = tempfile::tempdir().unwrap();
     let options = ExportOptions {
         format: ExportFormat::Obj,
