@@ -980,7 +980,10 @@ fn a_scene_with_instances_exports_every_triangle_and_its_rays_agree() {
         },
     );
     let instanced = renderer.layout().instanced_meshes();
-    assert!(instanced > 0, "robots at {size} has no instance under two-level");
+    assert!(
+        instanced > 0,
+        "robots at {size} has no instance under two-level"
+    );
     let dir = tempfile::tempdir().unwrap();
     let options = ExportOptions {
         format: ExportFormat::Obj,

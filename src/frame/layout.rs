@@ -172,7 +172,9 @@ impl fmt::Display for Reason {
             Reason::ManyCopies => "copies would cost memory merged",
             Reason::UpdateCostsMore => "update merged costs more than entries",
             Reason::EntriesCostMore => "entries cost more than update merged",
-            Reason::TopLevelCostsMore => "a top-level tree costs the rays more than instancing saves",
+            Reason::TopLevelCostsMore => {
+                "a top-level tree costs the rays more than instancing saves"
+            }
             Reason::Reshapes => "shape changes",
             Reason::TwoLevelRule => "--bvh two-level places every moving copy",
         })
@@ -927,7 +929,10 @@ mod tests {
                 .all(MeshChoice::any_instanced)
         );
         // Moving copies merged for their entries, and static ones, are left as they were.
-        let small = mesh(28, &[(CopyMotion::Similarity, 0.002), (CopyMotion::Static, 0.1)]);
+        let small = mesh(
+            28,
+            &[(CopyMotion::Similarity, 0.002), (CopyMotion::Static, 0.1)],
+        );
         let alone = decide_auto_scene(&[&small], RAYS);
         assert_eq!(alone, vec![decide_auto(&small, RAYS)]);
     }

@@ -31,8 +31,8 @@ pub use dirty::{DirtySet, Motion};
 pub use layout::{
     BYTES_PER_TRIANGLE, Choice, CopyMotion, CopyUse, ENTRY_NS_PER_RAY, LayoutPlan,
     MERGE_BUDGET_TRIANGLES, MeshChoice, MeshPlan, MeshUse, PLACE_NS_PER_INSTANCE,
-    REFIT_NS_PER_TRIANGLE, Reason, TOP_LEVEL_NS_PER_RAY, UsedLayout, decide_auto, decide_auto_scene,
-    decide_two_level,
+    REFIT_NS_PER_TRIANGLE, Reason, TOP_LEVEL_NS_PER_RAY, UsedLayout, decide_auto,
+    decide_auto_scene, decide_two_level,
 };
 pub use scene_geometry::{Instance, SceneGeometry};
 pub use settings::RenderSettings;
