@@ -124,7 +124,9 @@ enum TexelLookup {
     /// No texture: white.
     Untextured,
     /// A bilinear or trilinear lookup in texture `texture`, its taps computed (`none`,
-    /// `paper` and every method that picks one level).
+    /// `paper` and every method that picks one level). Made only by
+    /// `FrameScene::texel_lookup`, always on the pyramid of `texture` in the scene that
+    /// filters it: the filter reads the taps without bounds checks on that promise.
     Planned { texture: u32, plan: PlannedLookup },
     /// An anisotropic lookup (`Footprint::Anisotropic` at the biased `level`, which the
     /// lookup clamps), made in full when filtered.
@@ -672,9 +674,13 @@ impl FrameScene<'_> {
     fn texel<const AVX2: bool>(&self, lookup: &TexelLookup) -> Vec3A {
         match lookup {
             TexelLookup::Untextured => Vec3A::ONE,
-            TexelLookup::Planned { texture, plan } => self.textures[*texture as usize]
-                .pyramid
-                .sample_planned_colour_in::<AVX2>(plan),
+            TexelLookup::Planned { texture, plan } => {
+                let pyramid = &self.textures[*texture as usize].pyramid;
+                // SAFETY: only `texel_lookup` makes a planned lookup, on the pyramid of
+                // `self.textures[texture]`, and the textures do not change while `self` is
+                // borrowed: the lookups of a frame are made and filtered by the same scene.
+                unsafe { pyramid.sample_planned_colour_in::<AVX2>(plan) }
+            }
             &TexelLookup::Anisotropic {
                 texture,
                 uv,

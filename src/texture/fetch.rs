@@ -34,52 +34,94 @@ pub(super) fn level_blend(lower: Vec4, upper: Vec4, frac: f32) -> Vec4 {
 
 /// The four texels of `taps`, decoded (an 8-bit level's alpha only when `ALPHA`; the
 /// blends work lane by lane, so the colour channels are the same bits either way).
+///
+/// Read without bounds checks unless `CHECKED`: a lookup's taps are wrapped into the level
+/// they were computed for (`BilinearTaps`), so where the caller reads the level the taps
+/// were made for, every index is in range and the four checks (eight instructions a level,
+/// sixteen a trilinear lookup) can only pass. `CHECKED` keeps them for a plan the caller
+/// hands in from outside, which may have been made on another pyramid.
+///
+/// # Safety
+/// Without `CHECKED`, every index in `taps.texels` must be below the level's texel count:
+/// true of taps computed for `level` (or for a level of the same size and storage).
 #[inline(always)]
-fn texels<const ALPHA: bool>(level: &MipLevel, taps: &BilinearTaps) -> [Vec4; 4] {
-    let [i00, i10, i01, i11] = taps.texels.map(|i| i as usize);
+unsafe fn texels<const ALPHA: bool, const CHECKED: bool>(
+    level: &MipLevel,
+    taps: &BilinearTaps,
+) -> [Vec4; 4] {
+    #[inline(always)]
+    fn read<T: Copy, const CHECKED: bool>(slice: &[T], i: u32) -> T {
+        if CHECKED {
+            slice[i as usize]
+        } else {
+            debug_assert!((i as usize) < slice.len(), "tap {i} of {}", slice.len());
+            // SAFETY: the caller of `texels` guarantees the index is in range (see there).
+            unsafe { *slice.get_unchecked(i as usize) }
+        }
+    }
+    let [i00, i10, i01, i11] = taps.texels;
     // The storage is matched once per lookup, not once per texel.
     match &level.texels {
-        Texels::Linear(t) => [t[i00], t[i10], t[i01], t[i11]],
+        Texels::Linear(t) => [
+            read::<_, CHECKED>(t, i00),
+            read::<_, CHECKED>(t, i10),
+            read::<_, CHECKED>(t, i01),
+            read::<_, CHECKED>(t, i11),
+        ],
         Texels::Srgb8 { codes, tables } => {
             let c = codes.flat();
             [
-                tables.texel_in::<ALPHA>(c[i00]),
-                tables.texel_in::<ALPHA>(c[i10]),
-                tables.texel_in::<ALPHA>(c[i01]),
-                tables.texel_in::<ALPHA>(c[i11]),
+                tables.texel_in::<ALPHA>(read::<_, CHECKED>(c, i00)),
+                tables.texel_in::<ALPHA>(read::<_, CHECKED>(c, i10)),
+                tables.texel_in::<ALPHA>(read::<_, CHECKED>(c, i01)),
+                tables.texel_in::<ALPHA>(read::<_, CHECKED>(c, i11)),
             ]
         }
     }
 }
 
 /// Bilinear lookup in one level at `taps` (alpha as [`texels`] decodes it).
+///
+/// # Safety
+/// As [`texels`] (nothing without `CHECKED`).
 #[inline(always)]
-pub(super) fn bilinear<const ALPHA: bool>(level: &MipLevel, taps: &BilinearTaps) -> Vec4 {
-    bilinear_blend(texels::<ALPHA>(level, taps), taps.fx, taps.fy)
+pub(super) unsafe fn bilinear<const ALPHA: bool, const CHECKED: bool>(
+    level: &MipLevel,
+    taps: &BilinearTaps,
+) -> Vec4 {
+    // SAFETY: passed on to the caller.
+    let texels = unsafe { texels::<ALPHA, CHECKED>(level, taps) };
+    bilinear_blend(texels, taps.fx, taps.fy)
 }
 
 /// Trilinear lookup: bilinear in `levels[0]` and `levels[1]` at their taps, blended by
 /// `frac` (the weight of `levels[1]`). The AVX2 copy makes both levels' bilinear blends at
 /// once ([`two_bilinear_blends`]).
+///
+/// # Safety
+/// As [`texels`], for each level and its taps (nothing without `CHECKED`).
 #[inline(always)]
-pub(super) fn trilinear<const ALPHA: bool, const AVX2: bool>(
+pub(super) unsafe fn trilinear<const ALPHA: bool, const AVX2: bool, const CHECKED: bool>(
     levels: [&MipLevel; 2],
     taps: &[BilinearTaps; 2],
     frac: f32,
 ) -> Vec4 {
+    // SAFETY (all three blocks): passed on to the caller.
     #[cfg(target_arch = "x86_64")]
     if AVX2 {
-        let texels = [
-            texels::<ALPHA>(levels[0], &taps[0]),
-            texels::<ALPHA>(levels[1], &taps[1]),
-        ];
+        let texels = unsafe {
+            [
+                texels::<ALPHA, CHECKED>(levels[0], &taps[0]),
+                texels::<ALPHA, CHECKED>(levels[1], &taps[1]),
+            ]
+        };
         // SAFETY: `AVX2` is true only in the copy `simd::dispatch` runs where the CPU has
         // AVX2 (and in tests that check the CPU first).
         let [lower, upper] = unsafe { two_bilinear_blends(texels, taps) };
         return level_blend(lower, upper, frac);
     }
-    let lower = bilinear::<ALPHA>(levels[0], &taps[0]);
-    let upper = bilinear::<ALPHA>(levels[1], &taps[1]);
+    let lower = unsafe { bilinear::<ALPHA, CHECKED>(levels[0], &taps[0]) };
+    let upper = unsafe { bilinear::<ALPHA, CHECKED>(levels[1], &taps[1]) };
     level_blend(lower, upper, frac)
 }
 

@@ -248,6 +248,16 @@ impl MipLevel {
         }
     }
 
+    /// How many texels the level's storage holds (an 8-bit level's blocks are padded):
+    /// every tap's index is below it.
+    #[cfg(test)]
+    pub(super) fn storage_len(&self) -> usize {
+        match &self.texels {
+            Texels::Linear(t) => t.len(),
+            Texels::Srgb8 { codes, .. } => codes.flat().len(),
+        }
+    }
+
     /// Every texel in row-major order.
     pub fn texels(&self) -> impl ExactSizeIterator<Item = Vec4> + '_ {
         (0..self.width as usize * self.height as usize).map(|i| self.texel(i))

@@ -129,7 +129,8 @@ pub(super) fn wrap(i: i64, n: i64, mode: WrapMode) -> usize {
 #[inline(always)]
 fn trilinear<const AVX2: bool>(pyramid: &MipPyramid, uv: Vec2, lod: f32, sampler: Sampler) -> Vec4 {
     let plan = plan_trilinear::<AVX2, false>(pyramid, uv, lod, sampler);
-    filter_planned::<true, AVX2>(pyramid, &plan)
+    // SAFETY: planned on `pyramid` just above.
+    unsafe { filter_planned::<true, AVX2, false>(pyramid, &plan) }
 }
 
 /// Where a bilinear or trilinear lookup reads: its level (or two levels, blended by
@@ -206,18 +207,36 @@ fn plan_trilinear<const AVX2: bool, const PREFETCH: bool>(
     }
 }
 
-/// The lookup `plan` describes (an 8-bit level's alpha decoded only when `ALPHA`).
+/// The lookup `plan` describes (an 8-bit level's alpha decoded only when `ALPHA`), its
+/// level and texels read with bounds checks when `CHECKED` (see `fetch::texels`).
+///
+/// # Safety
+/// Without `CHECKED`, `plan` must have been planned on `pyramid` (or on a pyramid of the
+/// same level sizes and storage): then its levels exist and its taps are in range.
 #[inline(always)]
-fn filter_planned<const ALPHA: bool, const AVX2: bool>(
+unsafe fn filter_planned<const ALPHA: bool, const AVX2: bool, const CHECKED: bool>(
     pyramid: &MipPyramid,
     plan: &PlannedLookup,
 ) -> Vec4 {
     let k = plan.level as usize;
+    let level = |i: usize| {
+        if CHECKED {
+            &pyramid.levels[i]
+        } else {
+            debug_assert!(i < pyramid.levels.len(), "level {i}");
+            // SAFETY: the plan was made on this pyramid (the caller's promise), whose
+            // level `k` it read (and `k + 1` when it blends).
+            unsafe { pyramid.levels.get_unchecked(i) }
+        }
+    };
+    // SAFETY (both): the taps were computed for these levels (the caller's promise), or
+    // `CHECKED` reads them with checks.
     if !plan.blend {
-        return fetch::bilinear::<ALPHA>(&pyramid.levels[k], &plan.taps[0]);
+        return unsafe { fetch::bilinear::<ALPHA, CHECKED>(level(k), &plan.taps[0]) };
     }
-    let (lower, upper) = (&pyramid.levels[k], &pyramid.levels[k + 1]);
-    fetch::trilinear::<ALPHA, AVX2>([lower, upper], &plan.taps, plan.frac)
+    unsafe {
+        fetch::trilinear::<ALPHA, AVX2, CHECKED>([level(k), level(k + 1)], &plan.taps, plan.frac)
+    }
 }
 
 /// [`MipPyramid::sample_bilinear`] as a kernel.
@@ -232,7 +251,8 @@ impl Kernel for Bilinear<'_> {
     #[inline(always)]
     fn run<const AVX2: bool>(self) -> Vec4 {
         let taps = BilinearTaps::new_in::<AVX2>(self.level, self.uv, self.sampler);
-        fetch::bilinear::<true>(self.level, &taps)
+        // SAFETY: the taps were computed for this level just above.
+        unsafe { fetch::bilinear::<true, false>(self.level, &taps) }
     }
 }
 
@@ -279,7 +299,8 @@ impl<const ALPHA: bool> Kernel for Planned<'_, ALPHA> {
     type Output = Vec4;
     #[inline(always)]
     fn run<const AVX2: bool>(self) -> Vec4 {
-        filter_planned::<ALPHA, AVX2>(self.pyramid, self.plan)
+        // SAFETY: `CHECKED` (the plan comes from the caller, made on any pyramid).
+        unsafe { filter_planned::<ALPHA, AVX2, true>(self.pyramid, self.plan) }
     }
 }
 
@@ -440,17 +461,19 @@ impl MipPyramid {
     }
 
     /// [`Self::sample_planned_colour`] in the SIMD copy `AVX2` names (as
-    /// [`Self::plan_bilinear_in`]).
+    /// [`Self::plan_bilinear_in`]), its texels read without bounds checks: the renderer's
+    /// form, which plans and filters every lookup on the same pyramid (the checks could only
+    /// pass, and cost eight instructions a level).
     ///
-    /// # Panics
-    /// As [`Self::sample_planned`].
+    /// # Safety
+    /// `plan` must have been planned on this pyramid.
     #[inline(always)]
-    pub(crate) fn sample_planned_colour_in<const AVX2: bool>(&self, plan: &PlannedLookup) -> Vec3A {
-        let planned = Planned::<false> {
-            pyramid: self,
-            plan,
-        };
-        Vec3A::from_vec4(planned.run::<AVX2>())
+    pub(crate) unsafe fn sample_planned_colour_in<const AVX2: bool>(
+        &self,
+        plan: &PlannedLookup,
+    ) -> Vec3A {
+        // SAFETY: the caller's promise.
+        Vec3A::from_vec4(unsafe { filter_planned::<false, AVX2, false>(self, plan) })
     }
 
     /// Anisotropic lookup: the mean of `taps` trilinear lookups at `lod`, placed at the

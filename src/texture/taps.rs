@@ -743,6 +743,12 @@ mod tests {
                             )
                         };
                         let alone = [reference(a), reference(b)];
+                        // In range of the level's storage, which the renderer's filter
+                        // relies on to read the texels without bounds checks.
+                        for (l, t) in [a, b].into_iter().zip(alone) {
+                            let len = l.storage_len();
+                            assert!(t.texels.iter().all(|&i| (i as usize) < len), "{uv}");
+                        }
                         let bits = |t: [BilinearTaps; 2]| {
                             t.map(|t| (t.texels, t.fx.to_bits(), t.fy.to_bits()))
                         };
