@@ -15,6 +15,7 @@ pub mod diff;
 pub mod export;
 pub mod frame;
 pub mod geometry;
+pub mod large_pages;
 pub mod lod;
 pub mod markup;
 pub mod metrics;

@@ -62,6 +62,7 @@ const LEAVES: &[&str] = &[
     "markup",
     "percentiles",
     "chart",
+    "large_pages",
 ];
 
 /// Every rule, one per line, each checked on the transitive closure of imports.

@@ -59,6 +59,16 @@ pub struct BenchResult {
     pub render_ratio: Percentiles,
 }
 
+/// What a bench run measured: a result per configuration, and how much of the process's
+/// memory the kernel backed with huge pages at the end, with every configuration's scene
+/// still loaded (KiB, transparent and reserved: see [`crate::large_pages::huge_page_kib`];
+/// `None` where the system does not say).
+#[derive(Debug, Clone)]
+pub struct BenchRun {
+    pub results: Vec<BenchResult>,
+    pub huge_page_kib: Option<(u64, u64)>,
+}
+
 /// Renders `frames` for every configuration, `repeats` times, interleaved.
 pub fn run_bench(
     load: impl Fn() -> Result<SceneDesc>,
@@ -67,7 +77,7 @@ pub fn run_bench(
     clock: crate::frame::FrameClock,
     configs: &[BenchConfig],
     repeats: usize,
-) -> Result<Vec<BenchResult>> {
+) -> Result<BenchRun> {
     // Each render holds at least its frame's linear pixels.
     if !frames.is_empty() && repeats > 0 && !configs.is_empty() {
         check_frame_memory(settings.width, settings.height, LINEAR_PIXEL_BYTES, || {
@@ -113,7 +123,8 @@ pub fn run_bench(
         }
     }
     let frame_count = frames.len().max(1) as f64;
-    Ok((0..n)
+    let huge_page_kib = crate::large_pages::huge_page_kib();
+    let results = (0..n)
         .map(|c| {
             let baseline = (0..n)
                 .find(|&b| configs[b].threads == configs[c].threads)
@@ -130,7 +141,11 @@ pub fn run_bench(
                 ),
             }
         })
-        .collect())
+        .collect();
+    Ok(BenchRun {
+        results,
+        huge_page_kib,
+    })
 }
 
 /// A Markdown table of bench results.

@@ -201,7 +201,7 @@ pub fn bench(args: &BenchArgs) -> Result<()> {
         configs.len(),
         args.repeats
     );
-    let results = run_bench(
+    let run = run_bench(
         || load_scene(&path),
         settings,
         frames,
@@ -209,6 +209,26 @@ pub fn bench(args: &BenchArgs) -> Result<()> {
         &configs,
         args.repeats,
     )?;
-    print!("{}", bench_table(&results));
+    print!("{}", bench_table(&run.results));
+    eprintln!("{}", memory_pages_note(run.huge_page_kib));
     Ok(())
+}
+
+/// How the run's memory was paged, for the record of a benchmark (times depend on it:
+/// `crate::large_pages`).
+fn memory_pages_note(huge_page_kib: Option<(u64, u64)>) -> String {
+    let allocator = if crate::large_pages::is_in_use() {
+        "large buffers in 2 MiB-aligned mappings of their own"
+    } else {
+        "large buffers from the system allocator"
+    };
+    match huge_page_kib {
+        Some((transparent, reserved)) => format!(
+            "memory: {allocator}; at the end {} MiB in transparent huge pages, {} MiB in \
+             reserved huge pages",
+            transparent / 1024,
+            reserved / 1024
+        ),
+        None => format!("memory: {allocator}; huge pages not reported by this system"),
+    }
 }

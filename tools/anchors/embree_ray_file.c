@@ -307,7 +307,11 @@ int main(int argc, char **argv) {
     Class cls[4];
     for (int k = 0; k < 4; k++) prepare(&cls[k], rays, count, (uint32_t)k);
 
-    RTCDevice dev = rtcNewDevice("threads=1");
+    // EMBREE_CONFIG replaces the device configuration (one thread either way: say
+    // threads=1 in it), e.g. "threads=1,hugepages=1" for Embree's own large pages.
+    const char *config = getenv("EMBREE_CONFIG");
+    RTCDevice dev = rtcNewDevice(config && *config ? config : "threads=1");
+    if (!dev) { fprintf(stderr, "rtcNewDevice(\"%s\") failed\n", config ? config : ""); return 2; }
     const char *BUILD[3] = {"refit", "high", "robust"};
     // Which (build, class, API) run: all, or the one ONLY names (NULL scenes are not built).
     int run[3][4][APIS], any = 0;

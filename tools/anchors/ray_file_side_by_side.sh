@@ -5,6 +5,9 @@
 #   tools/anchors/ray_file_side_by_side.sh SCENE FRAME WxH [LIGHTS] [ROUNDS]
 #   e.g. tools/anchors/ray_file_side_by_side.sh ../shared/bart/kitchen/aff/kitchen.aff 400 800x600 1
 # needs: apt-get install -y libembree-dev   (Debian's Embree 3.13); MIPRAY=path overrides the binary.
+# EMBREE_CONFIG overrides Embree's device configuration (default "threads=1"); mipray's
+# allocator maps large buffers in 2 MiB pages where the system has them (`mipray bench`
+# prints how its memory was paged), and "threads=1,hugepages=1" gives Embree the same.
 #
 # `mipray export --rays` records the frame's rays (primary, shadow, reflection, refraction:
 # every ray of a render at depth 5 with LIGHTS lights, default 1). Each round then runs
