@@ -12,13 +12,18 @@ static ALLOCATOR: mipray::large_pages::LargePageAllocator = mipray::large_pages:
 
 fn main() -> ExitCode {
     // Before anything large is allocated, so the choice holds for the whole run.
-    if std::env::var_os("MIPRAY_LARGE_PAGES")
-        .is_some_and(|v| matches!(v.to_str(), Some("off" | "0" | "no" | "false")))
+    match std::env::var_os("MIPRAY_LARGE_PAGES")
+        .as_deref()
+        .map(|v| v.to_str())
     {
-        mipray::large_pages::turn_off();
-    } else {
-        mipray::large_pages::turn_on();
-    }
+        None | Some(Some("on")) => mipray::large_pages::turn_on(),
+        Some(Some("off")) => mipray::large_pages::turn_off(),
+        Some(value) => {
+            let value = value.unwrap_or("(not UTF-8)");
+            eprintln!("error: MIPRAY_LARGE_PAGES={value}: expected `on` or `off`");
+            return ExitCode::from(2);
+        }
+    };
     // Rust ignores SIGPIPE, which turns a closed pipe (`mipray diff ... | head`) into a
     // panic in `println!`; the default action ends the process quietly, like other tools.
     #[cfg(unix)]

@@ -338,6 +338,19 @@ fn large_pages_on_or_off_render_the_same_frame() {
         frame("on") == frame("off"),
         "the frame differs with large pages off"
     );
+    // A value other than `on` and `off` is refused, naming the variable.
+    let out = Command::new(env!("CARGO_BIN_EXE_mipray"))
+        .args(["info", "default"])
+        .env("MIPRAY_LARGE_PAGES", "maybe")
+        .current_dir(dir.path())
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(2));
+    assert!(
+        stderr(&out).contains("MIPRAY_LARGE_PAGES=maybe"),
+        "{}",
+        stderr(&out)
+    );
     for (off, says) in [
         (false, "2 MiB-aligned mappings of their own"),
         (true, "from the system allocator"),
