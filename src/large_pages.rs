@@ -61,8 +61,11 @@ pub fn turn_on() -> bool {
 }
 
 /// Whether large allocations get mappings of their own (settling the state to on if it was
-/// not settled yet).
+/// not settled yet). Never outside Linux, where everything goes to the system allocator.
 fn is_on() -> bool {
+    if !cfg!(target_os = "linux") {
+        return false;
+    }
     let _ = STATE.compare_exchange(UNSETTLED, ON, Ordering::AcqRel, Ordering::Acquire);
     STATE.load(Ordering::Acquire) == ON
 }
@@ -97,7 +100,7 @@ pub fn huge_page_kib() -> Option<(u64, u64)> {
 /// Whether a block of `layout` is (or is to be) one of this allocator's mappings.
 #[inline]
 fn maps(layout: Layout) -> bool {
-    cfg!(target_os = "linux") && layout.size() >= LARGE && layout.align() <= LARGE && is_on()
+    layout.size() >= LARGE && layout.align() <= LARGE && is_on()
 }
 
 /// `size` rounded up to whole large pages (`size` is at least [`LARGE`], far below
