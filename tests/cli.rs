@@ -312,77 +312,70 @@ fn default_animation_renders_by_name_identically_with_one_or_two_threads() {
     );
 }
 
+/// `mipray ARGS` in `cwd` with `MIPRAY_LARGE_PAGES` set to `setting`, or unset.
+fn mipray_with_large_pages(args: &[&str], cwd: &Path, setting: Option<&str>) -> Output {
+    let mut command = Command::new(env!("CARGO_BIN_EXE_mipray"));
+    command.args(args).current_dir(cwd);
+    match setting {
+        Some(value) => command.env("MIPRAY_LARGE_PAGES", value),
+        None => command.env_remove("MIPRAY_LARGE_PAGES"),
+    };
+    command.output().expect("run mipray")
+}
+
 /// The large-page allocator changes where memory comes from, never what is computed: a
 /// frame is the same file with it off, and `bench` says which way the memory was paged.
 #[test]
 fn large_pages_on_or_off_render_the_same_frame() {
     let dir = tempfile::tempdir().unwrap();
     // 640x360: the frame's linear pixels (3.5 MiB) alone are a large allocation.
-    let render = |out_dir: &str, off: bool| {
-        let mut command = Command::new(env!("CARGO_BIN_EXE_mipray"));
-        command.args([
-            "render", "default", "--size", "640x360", "--frames", "3", "--out", out_dir,
-        ]);
-        if off {
-            command.env("MIPRAY_LARGE_PAGES", "off");
-        } else {
-            command.env_remove("MIPRAY_LARGE_PAGES");
-        }
-        let out = command.current_dir(dir.path()).output().unwrap();
+    let size = ["--size", "640x360"];
+    for (out_dir, setting) in [("on", None), ("off", Some("off"))] {
+        let args = [
+            &["render", "default", "--frames", "3", "--out", out_dir][..],
+            &size,
+        ]
+        .concat();
+        let out = mipray_with_large_pages(&args, dir.path(), setting);
         assert!(out.status.success(), "{}", stderr(&out));
-    };
-    render("on", false);
-    render("off", true);
+    }
     let frame = |d: &str| std::fs::read(dir.path().join(d).join("frame_0003.png")).unwrap();
     assert!(
         frame("on") == frame("off"),
         "the frame differs with large pages off"
     );
     // A value other than `on` and `off` is refused, naming the variable.
-    let out = Command::new(env!("CARGO_BIN_EXE_mipray"))
-        .args(["info", "default"])
-        .env("MIPRAY_LARGE_PAGES", "maybe")
-        .current_dir(dir.path())
-        .output()
-        .unwrap();
+    let out = mipray_with_large_pages(&["info", "default"], dir.path(), Some("maybe"));
     assert_eq!(out.status.code(), Some(2));
     assert!(
         stderr(&out).contains("MIPRAY_LARGE_PAGES=maybe"),
         "{}",
         stderr(&out)
     );
-    for (off, says) in [
-        (false, "2 MiB-aligned mappings of their own"),
-        (true, "from the system allocator"),
+    let bench = [
+        "bench",
+        "default",
+        "--frames",
+        "3..4",
+        "--repeats",
+        "1",
+        "--methods",
+        "none",
+        "--threads",
+        "1",
+    ];
+    for (setting, says) in [
+        (None, "2 MiB-aligned mappings of their own"),
+        (Some("off"), "from the system allocator"),
     ] {
-        let mut command = Command::new(env!("CARGO_BIN_EXE_mipray"));
-        command.args([
-            "bench",
-            "default",
-            "--size",
-            "640x360",
-            "--frames",
-            "3..4",
-            "--repeats",
-            "1",
-            "--methods",
-            "none",
-            "--threads",
-            "1",
-        ]);
-        if off {
-            command.env("MIPRAY_LARGE_PAGES", "off");
-        } else {
-            command.env_remove("MIPRAY_LARGE_PAGES");
-        }
-        let out = command.current_dir(dir.path()).output().unwrap();
+        let out = mipray_with_large_pages(&[&bench[..], &size].concat(), dir.path(), setting);
         assert!(out.status.success(), "{}", stderr(&out));
         let note = stderr(&out);
         let line = note
             .lines()
             .find(|l| l.starts_with("memory: "))
             .unwrap_or("");
-        assert!(line.contains(says), "off {off}: {note}");
+        assert!(line.contains(says), "{setting:?}: {note}");
         assert!(line.contains("MiB in reserved huge pages") || line.contains("not reported"));
     }
 }
