@@ -15,7 +15,9 @@
 //!    (`/sys/kernel/mm/transparent_hugepage/enabled`) is `madvise` or `always` and it has
 //!    them to give, and with 4 KiB pages otherwise.
 //!
-//! Smaller allocations, and every allocation once the allocator is turned off
+//! Smaller allocations (with glibc's thresholds set as its own rules would set them had
+//! it seen the large ones, see [`keep_small_blocks_in_the_heap`]), and every allocation
+//! once the allocator is turned off
 //! ([`turn_off`], which the binary calls for `MIPRAY_LARGE_PAGES=off`), go to the system
 //! allocator. Outside Linux everything does.
 //!
@@ -24,12 +26,17 @@
 //! the first large block is made and never changes after, so a block is always released
 //! the way it was made.
 //!
-//! The cost of a mapping of its own is a system call and fresh zeroed pages for each large
-//! allocation, and up to 2 MiB of rounding; the frame loop allocates its large buffers
-//! once per run or per frame, where that is small against a frame (BENCHMARKS.md has the
-//! measured effect on whole frames).
+//! A released mapping is kept for reuse ([`Spares`]: at most [`MAX_SPARES`] of them and
+//! [`MAX_SPARE_BYTES`] in all, the oldest given back to the kernel first) and handed to the
+//! next allocation of the same rounded length. Why: the frame loop makes and drops some
+//! large buffers every frame (on BART Kitchen two mappings a frame), and a fresh mapping
+//! is fresh pages, each faulted in and zeroed by the kernel again; the system allocator
+//! keeps freed memory for the next block instead. The cost that remains is up to 2 MiB of
+//! rounding a block, the spares' memory, and a zeroing pass where a zeroed block reuses a
+//! spare (BENCHMARKS.md has the measured effect on whole frames).
 
 use std::alloc::{GlobalAlloc, Layout, System};
+use std::sync::Mutex;
 use std::sync::atomic::{AtomicU8, Ordering};
 
 /// The smallest allocation that gets a mapping of its own, and the page size it is rounded
@@ -66,9 +73,40 @@ fn is_on() -> bool {
     if !cfg!(target_os = "linux") {
         return false;
     }
-    let _ = STATE.compare_exchange(UNSETTLED, ON, Ordering::AcqRel, Ordering::Acquire);
+    if STATE
+        .compare_exchange(UNSETTLED, ON, Ordering::AcqRel, Ordering::Acquire)
+        .is_ok()
+    {
+        keep_small_blocks_in_the_heap();
+    }
     STATE.load(Ordering::Acquire) == ON
 }
+
+/// Tells the C library's allocator (glibc's), which keeps every block below [`LARGE`], to
+/// keep its freed memory as it would had it seen the large blocks itself.
+///
+/// Why: glibc raises its own thresholds as it frees large blocks (a freed mapping of `n`
+/// bytes, up to 32 MiB, makes blocks below `n` come from its heap, and lets its heap keep
+/// up to `2 n` free at the top before giving memory back). Once the large blocks are
+/// mapped here it sees none, keeps its starting thresholds (128 KiB) and gives back, at
+/// the end of every frame, the freed memory the next frame takes again: on BART Kitchen
+/// about 760 page faults a frame and on BART Robots about 870 (two threads), against 5 and
+/// 75 with the system allocator alone. Here blocks below [`LARGE`] come from its heap and
+/// the heap keeps up to [`HEAP_KEEPS`] free, the most glibc's own rule keeps. Set once,
+/// when the allocator turns on; a C library without these settings is left as it is.
+fn keep_small_blocks_in_the_heap() {
+    #[cfg(all(target_os = "linux", target_env = "gnu"))]
+    // SAFETY: `mallopt` only changes the C allocator's thresholds; it is called before
+    // this allocator hands out its first block and takes the C allocator's own lock.
+    unsafe {
+        libc::mallopt(libc::M_MMAP_THRESHOLD, LARGE as libc::c_int);
+        libc::mallopt(libc::M_TRIM_THRESHOLD, HEAP_KEEPS as libc::c_int);
+    }
+}
+
+/// The most free memory the C library's heap keeps at its top once the allocator is on:
+/// twice glibc's largest dynamic mapping threshold (32 MiB on 64-bit systems).
+pub const HEAP_KEEPS: usize = 64 << 20;
 
 /// Whether the allocator is installed and on: turned on (or it has made a large block)
 /// and not turned off first.
@@ -108,6 +146,123 @@ fn maps(layout: Layout) -> bool {
 #[inline]
 fn mapped_len(size: usize) -> usize {
     size.div_ceil(LARGE) * LARGE
+}
+
+/// Most released mappings kept for reuse.
+pub const MAX_SPARES: usize = 16;
+
+/// Most bytes the kept mappings may hold together: a frame's large buffers come to tens of
+/// megabytes (BART Kitchen at 800x600), so one frame's set fits; a larger block is given
+/// back to the kernel at once.
+pub const MAX_SPARE_BYTES: usize = 256 << 20;
+
+/// Released mappings kept for reuse, oldest first: `(address, length)`, lengths multiples
+/// of [`LARGE`]. A fixed array, so keeping and taking one never allocates (this is the
+/// allocator).
+struct Spares {
+    blocks: [(usize, usize); MAX_SPARES],
+    count: usize,
+    bytes: usize,
+}
+
+impl Spares {
+    const EMPTY: Spares = Spares {
+        blocks: [(0, 0); MAX_SPARES],
+        count: 0,
+        bytes: 0,
+    };
+
+    /// Takes the most recently kept mapping of exactly `len` bytes, if any.
+    fn take(&mut self, len: usize) -> Option<*mut u8> {
+        let i = self.blocks[..self.count]
+            .iter()
+            .rposition(|&(_, l)| l == len)?;
+        let (p, _) = self.remove(i);
+        Some(p as *mut u8)
+    }
+
+    /// Keeps the mapping `(p, len)`; returns the mappings to give back to the kernel to
+    /// stay within the limits (the oldest kept ones, or this one itself when it alone is
+    /// over [`MAX_SPARE_BYTES`]), at most [`MAX_SPARES`] + 1 of them.
+    fn keep(&mut self, p: *mut u8, len: usize) -> Released {
+        let mut released = Released::default();
+        if len > MAX_SPARE_BYTES {
+            released.push((p as usize, len));
+            return released;
+        }
+        while self.count == MAX_SPARES || self.bytes + len > MAX_SPARE_BYTES {
+            released.push(self.remove(0));
+        }
+        self.blocks[self.count] = (p as usize, len);
+        self.count += 1;
+        self.bytes += len;
+        released
+    }
+
+    fn remove(&mut self, i: usize) -> (usize, usize) {
+        let block = self.blocks[i];
+        self.blocks.copy_within(i + 1..self.count, i);
+        self.count -= 1;
+        self.bytes -= block.1;
+        block
+    }
+}
+
+/// Mappings to give back to the kernel once the lock on [`SPARES`] is released.
+#[derive(Default)]
+struct Released {
+    blocks: [(usize, usize); MAX_SPARES + 1],
+    count: usize,
+}
+
+impl Released {
+    fn push(&mut self, block: (usize, usize)) {
+        self.blocks[self.count] = block;
+        self.count += 1;
+    }
+}
+
+static SPARES: Mutex<Spares> = Mutex::new(Spares::EMPTY);
+
+/// The spares, locked. Nothing panics while the lock is held, but a poisoned lock would
+/// still hold a consistent list, so it is used as it is.
+fn spares() -> std::sync::MutexGuard<'static, Spares> {
+    SPARES
+        .lock()
+        .unwrap_or_else(|poisoned| poisoned.into_inner())
+}
+
+/// A mapping of `len` bytes (a multiple of [`LARGE`]): a kept one of that length, else a
+/// fresh one; its first `zeroed` bytes (at most `len`) zero (a fresh mapping already is all
+/// zero; a kept one is cleared that far). Null where the kernel makes none.
+#[cfg(target_os = "linux")]
+fn obtain(len: usize, zeroed: usize) -> *mut u8 {
+    debug_assert!(zeroed <= len);
+    let kept = spares().take(len);
+    match kept {
+        Some(p) => {
+            // SAFETY: `p` is a kept mapping of `len >= zeroed` writable bytes, now this
+            // block's alone.
+            unsafe { std::ptr::write_bytes(p, 0, zeroed) };
+            p
+        }
+        None => map::map(len),
+    }
+}
+
+/// Releases the mapping `(p, len)`: kept for reuse, or given back to the kernel (with any
+/// kept ones it displaces).
+///
+/// # Safety
+/// `p` and `len` must be a live mapping [`obtain`] handed out, not used after this.
+#[cfg(target_os = "linux")]
+unsafe fn release(p: *mut u8, len: usize) {
+    let released = spares().keep(p, len);
+    for &(q, l) in &released.blocks[..released.count] {
+        // SAFETY: every released block was a mapping of this length (kept, or `p` itself),
+        // no longer kept, so nothing hands it out again.
+        unsafe { map::unmap(q as *mut u8, l) };
+    }
 }
 
 #[cfg(target_os = "linux")]
@@ -182,16 +337,17 @@ mod map {
 }
 
 // SAFETY: every block is either the system allocator's (made and released by `System`
-// with the same layout) or a fresh private mapping of at least `layout.size()` bytes,
-// aligned to `LARGE` (at least `layout.align()`, which `maps` checks) and released with
-// `munmap` of the same length; `maps` gives the same answer for a layout at its release as
-// at its allocation (see the module's invariant).
+// with the same layout) or a private mapping of exactly `mapped_len(layout.size())` bytes
+// (fresh, or kept from an earlier block of the same rounded length and used by nothing
+// else while kept), aligned to `LARGE` (at least `layout.align()`, which `maps` checks) and
+// released (kept or unmapped) with that same length; `maps` gives the same answer for a
+// layout at its release as at its allocation (see the module's invariant).
 unsafe impl GlobalAlloc for LargePageAllocator {
     #[inline]
     unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
         #[cfg(target_os = "linux")]
         if maps(layout) {
-            return map::map(mapped_len(layout.size()));
+            return obtain(mapped_len(layout.size()), 0);
         }
         // SAFETY: the caller's promise (a layout of non-zero size), passed on.
         unsafe { System.alloc(layout) }
@@ -199,10 +355,9 @@ unsafe impl GlobalAlloc for LargePageAllocator {
 
     #[inline]
     unsafe fn alloc_zeroed(&self, layout: Layout) -> *mut u8 {
-        // A fresh anonymous mapping is already zero: no pass over it.
         #[cfg(target_os = "linux")]
         if maps(layout) {
-            return map::map(mapped_len(layout.size()));
+            return obtain(mapped_len(layout.size()), layout.size());
         }
         // SAFETY: as in `alloc`.
         unsafe { System.alloc_zeroed(layout) }
@@ -212,9 +367,9 @@ unsafe impl GlobalAlloc for LargePageAllocator {
     unsafe fn dealloc(&self, p: *mut u8, layout: Layout) {
         #[cfg(target_os = "linux")]
         if maps(layout) {
-            // SAFETY: a block of this layout was mapped here (the module's invariant), with
-            // its length rounded the same way.
-            return unsafe { map::unmap(p, mapped_len(layout.size())) };
+            // SAFETY: a block of this layout was obtained here (the module's invariant),
+            // with its length rounded the same way, and the caller is done with it.
+            return unsafe { release(p, mapped_len(layout.size())) };
         }
         // SAFETY: the caller's promise; the block is `System`'s (see `alloc`).
         unsafe { System.dealloc(p, layout) }
@@ -384,6 +539,68 @@ mod tests {
             }
             None => println!("no reserved pool of huge pages here: its mapping was not tried"),
         }
+    }
+
+    /// A released block comes back for the next one of its rounded length, and a zeroed
+    /// one comes back zero whatever was written into it before.
+    #[cfg(target_os = "linux")]
+    #[test]
+    fn a_released_block_is_reused_and_cleared_when_zeroed() {
+        // A length no other test uses, so no test running alongside takes the spare.
+        let l = layout(11 * LARGE - 100, 64);
+        // SAFETY: live blocks of layout `l`, each released once.
+        unsafe {
+            let p = A.alloc(l);
+            assert!(!p.is_null());
+            fill_and_check(p, l.size(), 11);
+            A.dealloc(p, l);
+            let q = A.alloc_zeroed(l);
+            assert_eq!(q, p, "the kept mapping is reused");
+            assert!(
+                std::slice::from_raw_parts(q, l.size())
+                    .iter()
+                    .all(|&b| b == 0)
+            );
+            fill_and_check(q, l.size(), 12);
+            A.dealloc(q, l);
+            // A length in the same whole pages reuses it too; without zeroing, the block
+            // is simply writable (its old contents are the caller's to overwrite).
+            let shorter = layout(10 * LARGE + 1, 64);
+            let r = A.alloc(shorter);
+            assert_eq!(r, p);
+            fill_and_check(r, shorter.size(), 13);
+            A.dealloc(r, shorter);
+        }
+    }
+
+    /// The kept list stays within its limits, gives back the oldest first, and hands out
+    /// only exact lengths, newest first. On the list alone (no memory is touched).
+    #[test]
+    fn spares_keep_the_newest_within_their_limits() {
+        let mut spares = Spares::EMPTY;
+        let released: Vec<(usize, usize)> = (1..=MAX_SPARES + 2)
+            .flat_map(|i| {
+                let r = spares.keep((i * LARGE * 64) as *mut u8, LARGE);
+                r.blocks[..r.count].to_vec()
+            })
+            .collect();
+        assert_eq!(spares.count, MAX_SPARES);
+        assert_eq!(spares.bytes, MAX_SPARES * LARGE);
+        assert_eq!(released, [(LARGE * 64, LARGE), (2 * LARGE * 64, LARGE)]);
+        assert_eq!(spares.take(2 * LARGE), None, "only exact lengths");
+        let newest = ((MAX_SPARES + 2) * LARGE * 64) as *mut u8;
+        assert_eq!(spares.take(LARGE), Some(newest));
+        assert_eq!(spares.count, MAX_SPARES - 1);
+        // A block over the byte limit alone is given back at once, nothing displaced.
+        let r = spares.keep(std::ptr::null_mut(), MAX_SPARE_BYTES + LARGE);
+        assert_eq!(&r.blocks[..r.count], [(0, MAX_SPARE_BYTES + LARGE)]);
+        assert_eq!(spares.count, MAX_SPARES - 1);
+        // One that fits only once older ones go displaces just enough of them.
+        let big = MAX_SPARE_BYTES - 4 * LARGE;
+        let r = spares.keep(std::ptr::null_mut(), big);
+        assert!(spares.bytes <= MAX_SPARE_BYTES && spares.count <= MAX_SPARES);
+        assert_eq!(r.count, MAX_SPARES - 1 - 4, "{:?}", &r.blocks[..r.count]);
+        assert_eq!(spares.bytes, big + 4 * LARGE);
     }
 
     #[test]
