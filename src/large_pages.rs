@@ -90,8 +90,9 @@ fn is_on() -> bool {
 /// up to `2 n` free at the top before giving memory back). Once the large blocks are
 /// mapped here it sees none, keeps its starting thresholds (128 KiB) and gives back, at
 /// the end of every frame, the freed memory the next frame takes again: on BART Kitchen
-/// about 760 page faults a frame and on BART Robots about 870 (two threads), against 5 and
-/// 75 with the system allocator alone. Here blocks below [`LARGE`] come from its heap and
+/// about 730 page faults a frame on one thread (none with the system allocator alone), on
+/// BART Robots about 870 on two (75); 2 and 24 with the thresholds set here
+/// (docs/benchmark-log.md). Here blocks below [`LARGE`] come from its heap and
 /// the heap keeps up to [`HEAP_KEEPS`] free, the most glibc's own rule keeps. Set once,
 /// when the allocator turns on; a C library without these settings is left as it is.
 fn keep_small_blocks_in_the_heap() {

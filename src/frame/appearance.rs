@@ -9,7 +9,7 @@
 //! one more, the default material, follows them for primitives without one
 //! ([`material_descs`] and [`Appearance::new`] agree on this order).
 
-use crate::render::{LightKind, LightSource, Material, ShadingModel};
+use crate::render::{LightKind, LightSource, Material, ShadingModel, highlight_floor};
 use crate::scene::{LightDesc, MaterialDesc, SceneDesc, Shading};
 
 /// Everything the integrator needs to know about a scene's surfaces and lights.
@@ -56,6 +56,7 @@ pub fn material(desc: &MaterialDesc) -> Material {
         transmission: desc.transmission,
         ior: desc.ior,
         shininess: desc.shininess,
+        highlight_floor: highlight_floor(desc.shininess),
         specular: desc.specular,
         model,
     }

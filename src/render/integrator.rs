@@ -784,11 +784,13 @@ fn direct_light(
         color += diffuse * irradiance * std::f32::consts::FRAC_1_PI;
         if material.specular > 0.0 {
             let half = (incident.to_light - direction).normalize_or_zero();
-            let highlight = surface
-                .shading_normal
-                .dot(half)
-                .max(0.0)
-                .powf(material.shininess);
+            let cos = surface.shading_normal.dot(half).max(0.0);
+            if cos < material.highlight_floor {
+                // `powf` would give +0 (`material::highlight_floor`): the highlight adds
+                // nothing, so the frame is the same bits without the call.
+                continue;
+            }
+            let highlight = cos.powf(material.shininess);
             let normalization = (material.shininess + 8.0) / (8.0 * std::f32::consts::PI);
             color += irradiance * (opaque * material.specular * normalization * highlight);
         }

@@ -22,7 +22,7 @@ pub use camera::Camera;
 pub use film::{LinearImage, render_image, render_image_recording};
 pub use integrator::{FrameScene, MIP_LEVELS, TraceCounters};
 pub use light::{Light, LightKind, LightSource};
-pub use material::{Material, ShadingModel};
+pub use material::{Material, ShadingModel, highlight_floor};
 pub use probe::{Bend, Chain, LodProbe};
 pub use ray_log::{RayAnswer, RayClass, RayLog, TracedRay};
 pub use scene_bvh::{InstanceShading, Instanced, PbRule, SceneBvh};
