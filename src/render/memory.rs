@@ -60,7 +60,12 @@ pub fn check_frame_memory(
             what: what(),
             bytes,
             cause,
-        })
+        })?;
+    // The probe must really be allocated: a block made and freed unused is one the
+    // optimizer may leave out, taking the allocation to succeed (a release build did, and
+    // a 16384x16384 render then aborted in its first allocation instead of this error).
+    std::hint::black_box(probe.as_mut_ptr());
+    Ok(())
 }
 
 #[cfg(test)]
