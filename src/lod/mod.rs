@@ -418,6 +418,22 @@ pub trait RayLod: Copy + Send + Sync {
     /// Carries the state along the ray to the hit at `hit.t`.
     fn arrive(&mut self, hit: &SurfaceHit);
 
+    /// Whether the method's level at a hit depends only on the arriving ray's state, the
+    /// hit's distance and the triangle's `log2 P_b` (`paper`): then
+    /// [`Self::level_at_distance`] gives it, and the renderer computes each hit's level as
+    /// soon as the walk returns the hit, bit for bit the level [`Self::footprint`] gives
+    /// after [`Self::arrive`] (see `render::tile`).
+    const LEVEL_AT_DISTANCE: bool = false;
+
+    /// With [`Self::LEVEL_AT_DISTANCE`], the level [`Self::footprint`] gives at a hit at
+    /// distance `t` on a triangle of `log2_pb`, from the state before [`Self::arrive`].
+    /// Not called otherwise.
+    #[inline(always)]
+    fn level_at_distance(&self, t: f32, log2_pb: f32) -> f32 {
+        let _ = (t, log2_pb);
+        unreachable!("{:?} has no level at a distance", Self::METHOD)
+    }
+
     /// The lookup at the hit (called after `arrive`) in a texture of `texture_size`
     /// texels at level 0. Must be finite for any hit, degenerate or grazing.
     fn footprint(

@@ -37,6 +37,13 @@ impl RayLod for PathLength {
     const METHOD: LodMethod = LodMethod::Paper;
     const BYTES: usize = 4;
     type Kept = ();
+    const LEVEL_AT_DISTANCE: bool = true;
+
+    #[inline(always)]
+    fn level_at_distance(&self, t: f32, log2_pb: f32) -> f32 {
+        // The state `arrive` makes, and `footprint`'s level of it.
+        PathLength(self.0 + t).paper_level(log2_pb)
+    }
 
     #[inline]
     fn primary(_: &LodCamera, _: f32, _: f32) -> Self {

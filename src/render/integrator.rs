@@ -412,7 +412,7 @@ impl FrameScene<'_> {
     ) -> Arrival<L> {
         let triangle = self.hit_triangle(&mut hit, origin, direction);
         let mut arrival = Arrival::unmade(&triangle, hit, origin, direction, lod, depth);
-        self.arrive_at::<L, false>(&triangle, &mut arrival, requests, counters);
+        self.arrive_at::<L, false>(&triangle, &mut arrival, None, requests, counters);
         arrival
     }
 
@@ -420,12 +420,15 @@ impl FrameScene<'_> {
     /// hit's triangle as `FrameScene::hit_triangle` read it, which also settled the hit).
     /// The texture lookup is planned in the SIMD copy `AVX2` names:
     /// the caller's own (true only in the AVX2 copy, as in `simd::Kernel::run`).
+    /// `level_ahead`: the method's level at this hit, computed when the walk returned it
+    /// (only where [`RayLod::LEVEL_AT_DISTANCE`]; the same bits as its footprint's).
     // Always inlined: part of the tile kernel (`TraceTile`), compiled into each SIMD copy.
     #[inline(always)]
     pub(super) fn arrive_at<L: RayLod, const AVX2: bool>(
         &self,
         triangle: &HitTriangle,
         arrival: &mut Arrival<L>,
+        level_ahead: Option<f32>,
         requests: &mut Vec<ShadowRequest>,
         counters: &mut TraceCounters,
     ) {
@@ -437,6 +440,7 @@ impl FrameScene<'_> {
             &lod_hit,
             material,
             &arrival.lod,
+            level_ahead,
             counters,
             &mut arrival.lookup,
         );
@@ -621,6 +625,7 @@ impl FrameScene<'_> {
         lod_hit: &SurfaceHit,
         material: &Material,
         lod: &L,
+        level_ahead: Option<f32>,
         counters: &mut TraceCounters,
         out: &mut TexelLookup,
     ) {
@@ -633,7 +638,20 @@ impl FrameScene<'_> {
         };
         let uv = interpolate_uv(lod_hit.triangle.uvs, lod_hit.bary);
         let pyramid = &texture.pyramid;
-        let footprint = lod.footprint(lod_hit, &self.lod_camera, pyramid.base_size());
+        let footprint = match level_ahead {
+            Some(level) => {
+                debug_assert_eq!(
+                    Some(level.to_bits()),
+                    match lod.footprint(lod_hit, &self.lod_camera, pyramid.base_size()) {
+                        Footprint::Level(l) => Some(l.to_bits()),
+                        _ => None,
+                    },
+                    "the level computed ahead is the footprint's"
+                );
+                Footprint::Level(level)
+            }
+            None => lod.footprint(lod_hit, &self.lod_camera, pyramid.base_size()),
+        };
         let level = self.lookup_level(&footprint);
         let sampler = texture.sampler;
         *out = match footprint {
