@@ -296,18 +296,19 @@ impl FrameScene<'_> {
     }
 
     /// [`FrameScene::hit_triangle`] appended to `triangles`, written in place (see
-    /// [`HitTriangle::UNSET`] for why).
+    /// [`HitTriangle::UNSET`] for why); returns it.
     #[inline(always)]
-    pub fn push_hit_triangle(
+    pub fn push_hit_triangle<'t>(
         &self,
         hit: &mut Hit,
         origin: Vec3A,
         direction: Vec3A,
-        triangles: &mut Vec<HitTriangle>,
-    ) {
+        triangles: &'t mut Vec<HitTriangle>,
+    ) -> &'t HitTriangle {
         triangles.push(HitTriangle::UNSET);
         let out = triangles.last_mut().expect("a triangle was just pushed");
         self.bvh.write_hit_triangle(hit, origin, direction, out);
+        out
     }
 
     /// Radiance of the primary ray through film point `(px, py)` of `camera`, traced depth

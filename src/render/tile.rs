@@ -358,12 +358,11 @@ fn trace_packets<L: RayLod>(
                 );
             }
             if let Some(hit) = hit {
-                scene.push_hit_triangle(hit, ray.origin, ray.direction, triangles);
+                let triangle = scene.push_hit_triangle(hit, ray.origin, ray.direction, triangles);
                 if L::LEVEL_AT_DISTANCE {
                     // The settled hit's distance (reading the triangle may replace it), as
                     // the arrival's `RayLod::arrive` reads it.
-                    let log2_pb = triangles.last().map_or(0.0, |t| t.log2_pb);
-                    levels.push(ray.lod.level_at_distance(hit.t, log2_pb));
+                    levels.push(ray.lod.level_at_distance(hit.t, triangle.log2_pb));
                 }
             }
         }
