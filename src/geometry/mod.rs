@@ -75,8 +75,7 @@ pub struct HitTriangle {
     /// decide it (`lod::RayLod::LEVEL_AT_DISTANCE`), written by the tile loop as the walk
     /// returns the hit; NaN where nothing wrote it. The field sits in what was the
     /// struct's padding (128 bytes either way): a list of its own, pushed a level per hit
-    /// and read back by index, cost `paper` 44 M instructions a BART Kitchen frame, 33 a
-    /// hit (docs/benchmark-log.md).
+    /// and read back by index, cost about 24 instructions a hit (docs/benchmark-log.md).
     pub level: f32,
 }
 
