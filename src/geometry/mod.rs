@@ -71,12 +71,6 @@ pub struct HitTriangle {
     pub material: u32,
     pub log2_pb: f32,
     pub source: u32,
-    /// The hit's texture level where the LOD method needs only the hit's distance to
-    /// decide it (`lod::RayLod::LEVEL_AT_DISTANCE`), written by the tile loop as the walk
-    /// returns the hit; NaN where nothing wrote it. The field sits in what was the
-    /// struct's padding (128 bytes either way): a list of its own, pushed a level per hit
-    /// and read back by index, cost about 24 instructions a hit (docs/benchmark-log.md).
-    pub level: f32,
 }
 
 impl HitTriangle {
@@ -92,7 +86,6 @@ impl HitTriangle {
         material: u32::MAX,
         log2_pb: f32::NAN,
         source: u32::MAX,
-        level: f32::NAN,
     };
 }
 
@@ -263,18 +256,5 @@ impl Placement {
             normal_from_object,
             flips_winding: det < 0.0,
         }
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    /// The hit's level rides in what was padding: a hit triangle is still 128 bytes, the
-    /// size the tile's list of them (and every method that keeps one a ray) was measured at.
-    #[test]
-    fn the_level_fits_in_the_padding() {
-        assert_eq!(std::mem::size_of::<HitTriangle>(), 128);
-        assert_eq!(HitTriangle::UNSET.level.to_bits(), f32::NAN.to_bits());
     }
 }

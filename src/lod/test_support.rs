@@ -19,7 +19,6 @@ pub fn one_triangle(
         material: 0,
         log2_pb,
         source: 0,
-        level: f32::NAN,
     }
 }
 

@@ -296,7 +296,7 @@ impl FrameScene<'_> {
     }
 
     /// [`FrameScene::hit_triangle`] appended to `triangles`, written in place (see
-    /// [`HitTriangle::UNSET`] for why); returns it, for the caller to add the level.
+    /// [`HitTriangle::UNSET`] for why); returns it.
     #[inline(always)]
     pub fn push_hit_triangle<'t>(
         &self,
@@ -304,7 +304,7 @@ impl FrameScene<'_> {
         origin: Vec3A,
         direction: Vec3A,
         triangles: &'t mut Vec<HitTriangle>,
-    ) -> &'t mut HitTriangle {
+    ) -> &'t HitTriangle {
         triangles.push(HitTriangle::UNSET);
         let out = triangles.last_mut().expect("a triangle was just pushed");
         self.bvh.write_hit_triangle(hit, origin, direction, out);

@@ -74,13 +74,13 @@ pub(super) struct TileBuffers<L: RayLod> {
     /// material, `log2 P_b`) can overlap from hit to hit, where reading them at the start
     /// of each hit's shading put them at the head of its long dependent arithmetic. Faster
     /// in the `bench` build, within the noise in the release build (docs/benchmark-log.md).
-    ///
-    /// Where the method's level needs only the hit's distance ([`RayLod::LEVEL_AT_DISTANCE`]),
-    /// each triangle also holds its hit's level (`HitTriangle::level`), computed as its
-    /// packet's hits come back, long before the hit's arrival needs it. Made on arrival,
-    /// the logarithm (a division and a polynomial) headed the chain of dependent work that
-    /// plans the hit's lookup; there it overlaps the walks (docs/benchmark-log.md).
     triangles: Vec<HitTriangle>,
+    /// Where the method's level needs only the hit's distance ([`RayLod::LEVEL_AT_DISTANCE`]):
+    /// the bounce's levels, one per hit in `hits`' order, each computed as its packet's
+    /// hits come back (with its triangle), long before the hit's arrival needs it. Made on
+    /// arrival, the logarithm (a division and a polynomial) headed the chain of dependent
+    /// work that plans the hit's lookup; there it overlaps the walks (docs/benchmark-log.md).
+    levels: Vec<f32>,
 }
 
 impl<L: RayLod> Default for TileBuffers<L> {
@@ -96,6 +96,7 @@ impl<L: RayLod> Default for TileBuffers<L> {
             of_light: Vec::new(),
             pixel_of: Vec::new(),
             triangles: Vec::new(),
+            levels: Vec::new(),
         }
     }
 }
@@ -160,6 +161,7 @@ fn trace_tile<L: RayLod, const AVX2: bool>(
         of_light,
         pixel_of,
         triangles,
+        levels,
     } = buffers;
     let x1 = (x0 + TILE).min(camera.width);
     let y1 = (y0 + TILE).min(camera.height);
@@ -171,22 +173,24 @@ fn trace_tile<L: RayLod, const AVX2: bool>(
     debug_assert_eq!(samples.len(), ((x1 - x0) * (y1 - y0) * spp) as usize);
     vertices.clear();
     vertices.resize(samples.len(), Combine::EMPTY);
-    primary_bounce::<L>(scene, camera, spp, samples, counters, rays, hits, triangles);
+    primary_bounce::<L>(
+        scene, camera, spp, samples, counters, rays, hits, triangles, levels,
+    );
     // The bounce's rays are vertices `first_vertex..` in order, each `depth` bounces deep.
     let (mut first_vertex, mut depth) = (0u32, 0u32);
     while !rays.is_empty() {
         // Arrive at every hit; a miss is the background.
         waiting.clear();
         requests.clear();
-        let mut hit_triangles = triangles.iter();
+        let mut hit_triangles = triangles.iter().enumerate();
         for ((vertex, ray), &hit) in (first_vertex..).zip(rays.iter()).zip(hits.iter()) {
             let Some(hit) = hit else {
                 vertices[vertex as usize] = Combine::leaf(scene.background);
                 continue;
             };
-            let triangle = hit_triangles.next().expect("a triangle per hit");
+            let (k, triangle) = hit_triangles.next().expect("a triangle per hit");
             let level_ahead = if L::LEVEL_AT_DISTANCE {
-                Some(triangle.level)
+                levels.get(k).copied()
             } else {
                 None
             };
@@ -226,7 +230,7 @@ fn trace_tile<L: RayLod, const AVX2: bool>(
         vertices.resize(next_first as usize + next_rays.len(), Combine::EMPTY);
         (first_vertex, depth) = (next_first, depth + 1);
         std::mem::swap(rays, next_rays);
-        trace_bounce(scene, rays, counters, hits, triangles);
+        trace_bounce(scene, rays, counters, hits, triangles, levels);
     }
     // Last vertex first: children are numbered after their parents.
     for v in (0..vertices.len()).rev() {
@@ -266,6 +270,7 @@ fn primary_bounce<L: RayLod>(
     rays: &mut Vec<Spawned<L>>,
     hits: &mut Vec<Option<Hit>>,
     triangles: &mut Vec<HitTriangle>,
+    levels: &mut Vec<f32>,
 ) {
     rays.clear();
     rays.extend(samples.iter().map(|&(x, y, i)| {
@@ -279,9 +284,15 @@ fn primary_bounce<L: RayLod>(
             lod: L::primary(&scene.lod_camera, px, py),
         }
     }));
-    trace_packets(scene, rays, counters, hits, triangles, |rays, hits| {
-        scene.bvh.closest_hits(rays, f32::INFINITY, hits)
-    });
+    trace_packets(
+        scene,
+        rays,
+        counters,
+        hits,
+        triangles,
+        levels,
+        |rays, hits| scene.bvh.closest_hits(rays, f32::INFINITY, hits),
+    );
 }
 
 /// A bounce's reflected and refracted rays (`rays`, in the order they were spawned) traced
@@ -296,10 +307,17 @@ fn trace_bounce<L: RayLod>(
     counters: &mut TraceCounters,
     hits: &mut Vec<Option<Hit>>,
     triangles: &mut Vec<HitTriangle>,
+    levels: &mut Vec<f32>,
 ) {
-    trace_packets(scene, rays, counters, hits, triangles, |rays, hits| {
-        scene.bvh.closest_hits_scattered(rays, f32::INFINITY, hits)
-    });
+    trace_packets(
+        scene,
+        rays,
+        counters,
+        hits,
+        triangles,
+        levels,
+        |rays, hits| scene.bvh.closest_hits_scattered(rays, f32::INFINITY, hits),
+    );
 }
 
 /// `rays` traced by `closest` in packets of up to [`PACKET`], the hits written in place into
@@ -314,11 +332,13 @@ fn trace_packets<L: RayLod>(
     counters: &mut TraceCounters,
     hits: &mut Vec<Option<Hit>>,
     triangles: &mut Vec<HitTriangle>,
+    levels: &mut Vec<f32>,
     mut closest: impl FnMut(&[(Vec3A, Vec3A)], &mut [Option<Hit>]),
 ) {
     hits.clear();
     hits.resize(rays.len(), None);
     triangles.clear();
+    levels.clear();
     let mut packet_rays = [(Vec3A::ZERO, Vec3A::ZERO); PACKET];
     for (packet, packet_hits) in rays.chunks(PACKET).zip(hits.chunks_mut(PACKET)) {
         for (traced, ray) in packet_rays.iter_mut().zip(packet) {
@@ -342,7 +362,7 @@ fn trace_packets<L: RayLod>(
                 if L::LEVEL_AT_DISTANCE {
                     // The settled hit's distance (reading the triangle may replace it), as
                     // the arrival's `RayLod::arrive` reads it.
-                    triangle.level = ray.lod.level_at_distance(hit.t, triangle.log2_pb);
+                    levels.push(ray.lod.level_at_distance(hit.t, triangle.log2_pb));
                 }
             }
         }
