@@ -257,7 +257,8 @@ fn trace_tile<L: RayLod, const AVX2: bool>(
 
 /// The samples' primary rays into `rays` (in the samples' order), traced as packets of up to
 /// [`PACKET`] (an 8 x 8 block of a whole tile at one sample per pixel), their hits into
-/// `hits` and each hit's triangle into `triangles` (all three cleared first).
+/// `hits`, each hit's triangle into `triangles` and, with [`RayLod::LEVEL_AT_DISTANCE`], its
+/// level into `levels` (all four cleared first).
 #[allow(clippy::too_many_arguments)]
 // Always inlined: part of the tile kernel (`TraceTile`), compiled into each SIMD copy.
 #[inline(always)]
@@ -297,8 +298,9 @@ fn primary_bounce<L: RayLod>(
 
 /// A bounce's reflected and refracted rays (`rays`, in the order they were spawned) traced
 /// as packets of up to [`PACKET`] (`SceneBvh::closest_hits_scattered`: each ray finds
-/// exactly what it finds alone), their hits into `hits` and each hit's triangle into
-/// `triangles` (both cleared first).
+/// exactly what it finds alone), their hits into `hits`, each hit's triangle into
+/// `triangles` and, with [`RayLod::LEVEL_AT_DISTANCE`], its level into `levels` (all three
+/// cleared first).
 // Always inlined: part of the tile kernel (`TraceTile`), compiled into each SIMD copy.
 #[inline(always)]
 fn trace_bounce<L: RayLod>(
@@ -322,7 +324,9 @@ fn trace_bounce<L: RayLod>(
 
 /// `rays` traced by `closest` in packets of up to [`PACKET`], the hits written in place into
 /// `hits` (cleared and sized first); each ray counted and logged, and each hit's triangle
-/// appended to `triangles` (cleared first) as its packet's hits come back. Reading a
+/// appended to `triangles` (cleared first) as its packet's hits come back, and with
+/// [`RayLod::LEVEL_AT_DISTANCE`] its level to `levels` (cleared first; one per triangle,
+/// so the arrival finds hit `k`'s level at `k`). Reading a
 /// hit's triangle may replace its distance and barycentrics (`SceneBvh::hit_triangle`);
 /// the log records the hit as the walk returned it.
 #[inline(always)]
@@ -367,6 +371,10 @@ fn trace_packets<L: RayLod>(
             }
         }
     }
+    debug_assert!(
+        !L::LEVEL_AT_DISTANCE || levels.len() == triangles.len(),
+        "a level per hit triangle"
+    );
 }
 
 /// Traces every request's shadow ray and fills in its transmittance: per light, the
