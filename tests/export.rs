@@ -963,6 +963,128 @@ fn the_ray_file_records_every_ray_with_answers_brute_force_confirms() {
     }
 }
 
+/// `tools/anchors/split_ray_file.py` splits a ray file into parts that hold every ray once,
+/// each in its class's part and in the file's order: primary rays alone, and each
+/// secondary class by bounce, the first bounce's rays leaving (within the tool's tolerance)
+/// their pixel's primary hit, the later ones not. A file that is not a ray file is refused
+/// with its name. (Needs `python3`; skipped without it, and a failure where `CI` is set.)
+#[test]
+fn split_ray_file_parts_hold_every_ray_once_by_class_and_bounce() {
+    use mipray::export::rays::{RayRecord, read_ray_file};
+    use mipray::render::RayClass;
+    let python = |args: &[&std::ffi::OsStr]| {
+        Command::new("python3")
+            .arg(Path::new(env!("CARGO_MANIFEST_DIR")).join("tools/anchors/split_ray_file.py"))
+            .args(args)
+            .output()
+    };
+    if !Command::new("python3")
+        .arg("--version")
+        .output()
+        .is_ok_and(|o| o.status.success())
+    {
+        assert!(
+            std::env::var_os("CI").is_none(),
+            "python3 is needed to run tools/anchors/split_ray_file.py"
+        );
+        eprintln!("skipped: python3 not found");
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().to_str().unwrap();
+    let (w, h) = (48u32, 27u32);
+    let run = mipray(&[
+        "export",
+        "default",
+        "--frames",
+        "5",
+        "--size",
+        &format!("{w}x{h}"),
+        "--rays",
+        "--out",
+        out,
+    ]);
+    assert!(
+        run.status.success(),
+        "{}",
+        String::from_utf8_lossy(&run.stderr)
+    );
+    let file = dir.path().join("rays_0005.bin");
+    let records = read_ray_file(&file).unwrap();
+    let parts_dir = dir.path().join("parts");
+    let split = python(&[file.as_os_str(), parts_dir.as_os_str()]).unwrap();
+    assert!(
+        split.status.success(),
+        "{}",
+        String::from_utf8_lossy(&split.stderr)
+    );
+
+    // Each pixel's primary hit point and distance.
+    let mut primary_hit = HashMap::new();
+    for r in records.iter().filter(|r| r.class == RayClass::Primary) {
+        if r.t.is_finite() {
+            primary_hit.insert(r.pixel, (r.origin + r.direction * r.t, r.t));
+        }
+    }
+    let same = |a: &RayRecord, b: &RayRecord| {
+        a.origin.to_array().map(f32::to_bits) == b.origin.to_array().map(f32::to_bits)
+            && a.direction.to_array().map(f32::to_bits) == b.direction.to_array().map(f32::to_bits)
+            && (a.class, a.pixel, a.result) == (b.class, b.pixel, b.result)
+    };
+    let mut total = 0;
+    let mut names = Vec::new();
+    for entry in std::fs::read_dir(&parts_dir).unwrap() {
+        let path = entry.unwrap().path();
+        let name = path.file_stem().unwrap().to_str().unwrap().to_string();
+        let part = read_ray_file(&path).unwrap();
+        assert!(!part.is_empty(), "{name}: an empty part was written");
+        let (class, bounce) = name.split_once('_').unwrap_or((name.as_str(), ""));
+        // In the file's order: each of the part's rays found after the one before it.
+        let mut from = 0;
+        for r in &part {
+            assert_eq!(r.class.name(), class, "{name}: {r:?}");
+            let at = records[from..]
+                .iter()
+                .position(|f| f.class == r.class && same(f, r))
+                .unwrap_or_else(|| panic!("{name}: {r:?} not in the file after ray {from}"));
+            from += at + 1;
+            if r.class == RayClass::Primary {
+                assert_eq!(bounce, "");
+                continue;
+            }
+            let first = primary_hit
+                .get(&r.pixel)
+                .is_some_and(|&(hit, t)| r.origin.distance(hit) <= 1e-3 * t);
+            assert_eq!(
+                bounce,
+                if first { "first" } else { "later" },
+                "{name}: {r:?}"
+            );
+        }
+        total += part.len();
+        names.push(name);
+    }
+    names.sort();
+    assert_eq!(total, records.len(), "parts {names:?}");
+    for name in [
+        "primary",
+        "shadow_first",
+        "shadow_later",
+        "reflection_first",
+    ] {
+        assert!(names.iter().any(|n| n == name), "no {name} in {names:?}");
+    }
+
+    let not_rays = dir.path().join("frame_0005.obj");
+    let refused = python(&[not_rays.as_os_str(), parts_dir.as_os_str()]).unwrap();
+    assert!(!refused.status.success());
+    let message = String::from_utf8_lossy(&refused.stderr);
+    assert!(
+        message.contains("frame_0005.obj") && message.contains("not a ray file"),
+        "{message}"
+    );
+}
+
 /// A scene of moving meshes (BART-like robots at a small size): the library refuses a
 /// renderer that places them as instances (`two-level`) instead of writing a partial mesh,
 /// and `export` writes every triangle `info` counts, its ray file's answers those faces
