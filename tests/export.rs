@@ -29,6 +29,28 @@ fn default_scene() -> SceneDesc {
     mipray::cli::load_scene(&path).expect("load default scene")
 }
 
+/// `mipray export default --frames 5 --size SIZE --rays --out DIR`, which must succeed; the
+/// path of the ray file it wrote (its OBJ is `frame_0005.obj` beside it).
+fn export_default_rays(dir: &Path, size: &str) -> PathBuf {
+    let run = mipray(&[
+        "export",
+        "default",
+        "--frames",
+        "5",
+        "--size",
+        size,
+        "--rays",
+        "--out",
+        dir.to_str().unwrap(),
+    ]);
+    assert!(
+        run.status.success(),
+        "{}",
+        String::from_utf8_lossy(&run.stderr)
+    );
+    dir.join("rays_0005.bin")
+}
+
 fn settings(width: u32, height: u32) -> RenderSettings {
     RenderSettings {
         width,
@@ -860,18 +882,10 @@ fn the_ray_file_records_every_ray_with_answers_brute_force_confirms() {
     use mipray::render::RayClass;
     use mipray::render::film::tile_pixels;
     let dir = tempfile::tempdir().unwrap();
-    let out = dir.path().to_str().unwrap();
     let (w, h) = (48u32, 27u32);
     let size = format!("{w}x{h}");
-    let run = mipray(&[
-        "export", "default", "--frames", "5", "--size", &size, "--rays", "--out", out,
-    ]);
-    assert!(
-        run.status.success(),
-        "{}",
-        String::from_utf8_lossy(&run.stderr)
-    );
-    let records = read_ray_file(&dir.path().join("rays_0005.bin")).unwrap();
+    let file = export_default_rays(dir.path(), &size);
+    let records = read_ray_file(&file).unwrap();
     let faces = obj_faces(&dir.path().join("frame_0005.obj"));
     let count = |c: RayClass| records.iter().filter(|r| r.class == c).count();
     assert_eq!(
@@ -937,7 +951,6 @@ fn the_ray_file_records_every_ray_with_answers_brute_force_confirms() {
     }
     assert_eq!(checked.iter().sum::<usize>(), records.len());
 
-    let file = dir.path().join("rays_0005.bin");
     let rows = bench_rows_agree("default", "5", &size, &file);
     assert_eq!(
         rows.len(),
@@ -991,25 +1004,7 @@ fn split_ray_file_parts_hold_every_ray_once_by_class_and_bounce() {
         return;
     }
     let dir = tempfile::tempdir().unwrap();
-    let out = dir.path().to_str().unwrap();
-    let (w, h) = (48u32, 27u32);
-    let run = mipray(&[
-        "export",
-        "default",
-        "--frames",
-        "5",
-        "--size",
-        &format!("{w}x{h}"),
-        "--rays",
-        "--out",
-        out,
-    ]);
-    assert!(
-        run.status.success(),
-        "{}",
-        String::from_utf8_lossy(&run.stderr)
-    );
-    let file = dir.path().join("rays_0005.bin");
+    let file = export_default_rays(dir.path(), "48x27");
     let records = read_ray_file(&file).unwrap();
     let parts_dir = dir.path().join("parts");
     let split = python(&[file.as_os_str(), parts_dir.as_os_str()]).unwrap();
@@ -1152,23 +1147,7 @@ fn bench_on_a_ray_file_cuts_each_ray_at_its_own_t_max_and_refuses_what_it_cannot
     use mipray::render::RayClass;
     let dir = tempfile::tempdir().unwrap();
     let size = "48x27";
-    let run = mipray(&[
-        "export",
-        "default",
-        "--frames",
-        "5",
-        "--size",
-        size,
-        "--rays",
-        "--out",
-        dir.path().to_str().unwrap(),
-    ]);
-    assert!(
-        run.status.success(),
-        "{}",
-        String::from_utf8_lossy(&run.stderr)
-    );
-    let records = read_ray_file(&dir.path().join("rays_0005.bin")).unwrap();
+    let records = read_ray_file(&export_default_rays(dir.path(), size)).unwrap();
     let mut cut = records.clone();
     let (mut misses, mut kept) = (0, 0);
     for (i, r) in cut.iter_mut().enumerate() {
