@@ -29,14 +29,15 @@ fn default_scene() -> SceneDesc {
     mipray::cli::load_scene(&path).expect("load default scene")
 }
 
-/// `mipray export default --frames 5 --size SIZE --rays --out DIR`, which must succeed; the
-/// path of the ray file it wrote (its OBJ is `frame_0005.obj` beside it).
-fn export_default_rays(dir: &Path, size: &str) -> PathBuf {
+/// `mipray export SCENE --frames FRAME --size SIZE --rays --out DIR`, which must succeed;
+/// the path of the ray file it wrote (its OBJ, `frame_NNNN.obj`, beside it).
+fn export_rays(scene: &str, frame: u32, size: &str, dir: &Path) -> PathBuf {
+    let frame_arg = frame.to_string();
     let run = mipray(&[
         "export",
-        "default",
+        scene,
         "--frames",
-        "5",
+        &frame_arg,
         "--size",
         size,
         "--rays",
@@ -48,7 +49,7 @@ fn export_default_rays(dir: &Path, size: &str) -> PathBuf {
         "{}",
         String::from_utf8_lossy(&run.stderr)
     );
-    dir.join("rays_0005.bin")
+    dir.join(format!("rays_{frame:04}.bin"))
 }
 
 fn settings(width: u32, height: u32) -> RenderSettings {
@@ -884,7 +885,7 @@ fn the_ray_file_records_every_ray_with_answers_brute_force_confirms() {
     let dir = tempfile::tempdir().unwrap();
     let (w, h) = (48u32, 27u32);
     let size = format!("{w}x{h}");
-    let file = export_default_rays(dir.path(), &size);
+    let file = export_rays("default", 5, &size, dir.path());
     let records = read_ray_file(&file).unwrap();
     let faces = obj_faces(&dir.path().join("frame_0005.obj"));
     let count = |c: RayClass| records.iter().filter(|r| r.class == c).count();
@@ -1004,7 +1005,7 @@ fn split_ray_file_parts_hold_every_ray_once_by_class_and_bounce() {
         return;
     }
     let dir = tempfile::tempdir().unwrap();
-    let file = export_default_rays(dir.path(), "48x27");
+    let file = export_rays("default", 5, "48x27", dir.path());
     let records = read_ray_file(&file).unwrap();
     let parts_dir = dir.path().join("parts");
     let split = python(&[file.as_os_str(), parts_dir.as_os_str()]).unwrap();
@@ -1114,25 +1115,10 @@ fn a_scene_with_instances_exports_every_triangle_and_its_rays_agree() {
     assert!(!dir.path().join("library").join("frame_0000.obj").exists());
 
     let out = dir.path().join("cli");
-    let run = mipray(&[
-        "export",
-        "robots",
-        "--frames",
-        "3",
-        "--size",
-        size,
-        "--rays",
-        "--out",
-        out.to_str().unwrap(),
-    ]);
-    assert!(
-        run.status.success(),
-        "{}",
-        String::from_utf8_lossy(&run.stderr)
-    );
+    let rays = export_rays("robots", 3, size, &out);
     let obj = std::fs::read_to_string(out.join("frame_0003.obj")).unwrap();
     assert_eq!(obj.lines().filter(|l| l.starts_with("f ")).count(), count);
-    let rows = bench_rows_agree("robots", "3", size, &out.join("rays_0003.bin"));
+    let rows = bench_rows_agree("robots", "3", size, &rays);
     assert!(rows.len() >= 4, "{rows:?}");
 }
 
@@ -1147,7 +1133,7 @@ fn bench_on_a_ray_file_cuts_each_ray_at_its_own_t_max_and_refuses_what_it_cannot
     use mipray::render::RayClass;
     let dir = tempfile::tempdir().unwrap();
     let size = "48x27";
-    let records = read_ray_file(&export_default_rays(dir.path(), size)).unwrap();
+    let records = read_ray_file(&export_rays("default", 5, size, dir.path())).unwrap();
     let mut cut = records.clone();
     let (mut misses, mut kept) = (0, 0);
     for (i, r) in cut.iter_mut().enumerate() {
