@@ -8,7 +8,7 @@ depth, so a secondary ray counts as first-bounce when its origin lies within `--
 (relative to the primary ray's hit distance) of its pixel's primary hit point (one sample
 a pixel, as `export --rays` writes); every other secondary ray is a later bounce.
 
-Writes, beside nothing else, one ray file per non-empty part into OUT_DIR:
+Writes one ray file per non-empty part into OUT_DIR (nothing else):
 `primary.bin`, `shadow_first.bin`, `shadow_later.bin`, `reflection_first.bin`, ... each in
 the same format, rays in the file's order, so that `mipray bench SCENE --frames F --rays
 PART.bin` and Embree's anchor (`embree_ray_file.c` in this folder) trace exactly the same
@@ -49,7 +49,7 @@ def main():
 
     # Each pixel's primary hit point and distance (pixels without a hit stay absent).
     hit_of = {}
-    for k, rec in enumerate(RECORD.iter_unpack(records)):
+    for rec in RECORD.iter_unpack(records):
         ox, oy, oz, dx, dy, dz, _tmin, _tmax, cls, pixel, result, t = rec
         if cls == 0 and result != 0xFFFFFFFF and math.isfinite(t):
             hit_of[pixel] = ((ox + dx * t, oy + dy * t, oz + dz * t), t)
