@@ -76,10 +76,14 @@ pub(super) struct TileBuffers<L: RayLod> {
     /// in the `bench` build, within the noise in the release build (docs/benchmark-log.md).
     triangles: Vec<HitTriangle>,
     /// Where the method's level needs only the hit's distance ([`RayLod::LEVEL_AT_DISTANCE`]):
-    /// the bounce's levels, one per hit in `hits`' order, each computed as its packet's
-    /// hits come back (with its triangle), long before the hit's arrival needs it. Made on
-    /// arrival, the logarithm (a division and a polynomial) headed the chain of dependent
-    /// work that plans the hit's lookup; there it overlaps the walks (docs/benchmark-log.md).
+    /// the bounce's levels, one per ray in `rays`' order (a miss's is never read), computed
+    /// a packet at a time as its hits come back, long before the hits' arrivals need them.
+    /// Made on arrival, the logarithm (a division and a polynomial) headed the chain of
+    /// dependent work that plans the hit's lookup; there it overlaps the walks. A packet's
+    /// levels are one loop over arrays of its rays' states, distances and `log2 P_b`, which
+    /// the compiler vectorises (eight lanes in the AVX2 copy; the same operations lane by
+    /// lane, so the same bits), where one level per hit, pushed, cost about 30 instructions
+    /// (docs/benchmark-log.md).
     levels: Vec<f32>,
 }
 
@@ -182,15 +186,19 @@ fn trace_tile<L: RayLod, const AVX2: bool>(
         // Arrive at every hit; a miss is the background.
         waiting.clear();
         requests.clear();
-        let mut hit_triangles = triangles.iter().enumerate();
-        for ((vertex, ray), &hit) in (first_vertex..).zip(rays.iter()).zip(hits.iter()) {
+        let mut hit_triangles = triangles.iter();
+        for (i, ((vertex, ray), &hit)) in (first_vertex..)
+            .zip(rays.iter())
+            .zip(hits.iter())
+            .enumerate()
+        {
             let Some(hit) = hit else {
                 vertices[vertex as usize] = Combine::leaf(scene.background);
                 continue;
             };
-            let (k, triangle) = hit_triangles.next().expect("a triangle per hit");
+            let triangle = hit_triangles.next().expect("a triangle per hit");
             let level_ahead = if L::LEVEL_AT_DISTANCE {
-                levels.get(k).copied()
+                levels.get(i).copied()
             } else {
                 None
             };
@@ -325,10 +333,10 @@ fn trace_bounce<L: RayLod>(
 /// `rays` traced by `closest` in packets of up to [`PACKET`], the hits written in place into
 /// `hits` (cleared and sized first); each ray counted and logged, and each hit's triangle
 /// appended to `triangles` (cleared first) as its packet's hits come back, and with
-/// [`RayLod::LEVEL_AT_DISTANCE`] its level to `levels` (cleared first; one per triangle,
-/// so the arrival finds hit `k`'s level at `k`). Reading a
-/// hit's triangle may replace its distance and barycentrics (`SceneBvh::hit_triangle`);
-/// the log records the hit as the walk returned it.
+/// [`RayLod::LEVEL_AT_DISTANCE`] each ray's level written to `levels` (cleared and sized
+/// first; ray `i`'s at `i`, a miss's never read). Reading a hit's triangle may replace its
+/// distance and barycentrics (`SceneBvh::hit_triangle`); the log records the hit as the
+/// walk returned it.
 #[inline(always)]
 fn trace_packets<L: RayLod>(
     scene: &FrameScene,
@@ -343,13 +351,23 @@ fn trace_packets<L: RayLod>(
     hits.resize(rays.len(), None);
     triangles.clear();
     levels.clear();
+    if L::LEVEL_AT_DISTANCE {
+        levels.resize(rays.len(), f32::NAN);
+    }
     let mut packet_rays = [(Vec3A::ZERO, Vec3A::ZERO); PACKET];
-    for (packet, packet_hits) in rays.chunks(PACKET).zip(hits.chunks_mut(PACKET)) {
+    for (first, (packet, packet_hits)) in (0..)
+        .step_by(PACKET)
+        .zip(rays.chunks(PACKET).zip(hits.chunks_mut(PACKET)))
+    {
         for (traced, ray) in packet_rays.iter_mut().zip(packet) {
             *traced = (ray.origin, ray.direction);
         }
         closest(&packet_rays[..packet.len()], packet_hits);
-        for (ray, hit) in packet.iter().zip(packet_hits) {
+        // The packet's level inputs, lane `i` for its ray `i` (a miss's lane keeps a
+        // placeholder: its level is computed and never read).
+        let mut states = [packet[0].lod; PACKET];
+        let (mut distance, mut log2_pb) = ([0.0f32; PACKET], [0.0f32; PACKET]);
+        for (i, (ray, hit)) in packet.iter().zip(packet_hits).enumerate() {
             counters.rays += 1;
             if let Some(log) = &mut counters.log {
                 log.closest(
@@ -366,15 +384,20 @@ fn trace_packets<L: RayLod>(
                 if L::LEVEL_AT_DISTANCE {
                     // The settled hit's distance (reading the triangle may replace it), as
                     // the arrival's `RayLod::arrive` reads it.
-                    levels.push(ray.lod.level_at_distance(hit.t, triangle.log2_pb));
+                    (states[i], distance[i], log2_pb[i]) = (ray.lod, hit.t, triangle.log2_pb);
                 }
             }
         }
+        if L::LEVEL_AT_DISTANCE {
+            // Every lane, a whole packet's worth: a loop of fixed length over arrays, which
+            // the compiler vectorises.
+            let mut level = [0.0f32; PACKET];
+            for (i, level) in level.iter_mut().enumerate() {
+                *level = states[i].level_at_distance(distance[i], log2_pb[i]);
+            }
+            levels[first..first + packet.len()].copy_from_slice(&level[..packet.len()]);
+        }
     }
-    debug_assert!(
-        !L::LEVEL_AT_DISTANCE || levels.len() == triangles.len(),
-        "a level per hit triangle"
-    );
 }
 
 /// Traces every request's shadow ray and fills in its transmittance: per light, the
