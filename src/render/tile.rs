@@ -198,7 +198,7 @@ fn trace_tile<L: RayLod, const AVX2: bool>(
             };
             let triangle = hit_triangles.next().expect("a triangle per hit");
             let level_ahead = if L::LEVEL_AT_DISTANCE {
-                levels.get(i).copied()
+                Some(levels[i])
             } else {
                 None
             };
@@ -367,7 +367,13 @@ fn trace_packets<L: RayLod>(
         // placeholder: its level is computed and never read).
         let mut states = [packet[0].lod; PACKET];
         let (mut distance, mut log2_pb) = ([0.0f32; PACKET], [0.0f32; PACKET]);
-        for (i, (ray, hit)) in packet.iter().zip(packet_hits).enumerate() {
+        // Zipped, not indexed: the packet's length is not known to be at most `PACKET`, so
+        // each indexed store was a bounds check.
+        let lanes = states
+            .iter_mut()
+            .zip(distance.iter_mut().zip(log2_pb.iter_mut()));
+        for ((ray, hit), (state, (distance, log2_pb))) in packet.iter().zip(packet_hits).zip(lanes)
+        {
             counters.rays += 1;
             if let Some(log) = &mut counters.log {
                 log.closest(
@@ -384,7 +390,7 @@ fn trace_packets<L: RayLod>(
                 if L::LEVEL_AT_DISTANCE {
                     // The settled hit's distance (reading the triangle may replace it), as
                     // the arrival's `RayLod::arrive` reads it.
-                    (states[i], distance[i], log2_pb[i]) = (ray.lod, hit.t, triangle.log2_pb);
+                    (*state, *distance, *log2_pb) = (ray.lod, hit.t, triangle.log2_pb);
                 }
             }
         }
