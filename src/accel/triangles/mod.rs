@@ -820,11 +820,13 @@ impl ShearedRay {
     }
 
     /// [`ShearedRay::new`] of each of `rays` into `out` (as many as the shorter holds),
-    /// four rays at a time on x86-64 ([`sheared_four`]: the same bits).
+    /// four rays at a time on x86-64 ([`sheared_four`]) and eight in the AVX2 copy
+    /// ([`sheared_eight`]), the same bits.
     ///
     /// Why: a packet makes the frames of its 64 rays before its walk, and one at a time
     /// (a division, and the axes picked lane by lane) that was about 63 of a primary ray's
-    /// 615 instructions on BART Kitchen (four at a time: about 29 in the AVX2 copy).
+    /// 615 instructions on BART Kitchen (four at a time: about 29 in the AVX2 copy; eight
+    /// at a time took 29 M instructions off a Kitchen frame of 2,979 M).
     ///
     /// In the copy [`crate::simd::dispatch`] chooses: the same operations, which the AVX2
     /// copy encodes with three operands (SSE2's copy spends a move on most of them).
