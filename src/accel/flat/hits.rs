@@ -367,19 +367,21 @@ impl LeafVisit for ClosestLeaf<'_> {
 const ACROSS_RAYS_MIN: usize = 4;
 
 /// The hit callback of a group test over the rays `chunk`: keeps each hit that is closer for
-/// its ray (bit `l` of `improved` set for ray `chunk[l]`).
+/// its ray (bit `l` of `improved` set for ray `chunk[l]`). A closest-hit ray never stops in
+/// a leaf (a later triangle may be closer), so it always asks for more.
 #[inline(always)]
 fn keeping_closer<'a>(
     within: &'a Within,
     best: &'a mut [Closest; PACKET],
     chunk: &'a [u8],
     improved: &'a mut u32,
-) -> impl FnMut(usize, u32, u32, f32, glam::Vec2) + 'a {
+) -> impl FnMut(usize, u32, u32, f32, glam::Vec2) -> bool + 'a {
     move |l, slot, source, t, bary| {
         let r = chunk[l] as usize;
         if keep_if_closer(within, &mut best[r], slot, source, t, bary) {
             *improved |= 1 << l;
         }
+        true
     }
 }
 
@@ -821,6 +823,7 @@ impl<F: FnMut(usize, u32, f32) -> bool> AnyHitPacketLeaf<'_, F> {
                                 if alive & (1 << l) != 0 && !visit(at + l, slot, t) {
                                     alive &= !(1 << l);
                                 }
+                                alive & (1 << l) != 0
                             },
                         )
                     };
@@ -873,6 +876,7 @@ impl<F: FnMut(usize, u32, f32) -> bool> AnyHitPacketLeaf<'_, F> {
                 if alive & (1 << l) != 0 && !visit(at + l, slot, t) {
                     alive &= !(1 << l);
                 }
+                alive & (1 << l) != 0
             },
         );
         stop(&mut self.stopped, chunk, live & !alive, limits);
@@ -899,7 +903,7 @@ impl<F: FnMut(usize, u32, f32) -> bool> AnyHitPacketLeaf<'_, F> {
                 let mut alive = (1u32 << chunk.len()) - 1;
                 self.accel.triangles.hits_in_leaf_across::<AVX>(
                     lanes,
-                    u32::MAX,
+                    alive,
                     first,
                     count,
                     &cut,
@@ -907,6 +911,7 @@ impl<F: FnMut(usize, u32, f32) -> bool> AnyHitPacketLeaf<'_, F> {
                         if alive & (1 << l) != 0 && !visit(chunk[l] as usize, slot, t) {
                             alive &= !(1 << l);
                         }
+                        alive & (1 << l) != 0
                     },
                 );
                 let finished = ((1u32 << chunk.len()) - 1) & !alive;

@@ -396,7 +396,9 @@ pub mod sixteen {
     /// (indices into `sheared`, 1 to [`WIDE`] of them, sharing one permutation) whose bits
     /// are set in `live` (bit `l` for `chunk[l]`), ray `l` of the chunk cut at
     /// `t_max[chunk[l]]`; calls `hit(l, slot, source, t, bary)` for every such ray and
-    /// triangle that cross.
+    /// triangle that cross, in the leaf's order, until `hit` returns false for a ray (an
+    /// any-hit query that has stopped it): that ray is tested no further, and the leaf ends
+    /// when no ray is left.
     ///
     /// # Safety
     /// The CPU must have AVX-512F.
@@ -410,7 +412,7 @@ pub mod sixteen {
         t_max: &[f32; PACKET],
         first_pack: u32,
         count: u32,
-        mut hit: impl FnMut(usize, u32, u32, f32, Vec2),
+        mut hit: impl FnMut(usize, u32, u32, f32, Vec2) -> bool,
     ) {
         assert!(
             (1..=WIDE).contains(&chunk.len()),
@@ -458,13 +460,16 @@ pub mod sixteen {
             origin: [0, 1, 2].map(|axis| join(&low.0[axis], &high.0[axis])),
             shear: [0, 1, 2].map(|axis| join(&low.1[axis], &high.1[axis])),
             cut,
-            live: live & ((1u32 << chunk.len()) - 1) as u16,
         };
+        let mut live = live & ((1u32 << chunk.len()) - 1) as u16;
         let first_pack = first_pack as usize;
         let packs = (count as usize).div_ceil(LANES);
         for pack in &triangles.packs[first_pack..first_pack + packs] {
             for lane in 0..pack.live as usize {
-                group.intersect(pack, lane, &mut hit);
+                live = group.intersect(live, pack, lane, &mut hit);
+                if live == 0 {
+                    return;
+                }
             }
         }
     }
@@ -475,7 +480,6 @@ pub mod sixteen {
         origin: [__m512; 3],
         shear: [__m512; 3],
         cut: __m512,
-        live: u16,
     }
 
     impl Group {
@@ -498,12 +502,16 @@ pub mod sixteen {
 
         #[inline]
         #[target_feature(enable = "avx512f")]
+        /// The triangle `lane` of `pack` against the rays `live` (bit `l` for lane `l`):
+        /// `hit` for each that crosses it; returns the rays still live (those `hit` did
+        /// not stop).
         fn intersect(
             &self,
+            mut live: u16,
             pack: &TrianglePack,
             lane: usize,
-            hit: &mut impl FnMut(usize, u32, u32, f32, Vec2),
-        ) {
+            hit: &mut impl FnMut(usize, u32, u32, f32, Vec2) -> bool,
+        ) -> u16 {
             let [ax, ay, az] = self.sheared_vertex(pack, 0, lane);
             let [bx, by, bz] = self.sheared_vertex(pack, 1, lane);
             let [cx, cy, cz] = self.sheared_vertex(pack, 2, lane);
@@ -522,7 +530,7 @@ pub mod sixteen {
                 out
             };
             let is_zero = |x: __m512| _mm512_cmp_ps_mask::<_CMP_EQ_OQ>(x, zero);
-            let on_edge = (is_zero(u) | is_zero(v) | is_zero(w)) & self.live;
+            let on_edge = (is_zero(u) | is_zero(v) | is_zero(w)) & live;
             if on_edge != 0 {
                 // Exactly on an edge in f32: decided in f64 (rare), as the pack test does.
                 let [ax, ay, bx, by, cx, cy] = [ax, ay, bx, by, cx, cy].map(row);
@@ -548,9 +556,9 @@ pub mod sixteen {
             let positive = gt(u) | gt(v) | gt(w);
             let det = _mm512_add_ps(_mm512_add_ps(u, v), w);
             let inside =
-                !(negative & positive) & _mm512_cmp_ps_mask::<_CMP_NEQ_UQ>(det, zero) & self.live;
+                !(negative & positive) & _mm512_cmp_ps_mask::<_CMP_NEQ_UQ>(det, zero) & live;
             if inside == 0 {
-                return;
+                return live;
             }
             let sz = self.shear[2];
             let t_scaled = _mm512_add_ps(
@@ -579,20 +587,23 @@ pub mod sixteen {
                 let (slot, source) = (pack.first_slot + lane as u32, pack.source[lane]);
                 // Two calls rather than one on an `Option` of both paths' answers: that
                 // went through the stack and stalled on reading its pieces back.
-                if finite & (1 << l) != 0 {
-                    hit(l, slot, source, t[l], Vec2::new(bv[l], bw[l]));
+                let goes_on = if finite & (1 << l) != 0 {
+                    hit(l, slot, source, t[l], Vec2::new(bv[l], bw[l]))
                 } else {
                     let t_max = cut[l];
                     let origin = self.origin.map(|axis| row(axis)[l]);
                     let shear = self.shear.map(|axis| row(axis)[l]);
                     let k = self.k.map(|axis| axis as u8);
-                    if let Some((t, bary)) =
-                        intersect_beyond_f32(origin, shear, k, pack, lane, t_max)
-                    {
-                        hit(l, slot, source, t, bary);
+                    match intersect_beyond_f32(origin, shear, k, pack, lane, t_max) {
+                        Some((t, bary)) => hit(l, slot, source, t, bary),
+                        None => true,
                     }
+                };
+                if !goes_on {
+                    live &= !(1 << l);
                 }
             }
+            live
         }
     }
 }
@@ -944,7 +955,8 @@ mod tests {
                                     t.to_bits(),
                                     bary.x.to_bits(),
                                     bary.y.to_bits(),
-                                ))
+                                ));
+                                true
                             },
                         )
                     };

@@ -581,16 +581,19 @@ impl PackedTriangles {
     /// [`PackedTriangles::hits_in_leaf`] for a group of rays at once: each triangle of the
     /// leaf is tested across the rays of `rays` in the lanes `live` (`u32::MAX`: all; the
     /// same answers as each ray alone), and `hit(lane, slot, source, t, bary)` is called for
-    /// every such ray and triangle that cross with `t` in `[0, t_max)` of that ray's lane.
+    /// every such ray and triangle that cross with `t` in `[0, t_max)` of that ray's lane,
+    /// in the leaf's order, until `hit` returns false for a lane (an any-hit query that has
+    /// stopped its ray): that lane is tested no further, and the leaf ends when no lane is
+    /// left.
     #[inline(always)]
     pub fn hits_in_leaf_across<const AVX: bool>(
         &self,
         rays: &ShearedLanes,
-        live: u32,
+        mut live: u32,
         first_pack: u32,
         count: u32,
         t_max: &crate::simd::F32x8,
-        mut hit: impl FnMut(usize, u32, u32, f32, Vec2),
+        mut hit: impl FnMut(usize, u32, u32, f32, Vec2) -> bool,
     ) {
         let first_pack = first_pack as usize;
         let packs = (count as usize).div_ceil(LANES);
@@ -602,7 +605,12 @@ impl PackedTriangles {
                     let l = mask.trailing_zeros() as usize;
                     mask &= mask - 1;
                     let slot = pack.first_slot + lane as u32;
-                    hit(l, slot, pack.source[lane], found.t[l], found.bary[l]);
+                    if !hit(l, slot, pack.source[lane], found.t[l], found.bary[l]) {
+                        live &= !(1 << l);
+                    }
+                }
+                if live == 0 {
+                    return;
                 }
             }
         }
