@@ -500,11 +500,11 @@ pub mod sixteen {
             [x, y, z]
         }
 
-        #[inline]
-        #[target_feature(enable = "avx512f")]
         /// The triangle `lane` of `pack` against the rays `live` (bit `l` for lane `l`):
         /// `hit` for each that crosses it; returns the rays still live (those `hit` did
         /// not stop).
+        #[inline]
+        #[target_feature(enable = "avx512f")]
         fn intersect(
             &self,
             mut live: u16,
