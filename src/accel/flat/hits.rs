@@ -809,9 +809,8 @@ impl<F: FnMut(usize, u32, f32) -> bool> AnyHitPacketLeaf<'_, F> {
                     count_fixed_group(3);
                     let chunk = &RAY_NUMBERS[at..end];
                     let visit = &mut self.visit;
-                    let mut alive = u32::from(live);
                     // SAFETY: `simd::avx512()` holds only where the CPU has AVX-512F.
-                    unsafe {
+                    let alive = unsafe {
                         sixteen::hits_in_leaf(
                             &self.accel.triangles,
                             self.sheared,
@@ -820,15 +819,10 @@ impl<F: FnMut(usize, u32, f32) -> bool> AnyHitPacketLeaf<'_, F> {
                             self.t_max,
                             first,
                             count,
-                            |l, slot, _, t, _| {
-                                if alive & (1 << l) != 0 && !visit(at + l, slot, t) {
-                                    alive &= !(1 << l);
-                                }
-                                alive & (1 << l) != 0
-                            },
+                            |l, slot, _, t, _| visit(at + l, slot, t),
                         )
                     };
-                    stop(&mut self.stopped, chunk, u32::from(live) & !alive, limits);
+                    stop(&mut self.stopped, chunk, u32::from(live & !alive), limits);
                     continue;
                 }
                 for half in [at, at + RAYS] {
@@ -866,19 +860,13 @@ impl<F: FnMut(usize, u32, f32) -> bool> AnyHitPacketLeaf<'_, F> {
                 .expect("a group's limits"),
         );
         let visit = &mut self.visit;
-        let mut alive = live;
-        self.accel.triangles.hits_in_leaf_across::<AVX>(
+        let alive = self.accel.triangles.hits_in_leaf_across::<AVX>(
             lanes,
             live,
             first,
             count,
             &cut,
-            |l, slot, _, t, _| {
-                if alive & (1 << l) != 0 && !visit(at + l, slot, t) {
-                    alive &= !(1 << l);
-                }
-                alive & (1 << l) != 0
-            },
+            |l, slot, _, t, _| visit(at + l, slot, t),
         );
         stop(&mut self.stopped, chunk, live & !alive, limits);
     }
@@ -901,21 +889,16 @@ impl<F: FnMut(usize, u32, f32) -> bool> AnyHitPacketLeaf<'_, F> {
             for chunk in order[at..at + run].chunks(RAYS) {
                 let lanes = &ShearedLanes::of_rays::<AVX>(self.sheared, chunk);
                 let cut = lanes_of::<AVX>(self.t_max, chunk);
-                let mut alive = (1u32 << chunk.len()) - 1;
-                self.accel.triangles.hits_in_leaf_across::<AVX>(
+                let all = (1u32 << chunk.len()) - 1;
+                let alive = self.accel.triangles.hits_in_leaf_across::<AVX>(
                     lanes,
-                    alive,
+                    all,
                     first,
                     count,
                     &cut,
-                    |l, slot, _, t, _| {
-                        if alive & (1 << l) != 0 && !visit(chunk[l] as usize, slot, t) {
-                            alive &= !(1 << l);
-                        }
-                        alive & (1 << l) != 0
-                    },
+                    |l, slot, _, t, _| visit(chunk[l] as usize, slot, t),
                 );
-                let finished = ((1u32 << chunk.len()) - 1) & !alive;
+                let finished = all & !alive;
                 stop(&mut self.stopped, chunk, finished, limits);
             }
             at += run;

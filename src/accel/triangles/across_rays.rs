@@ -398,7 +398,8 @@ pub mod sixteen {
     /// `t_max[chunk[l]]`; calls `hit(l, slot, source, t, bary)` for every such ray and
     /// triangle that cross, in the leaf's order, until `hit` returns false for a ray (an
     /// any-hit query that has stopped it): that ray is tested no further, and the leaf ends
-    /// when no ray is left.
+    /// when no ray is left. Returns the rays of `live` still live (`hit` is never called
+    /// for a ray after it returned false for it).
     ///
     /// # Safety
     /// The CPU must have AVX-512F.
@@ -413,7 +414,7 @@ pub mod sixteen {
         first_pack: u32,
         count: u32,
         mut hit: impl FnMut(usize, u32, u32, f32, Vec2) -> bool,
-    ) {
+    ) -> u16 {
         assert!(
             (1..=WIDE).contains(&chunk.len()),
             "{} rays in a lane group",
@@ -468,10 +469,11 @@ pub mod sixteen {
             for lane in 0..pack.live as usize {
                 live = group.intersect(live, pack, lane, &mut hit);
                 if live == 0 {
-                    return;
+                    return 0;
                 }
             }
         }
+        live
     }
 
     /// Up to sixteen rays of one permutation as vector rows, and their limits.

@@ -584,7 +584,8 @@ impl PackedTriangles {
     /// every such ray and triangle that cross with `t` in `[0, t_max)` of that ray's lane,
     /// in the leaf's order, until `hit` returns false for a lane (an any-hit query that has
     /// stopped its ray): that lane is tested no further, and the leaf ends when no lane is
-    /// left.
+    /// left. Returns the lanes of `live` still live (`hit` is never called for a lane after
+    /// it returned false for it).
     #[inline(always)]
     pub fn hits_in_leaf_across<const AVX: bool>(
         &self,
@@ -594,7 +595,7 @@ impl PackedTriangles {
         count: u32,
         t_max: &crate::simd::F32x8,
         mut hit: impl FnMut(usize, u32, u32, f32, Vec2) -> bool,
-    ) {
+    ) -> u32 {
         let first_pack = first_pack as usize;
         let packs = (count as usize).div_ceil(LANES);
         for pack in &self.packs[first_pack..first_pack + packs] {
@@ -610,10 +611,11 @@ impl PackedTriangles {
                     }
                 }
                 if live == 0 {
-                    return;
+                    return 0;
                 }
             }
         }
+        live
     }
 }
 
