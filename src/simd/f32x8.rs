@@ -162,30 +162,6 @@ impl F32x8 {
             .fold(f32::NEG_INFINITY, |a, b| if b > a { b } else { a })
     }
 
-    /// `self`'s lanes whose sign bit is set (negative numbers, `-0.0`, negative NaNs) and
-    /// `other`'s in the rest: one `blendv` on `self`'s own sign bits in the AVX copy.
-    #[inline(always)]
-    pub fn where_sign_set<const AVX: bool>(self, other: F32x8) -> F32x8 {
-        #[cfg(target_arch = "x86_64")]
-        if AVX {
-            // SAFETY: as in `sub`.
-            return unsafe { avx::where_sign_set(self, other) };
-        }
-        self.zip(other, |a, b| if a.is_sign_negative() { a } else { b })
-    }
-
-    /// `self`'s lanes whose sign bit is clear and `other`'s in the rest (the complement of
-    /// [`F32x8::where_sign_set`]).
-    #[inline(always)]
-    pub fn where_sign_clear<const AVX: bool>(self, other: F32x8) -> F32x8 {
-        #[cfg(target_arch = "x86_64")]
-        if AVX {
-            // SAFETY: as in `sub`.
-            return unsafe { avx::where_sign_clear(self, other) };
-        }
-        self.zip(other, |a, b| if a.is_sign_negative() { b } else { a })
-    }
-
     /// Bit `lane` set where `self < other` (false for NaN).
     #[inline(always)]
     pub fn lt_mask<const AVX: bool>(self, other: F32x8) -> u32 {
@@ -364,20 +340,6 @@ mod avx {
 
     #[inline]
     #[target_feature(enable = "avx")]
-    pub fn where_sign_set(a: F32x8, other: F32x8) -> F32x8 {
-        let a = load(a);
-        store(_mm256_blendv_ps(load(other), a, a))
-    }
-
-    #[inline]
-    #[target_feature(enable = "avx")]
-    pub fn where_sign_clear(a: F32x8, other: F32x8) -> F32x8 {
-        let a = load(a);
-        store(_mm256_blendv_ps(a, load(other), a))
-    }
-
-    #[inline]
-    #[target_feature(enable = "avx")]
     pub fn le_mask(a: F32x8, b: F32x8) -> u32 {
         _mm256_movemask_ps(_mm256_cmp_ps::<_CMP_LE_OQ>(load(a), load(b))) as u32
     }
@@ -480,19 +442,6 @@ mod tests {
                     .collect();
                 let (kept_lanes, kept_mask) = a.kept_where_le::<false>(b);
                 assert_eq!((bits(kept_lanes).to_vec(), kept_mask), (kept, le));
-                let by_sign = |set: bool| {
-                    (0..WIDTH)
-                        .map(|l| {
-                            let a_sign_set = a.0[l].to_bits() >> 31 == 1;
-                            if a_sign_set == set { a.0[l] } else { b.0[l] }.to_bits()
-                        })
-                        .collect::<Vec<u32>>()
-                };
-                assert_eq!(bits(a.where_sign_set::<false>(b)).to_vec(), by_sign(true));
-                assert_eq!(
-                    bits(a.where_sign_clear::<false>(b)).to_vec(),
-                    by_sign(false)
-                );
                 if j == 0 {
                     assert_eq!(bits(a.abs::<false>()), bits(F32x8(a.0.map(f32::abs))));
                     assert_eq!(bits(a.sqrt::<false>()), bits(F32x8(a.0.map(f32::sqrt))));
@@ -515,14 +464,6 @@ mod tests {
                     let (avx_lanes, avx_mask) = a.kept_where_le::<true>(b);
                     assert_eq!((bits(avx_lanes), avx_mask), (bits(kept_lanes), kept_mask));
                     assert_eq!(bits(a.add::<true>(b)), bits(a.add::<false>(b)));
-                    assert_eq!(
-                        bits(a.where_sign_set::<true>(b)),
-                        bits(a.where_sign_set::<false>(b))
-                    );
-                    assert_eq!(
-                        bits(a.where_sign_clear::<true>(b)),
-                        bits(a.where_sign_clear::<false>(b))
-                    );
                     assert_eq!(bits(a.div::<true>(b)), bits(a.div::<false>(b)));
                     assert_eq!(a.lt_mask::<true>(b), a.lt_mask::<false>(b));
                     assert_eq!(a.gt_mask::<true>(b), a.gt_mask::<false>(b));

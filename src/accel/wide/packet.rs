@@ -83,95 +83,6 @@ struct Frustum {
     reach_high: [f32; 3],
 }
 
-/// What a packet's bounds keep of one axis's inverse direction components: the least and
-/// the largest, and whether some or all are negative.
-#[derive(Clone, Copy, Debug, PartialEq)]
-struct InverseSpan {
-    min: f32,
-    max: f32,
-    some_negative: bool,
-    all_negative: bool,
-}
-
-impl InverseSpan {
-    /// A placeholder, overwritten before it is read.
-    const EMPTY: InverseSpan = InverseSpan {
-        min: 0.0,
-        max: 0.0,
-        some_negative: false,
-        all_negative: false,
-    };
-
-    /// The span of the first `len` inverses of `row`, or `None` when one is NaN.
-    #[inline(always)]
-    fn of_row(row: &[f32; PACKET], len: usize) -> Option<InverseSpan> {
-        // Four at a time; the slots of a last, partial group repeat ray 0.
-        let whole = len / 4 * 4;
-        let tail = Vec4::new(0.0, 1.0, 2.0, 3.0).cmplt(Vec4::splat((len - whole) as f32));
-        let first = Vec4::splat(row[0]);
-        let (mut min, mut max) = (first, first);
-        // Bit k: some (every) group has a negative inverse in lane k; lanes past `len`
-        // count as negative for `every` and not for `some`.
-        let (mut some_negative, mut every_negative, mut nan) = (0, 0b1111, 0);
-        let mut take = |v: Vec4, live: u32| {
-            min = min.min(v);
-            max = max.max(v);
-            let negative = v.cmplt(Vec4::ZERO).bitmask();
-            some_negative |= negative & live;
-            every_negative &= negative | !live;
-            nan |= v.cmpne(v).bitmask();
-        };
-        for at in (0..whole).step_by(4) {
-            take(Vec4::from_slice(&row[at..at + 4]), 0b1111);
-        }
-        if whole < len {
-            let v = Vec4::select(tail, Vec4::from_slice(&row[whole..whole + 4]), first);
-            take(v, tail.bitmask());
-        }
-        if nan != 0 {
-            return None;
-        }
-        Some(InverseSpan {
-            min: min.min_element(),
-            max: max.max_element(),
-            some_negative: some_negative != 0,
-            all_negative: every_negative & 0b1111 == 0b1111,
-        })
-    }
-
-    /// The span of `safe_inverse` (the walk's inverse, `walk::safe_inverse4`) over finite
-    /// values of which `low` is the least, `high` the largest, `below_zero` the largest
-    /// with its sign bit set (`-inf` when there is none) and `above_zero` the least with it
-    /// clear (`+inf` when there is none): the same bits as [`InverseSpan::of_row`] over
-    /// their inverses, from four divisions instead of one per value.
-    ///
-    /// Why it is exact: on values with the sign bit clear, `safe_inverse` is non-increasing
-    /// (`1e30` below `1e-30`, then `1 / x`, correctly rounded and so monotonic, and at
-    /// `1e-30` itself already `1e30`) and positive; on values with it set, including
-    /// `-0.0`, non-increasing and negative (finite values invert to nonzero ones). So the
-    /// least inverse is that of the largest value of the negative side, or of the largest
-    /// value when there is none, and the largest inverse that of the least value of the
-    /// positive side, or of the least value.
-    #[inline(always)]
-    fn of_extremes(low: f32, high: f32, below_zero: f32, above_zero: f32) -> InverseSpan {
-        let inverse = |x: f32| {
-            if x.abs() < 1e-30 {
-                1e30f32.copysign(x)
-            } else {
-                1.0 / x
-            }
-        };
-        let some_negative = below_zero != f32::NEG_INFINITY;
-        let all_negative = above_zero == f32::INFINITY;
-        InverseSpan {
-            min: inverse(if some_negative { below_zero } else { high }),
-            max: inverse(if all_negative { low } else { above_zero }),
-            some_negative,
-            all_negative,
-        }
-    }
-}
-
 impl RayPacket {
     /// The packet of `rays` (`(origin, direction)`, at most [`PACKET`]).
     #[inline]
@@ -640,20 +551,14 @@ impl Frustum {
         let origin_high = reduce(origin_high, Lanes::max_lane);
         let apex = (low + high) * 0.5;
         let margin = (high - low).max_element() * 0.5 + scale * CONVERGING_SLACK;
-        // The reversed segments' directions, `origin - apex`, eight rays at a time: with
-        // them, the shortest segment, the spread of the unit directions and, per axis, the
-        // extremes that give the span of their inverses ([`InverseSpan::of_extremes`]).
+        // The reversed segments' directions, `origin - apex`, as rows; eight rays at a time
+        // with them, the shortest segment and the spread of the unit directions.
+        let mut backwards = [[0.0f32; PACKET]; 3];
         let (mut spread_low, mut spread_high) = (
             [Lanes::splat(f32::INFINITY); 3],
             [Lanes::splat(f32::NEG_INFINITY); 3],
         );
         let mut shortest = Lanes::splat(f32::INFINITY);
-        let (mut b_low, mut b_high) = (
-            [Lanes::splat(f32::INFINITY); 3],
-            [Lanes::splat(f32::NEG_INFINITY); 3],
-        );
-        // The largest lane with its sign bit set and the least with it clear.
-        let (mut below_zero, mut above_zero) = (b_high, b_low);
         for at in (0..groups).step_by(Lanes::LANES) {
             let b =
                 [0, 1, 2].map(|axis| eight(&origin[axis], at).sub::<AVX>(Lanes::splat(apex[axis])));
@@ -667,15 +572,8 @@ impl Frustum {
                 let unit = b[axis].div::<AVX>(length);
                 spread_low[axis] = spread_low[axis].min::<AVX>(unit);
                 spread_high[axis] = spread_high[axis].max::<AVX>(unit);
-                let x = b[axis];
-                b_low[axis] = x.min::<AVX>(b_low[axis]);
-                b_high[axis] = x.max::<AVX>(b_high[axis]);
-                below_zero[axis] = x
-                    .where_sign_set::<AVX>(Lanes::splat(f32::NEG_INFINITY))
-                    .max::<AVX>(below_zero[axis]);
-                above_zero[axis] = x
-                    .where_sign_clear::<AVX>(Lanes::splat(f32::INFINITY))
-                    .min::<AVX>(above_zero[axis]);
+                backwards[axis][at..at + Lanes::LANES]
+                    .copy_from_slice(&b[axis].safe_inverse::<AVX>().0);
             }
         }
         let shortest = shortest.min_lane();
@@ -687,24 +585,8 @@ impl Frustum {
         if !(margin <= shortest * CONVERGING_MARGIN_MAX) || fans_out {
             return None;
         }
-        // The spans of the reversed directions' inverses from their extremes, with no
-        // division per ray. The origins and the apex are finite (checked above), so a
-        // difference is infinite only where it overflowed: no bounds then.
-        let mut spans = [InverseSpan::EMPTY; 3];
-        for axis in 0..3 {
-            let (low, high) = (b_low[axis].min_lane(), b_high[axis].max_lane());
-            if !(low.is_finite() && high.is_finite()) {
-                return None;
-            }
-            spans[axis] = InverseSpan::of_extremes(
-                low,
-                high,
-                below_zero[axis].max_lane(),
-                above_zero[axis].min_lane(),
-            );
-        }
         let splat = [0, 1, 2].map(|axis| Lanes::splat(apex[axis]));
-        let mut frustum = Frustum::over_spans(splat, splat, spans);
+        let mut frustum = Frustum::over_inverses(splat, splat, &backwards, len)?;
         frustum.grow(apex, margin);
         frustum.fixed_limit = Some(1.0 + CONVERGING_SLACK);
         // Every point of a forward segment lies within `margin` of its backward one, which
@@ -743,21 +625,6 @@ impl Frustum {
         inverse: &[[f32; PACKET]; 3],
         len: usize,
     ) -> Option<Frustum> {
-        let mut spans = [InverseSpan::EMPTY; 3];
-        for (span, row) in spans.iter_mut().zip(inverse) {
-            *span = InverseSpan::of_row(row, len)?;
-        }
-        Some(Frustum::over_spans(front_origin, back_origin, spans))
-    }
-
-    /// The bounds of inverse directions spanning `spans` (per axis) from the given front and
-    /// back origins.
-    #[inline(always)]
-    fn over_spans(
-        front_origin: [Lanes; 3],
-        back_origin: [Lanes; 3],
-        spans: [InverseSpan; 3],
-    ) -> Frustum {
         let mut frustum = Frustum {
             front_origin,
             back_origin,
@@ -773,17 +640,45 @@ impl Frustum {
             reach_low: [f32::NEG_INFINITY; 3],
             reach_high: [f32::INFINITY; 3],
         };
-        for (axis, span) in spans.into_iter().enumerate() {
-            frustum.inverse_min[axis] = Lanes::splat(span.min);
-            frustum.inverse_max[axis] = Lanes::splat(span.max);
+        // Four at a time; the slots of a last, partial group repeat ray 0.
+        let whole = len / 4 * 4;
+        let tail = Vec4::new(0.0, 1.0, 2.0, 3.0).cmplt(Vec4::splat((len - whole) as f32));
+        for axis in 0..3 {
+            let row = &inverse[axis];
+            let first = Vec4::splat(row[0]);
+            let (mut min, mut max) = (first, first);
+            // Bit k: some (every) group has a negative inverse in lane k; lanes past `len`
+            // count as negative for `every` and not for `some`.
+            let (mut some_negative, mut every_negative, mut nan) = (0, 0b1111, 0);
+            let mut take = |v: Vec4, live: u32| {
+                min = min.min(v);
+                max = max.max(v);
+                let negative = v.cmplt(Vec4::ZERO).bitmask();
+                some_negative |= negative & live;
+                every_negative &= negative | !live;
+                nan |= v.cmpne(v).bitmask();
+            };
+            for at in (0..whole).step_by(4) {
+                take(Vec4::from_slice(&row[at..at + 4]), 0b1111);
+            }
+            if whole < len {
+                let v = Vec4::select(tail, Vec4::from_slice(&row[whole..whole + 4]), first);
+                take(v, tail.bitmask());
+            }
+            if nan != 0 {
+                return None;
+            }
+            frustum.inverse_min[axis] = Lanes::splat(min.min_element());
+            frustum.inverse_max[axis] = Lanes::splat(max.max_element());
             // As `RayBoxes`: a negative inverse meets the upper plane first.
-            frustum.front[axis] = Plane::of(axis, span.all_negative);
-            frustum.back[axis] = Plane::of(axis, !span.all_negative);
-            if !span.some_negative || span.all_negative {
+            let all_negative = every_negative & 0b1111 == 0b1111;
+            frustum.front[axis] = Plane::of(axis, all_negative);
+            frustum.back[axis] = Plane::of(axis, !all_negative);
+            if some_negative == 0 || all_negative {
                 frustum.agreeing |= 1 << axis;
             }
         }
-        frustum
+        Some(frustum)
     }
 
     /// The lanes of `node` that some ray of the packet may enter before `t_max` (the
@@ -2159,85 +2054,6 @@ mod tests {
         let origin = [Lanes::splat(0.0); 3];
         assert!(Frustum::over_inverses(origin, origin, &nan, 37).is_none());
         assert!(Frustum::over_inverses(origin, origin, &nan, 36).is_some());
-    }
-
-    /// The span a converging packet takes from the extremes of its reversed directions is
-    /// the span [`InverseSpan::of_row`] takes from their inverses, bit for bit, on values
-    /// that stress the inverse: zeros of both signs, values on either side of and at the
-    /// `1e-30` cut, subnormals, the largest finite values, and plain ones, in runs that are
-    /// all negative, all positive or mixed.
-    #[test]
-    fn a_span_from_the_extremes_is_the_span_of_the_inverses() {
-        let hard = [
-            0.0f32,
-            -0.0,
-            1e-30,
-            -1e-30,
-            9.99e-31,
-            -9.99e-31,
-            1.0001e-30,
-            -1.0001e-30,
-            1e-40,
-            -1e-40,
-            f32::MIN_POSITIVE,
-            -f32::MIN_POSITIVE,
-            f32::MAX,
-            f32::MIN,
-            1.0,
-            -1.0,
-            0.37,
-            -2.5e7,
-        ];
-        let inverse = |x: f32| {
-            let v = F32x8::splat(x).safe_inverse::<false>().0[0];
-            assert_eq!(
-                v.to_bits(),
-                crate::accel::wide::walk::safe_inverse(x).to_bits()
-            );
-            v
-        };
-        let mut next = stream(0x5eed_5a1e);
-        let mut compared = 0;
-        for len in 1..=PACKET {
-            for sign in 0..3 {
-                let values: Vec<f32> = (0..len)
-                    .map(|_| {
-                        let pick = hard[((next() + 2.0) * 1000.0) as usize % hard.len()];
-                        let plain = next() * 10.0;
-                        let x = if next() < 0.0 { pick } else { plain };
-                        match sign {
-                            0 => -x.abs(),
-                            1 => x.abs(),
-                            _ => x,
-                        }
-                    })
-                    .collect();
-                let mut row = [0.0f32; PACKET];
-                for (slot, &x) in row.iter_mut().zip(&values) {
-                    *slot = inverse(x);
-                }
-                let fold = |f: fn(f32, f32) -> f32, from: f32, keep: fn(&f32) -> bool| {
-                    values.iter().copied().filter(keep).fold(from, f)
-                };
-                let low = fold(f32::min, f32::INFINITY, |_| true);
-                let high = fold(f32::max, f32::NEG_INFINITY, |_| true);
-                let below = fold(f32::max, f32::NEG_INFINITY, |x| x.is_sign_negative());
-                let above = fold(f32::min, f32::INFINITY, |x| x.is_sign_positive());
-                let from_extremes = InverseSpan::of_extremes(low, high, below, above);
-                let from_row = InverseSpan::of_row(&row, len).expect("no NaN");
-                let bits = |s: InverseSpan| {
-                    (
-                        s.min.to_bits(),
-                        s.max.to_bits(),
-                        s.some_negative,
-                        s.all_negative,
-                    )
-                };
-                assert_eq!(bits(from_extremes), bits(from_row), "{values:?}");
-                compared += 1;
-            }
-        }
-        assert_eq!(compared, 3 * PACKET);
     }
 
     #[test]
