@@ -473,6 +473,7 @@ impl TwoLevelAccel {
                 limits,
                 boxes,
                 object,
+                ..
             } = &mut *query;
             let (rays_packet, boxes) = (&*rays_packet, &*boxes);
             let ray = |r: usize| if packet { rays_packet.ray(r) } else { boxes[r] };

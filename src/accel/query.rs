@@ -9,7 +9,7 @@ use std::cell::RefCell;
 
 use glam::{Vec2, Vec3A};
 
-use super::triangles::ShearedRay;
+use super::triangles::{ShearedRay, ShearedRows};
 use super::wide::{PACKET, RayBoxes, RayPacket};
 
 /// The closest intersection along a ray.
@@ -91,6 +91,8 @@ impl<'a> Within<'a> {
 pub(super) struct PacketQuery {
     pub(super) packet: RayPacket,
     pub(super) sheared: [ShearedRay; PACKET],
+    /// The frames of `sheared` as rows, for the leaf tests of sixteen rays.
+    pub(super) rows: ShearedRows,
     pub(super) best: [Closest; PACKET],
     pub(super) limits: [f32; PACKET],
     /// Each ray's own slab constants (masked walks).
@@ -118,6 +120,7 @@ impl PacketQuery {
         Box::new(PacketQuery {
             packet: RayPacket::new(&[]),
             sheared: [ShearedRay::default(); PACKET],
+            rows: ShearedRows::default(),
             best: [Closest::default(); PACKET],
             limits: [0.0; PACKET],
             boxes: [RayBoxes::default(); PACKET],
@@ -134,7 +137,7 @@ impl PacketQuery {
     pub(super) fn fill(&mut self, rays: &[(Vec3A, Vec3A)], t_max: f32) {
         let n = rays.len().min(PACKET);
         self.packet.set(&rays[..n]);
-        ShearedRay::fill(&mut self.sheared[..n], &rays[..n]);
+        ShearedRay::fill_with_rows(&mut self.sheared[..n], &mut self.rows, &rays[..n]);
         self.best[..n].fill(Closest::default());
         self.limits.fill(t_max);
     }
@@ -181,7 +184,7 @@ impl PacketQuery {
     /// Each ray's hit-test constants, and its own slab constants when it walks `masked`.
     #[inline(always)]
     fn fill_ray_constants(&mut self, rays: &[(Vec3A, Vec3A)], masked: bool) {
-        ShearedRay::fill(&mut self.sheared, rays);
+        ShearedRay::fill_with_rows(&mut self.sheared, &mut self.rows, rays);
         if masked {
             for (boxes, &(origin, direction)) in self.boxes.iter_mut().zip(rays) {
                 *boxes = RayBoxes::new(origin, direction);

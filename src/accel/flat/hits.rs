@@ -8,7 +8,9 @@ use super::Accel;
 use crate::accel::query::{Closest, Hit, PacketQuery, Within};
 #[cfg(target_arch = "x86_64")]
 use crate::accel::triangles::sixteen;
-use crate::accel::triangles::{RAYS, ShearedLanes, ShearedRay, lanes_of, runs_by_permutation};
+use crate::accel::triangles::{
+    RAYS, ShearedLanes, ShearedRay, ShearedRows, lanes_of, runs_by_permutation,
+};
 use crate::accel::wide::{GatheredLeaf, LeafVisit, PACKET, RayBoxes, listed, rays_below};
 use crate::simd::F32x8;
 
@@ -115,6 +117,7 @@ impl Accel {
             accel: self,
             within,
             sheared: &query.sheared,
+            rows: &query.rows,
             // Only a packet walk hands a leaf its rays as a mask.
             one_permutation: if packet {
                 groups_of_one_permutation(&query.sheared, n)
@@ -251,6 +254,7 @@ impl Accel {
                 let mut leaf = AnyHitPacketLeaf {
                     accel: self,
                     sheared: &q.sheared,
+                    rows: &q.rows,
                     // Only the packet walk (converging rays) hands a leaf a mask.
                     one_permutation: if converging {
                         groups_of_one_permutation(&q.sheared, n)
@@ -441,6 +445,8 @@ struct ClosestPacketLeaf<'a> {
     accel: &'a Accel,
     within: &'a Within<'a>,
     sheared: &'a [ShearedRay; PACKET],
+    /// `sheared` as rows.
+    rows: &'a ShearedRows,
     /// The rays of the groups (rays `RAYS * g..RAYS * (g + 1)`) whose rays share one axis
     /// permutation: [`groups_of_one_permutation`].
     one_permutation: u64,
@@ -576,10 +582,12 @@ impl ClosestPacketLeaf<'_> {
                     let mut improved = 0u32;
                     // SAFETY: `simd::avx512()` holds only where the CPU has AVX-512F.
                     unsafe {
-                        sixteen::hits_in_leaf(
+                        sixteen::hits_in_leaf_of_rows(
                             &self.accel.triangles,
-                            self.sheared,
-                            chunk,
+                            self.rows,
+                            self.sheared[at].k(),
+                            at,
+                            end - at,
                             live,
                             limits,
                             first,
@@ -716,6 +724,8 @@ const STOPPED: f32 = -1.0;
 struct AnyHitPacketLeaf<'a, F> {
     accel: &'a Accel,
     sheared: &'a [ShearedRay; PACKET],
+    /// `sheared` as rows.
+    rows: &'a ShearedRows,
     /// The rays of the groups whose rays share one axis permutation
     /// ([`groups_of_one_permutation`]).
     one_permutation: u64,
@@ -811,10 +821,12 @@ impl<F: FnMut(usize, u32, f32) -> bool> AnyHitPacketLeaf<'_, F> {
                     let visit = &mut self.visit;
                     // SAFETY: `simd::avx512()` holds only where the CPU has AVX-512F.
                     let alive = unsafe {
-                        sixteen::hits_in_leaf(
+                        sixteen::hits_in_leaf_of_rows(
                             &self.accel.triangles,
-                            self.sheared,
-                            chunk,
+                            self.rows,
+                            self.sheared[at].k(),
+                            at,
+                            end - at,
                             live,
                             self.t_max,
                             first,

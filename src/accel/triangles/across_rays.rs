@@ -385,7 +385,9 @@ pub mod sixteen {
 
     use glam::Vec2;
 
-    use super::super::{LANES, PackedTriangles, ShearedRay, TrianglePack, intersect_beyond_f32};
+    use super::super::{
+        LANES, PackedTriangles, ShearedRay, ShearedRows, TrianglePack, intersect_beyond_f32,
+    };
     use super::{PACKET, RAYS, edge_function_f64};
     use crate::simd::F32x8;
 
@@ -462,18 +464,49 @@ pub mod sixteen {
             shear: [0, 1, 2].map(|axis| join(&low.1[axis], &high.1[axis])),
             cut,
         };
-        let mut live = live & ((1u32 << chunk.len()) - 1) as u16;
-        let first_pack = first_pack as usize;
-        let packs = (count as usize).div_ceil(LANES);
-        for pack in &triangles.packs[first_pack..first_pack + packs] {
-            for lane in 0..pack.live as usize {
-                live = group.intersect(live, pack, lane, &mut hit);
-                if live == 0 {
-                    return 0;
-                }
-            }
-        }
-        live
+        let live = live & ((1u32 << chunk.len()) - 1) as u16;
+        group.test_leaf(triangles, live, first_pack, count, &mut hit)
+    }
+
+    /// [`hits_in_leaf`] for the rays `at..at + len` of a packet (`len` 1 to [`WIDE`], `at`
+    /// a multiple of [`WIDE`]) sharing the permutation `k`, their frames taken from the
+    /// packet's rows (`rows`, filled by `ShearedRay::fill_with_rows` with the frames
+    /// `hits_in_leaf` would read) and their limits from `t_max[at..at + WIDE]`: the same
+    /// lanes, so the same tests and calls (lanes past `len` are never live).
+    ///
+    /// # Safety
+    /// The CPU must have AVX-512F.
+    #[inline]
+    #[target_feature(enable = "avx512f")]
+    pub unsafe fn hits_in_leaf_of_rows(
+        triangles: &PackedTriangles,
+        rows: &ShearedRows,
+        k: [u8; 3],
+        at: usize,
+        len: usize,
+        live: u16,
+        t_max: &[f32; PACKET],
+        first_pack: u32,
+        count: u32,
+        mut hit: impl FnMut(usize, u32, u32, f32, Vec2) -> bool,
+    ) -> u16 {
+        assert!(
+            (1..=WIDE).contains(&len) && at % WIDE == 0 && at + WIDE <= PACKET,
+            "rays {at}..{} of a packet",
+            at + len
+        );
+        let [origin, shear] = [rows.origin(), rows.shear()];
+        // SAFETY: `at + WIDE <= PACKET` (asserted), so each load reads sixteen floats of its
+        // row; unaligned loads need no alignment.
+        let load = |row: &[f32; PACKET]| unsafe { _mm512_loadu_ps(row.as_ptr().add(at)) };
+        let group = Group {
+            k: k.map(usize::from),
+            origin: origin.each_ref().map(load),
+            shear: shear.each_ref().map(load),
+            cut: load(t_max),
+        };
+        let live = live & ((1u32 << len) - 1) as u16;
+        group.test_leaf(triangles, live, first_pack, count, &mut hit)
     }
 
     /// Up to sixteen rays of one permutation as vector rows, and their limits.
@@ -485,6 +518,32 @@ pub mod sixteen {
     }
 
     impl Group {
+        /// Each triangle of the leaf `first_pack`, `count` against the rays `live`, in the
+        /// leaf's order, until no ray is left (see [`hits_in_leaf`]); returns the rays still
+        /// live.
+        #[inline]
+        #[target_feature(enable = "avx512f")]
+        fn test_leaf(
+            &self,
+            triangles: &PackedTriangles,
+            mut live: u16,
+            first_pack: u32,
+            count: u32,
+            hit: &mut impl FnMut(usize, u32, u32, f32, Vec2) -> bool,
+        ) -> u16 {
+            let first_pack = first_pack as usize;
+            let packs = (count as usize).div_ceil(LANES);
+            for pack in &triangles.packs[first_pack..first_pack + packs] {
+                for lane in 0..pack.live as usize {
+                    live = self.intersect(live, pack, lane, hit);
+                    if live == 0 {
+                        return 0;
+                    }
+                }
+            }
+            live
+        }
+
         #[inline]
         #[target_feature(enable = "avx512f")]
         fn sheared_vertex(&self, pack: &TrianglePack, i: usize, lane: usize) -> [__m512; 3] {
@@ -999,6 +1058,117 @@ mod tests {
         assert!(
             compared > 100_000 && hit > 5_000 && beyond > 500,
             "{compared} compared, {hit} hits, {beyond} far"
+        );
+    }
+
+    /// A packet's fixed group of sixteen rays tested from the packet's rows
+    /// ([`sixteen::hits_in_leaf_of_rows`]) makes the same calls in the same order, and
+    /// leaves the same rays live, as the group gathered from the rays' frames
+    /// ([`sixteen::hits_in_leaf`]): whole and partial groups, some lanes out, hits that
+    /// stop their ray, and huge coordinates.
+    #[test]
+    fn a_group_from_the_packets_rows_tests_as_the_gathered_group() {
+        if !simd::Isa::cpu_has_avx512() {
+            eprintln!("skipped: this CPU has no AVX-512");
+            return;
+        }
+        let mut s = 0x9e37_79b9_7f4a_7c15u64;
+        let mut next = || xorshift(&mut s);
+        let (mut groups, mut calls, mut stopped) = (0usize, 0usize, 0usize);
+        for round in 0..300 {
+            let scale = [1.0f32, 1.0, 1.0, 1e20][round % 4];
+            let centre = Vec3A::new(next(), next(), -3.0 + next()) * scale;
+            let triangles: Vec<[Vec3A; 3]> = (0..12)
+                .map(|i| {
+                    let a = centre + Vec3A::new(next(), next(), next()) * 2.0 * scale;
+                    let b = centre + Vec3A::new(next(), next(), next()) * 2.0 * scale;
+                    let first = if i % 2 == 0 { centre } else { a - b * 0.1 };
+                    [first, a, b]
+                })
+                .collect();
+            let packed = super::super::PackedTriangles::pack(&triangles, std::iter::once((0, 12)));
+            let n = 1 + round % PACKET;
+            let origin = Vec3A::new(next(), next(), next()) * 0.5;
+            let rays: Vec<(Vec3A, Vec3A)> = (0..n)
+                .map(|_| {
+                    let o = if round % 2 == 0 {
+                        origin
+                    } else {
+                        origin + Vec3A::new(next(), next(), next())
+                    };
+                    (
+                        o,
+                        centre + Vec3A::new(next(), next(), next()) * 1.5 * scale - o,
+                    )
+                })
+                .collect();
+            let mut sheared = [ShearedRay::default(); PACKET];
+            let mut rows = super::super::ShearedRows::default();
+            ShearedRay::fill_with_rows(&mut sheared, &mut rows, &rays);
+            let limits: [f32; PACKET] = std::array::from_fn(|i| {
+                if i % 3 == 0 {
+                    2.5 * scale
+                } else {
+                    f32::INFINITY
+                }
+            });
+            for at in (0..n).step_by(sixteen::WIDE) {
+                let len = sixteen::WIDE.min(n - at);
+                let k = sheared[at].k();
+                if sheared[at..at + len].iter().any(|ray| ray.k() != k) {
+                    continue;
+                }
+                let live = if round % 5 == 0 {
+                    (next() * 65536.0) as i32 as u16
+                } else {
+                    u16::MAX
+                };
+                // A ray stops at its second hit (an any-hit query's stop, exercised).
+                let run = |from_rows: bool| {
+                    let mut found = Vec::new();
+                    let mut seen = [0u8; sixteen::WIDE];
+                    let hit = |l: usize, slot: u32, source: u32, t: f32, bary: glam::Vec2| {
+                        found.push((
+                            l,
+                            slot,
+                            source,
+                            t.to_bits(),
+                            bary.x.to_bits(),
+                            bary.y.to_bits(),
+                        ));
+                        seen[l] += 1;
+                        seen[l] < 2
+                    };
+                    let chunk: Vec<u8> = (at..at + len).map(|r| r as u8).collect();
+                    // SAFETY: the CPU has AVX-512F (checked above).
+                    let left = unsafe {
+                        if from_rows {
+                            sixteen::hits_in_leaf_of_rows(
+                                &packed, &rows, k, at, len, live, &limits, 0, 12, hit,
+                            )
+                        } else {
+                            sixteen::hits_in_leaf(
+                                &packed, &sheared, &chunk, live, &limits, 0, 12, hit,
+                            )
+                        }
+                    };
+                    (found, left)
+                };
+                let (gathered, from_rows) = (run(false), run(true));
+                assert_eq!(
+                    from_rows,
+                    gathered,
+                    "round {round}, rays {at}..{}",
+                    at + len
+                );
+                groups += 1;
+                calls += gathered.0.len();
+                stopped += (live & ((1u32 << len) - 1) as u16 & !gathered.1).count_ones() as usize;
+            }
+        }
+        assert!(
+            groups > 300 && calls > 1_500 && stopped > 200,
+            "{groups} groups, {calls} calls, {stopped} rays stopped"
         );
     }
 

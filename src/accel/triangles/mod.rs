@@ -19,6 +19,8 @@ use std::ops::Range;
 use glam::{Vec2, Vec3A, Vec4};
 use obvhs::aabb::Aabb;
 
+use crate::accel::wide::PACKET;
+
 mod across_rays;
 #[cfg(target_arch = "x86_64")]
 mod two_packs;
@@ -707,12 +709,18 @@ fn sheared_four(rays: &[(Vec3A, Vec3A); 4], out: &mut [ShearedRay; 4]) {
 /// Why: half the instructions a ray of [`sheared_four`]'s (its three divisions above all),
 /// for every packet a frame traces.
 ///
+/// Returns the frames as rows too (origin x, y, z, then the three shears; lane `l` for ray
+/// `l`), what [`ShearedRows`] keeps.
+///
 /// # Safety
 /// The CPU must have AVX2.
 #[cfg(target_arch = "x86_64")]
 #[inline]
 #[target_feature(enable = "avx2")]
-unsafe fn sheared_eight(rays: &[(Vec3A, Vec3A); 8], out: &mut [ShearedRay; 8]) {
+unsafe fn sheared_eight(
+    rays: &[(Vec3A, Vec3A); 8],
+    out: &mut [ShearedRay; 8],
+) -> [std::arch::x86_64::__m256; 6] {
     use std::arch::x86_64::*;
     // Rays `j` and `4 + j` in the low and high halves of row `j`, transposed in each half:
     // lane `l` of each result holds ray `l`'s component.
@@ -767,6 +775,7 @@ unsafe fn sheared_eight(rays: &[(Vec3A, Vec3A); 8], out: &mut [ShearedRay; 8]) {
             _mm256_store_ps((&mut out[4 + j] as *mut ShearedRay).cast::<f32>(), second);
         }
     }
+    [ox, oy, oz, shear_x, shear_y, shear_z]
 }
 
 /// The 4x4 transpose of `rows` in each 128-bit half (as `simd::transpose4` in each).
@@ -842,7 +851,69 @@ impl ShearedRay {
     /// copy encodes with three operands (SSE2's copy spends a move on most of them).
     #[inline]
     pub fn fill(out: &mut [ShearedRay], rays: &[(Vec3A, Vec3A)]) {
-        crate::simd::dispatch(FillFrames { out, rays })
+        crate::simd::dispatch(FillFrames {
+            out,
+            rays,
+            rows: None,
+        })
+    }
+
+    /// [`ShearedRay::fill`] of a packet's rays (at most [`PACKET`]), their frames also kept
+    /// as rows in `rows` (see [`ShearedRows`]).
+    #[inline]
+    pub fn fill_with_rows(out: &mut [ShearedRay], rows: &mut ShearedRows, rays: &[(Vec3A, Vec3A)]) {
+        crate::simd::dispatch(FillFrames {
+            out,
+            rays,
+            rows: Some(rows),
+        })
+    }
+}
+
+/// The origins and shears of a packet's rays as rows (`origin[axis][ray]`,
+/// `shear[i][ray]`, the same bits as each [`ShearedRay`]'s), 64-byte aligned: a group of
+/// sixteen consecutive rays loads its rows whole ([`across_rays::sixteen`]).
+///
+/// Why: built from the frames at every leaf a group entered (two 8 x 8 transposes and a
+/// gather of the limits), the rows took about a tenth of a sixteen-ray leaf test; the
+/// packet's frames are made eight rays at a time in lanes, which are these rows, so keeping
+/// them costs six stores per eight rays.
+#[derive(Clone, Copy)]
+#[repr(C, align(64))]
+pub struct ShearedRows {
+    origin: [[f32; PACKET]; 3],
+    shear: [[f32; PACKET]; 3],
+}
+
+impl Default for ShearedRows {
+    fn default() -> Self {
+        ShearedRows {
+            origin: [[0.0; PACKET]; 3],
+            shear: [[0.0; PACKET]; 3],
+        }
+    }
+}
+
+impl ShearedRows {
+    /// The origins' rows (`[axis][ray]`).
+    #[inline(always)]
+    pub fn origin(&self) -> &[[f32; PACKET]; 3] {
+        &self.origin
+    }
+
+    /// The shears' rows (`[i][ray]`, in the frame's order: `dx / dz`, `dy / dz`, `1 / dz`).
+    #[inline(always)]
+    pub fn shear(&self) -> &[[f32; PACKET]; 3] {
+        &self.shear
+    }
+
+    /// Ray `r`'s rows from its frame.
+    #[inline(always)]
+    fn set(&mut self, r: usize, frame: &ShearedRay) {
+        for i in 0..3 {
+            self.origin[i][r] = frame.origin[i];
+            self.shear[i][r] = frame.shear[i];
+        }
     }
 }
 
@@ -850,6 +921,8 @@ impl ShearedRay {
 struct FillFrames<'a> {
     out: &'a mut [ShearedRay],
     rays: &'a [(Vec3A, Vec3A)],
+    /// Where the frames are also kept as rows ([`ShearedRay::fill_with_rows`]).
+    rows: Option<&'a mut ShearedRows>,
 }
 
 impl crate::simd::Kernel for FillFrames<'_> {
@@ -857,25 +930,48 @@ impl crate::simd::Kernel for FillFrames<'_> {
 
     #[inline(always)]
     fn run<const AVX2: bool>(self) {
-        let (out, rays) = (self.out, self.rays);
+        let (out, rays, mut rows) = (self.out, self.rays, self.rows);
         let n = out.len().min(rays.len());
+        if rows.is_some() {
+            assert!(n <= PACKET, "{n} rays for one packet's rows");
+        }
         let (out, rays) = (&mut out[..n], &rays[..n]);
         #[cfg(target_arch = "x86_64")]
         let eights = if AVX2 {
-            for (out, rays) in out.chunks_exact_mut(8).zip(rays.chunks_exact(8)) {
+            for (group, (out, rays)) in out
+                .chunks_exact_mut(8)
+                .zip(rays.chunks_exact(8))
+                .enumerate()
+            {
                 // SAFETY: `AVX2` is true only in the copy `simd::dispatch` runs where the
                 // CPU has AVX2 (and in tests that check the CPU first).
-                unsafe {
+                let lanes = unsafe {
                     sheared_eight(
                         rays.try_into().expect("eight rays"),
                         out.try_into().expect("eight frames"),
                     )
                 };
+                if let Some(rows) = rows.as_deref_mut() {
+                    let at = 8 * group;
+                    let [ox, oy, oz, sx, sy, sz] = lanes;
+                    let [o0, o1, o2] = &mut rows.origin;
+                    let [s0, s1, s2] = &mut rows.shear;
+                    let targets = [(o0, ox), (o1, oy), (o2, oz), (s0, sx), (s1, sy), (s2, sz)];
+                    for (row, lane) in targets {
+                        let slots: &mut [f32; 8] =
+                            (&mut row[at..at + 8]).try_into().expect("eight slots");
+                        // SAFETY: AVX is part of AVX2 (see above); an unaligned store of
+                        // eight floats into eight.
+                        unsafe { std::arch::x86_64::_mm256_storeu_ps(slots.as_mut_ptr(), lane) };
+                    }
+                }
             }
             n - n % 8
         } else {
             0
         };
+        #[cfg(not(target_arch = "x86_64"))]
+        let eights = 0;
         #[cfg(target_arch = "x86_64")]
         let (out, rays, n) = (&mut out[eights..], &rays[eights..], n - eights);
         #[cfg(target_arch = "x86_64")]
@@ -892,6 +988,29 @@ impl crate::simd::Kernel for FillFrames<'_> {
         let done = 0;
         for (out, &(origin, direction)) in out[done..].iter_mut().zip(&rays[done..]) {
             *out = ShearedRay::new(origin, direction);
+        }
+        if let Some(rows) = rows {
+            // The rays not made eight at a time, then the slots to the end of the last
+            // group of sixteen repeating the last ray (as a group test's lanes past its
+            // rays do).
+            for (k, frame) in out.iter().enumerate() {
+                rows.set(eights + k, frame);
+            }
+            if let Some(last) = out.last().copied() {
+                let all = eights + n;
+                for r in all..all.next_multiple_of(16).min(PACKET) {
+                    rows.set(r, &last);
+                }
+            } else if eights > 0 {
+                // Every ray was made eight at a time: pad from the last of them.
+                let last = eights - 1;
+                for r in eights..eights.next_multiple_of(16).min(PACKET) {
+                    for i in 0..3 {
+                        rows.origin[i][r] = rows.origin[i][last];
+                        rows.shear[i][r] = rows.shear[i][last];
+                    }
+                }
+            }
         }
     }
 }
@@ -915,6 +1034,12 @@ impl ShearedRay {
     #[inline(always)]
     pub fn axes_word(&self) -> u32 {
         u32::from_le_bytes([self.k[0], self.k[1], self.k[2], self.filler])
+    }
+
+    /// The frame's axes `kx`, `ky`, `kz`.
+    #[inline(always)]
+    pub fn k(&self) -> [u8; 3] {
+        self.k
     }
 
     /// Which of the six axis permutations the ray's frame uses (rays that share it can be
@@ -1185,11 +1310,13 @@ mod tests {
                 crate::simd::run_baseline(FillFrames {
                     out: &mut baseline,
                     rays: group,
+                    rows: None,
                 });
                 let mut avx2 = vec![ShearedRay::default(); run];
                 let ran = crate::simd::run_avx2_if_available(FillFrames {
                     out: &mut avx2,
                     rays: group,
+                    rows: None,
                 });
                 let mut dispatched = vec![ShearedRay::default(); run];
                 ShearedRay::fill(&mut dispatched, group);
@@ -1209,6 +1336,70 @@ mod tests {
         }
         // The AVX2 copy ran wherever the CPU has AVX2 (the suite's machines do).
         assert!(!crate::simd::Isa::cpu_has_avx2() || compared == 17 * rays.len());
+    }
+
+    /// A packet's rows hold each ray's frame, bit for bit, in both copies of the kernel and
+    /// for every packet size, and the slots to the end of the last group of sixteen repeat
+    /// the last ray; slots past that keep what was there.
+    #[test]
+    fn a_packets_rows_are_its_frames() {
+        let values = HARD_COMPONENTS;
+        let rays: Vec<(Vec3A, Vec3A)> = (0..PACKET)
+            .map(|i| {
+                let v = |k: usize| values[(i * 7 + k * 3) % values.len()];
+                (
+                    Vec3A::new(v(0), -v(1), 3.0 + i as f32),
+                    Vec3A::new(v(2), v(3), v(4)),
+                )
+            })
+            .collect();
+        let mut compared = 0;
+        for n in 1..=PACKET {
+            let group = &rays[..n];
+            let mut copies = Vec::new();
+            let (mut frames, mut rows) = (vec![ShearedRay::default(); n], ShearedRows::default());
+            crate::simd::run_baseline(FillFrames {
+                out: &mut frames,
+                rays: group,
+                rows: Some(&mut rows),
+            });
+            copies.push((frames, rows));
+            let (mut frames, mut rows) = (vec![ShearedRay::default(); n], ShearedRows::default());
+            let ran = crate::simd::run_avx2_if_available(FillFrames {
+                out: &mut frames,
+                rays: group,
+                rows: Some(&mut rows),
+            });
+            if ran.is_some() {
+                copies.push((frames, rows));
+            }
+            for (copy, (frames, rows)) in copies.iter().enumerate() {
+                let padded = n.next_multiple_of(16).min(PACKET);
+                for r in 0..PACKET {
+                    let frame = &frames[r.min(n - 1)];
+                    for i in 0..3 {
+                        let (origin, shear) = if r < padded {
+                            (frame.origin[i].to_bits(), frame.shear[i].to_bits())
+                        } else {
+                            (0, 0)
+                        };
+                        assert_eq!(
+                            rows.origin()[i][r].to_bits(),
+                            origin,
+                            "copy {copy}, {n} rays, ray {r}"
+                        );
+                        assert_eq!(
+                            rows.shear()[i][r].to_bits(),
+                            shear,
+                            "copy {copy}, {n} rays, ray {r}"
+                        );
+                    }
+                    compared += 1;
+                }
+            }
+        }
+        let copies = 1 + usize::from(crate::simd::Isa::cpu_has_avx2());
+        assert_eq!(compared, copies * PACKET * PACKET);
     }
 
     fn tri(a: [f32; 3], b: [f32; 3], c: [f32; 3]) -> [Vec3A; 3] {
