@@ -181,10 +181,15 @@ impl PacketQuery {
         bounded
     }
 
-    /// Each ray's hit-test constants, and its own slab constants when it walks `masked`.
+    /// Each ray's hit-test constants (as rows too for a packet walk, whose leaves test fixed
+    /// groups of rays), and its own slab constants when it walks `masked`.
     #[inline(always)]
     fn fill_ray_constants(&mut self, rays: &[(Vec3A, Vec3A)], masked: bool) {
-        ShearedRay::fill_with_rows(&mut self.sheared, &mut self.rows, rays);
+        if masked {
+            ShearedRay::fill(&mut self.sheared, rays);
+        } else {
+            ShearedRay::fill_with_rows(&mut self.sheared, &mut self.rows, rays);
+        }
         if masked {
             for (boxes, &(origin, direction)) in self.boxes.iter_mut().zip(rays) {
                 *boxes = RayBoxes::new(origin, direction);
