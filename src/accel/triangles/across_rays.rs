@@ -938,6 +938,27 @@ mod tests {
     /// triangles, and triangles so far that f32 overflows (the f64 fallback); groups of 1 to
     /// 16 rays of one permutation, some cut short. Every hit (ray, slot, source, distance and
     /// barycentric bits) and no other.
+    /// Twelve triangles around a random centre (coordinates scaled by `scale`), half of them
+    /// sharing the centre as a vertex: a leaf for the sixteen-ray tests. Returns the centre
+    /// and the leaf, packed.
+    #[cfg(target_arch = "x86_64")]
+    fn leaf_around(
+        next: &mut impl FnMut() -> f32,
+        scale: f32,
+    ) -> (Vec3A, super::super::PackedTriangles) {
+        let centre = Vec3A::new(next(), next(), -3.0 + next()) * scale;
+        let triangles: Vec<[Vec3A; 3]> = (0..12)
+            .map(|i| {
+                let a = centre + Vec3A::new(next(), next(), next()) * 2.0 * scale;
+                let b = centre + Vec3A::new(next(), next(), next()) * 2.0 * scale;
+                let first = if i % 2 == 0 { centre } else { a - b * 0.1 };
+                [first, a, b]
+            })
+            .collect();
+        let packed = super::super::PackedTriangles::pack(&triangles, std::iter::once((0, 12)));
+        (centre, packed)
+    }
+
     #[test]
     #[cfg(target_arch = "x86_64")]
     fn sixteen_rays_at_once_equal_each_ray_alone() {
@@ -950,16 +971,7 @@ mod tests {
         let (mut compared, mut hit, mut beyond) = (0usize, 0usize, 0usize);
         for round in 0..400 {
             let scale = [1.0f32, 1.0, 1.0, 1e20][round % 4];
-            let centre = Vec3A::new(next(), next(), -3.0 + next()) * scale;
-            let triangles: Vec<[Vec3A; 3]> = (0..12)
-                .map(|i| {
-                    let a = centre + Vec3A::new(next(), next(), next()) * 2.0 * scale;
-                    let b = centre + Vec3A::new(next(), next(), next()) * 2.0 * scale;
-                    let first = if i % 2 == 0 { centre } else { a - b * 0.1 };
-                    [first, a, b]
-                })
-                .collect();
-            let packed = super::super::PackedTriangles::pack(&triangles, std::iter::once((0, 12)));
+            let (centre, packed) = leaf_around(&mut next, scale);
             let origin = Vec3A::new(next(), next(), next()) * 0.5;
             let sheared: [ShearedRay; PACKET] = std::array::from_fn(|i| {
                 let target = if round % 3 == 0 && i % 2 == 0 {
@@ -1067,6 +1079,7 @@ mod tests {
     /// ([`sixteen::hits_in_leaf`]): whole and partial groups, some lanes out, hits that
     /// stop their ray, and huge coordinates.
     #[test]
+    #[cfg(target_arch = "x86_64")]
     fn a_group_from_the_packets_rows_tests_as_the_gathered_group() {
         if !simd::Isa::cpu_has_avx512() {
             eprintln!("skipped: this CPU has no AVX-512");
@@ -1077,16 +1090,7 @@ mod tests {
         let (mut groups, mut calls, mut stopped) = (0usize, 0usize, 0usize);
         for round in 0..300 {
             let scale = [1.0f32, 1.0, 1.0, 1e20][round % 4];
-            let centre = Vec3A::new(next(), next(), -3.0 + next()) * scale;
-            let triangles: Vec<[Vec3A; 3]> = (0..12)
-                .map(|i| {
-                    let a = centre + Vec3A::new(next(), next(), next()) * 2.0 * scale;
-                    let b = centre + Vec3A::new(next(), next(), next()) * 2.0 * scale;
-                    let first = if i % 2 == 0 { centre } else { a - b * 0.1 };
-                    [first, a, b]
-                })
-                .collect();
-            let packed = super::super::PackedTriangles::pack(&triangles, std::iter::once((0, 12)));
+            let (centre, packed) = leaf_around(&mut next, scale);
             let n = 1 + round % PACKET;
             let origin = Vec3A::new(next(), next(), next()) * 0.5;
             let rays: Vec<(Vec3A, Vec3A)> = (0..n)
