@@ -628,9 +628,8 @@ impl ClosestPacketLeaf<'_> {
     ) {
         count_fixed_group(0);
         let chunk = &RAY_NUMBERS[at..(at + RAYS).min(self.len)];
-        // Transposed at each leaf: kept from leaf to leaf (made once a packet), the lanes
-        // were read back from memory in each triangle test, which cost more.
-        let lanes = &ShearedLanes::of_rays::<AVX>(self.sheared, chunk);
+        // Read from the packet's rows at each leaf (the group's lanes are a block of them).
+        let lanes = &ShearedLanes::of_row_block(self.rows, self.sheared[at].k(), at, chunk.len());
         // Every triangle of the leaf is cut at the limit the ray entered it with.
         let cut = F32x8(limits[at..at + RAYS].try_into().expect("a group's limits"));
         let mut improved = 0u32;
@@ -865,7 +864,7 @@ impl<F: FnMut(usize, u32, f32) -> bool> AnyHitPacketLeaf<'_, F> {
         }
         count_fixed_group(2);
         let chunk = &RAY_NUMBERS[at..(at + RAYS).min(self.len)];
-        let lanes = &ShearedLanes::of_rays::<AVX>(self.sheared, chunk);
+        let lanes = &ShearedLanes::of_row_block(self.rows, self.sheared[at].k(), at, chunk.len());
         let cut = F32x8(
             self.t_max[at..at + RAYS]
                 .try_into()

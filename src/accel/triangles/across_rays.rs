@@ -21,7 +21,7 @@
 
 use glam::Vec2;
 
-use super::{ShearedRay, TrianglePack, intersect_beyond_f32};
+use super::{ShearedRay, ShearedRows, TrianglePack, intersect_beyond_f32};
 use crate::accel::wide::PACKET;
 use crate::simd::F32x8;
 
@@ -115,6 +115,26 @@ impl ShearedLanes {
             };
         }
         ShearedLanes::gather(chunk.iter().map(|&r| &sheared[r as usize]))
+    }
+
+    /// The rays `at..at + len` of a packet (`len` 1 to [`RAYS`], `at` a multiple of
+    /// [`RAYS`]) sharing the permutation `k`, read whole from the packet's rows (filled by
+    /// `ShearedRay::fill_with_rows`): the lanes [`ShearedLanes::of_rays`] makes of those
+    /// rays (lanes past `len` repeat the last ray in both), without a transpose.
+    #[inline(always)]
+    pub fn of_row_block(rows: &ShearedRows, k: [u8; 3], at: usize, len: usize) -> ShearedLanes {
+        assert!(
+            (1..=RAYS).contains(&len) && at % RAYS == 0 && at + RAYS <= PACKET,
+            "rays {at}..{} of a packet",
+            at + len
+        );
+        let block = |row: &[f32; PACKET]| F32x8(row[at..at + RAYS].try_into().expect("eight rays"));
+        ShearedLanes {
+            k: k.map(usize::from),
+            origin: rows.origin().each_ref().map(block),
+            shear: rows.shear().each_ref().map(block),
+            live: (1u32 << len) - 1,
+        }
     }
 
     #[inline(always)]
@@ -938,6 +958,56 @@ mod tests {
     /// triangles, and triangles so far that f32 overflows (the f64 fallback); groups of 1 to
     /// 16 rays of one permutation, some cut short. Every hit (ray, slot, source, distance and
     /// barycentric bits) and no other.
+    /// A block of a packet's rows is the group [`ShearedLanes::of_rays`] makes of the same
+    /// rays, in both copies, for every packet size and every block of eight in it.
+    #[test]
+    fn a_block_of_the_packets_rows_is_the_gathered_group() {
+        let mut s = 0x6a09_e667_f3bc_c908u64;
+        let mut next = || xorshift(&mut s);
+        let bits = |g: &ShearedLanes| {
+            let rows = g.origin.iter().chain(&g.shear);
+            (
+                g.k,
+                g.live,
+                rows.flat_map(|r| r.0.map(f32::to_bits)).collect::<Vec<_>>(),
+            )
+        };
+        let mut compared = 0;
+        for n in 1..=PACKET {
+            // One direction's signs for all, so that blocks share their permutation.
+            let rays: Vec<(Vec3A, Vec3A)> = (0..n)
+                .map(|_| {
+                    let o = Vec3A::new(next(), next(), next()) * 1e3;
+                    (
+                        o,
+                        Vec3A::new(0.3 * next(), 0.3 * next(), -1.0 - next().abs()),
+                    )
+                })
+                .collect();
+            let mut sheared = [ShearedRay::default(); PACKET];
+            let mut rows = super::super::ShearedRows::default();
+            ShearedRay::fill_with_rows(&mut sheared, &mut rows, &rays);
+            for at in (0..n).step_by(RAYS) {
+                let len = RAYS.min(n - at);
+                let chunk: Vec<u8> = (at..at + len).map(|r| r as u8).collect();
+                let block = ShearedLanes::of_row_block(&rows, sheared[at].k(), at, len);
+                assert_eq!(
+                    bits(&block),
+                    bits(&ShearedLanes::of_rays::<false>(&sheared, &chunk))
+                );
+                if simd::Isa::cpu_has_avx2() {
+                    let avx2 = ShearedLanes::of_rays::<true>(&sheared, &chunk);
+                    assert_eq!(bits(&block), bits(&avx2), "{n} rays, block at {at}");
+                }
+                compared += 1;
+            }
+        }
+        assert_eq!(
+            compared,
+            (1..=PACKET).map(|n| n.div_ceil(RAYS)).sum::<usize>()
+        );
+    }
+
     /// Twelve triangles around a random centre (coordinates scaled by `scale`), half of them
     /// sharing the centre as a vertex: a leaf for the sixteen-ray tests. Returns the centre
     /// and the leaf, packed.
