@@ -91,7 +91,8 @@ impl<'a> Within<'a> {
 pub(super) struct PacketQuery {
     pub(super) packet: RayPacket,
     pub(super) sheared: [ShearedRay; PACKET],
-    /// The frames of `sheared` as rows, for the leaf tests of sixteen rays.
+    /// The frames of `sheared` as rows, for the leaf tests of a packet's fixed groups (filled
+    /// for packets that walk with bounds; masked walks test no fixed group).
     pub(super) rows: ShearedRows,
     pub(super) best: [Closest; PACKET],
     pub(super) limits: [f32; PACKET],

@@ -580,6 +580,7 @@ impl ClosestPacketLeaf<'_> {
                 if in_sixteen_lanes(live, self.one_permutation, self.sheared, at, end) {
                     count_fixed_group(1);
                     let mut improved = 0u32;
+                    debug_assert!(self.rows.hold(self.sheared, at, end), "stale rows");
                     // SAFETY: `simd::avx512()` holds only where the CPU has AVX-512F.
                     unsafe {
                         sixteen::hits_in_leaf_of_rows(
@@ -629,6 +630,10 @@ impl ClosestPacketLeaf<'_> {
         count_fixed_group(0);
         let chunk = &RAY_NUMBERS[at..(at + RAYS).min(self.len)];
         // Read from the packet's rows at each leaf (the group's lanes are a block of them).
+        debug_assert!(
+            self.rows.hold(self.sheared, at, at + chunk.len()),
+            "stale rows"
+        );
         let lanes = &ShearedLanes::of_row_block(self.rows, self.sheared[at].k(), at, chunk.len());
         // Every triangle of the leaf is cut at the limit the ray entered it with.
         let cut = F32x8(limits[at..at + RAYS].try_into().expect("a group's limits"));
@@ -818,6 +823,7 @@ impl<F: FnMut(usize, u32, f32) -> bool> AnyHitPacketLeaf<'_, F> {
                     count_fixed_group(3);
                     let chunk = &RAY_NUMBERS[at..end];
                     let visit = &mut self.visit;
+                    debug_assert!(self.rows.hold(self.sheared, at, end), "stale rows");
                     // SAFETY: `simd::avx512()` holds only where the CPU has AVX-512F.
                     let alive = unsafe {
                         sixteen::hits_in_leaf_of_rows(
@@ -864,6 +870,10 @@ impl<F: FnMut(usize, u32, f32) -> bool> AnyHitPacketLeaf<'_, F> {
         }
         count_fixed_group(2);
         let chunk = &RAY_NUMBERS[at..(at + RAYS).min(self.len)];
+        debug_assert!(
+            self.rows.hold(self.sheared, at, at + chunk.len()),
+            "stale rows"
+        );
         let lanes = &ShearedLanes::of_row_block(self.rows, self.sheared[at].k(), at, chunk.len());
         let cut = F32x8(
             self.t_max[at..at + RAYS]

@@ -872,12 +872,13 @@ impl ShearedRay {
 
 /// The origins and shears of a packet's rays as rows (`origin[axis][ray]`,
 /// `shear[i][ray]`, the same bits as each [`ShearedRay`]'s), 64-byte aligned: a group of
-/// sixteen consecutive rays loads its rows whole ([`across_rays::sixteen`]).
+/// eight or sixteen consecutive rays loads its rows whole ([`ShearedLanes::of_row_block`],
+/// [`across_rays::sixteen`]).
 ///
-/// Why: built from the frames at every leaf a group entered (two 8 x 8 transposes and a
-/// gather of the limits), the rows took about a tenth of a sixteen-ray leaf test; the
-/// packet's frames are made eight rays at a time in lanes, which are these rows, so keeping
-/// them costs six stores per eight rays.
+/// Why: built from the frames at every leaf a group entered (8 x 8 transposes, and a gather
+/// of the limits for sixteen rays), the rows took about a tenth of a leaf test; the packet's
+/// frames are made eight rays at a time in lanes, which are these rows, so keeping them
+/// costs six stores per eight rays.
 #[derive(Clone, Copy)]
 #[repr(C, align(64))]
 pub struct ShearedRows {
@@ -905,6 +906,18 @@ impl ShearedRows {
     #[inline(always)]
     pub fn shear(&self) -> &[[f32; PACKET]; 3] {
         &self.shear
+    }
+
+    /// Whether the rows `at..end` (and the padding past them to the end of their group of
+    /// sixteen) hold the frames `sheared[at..end]` (for debug checks: the rows are filled by
+    /// `ShearedRay::fill_with_rows`, and a walk must not read rows of another packet).
+    pub fn hold(&self, sheared: &[ShearedRay; PACKET], at: usize, end: usize) -> bool {
+        (at..end).all(|r| {
+            (0..3).all(|i| {
+                self.origin[i][r].to_bits() == sheared[r].origin[i].to_bits()
+                    && self.shear[i][r].to_bits() == sheared[r].shear[i].to_bits()
+            })
+        })
     }
 
     /// Ray `r`'s rows from its frame.
