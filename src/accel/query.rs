@@ -188,13 +188,11 @@ impl PacketQuery {
     fn fill_ray_constants(&mut self, rays: &[(Vec3A, Vec3A)], masked: bool) {
         if masked {
             ShearedRay::fill(&mut self.sheared, rays);
-        } else {
-            ShearedRay::fill_with_rows(&mut self.sheared, &mut self.rows, rays);
-        }
-        if masked {
             for (boxes, &(origin, direction)) in self.boxes.iter_mut().zip(rays) {
                 *boxes = RayBoxes::new(origin, direction);
             }
+        } else {
+            ShearedRay::fill_with_rows(&mut self.sheared, &mut self.rows, rays);
         }
     }
 

@@ -953,11 +953,6 @@ mod tests {
         assert!(chunks > 1_000, "{chunks} chunks");
     }
 
-    /// The test across sixteen rays (AVX-512) against each ray alone, on leaves of three
-    /// packs: fans around a shared vertex (exact edges, the f64 recomputation), random
-    /// triangles, and triangles so far that f32 overflows (the f64 fallback); groups of 1 to
-    /// 16 rays of one permutation, some cut short. Every hit (ray, slot, source, distance and
-    /// barycentric bits) and no other.
     /// A block of a packet's rows is the group [`ShearedLanes::of_rays`] makes of the same
     /// rays, in both copies, for every packet size and every block of eight in it.
     #[test]
@@ -1029,6 +1024,24 @@ mod tests {
         (centre, packed)
     }
 
+    /// Limits for a packet's rays around a [`leaf_around`] of that `scale`: every third ray
+    /// cut inside the leaf, the others unlimited.
+    #[cfg(target_arch = "x86_64")]
+    fn some_rays_cut(scale: f32) -> [f32; PACKET] {
+        std::array::from_fn(|i| {
+            if i % 3 == 0 {
+                2.5 * scale
+            } else {
+                f32::INFINITY
+            }
+        })
+    }
+
+    /// The test across sixteen rays (AVX-512) against each ray alone, on leaves of three
+    /// packs: fans around a shared vertex (exact edges, the f64 recomputation), random
+    /// triangles, and triangles so far that f32 overflows (the f64 fallback); groups of 1 to
+    /// 16 rays of one permutation, some cut short. Every hit (ray, slot, source, distance and
+    /// barycentric bits) and no other.
     #[test]
     #[cfg(target_arch = "x86_64")]
     fn sixteen_rays_at_once_equal_each_ray_alone() {
@@ -1056,13 +1069,7 @@ mod tests {
                 };
                 ShearedRay::new(o, target - o)
             });
-            let limits: [f32; PACKET] = std::array::from_fn(|i| {
-                if i % 3 == 0 {
-                    2.5 * scale
-                } else {
-                    f32::INFINITY
-                }
-            });
+            let limits = some_rays_cut(scale);
             let rays: Vec<u8> = (0..PACKET as u8).collect();
             let mut buffer = [0u8; PACKET];
             let (order, runs) = runs_by_permutation(&sheared, &rays, &mut buffer);
@@ -1179,13 +1186,7 @@ mod tests {
             let mut sheared = [ShearedRay::default(); PACKET];
             let mut rows = super::super::ShearedRows::default();
             ShearedRay::fill_with_rows(&mut sheared, &mut rows, &rays);
-            let limits: [f32; PACKET] = std::array::from_fn(|i| {
-                if i % 3 == 0 {
-                    2.5 * scale
-                } else {
-                    f32::INFINITY
-                }
-            });
+            let limits = some_rays_cut(scale);
             for at in (0..n).step_by(sixteen::WIDE) {
                 let len = sixteen::WIDE.min(n - at);
                 let k = sheared[at].k();

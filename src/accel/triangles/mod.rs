@@ -908,9 +908,9 @@ impl ShearedRows {
         &self.shear
     }
 
-    /// Whether the rows `at..end` (and the padding past them to the end of their group of
-    /// sixteen) hold the frames `sheared[at..end]` (for debug checks: the rows are filled by
-    /// `ShearedRay::fill_with_rows`, and a walk must not read rows of another packet).
+    /// Whether the rows `at..end` hold the frames `sheared[at..end]` (for debug checks: the
+    /// rows are filled by `ShearedRay::fill_with_rows`, and a walk must not read rows of
+    /// another packet).
     pub fn hold(&self, sheared: &[ShearedRay; PACKET], at: usize, end: usize) -> bool {
         (at..end).all(|r| {
             (0..3).all(|i| {
@@ -918,6 +918,19 @@ impl ShearedRows {
                     && self.shear[i][r].to_bits() == sheared[r].shear[i].to_bits()
             })
         })
+    }
+
+    /// Copies ray `len - 1`'s rows into the slots from `len` to the end of its group of
+    /// sixteen (nothing when `len` is 0).
+    #[inline(always)]
+    fn repeat_last_to_group_end(&mut self, len: usize) {
+        let Some(last) = len.checked_sub(1) else {
+            return;
+        };
+        for row in self.origin.iter_mut().chain(&mut self.shear) {
+            let value = row[last];
+            row[len..len.next_multiple_of(16).min(PACKET)].fill(value);
+        }
     }
 
     /// Ray `r`'s rows from its frame.
@@ -1009,21 +1022,7 @@ impl crate::simd::Kernel for FillFrames<'_> {
             for (k, frame) in out.iter().enumerate() {
                 rows.set(eights + k, frame);
             }
-            if let Some(last) = out.last().copied() {
-                let all = eights + n;
-                for r in all..all.next_multiple_of(16).min(PACKET) {
-                    rows.set(r, &last);
-                }
-            } else if eights > 0 {
-                // Every ray was made eight at a time: pad from the last of them.
-                let last = eights - 1;
-                for r in eights..eights.next_multiple_of(16).min(PACKET) {
-                    for i in 0..3 {
-                        rows.origin[i][r] = rows.origin[i][last];
-                        rows.shear[i][r] = rows.shear[i][last];
-                    }
-                }
-            }
+            rows.repeat_last_to_group_end(eights + n);
         }
     }
 }
