@@ -389,6 +389,32 @@ fn keeping_closer<'a>(
     }
 }
 
+/// The hit callback of a group test over the packet's rays from `at` in their fixed lanes
+/// (lane `l` for ray `at + l`): keeps each hit that is closer for its ray, and lowers the
+/// ray's limit to it at once, as [`limit_improved`] does after a gathered group's test. The
+/// test reads the limits only as it starts (its cut is a copy), so the lowered limit
+/// takes effect from the next leaf, the same bits as lowered after the test: the kept
+/// hits of a leaf come closer or tie, and the last one kept is the ray's best.
+#[inline(always)]
+fn keeping_closer_from<'a>(
+    within: &'a Within,
+    best: &'a mut [Closest; PACKET],
+    sheared: &'a [ShearedRay; PACKET],
+    limits: &'a mut [f32; PACKET],
+    at: usize,
+) -> impl FnMut(usize, u32, u32, f32, glam::Vec2) -> bool + 'a {
+    move |l, slot, source, t, bary| {
+        // A group's lanes are within the packet: `at + l < PACKET`; the mask makes that
+        // known to the compiler (no bounds checks), and changes nothing.
+        let r = (at + l) % PACKET;
+        if keep_if_closer(within, &mut best[r], slot, source, t, bary) {
+            // Keep visiting boxes that start at `t` (up to rounding), where a tie may hide.
+            limits[r] = sheared[r].tie_limit(t);
+        }
+        true
+    }
+}
+
 /// Lowers the limit of each ray of `chunk` whose best hit a group test improved (bit `l` of
 /// `improved` for ray `chunk[l]`) to that hit.
 #[inline(always)]
@@ -576,11 +602,13 @@ impl ClosestPacketLeaf<'_> {
                     continue;
                 }
                 let end = (at + sixteen::WIDE).min(self.len);
-                let chunk = &RAY_NUMBERS[at..end];
                 if in_sixteen_lanes(live, self.one_permutation, self.sheared, at, end) {
                     count_fixed_group(1);
-                    let mut improved = 0u32;
                     debug_assert!(self.rows.hold(self.sheared, at, end), "stale rows");
+                    // Every triangle of the leaf is cut at the limit the ray entered it with.
+                    let cut: [f32; sixteen::WIDE] = limits[at..at + sixteen::WIDE]
+                        .try_into()
+                        .expect("a block's limits");
                     // SAFETY: `simd::avx512()` holds only where the CPU has AVX-512F.
                     unsafe {
                         sixteen::hits_in_leaf_of_rows(
@@ -590,13 +618,12 @@ impl ClosestPacketLeaf<'_> {
                             at,
                             end - at,
                             live,
-                            limits,
+                            &cut,
                             first,
                             count,
-                            keeping_closer(self.within, self.best, chunk, &mut improved),
+                            keeping_closer_from(self.within, self.best, self.sheared, limits, at),
                         )
                     };
-                    limit_improved(chunk, improved, self.best, self.sheared, limits);
                     continue;
                 }
                 for half in [at, at + RAYS] {
@@ -637,16 +664,14 @@ impl ClosestPacketLeaf<'_> {
         let lanes = &ShearedLanes::of_row_block(self.rows, self.sheared[at].k(), at, chunk.len());
         // Every triangle of the leaf is cut at the limit the ray entered it with.
         let cut = F32x8(limits[at..at + RAYS].try_into().expect("a group's limits"));
-        let mut improved = 0u32;
         self.accel.triangles.hits_in_leaf_across::<AVX>(
             lanes,
             live,
             first,
             count,
             &cut,
-            keeping_closer(self.within, self.best, chunk, &mut improved),
+            keeping_closer_from(self.within, self.best, self.sheared, limits, at),
         );
-        limit_improved(chunk, improved, self.best, self.sheared, limits);
     }
 }
 
@@ -833,7 +858,9 @@ impl<F: FnMut(usize, u32, f32) -> bool> AnyHitPacketLeaf<'_, F> {
                             at,
                             end - at,
                             live,
-                            self.t_max,
+                            self.t_max[at..at + sixteen::WIDE]
+                                .try_into()
+                                .expect("a block's limits"),
                             first,
                             count,
                             |l, slot, _, t, _| visit(at + l, slot, t),

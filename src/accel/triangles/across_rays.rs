@@ -491,8 +491,10 @@ pub mod sixteen {
     /// [`hits_in_leaf`] for the rays `at..at + len` of a packet (`len` 1 to [`WIDE`], `at`
     /// a multiple of [`WIDE`]) sharing the permutation `k`, their frames taken from the
     /// packet's rows (`rows`, filled by `ShearedRay::fill_with_rows` with the frames
-    /// `hits_in_leaf` would read) and their limits from `t_max[at..at + WIDE]`: the same
-    /// lanes, so the same tests and calls (lanes past `len` are never live).
+    /// `hits_in_leaf` would read) and their limits from `cut` (`t_max[at..at + WIDE]` in
+    /// `hits_in_leaf`'s terms, taken by the caller: a copy leaves the packet's limits free
+    /// for the hit callback to lower): the same lanes, so the same tests and calls (lanes
+    /// past `len` are never live).
     ///
     /// # Safety
     /// The CPU must have AVX-512F.
@@ -505,7 +507,7 @@ pub mod sixteen {
         at: usize,
         len: usize,
         live: u16,
-        t_max: &[f32; PACKET],
+        cut: &[f32; WIDE],
         first_pack: u32,
         count: u32,
         mut hit: impl FnMut(usize, u32, u32, f32, Vec2) -> bool,
@@ -523,7 +525,8 @@ pub mod sixteen {
             k: k.map(usize::from),
             origin: origin.each_ref().map(load),
             shear: shear.each_ref().map(load),
-            cut: load(t_max),
+            // SAFETY: sixteen floats; unaligned loads need no alignment.
+            cut: unsafe { _mm512_loadu_ps(cut.as_ptr()) },
         };
         let live = live & ((1u32 << len) - 1) as u16;
         group.test_leaf(triangles, live, first_pack, count, &mut hit)
@@ -1219,7 +1222,16 @@ mod tests {
                     let left = unsafe {
                         if from_rows {
                             sixteen::hits_in_leaf_of_rows(
-                                &packed, &rows, k, at, len, live, &limits, 0, 12, hit,
+                                &packed,
+                                &rows,
+                                k,
+                                at,
+                                len,
+                                live,
+                                limits[at..at + sixteen::WIDE].try_into().unwrap(),
+                                0,
+                                12,
+                                hit,
                             )
                         } else {
                             sixteen::hits_in_leaf(
