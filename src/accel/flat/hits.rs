@@ -6,11 +6,11 @@ use glam::Vec3A;
 
 use super::Accel;
 use crate::accel::query::{Closest, Hit, PacketQuery, Within};
-#[cfg(target_arch = "x86_64")]
-use crate::accel::triangles::sixteen;
 use crate::accel::triangles::{
     RAYS, ShearedLanes, ShearedRay, ShearedRows, lanes_of, runs_by_permutation,
 };
+#[cfg(target_arch = "x86_64")]
+use crate::accel::triangles::{block_lanes_of, sixteen};
 use crate::accel::wide::{GatheredLeaf, LeafVisit, PACKET, RayBoxes, listed, rays_below};
 use crate::simd::F32x8;
 
@@ -162,7 +162,8 @@ impl Accel {
             #[cfg(target_arch = "x86_64")]
             if AVX && run > RAYS && crate::simd::avx512() {
                 for chunk in order[at..at + run].chunks(sixteen::WIDE) {
-                    let mut improved = 0u32;
+                    // Every triangle of the leaf is cut at the limit the ray entered it with.
+                    let cut = block_lanes_of::<AVX>(limits, chunk);
                     // SAFETY: `simd::avx512()` holds only where the CPU has AVX-512F.
                     unsafe {
                         sixteen::hits_in_leaf(
@@ -170,13 +171,14 @@ impl Accel {
                             sheared,
                             chunk,
                             u16::MAX,
-                            limits,
+                            &cut,
                             first,
                             count,
-                            keeping_closer(within, best, chunk, &mut improved),
+                            keeping_closer_lowering(within, best, sheared, limits, |l| {
+                                usize::from(chunk[l])
+                            }),
                         )
                     };
-                    limit_improved(chunk, improved, best, sheared, limits);
                 }
                 at += run;
                 continue;
@@ -185,16 +187,16 @@ impl Accel {
                 let lanes = &ShearedLanes::of_rays::<AVX>(sheared, chunk);
                 // Every triangle of the leaf is cut at the limit the ray entered it with.
                 let cut = lanes_of::<AVX>(limits, chunk);
-                let mut improved = 0u32;
                 self.triangles.hits_in_leaf_across::<AVX>(
                     lanes,
                     u32::MAX,
                     first,
                     count,
                     &cut,
-                    keeping_closer(within, best, chunk, &mut improved),
+                    keeping_closer_lowering(within, best, sheared, limits, |l| {
+                        usize::from(chunk[l])
+                    }),
                 );
-                limit_improved(chunk, improved, best, sheared, limits);
             }
             at += run;
         }
@@ -370,68 +372,33 @@ impl LeafVisit for ClosestLeaf<'_> {
 /// the rays; below it, each ray tests the leaf's packs alone (the answers are the same).
 const ACROSS_RAYS_MIN: usize = 4;
 
-/// The hit callback of a group test over the rays `chunk`: keeps each hit that is closer for
-/// its ray (bit `l` of `improved` set for ray `chunk[l]`). A closest-hit ray never stops in
-/// a leaf (a later triangle may be closer), so it always asks for more.
+/// The hit callback of a group test whose lane `l` holds the packet's ray `ray_of(l)`:
+/// keeps each hit that is closer for its ray (a closest-hit ray never stops in a leaf: a
+/// later triangle may be closer, so it always asks for more) and lowers the ray's limit to
+/// it at once. A group test reads the limits only as it starts (its cut is a copy, so the
+/// limits are free for this callback to write), and each triangle of the leaf is cut at
+/// the limit the ray entered it with; the lowered limit takes effect from the next leaf.
+/// The limit left is that of the last hit kept, the ray's best (the kept hits come closer
+/// or tie): the bits a pass over the improved rays after the test wrote, without its mask,
+/// its loop or its reads of the best hits (about 6% more primary rays a second, BART
+/// Kitchen on an AMD Zen 5).
 #[inline(always)]
-fn keeping_closer<'a>(
-    within: &'a Within,
-    best: &'a mut [Closest; PACKET],
-    chunk: &'a [u8],
-    improved: &'a mut u32,
-) -> impl FnMut(usize, u32, u32, f32, glam::Vec2) -> bool + 'a {
-    move |l, slot, source, t, bary| {
-        let r = chunk[l] as usize;
-        if keep_if_closer(within, &mut best[r], slot, source, t, bary) {
-            *improved |= 1 << l;
-        }
-        true
-    }
-}
-
-/// The hit callback of a group test over the packet's rays from `at` in their fixed lanes
-/// (lane `l` for ray `at + l`): keeps each hit that is closer for its ray, and lowers the
-/// ray's limit to it at once, as [`limit_improved`] does after a gathered group's test. The
-/// test reads the limits only as it starts (its cut is a copy), so the lowered limit
-/// takes effect from the next leaf, the same bits as lowered after the test: the kept
-/// hits of a leaf come closer or tie, and the last one kept is the ray's best.
-#[inline(always)]
-fn keeping_closer_from<'a>(
+fn keeping_closer_lowering<'a>(
     within: &'a Within,
     best: &'a mut [Closest; PACKET],
     sheared: &'a [ShearedRay; PACKET],
     limits: &'a mut [f32; PACKET],
-    at: usize,
+    ray_of: impl Fn(usize) -> usize + 'a,
 ) -> impl FnMut(usize, u32, u32, f32, glam::Vec2) -> bool + 'a {
     move |l, slot, source, t, bary| {
-        // A group's lanes are within the packet: `at + l < PACKET`; the mask makes that
-        // known to the compiler (no bounds checks), and changes nothing.
-        let r = (at + l) % PACKET;
+        // A ray of the packet: below `PACKET`. The remainder (a mask) makes that known to
+        // the compiler, so the three arrays are read without bounds checks.
+        let r = ray_of(l) % PACKET;
         if keep_if_closer(within, &mut best[r], slot, source, t, bary) {
             // Keep visiting boxes that start at `t` (up to rounding), where a tie may hide.
             limits[r] = sheared[r].tie_limit(t);
         }
         true
-    }
-}
-
-/// Lowers the limit of each ray of `chunk` whose best hit a group test improved (bit `l` of
-/// `improved` for ray `chunk[l]`) to that hit.
-#[inline(always)]
-fn limit_improved(
-    chunk: &[u8],
-    mut improved: u32,
-    best: &[Closest; PACKET],
-    sheared: &[ShearedRay; PACKET],
-    limits: &mut [f32; PACKET],
-) {
-    while improved != 0 {
-        let l = improved.trailing_zeros() as usize;
-        improved &= improved - 1;
-        let r = chunk[l] as usize;
-        let t = best[r].hit.map_or(f32::INFINITY, |h| h.t);
-        // Keep visiting boxes that start at `t` (up to rounding), where a tie may hide.
-        limits[r] = sheared[r].tie_limit(t);
     }
 }
 
@@ -621,7 +588,13 @@ impl ClosestPacketLeaf<'_> {
                             &cut,
                             first,
                             count,
-                            keeping_closer_from(self.within, self.best, self.sheared, limits, at),
+                            keeping_closer_lowering(
+                                self.within,
+                                self.best,
+                                self.sheared,
+                                limits,
+                                move |l| at + l,
+                            ),
                         )
                     };
                     continue;
@@ -670,7 +643,9 @@ impl ClosestPacketLeaf<'_> {
             first,
             count,
             &cut,
-            keeping_closer_from(self.within, self.best, self.sheared, limits, at),
+            keeping_closer_lowering(self.within, self.best, self.sheared, limits, move |l| {
+                at + l
+            }),
         );
     }
 }

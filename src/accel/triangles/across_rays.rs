@@ -316,6 +316,21 @@ pub fn lanes_of<const AVX: bool>(values: &[f32; PACKET], chunk: &[u8]) -> F32x8 
     F32x8(index.map(|r| values[r as usize]))
 }
 
+/// [`lanes_of`] for a block of up to sixteen rays `chunk` (indices into `values`) in two
+/// groups of eight lanes, lanes past the block holding its last ray's value: the lanes
+/// `sixteen::hits_in_leaf` reads the block's rays in.
+#[cfg(target_arch = "x86_64")]
+pub fn block_lanes_of<const AVX: bool>(values: &[f32; PACKET], chunk: &[u8]) -> [F32x8; 2] {
+    let (low, high) = chunk.split_at(chunk.len().min(RAYS));
+    // A block of eight or fewer: its last ray in every lane of the second group.
+    let high = if high.is_empty() {
+        &chunk[chunk.len() - 1..]
+    } else {
+        high
+    };
+    [lanes_of::<AVX>(values, low), lanes_of::<AVX>(values, high)]
+}
+
 /// The six axis permutations of a sheared ray ([`ShearedRay::permutation`]).
 const PERMUTATIONS: usize = 6;
 
@@ -416,11 +431,12 @@ pub mod sixteen {
 
     /// Tests each triangle of the leaf `first_pack`, `count` against the rays `chunk`
     /// (indices into `sheared`, 1 to [`WIDE`] of them, sharing one permutation) whose bits
-    /// are set in `live` (bit `l` for `chunk[l]`), ray `l` of the chunk cut at
-    /// `t_max[chunk[l]]`; calls `hit(l, slot, source, t, bary)` for every such ray and
-    /// triangle that cross, in the leaf's order, until `hit` returns false for a ray (an
-    /// any-hit query that has stopped it): that ray is tested no further, and the leaf ends
-    /// when no ray is left. Returns the rays of `live` still live (`hit` is never called
+    /// are set in `live` (bit `l` for `chunk[l]`), ray `l` of the chunk cut at lane `l` of
+    /// `cut` (its limit, as [`block_lanes_of`] lays a packet's limits out: a copy, so the
+    /// caller's limits are free for `hit` to lower); calls `hit(l, slot, source, t, bary)`
+    /// for every such ray and triangle that cross, in the leaf's order, until `hit`
+    /// returns false for a ray (an any-hit query that has stopped it): that ray is tested
+    /// no further, and the leaf ends when no ray is left. Returns the rays of `live` still live (`hit` is never called
     /// for a ray after it returned false for it).
     ///
     /// # Safety
@@ -432,7 +448,7 @@ pub mod sixteen {
         sheared: &[ShearedRay; PACKET],
         chunk: &[u8],
         live: u16,
-        t_max: &[f32; PACKET],
+        cut: &[F32x8; 2],
         first_pack: u32,
         count: u32,
         mut hit: impl FnMut(usize, u32, u32, f32, Vec2) -> bool,
@@ -466,18 +482,7 @@ pub mod sixteen {
                 _mm256_castps_pd(hi),
             ))
         };
-        let cut_half = |from: usize| {
-            let index = std::array::from_fn(|l| index(from + l) as u8);
-            // SAFETY: AVX-512F implies AVX2; `F32x8` is 32 bytes, 32-byte aligned.
-            unsafe {
-                let half = super::transposed::from_indices(t_max, index);
-                _mm256_load_ps(half.0.as_ptr())
-            }
-        };
-        let cut = _mm512_castpd_ps(_mm512_insertf64x4::<1>(
-            _mm512_castpd256_pd512(_mm256_castps_pd(cut_half(0))),
-            _mm256_castps_pd(cut_half(RAYS)),
-        ));
+        let cut = join(&cut[0], &cut[1]);
         let group = Group {
             k,
             origin: [0, 1, 2].map(|axis| join(&low.0[axis], &high.0[axis])),
@@ -491,10 +496,9 @@ pub mod sixteen {
     /// [`hits_in_leaf`] for the rays `at..at + len` of a packet (`len` 1 to [`WIDE`], `at`
     /// a multiple of [`WIDE`]) sharing the permutation `k`, their frames taken from the
     /// packet's rows (`rows`, filled by `ShearedRay::fill_with_rows` with the frames
-    /// `hits_in_leaf` would read) and their limits from `cut` (`t_max[at..at + WIDE]` in
-    /// `hits_in_leaf`'s terms, taken by the caller: a copy leaves the packet's limits free
-    /// for the hit callback to lower): the same lanes, so the same tests and calls (lanes
-    /// past `len` are never live).
+    /// `hits_in_leaf` would read) and their limits from `cut` (a copy of the packet's
+    /// limits `at..at + WIDE`, so they are free for `hit` to lower): the same lanes, so
+    /// the same tests and calls (lanes past `len` are never live).
     ///
     /// # Safety
     /// The CPU must have AVX-512F.
@@ -1097,7 +1101,7 @@ mod tests {
                             &sheared,
                             chunk,
                             live,
-                            &limits,
+                            &block_lanes_of::<true>(&limits, chunk),
                             0,
                             12,
                             |l, slot, source, t, bary| {
@@ -1235,7 +1239,14 @@ mod tests {
                             )
                         } else {
                             sixteen::hits_in_leaf(
-                                &packed, &sheared, &chunk, live, &limits, 0, 12, hit,
+                                &packed,
+                                &sheared,
+                                &chunk,
+                                live,
+                                &block_lanes_of::<true>(&limits, &chunk),
+                                0,
+                                12,
+                                hit,
                             )
                         }
                     };

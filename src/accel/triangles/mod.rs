@@ -26,6 +26,8 @@ mod across_rays;
 mod two_packs;
 
 #[cfg(target_arch = "x86_64")]
+pub use across_rays::block_lanes_of;
+#[cfg(target_arch = "x86_64")]
 pub use across_rays::sixteen;
 pub use across_rays::{RAYS, ShearedLanes, lanes_of, runs_by_permutation};
 
