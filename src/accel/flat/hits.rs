@@ -821,7 +821,6 @@ impl<F: FnMut(usize, u32, f32) -> bool> AnyHitPacketLeaf<'_, F> {
                 let end = (at + sixteen::WIDE).min(self.len);
                 if in_sixteen_lanes(live, self.one_permutation, self.sheared, at, end) {
                     count_fixed_group(3);
-                    let chunk = &RAY_NUMBERS[at..end];
                     let visit = &mut self.visit;
                     debug_assert!(self.rows.hold(self.sheared, at, end), "stale rows");
                     // SAFETY: `simd::avx512()` holds only where the CPU has AVX-512F.
@@ -841,7 +840,7 @@ impl<F: FnMut(usize, u32, f32) -> bool> AnyHitPacketLeaf<'_, F> {
                             |l, slot, _, t, _| visit(at + l, slot, t),
                         )
                     };
-                    stop(&mut self.stopped, chunk, u32::from(live & !alive), limits);
+                    stop_from(&mut self.stopped, at, u32::from(live & !alive), limits);
                     continue;
                 }
                 for half in [at, at + RAYS] {
@@ -891,7 +890,7 @@ impl<F: FnMut(usize, u32, f32) -> bool> AnyHitPacketLeaf<'_, F> {
             &cut,
             |l, slot, _, t, _| visit(at + l, slot, t),
         );
-        stop(&mut self.stopped, chunk, live & !alive, limits);
+        stop_from(&mut self.stopped, at, live & !alive, limits);
     }
 
     /// Tests each triangle of a leaf across the rays `rays`, sorted into runs of one
@@ -926,6 +925,19 @@ impl<F: FnMut(usize, u32, f32) -> bool> AnyHitPacketLeaf<'_, F> {
             }
             at += run;
         }
+    }
+}
+
+/// [`stop`] for a fixed group from ray `at` (bit `l` of `finished` for ray `at + l`): the
+/// group's bits go into `stopped` at once, without reading a list of its rays.
+#[inline(always)]
+fn stop_from(stopped: &mut u64, at: usize, mut finished: u32, limits: &mut [f32; PACKET]) {
+    *stopped |= u64::from(finished) << at;
+    while finished != 0 {
+        let l = finished.trailing_zeros() as usize;
+        finished &= finished - 1;
+        // A ray of the packet: the remainder (a mask) spares the bounds check.
+        limits[(at + l) % PACKET] = STOPPED;
     }
 }
 
