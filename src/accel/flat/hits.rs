@@ -393,7 +393,9 @@ fn keeping_closer_lowering<'a>(
     move |l, slot, source, t, bary| {
         // A ray of the packet: below `PACKET`. The remainder (a mask) makes that known to
         // the compiler, so the three arrays are read without bounds checks.
-        let r = ray_of(l) % PACKET;
+        let r = ray_of(l);
+        debug_assert!(r < PACKET, "ray {r} of a packet");
+        let r = r % PACKET;
         if keep_if_closer(within, &mut best[r], slot, source, t, bary) {
             // Keep visiting boxes that start at `t` (up to rounding), where a tie may hide.
             limits[r] = sheared[r].tie_limit(t);
@@ -937,6 +939,7 @@ fn stop_from(stopped: &mut u64, at: usize, mut finished: u32, limits: &mut [f32;
         let l = finished.trailing_zeros() as usize;
         finished &= finished - 1;
         // A ray of the packet: the remainder (a mask) spares the bounds check.
+        debug_assert!(at + l < PACKET, "ray {} of a packet", at + l);
         limits[(at + l) % PACKET] = STOPPED;
     }
 }
