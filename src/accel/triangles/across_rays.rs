@@ -436,8 +436,8 @@ pub mod sixteen {
     /// caller's limits are free for `hit` to lower); calls `hit(l, slot, source, t, bary)`
     /// for every such ray and triangle that cross, in the leaf's order, until `hit`
     /// returns false for a ray (an any-hit query that has stopped it): that ray is tested
-    /// no further, and the leaf ends when no ray is left. Returns the rays of `live` still live (`hit` is never called
-    /// for a ray after it returned false for it).
+    /// no further, and the leaf ends when no ray is left. Returns the rays of `live` still
+    /// live (`hit` is never called for a ray after it returned false for it).
     ///
     /// # Safety
     /// The CPU must have AVX-512F.
