@@ -539,18 +539,6 @@ fn in_sixteen_lanes(
         && sheared[at].axes_word() == sheared[end - 1].axes_word()
 }
 
-/// Ray `r` at index `r`: the ray numbers of a packet's fixed groups, as the lists the
-/// group tests take.
-const RAY_NUMBERS: [u8; PACKET] = {
-    let mut numbers = [0u8; PACKET];
-    let mut r = 0;
-    while r < PACKET {
-        numbers[r] = r as u8;
-        r += 1;
-    }
-    numbers
-};
-
 impl ClosestPacketLeaf<'_> {
     /// Tests a leaf for the rays of `entering` that lie in groups of one permutation, group
     /// by group, each group's rays in their fixed lanes (no list, no sort): the same tests,
@@ -630,13 +618,11 @@ impl ClosestPacketLeaf<'_> {
         limits: &mut [f32; PACKET],
     ) {
         count_fixed_group(0);
-        let chunk = &RAY_NUMBERS[at..(at + RAYS).min(self.len)];
+        // The group's rays in the packet (`of_row_block` asserts one to eight).
+        let len = self.len.min(at + RAYS) - at;
         // Read from the packet's rows at each leaf (the group's lanes are a block of them).
-        debug_assert!(
-            self.rows.hold(self.sheared, at, at + chunk.len()),
-            "stale rows"
-        );
-        let lanes = &ShearedLanes::of_row_block(self.rows, self.sheared[at].k(), at, chunk.len());
+        debug_assert!(self.rows.hold(self.sheared, at, at + len), "stale rows");
+        let lanes = &ShearedLanes::of_row_block(self.rows, self.sheared[at].k(), at, len);
         // Every triangle of the leaf is cut at the limit the ray entered it with.
         let cut = F32x8(limits[at..at + RAYS].try_into().expect("a group's limits"));
         self.accel.triangles.hits_in_leaf_across::<AVX>(
@@ -872,12 +858,10 @@ impl<F: FnMut(usize, u32, f32) -> bool> AnyHitPacketLeaf<'_, F> {
             return;
         }
         count_fixed_group(2);
-        let chunk = &RAY_NUMBERS[at..(at + RAYS).min(self.len)];
-        debug_assert!(
-            self.rows.hold(self.sheared, at, at + chunk.len()),
-            "stale rows"
-        );
-        let lanes = &ShearedLanes::of_row_block(self.rows, self.sheared[at].k(), at, chunk.len());
+        // The group's rays in the packet (`of_row_block` asserts one to eight).
+        let len = self.len.min(at + RAYS) - at;
+        debug_assert!(self.rows.hold(self.sheared, at, at + len), "stale rows");
+        let lanes = &ShearedLanes::of_row_block(self.rows, self.sheared[at].k(), at, len);
         let cut = F32x8(
             self.t_max[at..at + RAYS]
                 .try_into()
