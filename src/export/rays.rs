@@ -37,10 +37,10 @@ pub const MISS: u32 = u32::MAX;
 
 /// One record of a ray file, laid out in memory as in the file (48 bytes, `repr(C)`).
 ///
-/// Why this layout: `mipray bench --rays` traces from these records, and so does Embree's
-/// anchor from the file's 48-byte records. With 16-byte `Vec3A` fields a record took 64
-/// bytes, a cache line a ray, and the harness read a third more memory than Embree's for
-/// the same rays.
+/// Why this layout: `mipray bench --rays` traces from these records inside its clock, as
+/// Embree's anchor traces from the file's 48-byte records inside its own. With 16-byte
+/// `Vec3A` fields a record would take 64 bytes, a cache line a ray, and the bench would
+/// read a third more memory per ray than the anchor it is compared with.
 #[derive(Debug, Clone, Copy, PartialEq)]
 #[repr(C)]
 pub struct RayRecord {
