@@ -925,9 +925,8 @@ fn the_ray_file_records_every_ray_with_answers_brute_force_confirms() {
     let mut checked = [0usize; 4];
     for r in &records {
         assert!(r.pixel < w * h);
-        let hit_t = |tri: &[glam::Vec3A; 3]| {
-            intersect(tri, r.origin.into(), r.direction.into()).map(|(t, _)| t)
-        };
+        let (origin, direction) = r.origin_direction();
+        let hit_t = |tri: &[glam::Vec3A; 3]| intersect(tri, origin, direction).map(|(t, _)| t);
         let nearest = faces
             .iter()
             .filter_map(hit_t)

@@ -552,8 +552,8 @@ fn trace_chunk(kernel: FileKernel, bvh: &SceneBvh, rays: &[&RayRecord], out: &mu
         FileKernel::ClosestScattered => closest_in_packets(bvh, rays, true, out),
         FileKernel::ClosestSingle => {
             for (answer, r) in out.iter_mut().zip(rays) {
-                *answer =
-                    closest_answer(bvh.closest_hit(r.origin.into(), r.direction.into(), r.t_max));
+                let (origin, direction) = r.origin_direction();
+                *answer = closest_answer(bvh.closest_hit(origin, direction, r.t_max));
             }
         }
         FileKernel::OcclusionPackets => {
@@ -572,10 +572,8 @@ fn trace_chunk(kernel: FileKernel, bvh: &SceneBvh, rays: &[&RayRecord], out: &mu
         }
         FileKernel::Occlusion => {
             for (answer, r) in out.iter_mut().zip(rays) {
-                let clear =
-                    bvh.visit_hits(r.origin.into(), r.direction.into(), r.t_max, |_, _, _| {
-                        false
-                    });
+                let (origin, direction) = r.origin_direction();
+                let clear = bvh.visit_hits(origin, direction, r.t_max, |_, _, _| false);
                 *answer = (!clear).then_some((0, f32::NAN));
             }
         }
@@ -612,7 +610,7 @@ fn closest_in_packets(bvh: &SceneBvh, rays: &[&RayRecord], scattered: bool, out:
 fn packet_rays(packet: &[&RayRecord]) -> [(Vec3A, Vec3A); PACKET] {
     let mut pairs = [(Vec3A::ZERO, Vec3A::ZERO); PACKET];
     for (pair, r) in pairs.iter_mut().zip(packet) {
-        *pair = (r.origin.into(), r.direction.into());
+        *pair = r.origin_direction();
     }
     pairs
 }

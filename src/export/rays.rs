@@ -24,7 +24,7 @@
 use std::io::{self, Read, Write};
 use std::path::{Path, PathBuf};
 
-use glam::Vec3;
+use glam::{Vec3, Vec3A};
 
 use crate::render::{RayAnswer, RayClass, TracedRay};
 
@@ -59,6 +59,12 @@ pub struct RayRecord {
 const _: () = assert!(std::mem::size_of::<RayRecord>() == RECORD_BYTES);
 
 impl RayRecord {
+    /// The ray's origin and direction as the kernels take them (widened to `Vec3A`).
+    #[inline]
+    pub fn origin_direction(&self) -> (Vec3A, Vec3A) {
+        (self.origin.into(), self.direction.into())
+    }
+
     /// The record of a traced ray; `face_of_slot` maps a slot of the frame's triangles to
     /// its face index in the exported mesh.
     ///
@@ -454,8 +460,8 @@ mod tests {
     fn answers_map_to_face_indices_and_flags() {
         let faces = [5u32, 3, 9];
         let traced = |answer| TracedRay {
-            origin: glam::Vec3A::ZERO,
-            direction: glam::Vec3A::X,
+            origin: Vec3A::ZERO,
+            direction: Vec3A::X,
             t_min: 0.0,
             t_max: 4.0,
             class: RayClass::Reflection,
