@@ -165,6 +165,7 @@ fn bad_options_are_refused() {
         &["render", "tri.gltf", "--spp", "0"],
         &["render", "tri.gltf", "--lod", "bogus"],
         &["render", "tri.gltf", "--lod-bias", "99"],
+        &["render", "tri.gltf", "--mip-filter", "cubic"],
         &["render", "tri.gltf", "--shard", "4/4"],
         &["render", "tri.gltf", "--shard", "x"],
         // Frame 1 of 2 at 1e-45 frames a second would be at an infinite time.
@@ -309,6 +310,47 @@ fn default_animation_renders_by_name_identically_with_one_or_two_threads() {
     assert!(
         alone == std::fs::read(dir.path().join("t1/frame_0011.png")).unwrap(),
         "frame 11 alone differs"
+    );
+}
+
+/// `--mip-filter nearest` reads one level a lookup: the textured frame changes, the
+/// record says so, and `linear` is what the default scene's textures do already.
+#[test]
+fn mip_filter_flag_is_applied_and_recorded() {
+    let dir = tempfile::tempdir().unwrap();
+    for (out_dir, filter) in [
+        ("own", None),
+        ("linear", Some("linear")),
+        ("nearest", Some("nearest")),
+    ] {
+        let mut args = vec![
+            "render", "default", "--size", "96x54", "--frames", "10", "--out", out_dir,
+        ];
+        if let Some(filter) = filter {
+            args.extend(["--mip-filter", filter]);
+        }
+        let out = mipray(&args, dir.path());
+        assert!(out.status.success(), "{}", stderr(&out));
+    }
+    let frame = |d: &str| std::fs::read(dir.path().join(d).join("frame_0010.png")).unwrap();
+    assert!(
+        frame("own") == frame("linear"),
+        "the default scene's textures are trilinear"
+    );
+    assert!(
+        frame("own") != frame("nearest"),
+        "one level a lookup changes the frame"
+    );
+    let record = |d: &str| std::fs::read_to_string(dir.path().join(d).join("stats.jsonl")).unwrap();
+    assert!(
+        record("nearest").contains(r#""mip-filter":"nearest""#),
+        "{}",
+        record("nearest")
+    );
+    assert!(
+        record("own").contains(r#""mip-filter":"each texture's own""#),
+        "{}",
+        record("own")
     );
 }
 

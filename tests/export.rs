@@ -14,7 +14,7 @@ use mipray::scene::{
     AnimationDesc, ChannelDesc, ChannelTarget, Interpolation, MaterialDesc, MeshDesc, NodeDesc,
     PrimitiveDesc, SceneDesc, Trs,
 };
-use mipray::texture::{MipPyramid, Sampler, Texture};
+use mipray::texture::{MipFilter, MipPyramid, Sampler, Texture};
 
 mod common;
 
@@ -721,6 +721,41 @@ fn camera_json_reproduces_the_corner_primary_rays_bit_for_bit() {
             renderer.scene().background.to_array()
         );
     }
+}
+
+/// A texture read one level a lookup (glTF `*_MIPMAP_NEAREST`, or `--mip-filter`) keeps its
+/// filter through an OBJ export (`mipray_mip nearest`); a word other than `linear` or
+/// `nearest` is an error naming the file.
+#[test]
+fn the_mip_filter_survives_an_obj_export() {
+    let mut scene = default_scene();
+    assert!(!scene.textures.is_empty());
+    for t in &mut scene.textures {
+        t.sampler.mip = MipFilter::Nearest;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let mut exporter = Renderer::new(scene, settings(32, 18));
+    export(&mut exporter, dir.path(), ExportFormat::Obj, 0..1);
+    let obj = dir.path().join("frame_0000.obj");
+    let reloaded = mipray::cli::load_scene(&obj).expect("reload OBJ");
+    assert!(!reloaded.textures.is_empty());
+    for t in &reloaded.textures {
+        assert_eq!(t.sampler.mip, MipFilter::Nearest, "{}", t.name);
+    }
+    let mtl = std::fs::read_dir(dir.path())
+        .unwrap()
+        .flatten()
+        .map(|e| e.path())
+        .find(|p| p.extension().is_some_and(|e| e == "mtl"))
+        .expect("an MTL file");
+    let text = std::fs::read_to_string(&mtl).unwrap();
+    std::fs::write(&mtl, text.replace("mipray_mip nearest", "mipray_mip cubic")).unwrap();
+    let error = format!("{:#}", mipray::cli::load_scene(&obj).unwrap_err());
+    assert!(
+        error.contains("mipray_mip cubic")
+            && error.contains(&*mtl.file_name().unwrap().to_string_lossy()),
+        "{error}"
+    );
 }
 
 #[test]

@@ -12,7 +12,7 @@ use glam::{Mat4, Quat, Vec2, Vec3};
 use mipray::anim::{AnimationSelection, Pose, VertexSpace, deform_primitive, primitive_deforms};
 use mipray::scene::gltf::load;
 use mipray::scene::{ChannelTarget, Interpolation, LightKind, SceneDesc};
-use mipray::texture::WrapMode;
+use mipray::texture::{MipFilter, WrapMode};
 use serde_json::{Value, json};
 
 use common::BufferBuilder;
@@ -170,6 +170,8 @@ fn check_round_trip(scene: &SceneDesc, file: &Path) {
     let texture = &scene.textures[0];
     assert_eq!(texture.sampler.wrap_s, WrapMode::ClampToEdge);
     assert_eq!(texture.sampler.wrap_t, WrapMode::MirroredRepeat);
+    // LINEAR_MIPMAP_NEAREST: one level a lookup.
+    assert_eq!(texture.sampler.mip, MipFilter::Nearest);
     assert_eq!(texture.pyramid.base_size(), (PNG_WIDTH, PNG_HEIGHT));
     assert_eq!(texture.pyramid.level_count(), 3, "4x2, 2x1, 1x1");
 

@@ -58,6 +58,7 @@ fn gradient(width: u32, height: u32) -> Texture {
         sampler: Sampler {
             wrap_s: WrapMode::Repeat,
             wrap_t: WrapMode::MirroredRepeat,
+            ..Sampler::default()
         },
     }
 }

@@ -8,6 +8,7 @@ use clap::Args;
 
 use crate::anim::AnimationSelection;
 use crate::frame::RenderSettings;
+use crate::texture::MipFilter;
 
 /// Largest image: width x height.
 pub const MAX_PIXELS: u64 = 16384 * 16384;
@@ -78,6 +79,12 @@ pub struct TraceArgs {
     /// Levels added to every MIP-mapped lookup (positive: blurrier); `--lod none` ignores it.
     #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
     pub lod_bias: f32,
+    /// How every texture's MIP levels are read: `linear` blends the two nearest
+    /// (trilinear), `nearest` reads the nearest alone (one bilinear lookup, cheaper, with
+    /// visible steps) [default: as each texture's sampler says: glTF `*_MIPMAP_NEAREST`
+    /// is `nearest`, anything else `linear`].
+    #[arg(long, value_enum)]
+    pub mip_filter: Option<MipFilter>,
     /// Maximum reflection/refraction depth.
     #[arg(long, default_value_t = 5)]
     pub max_depth: u32,
@@ -127,6 +134,7 @@ pub fn render_settings(
         width,
         height,
         lod_bias: trace.lod_bias,
+        mip_filter: trace.mip_filter,
         spp,
         max_depth: trace.max_depth,
         lights,

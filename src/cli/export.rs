@@ -45,6 +45,7 @@ pub struct ExportArgs {
 pub fn export(args: &ExportArgs) -> Result<()> {
     let trace = TraceArgs {
         lod_bias: 0.0,
+        mip_filter: None,
         max_depth: args.max_depth,
     };
     let mut settings = render_settings(&args.sequence, &trace, args.lights.lights, args.spp)?;

@@ -23,6 +23,7 @@ use crate::frame::{FrameClock, LevelImage, RenderSettings, Renderer};
 use crate::lod::LodMethod;
 use crate::record::{RunIdentity, scene_files_identity, scene_identity};
 use crate::run::{Check, FrameFormat, Resume, SequenceOutput, Shard, render_sequence};
+use crate::texture::MipFilter;
 
 #[derive(Args, Debug, Clone)]
 pub struct RenderArgs {
@@ -225,6 +226,13 @@ fn run_identity(
         ),
         ("lod", settings.lod.to_string()),
         ("lod-bias", settings.lod_bias.to_string()),
+        (
+            "mip-filter",
+            settings
+                .mip_filter
+                .map_or("each texture's own", MipFilter::name)
+                .to_string(),
+        ),
         ("max-depth", settings.max_depth.to_string()),
         (
             "lights",

@@ -18,7 +18,7 @@ use crate::colour::encode_srgb8;
 use crate::frame::Renderer;
 use crate::frame::appearance::material_descs;
 use crate::scene::MaterialDesc;
-use crate::texture::{Texture, WrapMode};
+use crate::texture::{MipFilter, Texture, WrapMode};
 
 /// The shared material library every exported OBJ frame references.
 pub const MTL_FILE: &str = "materials.mtl";
@@ -191,6 +191,9 @@ pub(crate) fn write_mtl(
                     wrap_name(sampler.wrap_s),
                     wrap_name(sampler.wrap_t)
                 )?;
+                if sampler.mip != MipFilter::default() {
+                    writeln!(w, "mipray_mip {}", sampler.mip.name())?;
+                }
                 writeln!(w, "mipray_texture_name {}", scene.textures[index].name)?;
             }
             writeln!(w, "mipray_reflectance {}", m.reflectance)?;

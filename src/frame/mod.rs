@@ -393,6 +393,7 @@ impl Renderer {
             additive_ambient: Vec3A::from(scene.ambient.unwrap_or(Vec3::ONE)),
             lod: settings.lod,
             lod_bias: settings.lod_bias,
+            mip_filter: settings.mip_filter,
             lod_camera: LodCamera::new(&prepared.camera.view_frame()),
             max_depth: settings.max_depth,
         }

@@ -3,6 +3,7 @@
 use crate::accel::{BvhLayout, BvhPolicy};
 use crate::anim::AnimationSelection;
 use crate::lod::LodMethod;
+use crate::texture::MipFilter;
 
 /// How frames are rendered (the CLI's render options).
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -12,6 +13,9 @@ pub struct RenderSettings {
     pub lod: LodMethod,
     /// Levels added to every MIP-mapped lookup (`--lod-bias`; `none` ignores it).
     pub lod_bias: f32,
+    /// How every texture's lookups read its MIP levels (`--mip-filter`); `None`: as each
+    /// texture's sampler says (the file's, trilinear where it says nothing).
+    pub mip_filter: Option<MipFilter>,
     /// Samples per pixel (stratified).
     pub spp: u32,
     /// Maximum number of reflection/refraction bounces.
@@ -33,6 +37,7 @@ impl Default for RenderSettings {
             height: 360,
             lod: LodMethod::Paper,
             lod_bias: 0.0,
+            mip_filter: None,
             spp: 1,
             max_depth: 5,
             lights: None,

@@ -26,7 +26,7 @@ use crate::render::material::{Material, ShadingModel};
 use crate::render::ray_log::{RayClass, RayLog};
 use crate::render::scene_bvh::SceneBvh;
 use crate::render::surface::{SurfacePoint, dielectric_fresnel, interpolate_uv, reflect};
-use crate::texture::{MipPyramid, PlannedLookup, Texture};
+use crate::texture::{MipFilter, MipPyramid, PlannedLookup, Sampler, Texture};
 
 /// Histogram bins for texture lookups per integer MIP level (textures up to 32768^2).
 pub const MIP_LEVELS: usize = 16;
@@ -100,6 +100,8 @@ pub struct FrameScene<'a> {
     pub lod: LodMethod,
     /// Added to every MIP-mapped level (`--lod-bias`; not to `none`).
     pub lod_bias: f32,
+    /// How every texture's levels are read (`--mip-filter`); `None`: as its sampler says.
+    pub mip_filter: Option<MipFilter>,
     /// The camera constants primary rays' LOD state starts from.
     pub lod_camera: LodCamera,
     pub max_depth: u32,
@@ -654,7 +656,7 @@ impl FrameScene<'_> {
             None => lod.footprint(lod_hit, &self.lod_camera, pyramid.base_size()),
         };
         let level = self.lookup_level(&footprint);
-        let sampler = texture.sampler;
+        let sampler = self.sampler(texture);
         *out = match footprint {
             Footprint::Base => TexelLookup::Planned {
                 texture: t,
@@ -682,9 +684,20 @@ impl FrameScene<'_> {
         // A plan knows its level (the same split of the same clamped level).
         let read = match out {
             TexelLookup::Planned { plan, .. } => plan.level(),
+            _ if sampler.mip == MipFilter::Nearest => pyramid.nearest_level(level),
             _ => pyramid.clamp_and_split_level(level).0,
         };
         counters.mip_histogram[read.min(MIP_LEVELS - 1)] += 1;
+    }
+
+    /// How `texture` is read this frame: its sampler, with the frame's MIP filter where
+    /// one is set.
+    #[inline(always)]
+    fn sampler(&self, texture: &Texture) -> Sampler {
+        Sampler {
+            mip: self.mip_filter.unwrap_or(texture.sampler.mip),
+            ..texture.sampler
+        }
     }
 
     /// The filtered base-colour texel of a lookup (white when untextured); a planned lookup
@@ -709,7 +722,8 @@ impl FrameScene<'_> {
             } => {
                 let texture = &self.textures[texture as usize];
                 let pyramid = &texture.pyramid;
-                Vec3A::from_vec4(pyramid.sample_anisotropic(uv, level, axis, taps, texture.sampler))
+                let sampler = self.sampler(texture);
+                Vec3A::from_vec4(pyramid.sample_anisotropic(uv, level, axis, taps, sampler))
             }
             &TexelLookup::Elliptical {
                 texture,
@@ -727,7 +741,7 @@ impl FrameScene<'_> {
                     level,
                     (major, minor),
                     scale,
-                    texture.sampler,
+                    self.sampler(texture),
                 ))
             }
         }

@@ -27,7 +27,7 @@ use std::sync::LazyLock;
 use glam::{DVec2, Vec2, Vec4};
 
 use super::sample::wrap;
-use super::{MipLevel, MipPyramid, Sampler, WrapMode};
+use super::{MipFilter, MipLevel, MipPyramid, Sampler, WrapMode};
 
 /// Entries of the Gaussian weight table over `r^2` in `[0, 1)`.
 const WEIGHT_TABLE_SIZE: usize = 128;
@@ -51,7 +51,8 @@ impl MipPyramid {
     /// EWA lookup at `uv` over the ellipse with conjugate semi-axes `major` and `minor`
     /// (texture-coordinate offsets per pixel, scaled by `scale`: `2^bias` for a LOD bias),
     /// filtered at level `lod` (clamped with [`Self::clamp_level`]; the caller's level of
-    /// the scaled minor axis) and the next. At the last level (1x1) the lookup is its texel.
+    /// the scaled minor axis) and the next (only the nearest level with
+    /// [`MipFilter::Nearest`]). At the last level (1x1) the lookup is its texel.
     pub fn sample_ewa(
         &self,
         uv: Vec2,
@@ -63,6 +64,11 @@ impl MipPyramid {
         let (major, minor) = (major * scale, minor * scale);
         if !(major.is_finite() && minor.is_finite()) {
             return self.sample_trilinear(uv, lod, sampler);
+        }
+        if sampler.mip == MipFilter::Nearest {
+            let k = self.nearest_level(lod);
+            return ewa_in_level(&self.levels[k], uv, major, minor, sampler)
+                .unwrap_or_else(|| self.sample_bilinear(k, uv, sampler));
         }
         let lod = self.clamp_level(lod);
         let lower = lod.floor();
@@ -287,6 +293,34 @@ mod tests {
         }
     }
 
+    /// With `MipFilter::Nearest` the ellipse is summed in the nearest level alone: what
+    /// the blending filter gives at that whole level.
+    #[test]
+    fn nearest_mip_filter_sums_the_nearest_level_alone() {
+        let p = pyramid(64, 64, |x, y| {
+            Vec4::new(x as f32 / 64.0, (y * y) as f32 / 4096.0, 0.5, 1.0)
+        });
+        let nearest = Sampler {
+            mip: MipFilter::Nearest,
+            ..Sampler::default()
+        };
+        let axes = (Vec2::new(0.05, 0.01), Vec2::new(-0.004, 0.02));
+        let uv = Vec2::new(0.31, 0.58);
+        for (lod, level) in [
+            (0.3, 0.0),
+            (1.25, 1.0),
+            (1.5, 1.0),
+            (1.75, 2.0),
+            (99.0, 6.0),
+        ] {
+            let one = p.sample_ewa(uv, level, axes, 1.0, Sampler::default());
+            let got = p.sample_ewa(uv, lod, axes, 1.0, nearest);
+            assert_eq!(got, one, "{lod}");
+        }
+        let blended = p.sample_ewa(uv, 1.5, axes, 1.0, Sampler::default());
+        assert_ne!(blended, p.sample_ewa(uv, 1.5, axes, 1.0, nearest));
+    }
+
     #[test]
     fn a_linear_ramp_is_averaged_to_its_centre_value() {
         // Red = texel x: a symmetric filter around the lookup point returns the point's x,
@@ -295,6 +329,7 @@ mod tests {
         let s = Sampler {
             wrap_s: WrapMode::ClampToEdge,
             wrap_t: WrapMode::ClampToEdge,
+            ..Sampler::default()
         };
         let uv = Vec2::new(100.5 / 256.0, 0.5);
         for (major, minor) in [
@@ -380,6 +415,7 @@ mod tests {
             let s = Sampler {
                 wrap_s: mode,
                 wrap_t: mode,
+                ..Sampler::default()
             };
             for uv in [
                 Vec2::new(f32::NAN, 0.3),

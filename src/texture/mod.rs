@@ -44,11 +44,36 @@ pub enum WrapMode {
     MirroredRepeat,
 }
 
-/// Per-axis wrap modes (s = u, t = v).
+/// How a lookup whose level lies between two MIP levels reads them (the MIP half of
+/// glTF's minification filters).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, clap::ValueEnum)]
+pub enum MipFilter {
+    /// Both levels, bilinear in each and blended by the level's fraction: trilinear (glTF
+    /// `*_MIPMAP_LINEAR`, the default).
+    #[default]
+    Linear,
+    /// The nearest level alone, ties to the finer one (OpenGL's rule for glTF
+    /// `*_MIPMAP_NEAREST`): one bilinear lookup, so cheaper, with a visible step where a
+    /// surface's level crosses a half.
+    Nearest,
+}
+
+impl MipFilter {
+    /// The name the command line and the frame records use.
+    pub fn name(self) -> &'static str {
+        match self {
+            MipFilter::Linear => "linear",
+            MipFilter::Nearest => "nearest",
+        }
+    }
+}
+
+/// Per-axis wrap modes (s = u, t = v) and how levels are read.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub struct Sampler {
     pub wrap_s: WrapMode,
     pub wrap_t: WrapMode,
+    pub mip: MipFilter,
 }
 
 /// One level of a pyramid: linear RGBA texels, row 0 at v = 0.
@@ -375,6 +400,18 @@ impl MipPyramid {
         #[cfg(not(target_arch = "x86_64"))]
         let k = lod as i32;
         (k as usize, lod - k as f32)
+    }
+
+    /// The level a one-level lookup ([`MipFilter::Nearest`]) at `lod` reads: the nearest to
+    /// [`Self::clamp_level`]'s level, ties to the finer (OpenGL's `ceil(lod + 1/2) - 1`
+    /// above level 0), from the same split as [`Self::clamp_and_split_level`].
+    #[inline(always)]
+    pub fn nearest_level(&self, lod: f32) -> usize {
+        let (k, frac) = self.clamp_and_split_level(lod);
+        // At the last level the fraction is 0 (the clamp), so this never passes it.
+        let nearest = k + usize::from(frac > 0.5);
+        debug_assert!(nearest < self.levels.len(), "level {nearest} of {lod}");
+        nearest
     }
 
     /// The level below `lod` (a level in `[0, last]`, as [`Self::clamp_level`] gives it)

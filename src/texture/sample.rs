@@ -28,7 +28,7 @@
 use glam::{Vec2, Vec3A, Vec4};
 
 use super::taps::BilinearTaps;
-use super::{MipLevel, MipPyramid, Sampler, WrapMode, fetch};
+use super::{MipFilter, MipLevel, MipPyramid, Sampler, WrapMode, fetch};
 use crate::simd::{Kernel, dispatch};
 
 /// Largest `|texel index|` the integer Repeat path takes (exact in f64 and far from i64
@@ -186,6 +186,9 @@ fn plan_trilinear<const AVX2: bool, const PREFETCH: bool>(
     lod: f32,
     sampler: Sampler,
 ) -> PlannedLookup {
+    if sampler.mip == MipFilter::Nearest {
+        return plan_bilinear::<AVX2, PREFETCH>(pyramid, pyramid.nearest_level(lod), uv, sampler);
+    }
     let (k, frac) = pyramid.clamp_and_split_level(lod);
     let levels = &pyramid.levels;
     if frac == 0.0 || k + 1 >= levels.len() {
@@ -356,7 +359,8 @@ impl MipPyramid {
     ///
     /// Level 0 or below is magnification: plain bilinear at level 0. Otherwise the bilinear
     /// results of `floor(lod)` and `floor(lod) + 1` are blended by the fraction; at the last
-    /// level it is bilinear there.
+    /// level it is bilinear there. With [`MipFilter::Nearest`] it is bilinear in the level
+    /// [`Self::nearest_level`] gives.
     pub fn sample_trilinear(&self, uv: Vec2, lod: f32, sampler: Sampler) -> Vec4 {
         dispatch(Trilinear {
             pyramid: self,
@@ -515,6 +519,7 @@ mod tests {
         Sampler {
             wrap_s: s,
             wrap_t: t,
+            ..Sampler::default()
         }
     }
 
@@ -829,6 +834,53 @@ mod tests {
         let l0 = p.sample_bilinear(0, uv, s);
         let got = p.sample_trilinear(uv, 0.5, s);
         assert!(close(got, (l0 + l1) * 0.5, 1e-5), "{got}");
+    }
+
+    /// `MipFilter::Nearest` reads one level, the nearest (ties to the finer, OpenGL's
+    /// rule), as `sample_bilinear` there; the planned form too, and every level a lookup
+    /// can ask for (magnified, NaN, past the last) stays in the pyramid.
+    #[test]
+    fn nearest_mip_filter_reads_the_nearest_level_alone() {
+        let p = grid(16, 12);
+        let last = p.level_count() - 1;
+        let s = Sampler {
+            mip: MipFilter::Nearest,
+            ..sampler(REPEAT, MIRROR)
+        };
+        let uv = Vec2::new(0.37, 0.61);
+        let cases = [
+            (f32::NAN, 0),
+            (f32::NEG_INFINITY, 0),
+            (-3.0, 0),
+            (0.0, 0),
+            (0.5, 0),
+            (0.5f32.next_up(), 1),
+            (1.0, 1),
+            (1.25, 1),
+            (1.5, 1),
+            (1.75, 2),
+            (last as f32 - 0.25, last),
+            (last as f32 + 0.75, last),
+            (f32::INFINITY, last),
+        ];
+        for (lod, level) in cases {
+            assert_eq!(p.nearest_level(lod), level, "{lod}");
+            let want = p.sample_bilinear(level, uv, s);
+            assert!(same_bits(p.sample_trilinear(uv, lod, s), want), "{lod}");
+            let plan = p.plan_trilinear(uv, lod, s);
+            assert_eq!(plan.level(), level, "{lod}");
+            assert!(same_bits(p.sample_planned(&plan), want), "{lod}");
+        }
+        // The default is trilinear: between two levels the two filters differ.
+        let linear = Sampler {
+            mip: MipFilter::Linear,
+            ..s
+        };
+        assert_ne!(
+            p.sample_trilinear(uv, 1.25, linear),
+            p.sample_trilinear(uv, 1.25, s)
+        );
+        assert_eq!(Sampler::default().mip, MipFilter::Linear);
     }
 
     #[test]

@@ -733,7 +733,11 @@ mod tests {
                 let uv = Vec2::new(u, vs[(i * 7) % vs.len()]);
                 for wrap_s in MODES {
                     for wrap_t in MODES {
-                        let sampler = Sampler { wrap_s, wrap_t };
+                        let sampler = Sampler {
+                            wrap_s,
+                            wrap_t,
+                            ..Sampler::default()
+                        };
                         // Each level alone, one axis at a time in f64.
                         let reference = |l: &MipLevel| {
                             BilinearTaps::of_axes(

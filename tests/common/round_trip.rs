@@ -157,7 +157,7 @@ pub fn round_trip_scene(storage: Storage, png: &[u8]) -> (Value, Vec<u8>) {
                               "KHR_materials_ior": { "ior": 1.33 } } },
         ],
         "textures": [{ "sampler": 0, "source": 0 }],
-        "samplers": [{ "wrapS": 33071, "wrapT": 33648 }],
+        "samplers": [{ "wrapS": 33071, "wrapT": 33648, "minFilter": 9985 }],
         "images": [image],
         "cameras": [
             { "type": "perspective", "perspective": { "yfov": 0.8, "znear": 0.1, "aspectRatio": 1.5 } },

@@ -26,6 +26,7 @@ pub fn checker(size: u32, squares: u32) -> Texture {
         sampler: Sampler {
             wrap_s: WrapMode::Repeat,
             wrap_t: WrapMode::Repeat,
+            ..Sampler::default()
         },
     }
 }

@@ -23,7 +23,9 @@ use glam::Vec3;
 
 use super::includes::Files;
 use crate::scene::MaterialDesc;
-use crate::texture::{ColorEncoding, MipPyramid, Sampler, Texture, WrapMode, decode_texels};
+use crate::texture::{
+    ColorEncoding, MipFilter, MipPyramid, Sampler, Texture, WrapMode, decode_texels,
+};
 
 /// An `fm` state: ambient, diffuse, specular, shine, T, ior.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -153,6 +155,7 @@ impl Materials {
             sampler: Sampler {
                 wrap_s: WrapMode::Repeat,
                 wrap_t: WrapMode::Repeat,
+                mip: MipFilter::Linear,
             },
         });
         self.texture_by_name.insert(name.to_string(), i);

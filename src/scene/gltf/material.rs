@@ -23,7 +23,9 @@ use glam::{Vec2, Vec3};
 
 use super::buffers::{Buffers, image_bytes};
 use crate::scene::MaterialDesc;
-use crate::texture::{ColorEncoding, MipPyramid, Sampler, Texture, WrapMode, decode_texels};
+use crate::texture::{
+    ColorEncoding, MipFilter, MipPyramid, Sampler, Texture, WrapMode, decode_texels,
+};
 
 /// Largest index of refraction kept; also what the spec's "infinite" IOR (0) becomes.
 const MAX_IOR: f32 = 4.0;
@@ -221,6 +223,7 @@ impl TextureLoader<'_> {
             sampler: Sampler {
                 wrap_s: wrap_mode(sampler.wrap_s()),
                 wrap_t: wrap_mode(sampler.wrap_t()),
+                mip: mip_filter(sampler.min_filter()),
             },
         });
         let index = self.textures.len() - 1;
@@ -249,9 +252,40 @@ fn wrap_mode(mode: gltf::texture::WrappingMode) -> WrapMode {
     }
 }
 
+/// The MIP half of a sampler's minification filter. mipray MIP-maps every texture and
+/// filters within a level bilinearly, so a filter without MIP-maps (`NEAREST`, `LINEAR`)
+/// and the texel half (`NEAREST_*` against `LINEAR_*`) are not read: only whether the
+/// levels are blended (`*_MIPMAP_LINEAR`, and no filter given) or the nearest is read
+/// alone (`*_MIPMAP_NEAREST`).
+fn mip_filter(filter: Option<gltf::texture::MinFilter>) -> MipFilter {
+    use gltf::texture::MinFilter;
+    match filter {
+        Some(MinFilter::NearestMipmapNearest | MinFilter::LinearMipmapNearest) => {
+            MipFilter::Nearest
+        }
+        _ => MipFilter::Linear,
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn only_the_mipmap_nearest_filters_read_one_level() {
+        use gltf::texture::MinFilter;
+        for (filter, want) in [
+            (None, MipFilter::Linear),
+            (Some(MinFilter::LinearMipmapLinear), MipFilter::Linear),
+            (Some(MinFilter::NearestMipmapLinear), MipFilter::Linear),
+            (Some(MinFilter::Linear), MipFilter::Linear),
+            (Some(MinFilter::Nearest), MipFilter::Linear),
+            (Some(MinFilter::LinearMipmapNearest), MipFilter::Nearest),
+            (Some(MinFilter::NearestMipmapNearest), MipFilter::Nearest),
+        ] {
+            assert_eq!(mip_filter(filter), want, "{filter:?}");
+        }
+    }
 
     #[test]
     fn smooth_metal_is_a_mirror_and_rough_dielectric_is_matte() {

@@ -12,6 +12,7 @@
 //!   (shininess), `Ks` (mean = highlight strength), and mipray's exact statements
 //!   `mipray_name`, `mipray_reflectance`, `mipray_specular`, `mipray_transmission`,
 //!   `mipray_double_sided`, `mipray_wrap S T` (`repeat`/`clamp`/`mirrored`),
+//!   `mipray_mip linear|nearest` (how the MIP levels are read),
 //!   `mipray_texture_name`, which take precedence;
 //! - camera and lights: beside `frame_NNNN.obj`, a `camera_NNNN.json` (as `export` writes
 //!   it) adds a camera node reproducing its eye, forward, up and vertical field of view,

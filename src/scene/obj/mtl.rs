@@ -7,7 +7,9 @@ use std::path::{Path, PathBuf};
 use glam::{Vec3, Vec4};
 
 use crate::scene::{MaterialDesc, SceneDesc};
-use crate::texture::{ColorEncoding, MipPyramid, Sampler, Texture, WrapMode, decode_texels};
+use crate::texture::{
+    ColorEncoding, MipFilter, MipPyramid, Sampler, Texture, WrapMode, decode_texels,
+};
 
 use super::validate::first_bad_mtl_line;
 use super::{ObjError, error};
@@ -232,6 +234,7 @@ pub(super) fn texture(
         Sampler {
             wrap_s: WrapMode::ClampToEdge,
             wrap_t: WrapMode::ClampToEdge,
+            mip: MipFilter::Linear,
         }
     } else {
         Sampler::default()
@@ -254,6 +257,22 @@ pub(super) fn texture(
                 ));
             }
         }
+    }
+    if let Some(mip) = m.unknown_param.get("mipray_mip") {
+        sampler.mip = match mip.trim() {
+            "linear" => MipFilter::Linear,
+            "nearest" => MipFilter::Nearest,
+            _ => {
+                return Err(error(
+                    mtl_path,
+                    None,
+                    format!(
+                        "material {}: mipray_mip {mip}: expected linear or nearest",
+                        m.name
+                    ),
+                ));
+            }
+        };
     }
     let texture_path = mtl_path
         .parent()

@@ -23,7 +23,9 @@ use openusd::usd::{Prim, Stage};
 
 use super::values::{Reader, attr_path, scalar, token, vec2, vec3_or_4, vec4};
 use crate::scene::{MaterialDesc, Shading};
-use crate::texture::{ColorEncoding, MipPyramid, Sampler, Texture, WrapMode, decode_texels};
+use crate::texture::{
+    ColorEncoding, MipFilter, MipPyramid, Sampler, Texture, WrapMode, decode_texels,
+};
 
 /// Largest index of refraction kept (as for glTF).
 const MAX_IOR: f32 = 4.0;
@@ -381,6 +383,8 @@ impl Materials {
         let sampler = Sampler {
             wrap_s: wrap("wrapS", ignored)?,
             wrap_t: wrap("wrapT", ignored)?,
+            // UsdUVTexture has no minification filter: trilinear, as everywhere else.
+            mip: MipFilter::Linear,
         };
         let scale = match shader_input(reader, shader, "scale")? {
             Input::Value(v) => {
