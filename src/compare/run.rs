@@ -212,6 +212,7 @@ pub fn run_compare(
         lights,
         shared_update_ms: shared_update_ms / frames,
         lod_bias: options.settings.lod_bias,
+        mip_filter: options.settings.mip_filter,
         methods,
         table1,
     };

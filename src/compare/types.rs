@@ -80,6 +80,8 @@ pub struct CompareReport {
     /// Shared per-frame update (animate, refit, ...) not attributed to any method, mean ms.
     pub shared_update_ms: f64,
     pub lod_bias: f32,
+    /// `--mip-filter`, when given (else each texture read as its sampler says).
+    pub mip_filter: Option<crate::texture::MipFilter>,
     pub methods: Vec<MethodSummary>,
     /// Empty unless `--lights A..B` asked for the Table 1 replication.
     pub table1: Vec<LightsRow>,

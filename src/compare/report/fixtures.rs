@@ -58,6 +58,7 @@ pub(super) fn sample_report() -> CompareReport {
         lights: 2,
         shared_update_ms: 0.75,
         lod_bias: 0.0,
+        mip_filter: None,
         methods: vec![none, paper, cones],
         table1: vec![
             LightsRow {

@@ -55,10 +55,14 @@ of pixels under-filtered by more than half a level, i.e. at risk of aliasing. `f
 the mean absolute difference between the method's and the reference's frame-to-frame \
 change, in 8-bit code values. `n/a`: not measured (flicker needs two frames).";
 
-/// One line: size, frame range, reference spp, repeats, lights, LOD bias, shared update.
+/// One line: size, frame range, reference spp, repeats, lights, LOD bias, MIP filter (when
+/// `--mip-filter` set one), shared update.
 fn run_settings(report: &CompareReport) -> String {
+    let mip_filter = report
+        .mip_filter
+        .map_or(String::new(), |f| format!(", MIP filter {}", f.name()));
     format!(
-        "{}x{} px, {}, reference {} spp, {} repeats, {} lights, LOD bias {}, shared update {} ms/frame",
+        "{}x{} px, {}, reference {} spp, {} repeats, {} lights, LOD bias {}{mip_filter}, shared update {} ms/frame",
         report.width,
         report.height,
         frame_span(&report.frames),
@@ -194,6 +198,18 @@ mod tests {
         assert!(md.contains("**How to read.**"));
         report.table1.clear();
         assert!(!markdown(&report).contains("Table 1"));
+    }
+
+    #[test]
+    fn the_settings_line_names_a_mip_filter_only_when_one_was_set() {
+        let mut report = sample_report();
+        assert!(!markdown(&report).contains("MIP filter"));
+        report.mip_filter = Some(crate::texture::MipFilter::Nearest);
+        let md = markdown(&report);
+        assert!(
+            md.contains("LOD bias 0, MIP filter nearest, shared update"),
+            "{md}"
+        );
     }
 
     #[test]
