@@ -121,6 +121,7 @@ fn info_reports_counts() {
         "{text}"
     );
     assert!(text.contains("4x4, 3 MIP levels"), "{text}");
+    assert!(text.contains("MIP filter linear"), "{text}");
 }
 
 #[test]

@@ -168,11 +168,12 @@ pub fn describe(scene: &SceneDesc) -> String {
         let (w, h) = t.pyramid.base_size();
         let _ = writeln!(
             s,
-            "  {}: {w}x{h}, {} MIP levels, wrap {:?}/{:?}",
+            "  {}: {w}x{h}, {} MIP levels, wrap {:?}/{:?}, MIP filter {}",
             t.name,
             t.pyramid.level_count(),
             t.sampler.wrap_s,
-            t.sampler.wrap_t
+            t.sampler.wrap_t,
+            t.sampler.mip.name()
         );
     }
     let clock = FrameClock::for_scene(scene, None);
