@@ -684,8 +684,7 @@ impl FrameScene<'_> {
         // A plan knows its level (the same split of the same clamped level).
         let read = match out {
             TexelLookup::Planned { plan, .. } => plan.level(),
-            _ if sampler.mip == MipFilter::Nearest => pyramid.nearest_level(level),
-            _ => pyramid.clamp_and_split_level(level).0,
+            _ => pyramid.level_read(level, sampler.mip),
         };
         counters.mip_histogram[read.min(MIP_LEVELS - 1)] += 1;
     }

@@ -65,19 +65,17 @@ impl MipPyramid {
         if !(major.is_finite() && minor.is_finite()) {
             return self.sample_trilinear(uv, lod, sampler);
         }
+        let ewa = |k: usize| {
+            ewa_in_level(&self.levels[k], uv, major, minor, sampler)
+                .unwrap_or_else(|| self.sample_bilinear(k, uv, sampler))
+        };
         if sampler.mip == MipFilter::Nearest {
-            let k = self.nearest_level(lod);
-            return ewa_in_level(&self.levels[k], uv, major, minor, sampler)
-                .unwrap_or_else(|| self.sample_bilinear(k, uv, sampler));
+            return ewa(self.nearest_level(lod));
         }
         let lod = self.clamp_level(lod);
         let lower = lod.floor();
         let k = lower as usize;
         let frac = lod - lower;
-        let ewa = |k: usize| {
-            ewa_in_level(&self.levels[k], uv, major, minor, sampler)
-                .unwrap_or_else(|| self.sample_bilinear(k, uv, sampler))
-        };
         if frac == 0.0 || k + 1 >= self.levels.len() {
             return ewa(k);
         }

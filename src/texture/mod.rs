@@ -59,12 +59,21 @@ pub enum MipFilter {
 }
 
 impl MipFilter {
-    /// The name the command line and the frame records use.
+    /// The name the command line, the frame records and OBJ export use.
     pub fn name(self) -> &'static str {
         match self {
             MipFilter::Linear => "linear",
             MipFilter::Nearest => "nearest",
         }
+    }
+
+    /// The filter [`Self::name`] calls `name`.
+    pub fn from_name(name: &str) -> Option<MipFilter> {
+        use clap::ValueEnum;
+        MipFilter::value_variants()
+            .iter()
+            .copied()
+            .find(|f| f.name() == name)
     }
 }
 
@@ -414,6 +423,16 @@ impl MipPyramid {
         nearest
     }
 
+    /// The level a lookup at `lod` reads with `mip` (the lower of two when it blends): what
+    /// its plan's [`PlannedLookup::level`] says, for lookups that are not planned.
+    #[inline(always)]
+    pub fn level_read(&self, lod: f32, mip: MipFilter) -> usize {
+        match mip {
+            MipFilter::Linear => self.clamp_and_split_level(lod).0,
+            MipFilter::Nearest => self.nearest_level(lod),
+        }
+    }
+
     /// The level below `lod` (a level in `[0, last]`, as [`Self::clamp_level`] gives it)
     /// and the fraction towards the next one: the plain form of
     /// [`Self::clamp_and_split_level`], kept as the tests' reference for it.
@@ -430,6 +449,20 @@ impl MipPyramid {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The command line's words (clap's) are the records' and OBJ export's (`name`), and
+    /// `from_name` reads them back.
+    #[test]
+    fn mip_filter_names_agree_everywhere() {
+        use clap::ValueEnum;
+        for &f in MipFilter::value_variants() {
+            let clap_name = f.to_possible_value().expect("a name").get_name().to_owned();
+            assert_eq!(clap_name, f.name());
+            assert_eq!(MipFilter::from_name(f.name()), Some(f));
+        }
+        assert_eq!(MipFilter::from_name("cubic"), None);
+        assert_eq!(MipFilter::from_name("Linear"), None);
+    }
 
     /// The flag the lookups' shortcut reads is the sides' own test, for every size a
     /// pyramid makes (each level of a power-of-two image, down to 1 x 1, is one too).

@@ -869,6 +869,17 @@ mod tests {
             assert!(same_bits(p.sample_trilinear(uv, lod, s), want), "{lod}");
             let plan = p.plan_trilinear(uv, lod, s);
             assert_eq!(plan.level(), level, "{lod}");
+            assert_eq!(p.level_read(lod, MipFilter::Nearest), level, "{lod}");
+            let linear = Sampler {
+                mip: MipFilter::Linear,
+                ..s
+            };
+            let blended_plan = p.plan_trilinear(uv, lod, linear);
+            assert_eq!(
+                p.level_read(lod, MipFilter::Linear),
+                blended_plan.level(),
+                "{lod}"
+            );
             assert!(same_bits(p.sample_planned(&plan), want), "{lod}");
         }
         // The default is trilinear: between two levels the two filters differ.

@@ -259,20 +259,16 @@ pub(super) fn texture(
         }
     }
     if let Some(mip) = m.unknown_param.get("mipray_mip") {
-        sampler.mip = match mip.trim() {
-            "linear" => MipFilter::Linear,
-            "nearest" => MipFilter::Nearest,
-            _ => {
-                return Err(error(
-                    mtl_path,
-                    None,
-                    format!(
-                        "material {}: mipray_mip {mip}: expected linear or nearest",
-                        m.name
-                    ),
-                ));
-            }
-        };
+        sampler.mip = MipFilter::from_name(mip.trim()).ok_or_else(|| {
+            error(
+                mtl_path,
+                None,
+                format!(
+                    "material {}: mipray_mip {mip}: expected linear or nearest",
+                    m.name
+                ),
+            )
+        })?;
     }
     let texture_path = mtl_path
         .parent()
