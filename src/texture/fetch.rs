@@ -7,9 +7,11 @@
 //! AVX's eight lanes in the AVX2 copy. An AVX2 copy that decoded two texels with one gather from
 //! the table (and blended two texels per 8-lane operation) was slower on an AMD Zen 4
 //! (`cargo bench --bench texture_filter`: trilinear 47-60 ns a lookup against 40-47 with
-//! per-channel loads; not measured on other CPUs, but Intel's microcode mitigation of Gather
-//! Data Sampling slows gathers on the CPUs it covers): a lookup's sixteen or thirty-two
-//! reads of a 2 KiB table that stays in cache are cheaper as plain loads.
+//! per-channel loads), and a microbenchmark of the decode alone was twice as slow with
+//! gathers on an AMD Zen 5 (13.4 against 6.1-6.4 ns for eight texels' RGB); Intel's
+//! microcode mitigation of Gather Data Sampling slows gathers on the CPUs it covers too: a
+//! lookup's sixteen or thirty-two reads of a 2 KiB table that stays in cache are cheaper as
+//! plain loads.
 
 use glam::Vec4;
 
