@@ -72,10 +72,7 @@ impl MipPyramid {
         if sampler.mip == MipFilter::Nearest {
             return ewa(self.nearest_level(lod));
         }
-        let lod = self.clamp_level(lod);
-        let lower = lod.floor();
-        let k = lower as usize;
-        let frac = lod - lower;
+        let (k, frac) = self.clamp_and_split_level(lod);
         if frac == 0.0 || k + 1 >= self.levels.len() {
             return ewa(k);
         }
