@@ -99,8 +99,41 @@ impl std::fmt::Display for RayKind {
     }
 }
 
-/// A ray to time: origin, unit direction, search distance.
-type TimedRay = (Vec3A, Vec3A, f32);
+/// A ray to time: origin, unit direction, search distance, as seven floats (28 bytes).
+///
+/// Why not `(Vec3A, Vec3A, f32)`: that tuple is 48 bytes, and a frame's rays (11 to 23 MB
+/// at 800 x 600) are read from memory as they are timed. Embree's anchor
+/// (`../shared/anchors/embree_rays.c`) keeps the same rays as seven float arrays, 28 bytes a
+/// ray, so the padded tuple made mipray's side read 1.7 times the bytes per ray; on an
+/// Intel Xeon VM that cost its packets 3-7% of their rate (docs/benchmark-log.md). The
+/// ray-file bench reads the file's 48-byte records, as that anchor does.
+#[derive(Debug, Clone, Copy)]
+#[repr(C)]
+struct TimedRay {
+    origin: [f32; 3],
+    direction: [f32; 3],
+    t_max: f32,
+}
+
+impl TimedRay {
+    fn new(origin: Vec3A, direction: Vec3A, t_max: f32) -> TimedRay {
+        TimedRay {
+            origin: origin.to_array(),
+            direction: direction.to_array(),
+            t_max,
+        }
+    }
+
+    /// Origin, direction and search distance, as the walks take them.
+    #[inline(always)]
+    fn parts(&self) -> (Vec3A, Vec3A, f32) {
+        (
+            Vec3A::from_array(self.origin),
+            Vec3A::from_array(self.direction),
+            self.t_max,
+        )
+    }
+}
 
 /// The rays of one frame.
 struct FrameRays {
@@ -243,19 +276,25 @@ fn frame_rays(renderer: &Renderer, prepared: &crate::frame::PreparedFrame) -> Fr
             let primary: Vec<TimedRay> = tile_pixels((x0, y0), w, h)
                 .map(|(x, y)| {
                     let d = camera.primary_direction(x as f32 + 0.5, y as f32 + 0.5);
-                    (camera.eye, d, f32::INFINITY)
+                    TimedRay::new(camera.eye, d, f32::INFINITY)
                 })
                 .collect();
             let hits: Vec<_> = primary
                 .iter()
-                .map(|&(o, d, t_max)| (o, d, scene.bvh.closest_hit(o, d, t_max)))
+                .map(|ray| {
+                    let (o, d, t_max) = ray.parts();
+                    (o, d, scene.bvh.closest_hit(o, d, t_max))
+                })
                 .collect();
             let shadow = prepared
                 .lights
                 .iter()
                 .map(|light| {
                     hits.iter()
-                        .filter_map(|&(o, d, hit)| shadow_ray_toward(&scene, hit?, o, d, light))
+                        .filter_map(|&(o, d, hit)| {
+                            let (o, d, t_max) = shadow_ray_toward(&scene, hit?, o, d, light)?;
+                            Some(TimedRay::new(o, d, t_max))
+                        })
                         .collect()
                 })
                 .collect();
@@ -294,7 +333,8 @@ fn trace_all(kind: RayKind, bvh: &SceneBvh, rays: &FrameRays) -> usize {
                     .chunks(PACKET)
                     .map(|packet| {
                         let mut pairs = [(Vec3A::ZERO, Vec3A::ZERO); PACKET];
-                        for (pair, &(o, d, _)) in pairs.iter_mut().zip(packet) {
+                        for (pair, ray) in pairs.iter_mut().zip(packet) {
+                            let (o, d, _) = ray.parts();
                             *pair = (o, d);
                         }
                         let mut hits = [None; PACKET];
@@ -311,7 +351,10 @@ fn trace_all(kind: RayKind, bvh: &SceneBvh, rays: &FrameRays) -> usize {
             .map(|chunk| {
                 chunk
                     .iter()
-                    .filter(|&&(o, d, t_max)| bvh.closest_hit(o, d, t_max).is_some())
+                    .filter(|ray| {
+                        let (o, d, t_max) = ray.parts();
+                        bvh.closest_hit(o, d, t_max).is_some()
+                    })
                     .count()
             })
             .sum(),
@@ -325,7 +368,8 @@ fn trace_all(kind: RayKind, bvh: &SceneBvh, rays: &FrameRays) -> usize {
                         let packet = &rays.shadow[range.clone()];
                         let mut pairs = [(Vec3A::ZERO, Vec3A::ZERO); PACKET];
                         let mut limits = [0.0f32; PACKET];
-                        for (k, &(o, d, t_max)) in packet.iter().enumerate() {
+                        for (k, ray) in packet.iter().enumerate() {
+                            let (o, d, t_max) = ray.parts();
                             pairs[k] = (o, d);
                             limits[k] = t_max;
                         }
@@ -343,7 +387,10 @@ fn trace_all(kind: RayKind, bvh: &SceneBvh, rays: &FrameRays) -> usize {
             .map(|chunk| {
                 chunk
                     .iter()
-                    .filter(|&&(o, d, t_max)| !bvh.visit_hits(o, d, t_max, |_, _, _| false))
+                    .filter(|ray| {
+                        let (o, d, t_max) = ray.parts();
+                        !bvh.visit_hits(o, d, t_max, |_, _, _| false)
+                    })
                     .count()
             })
             .sum(),
