@@ -105,7 +105,7 @@ impl std::fmt::Display for RayKind {
 /// at 800 x 600) are read from memory as they are timed. Embree's anchor
 /// (`../shared/anchors/embree_rays.c`) keeps the same rays as seven float arrays, 28 bytes a
 /// ray, so the padded tuple made mipray's side read 1.7 times the bytes per ray; on an
-/// Intel Xeon VM that cost its packets 3-7% of their rate (docs/benchmark-log.md). The
+/// Intel Xeon VM that cost its packets 1-9% of their rate (docs/benchmark-log.md). The
 /// ray-file bench reads the file's 48-byte records, as that anchor does.
 #[derive(Debug, Clone, Copy)]
 #[repr(C)]
