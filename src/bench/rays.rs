@@ -580,8 +580,6 @@ fn answer_buffer(n: usize) -> Vec<Answer> {
     answers
 }
 
-/// Every answer of `kernel` for `rays`, in their order, into `answers` (as long as `rays`;
-/// chunks of rays side by side).
 /// How many rays [`trace_records`] hands a thread at a time: whole packets.
 const CHUNK: usize = 16 * PACKET;
 
@@ -598,8 +596,9 @@ fn packet_limits(rays: &[&RayRecord]) -> Vec<f32> {
         .collect()
 }
 
-/// Traces `rays` on `kernel` into `answers` (as long as `rays`); `limits` are the packets'
-/// shared search distances ([`packet_limits`]).
+/// Every answer of `kernel` for `rays`, in their order, into `answers` (as long as `rays`;
+/// chunks of rays side by side); `limits` are the packets' shared search distances
+/// ([`packet_limits`]).
 fn trace_records(
     kernel: FileKernel,
     bvh: &SceneBvh,

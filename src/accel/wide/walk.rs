@@ -488,9 +488,9 @@ fn exchange<const N: usize>(k: &mut [u32; N], i: usize, j: usize) {
     k[j] = a.max(b);
 }
 
-/// Of the entered children (`mask`), returns the nearest and pushes the others so that the
-/// next nearest is popped first: the order [`lanes_near_to_far`] gives, higher lane first
-/// among equal distances.
+/// Of the entered children (`mask`, not zero), returns the nearest and pushes the others
+/// so that the next nearest is popped first: the order [`lanes_near_to_far`] gives, higher
+/// lane first among equal distances.
 ///
 /// One child and two (together most of a closest-hit walk's nodes) take their own paths:
 /// two children are one comparison of their keys and one push, where going through the
