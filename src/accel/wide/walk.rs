@@ -375,7 +375,8 @@ pub(super) fn lanes_near_to_far<const HIGH_LANE_FIRST: bool>(
 ) -> ([usize; WIDTH], usize) {
     const RANK: u32 = WIDTH as u32 - 1;
     let near = near.0;
-    let rank = |lane: u32| if HIGH_LANE_FIRST { RANK - lane } else { lane };
+    // The rank is its own inverse: it turns a key's low bits back into the lane.
+    let rank = tie_rank::<HIGH_LANE_FIRST>;
     let key = |lane: usize| sort_key::<HIGH_LANE_FIRST>(&near, lane);
     let n = mask.count_ones() as usize;
     let mut lanes = [0; WIDTH];
@@ -427,18 +428,24 @@ pub(super) fn lanes_near_to_far<const HIGH_LANE_FIRST: bool>(
 }
 
 /// The key [`lanes_near_to_far`] orders lane `lane` by: its entry distance's bits with the
-/// lane's tie rank in the three lowest bits.
+/// lane's [`tie_rank`] in the three lowest bits.
 #[inline(always)]
 fn sort_key<const HIGH_LANE_FIRST: bool>(near: &[f32; WIDTH], lane: usize) -> u32 {
-    const RANK: u32 = WIDTH as u32 - 1;
     let lane = lane % WIDTH;
-    let rank = if HIGH_LANE_FIRST {
-        RANK - lane as u32
-    } else {
-        lane as u32
-    };
     // `& 0x7fff_ffff`: a -0.0 entry distance sorts as 0.
-    (near[lane].to_bits() & (0x7fff_ffff & !RANK)) | rank
+    let distance = near[lane].to_bits() & (0x7fff_ffff & !(WIDTH as u32 - 1));
+    distance | tie_rank::<HIGH_LANE_FIRST>(lane as u32)
+}
+
+/// Where lane `lane` (below [`WIDTH`]) comes among lanes of equal distance, lowest first:
+/// the higher lane first when `HIGH_LANE_FIRST`, else the lower. Its own inverse.
+#[inline(always)]
+const fn tie_rank<const HIGH_LANE_FIRST: bool>(lane: u32) -> u32 {
+    if HIGH_LANE_FIRST {
+        WIDTH as u32 - 1 - lane
+    } else {
+        lane
+    }
 }
 
 /// Sorts four keys with a sorting network of 5 exchanges, the fewest possible.
