@@ -214,7 +214,11 @@ impl WideBvh {
                                 // SAFETY: as for the node test below.
                                 unsafe {
                                     across_rays::rays_by_lane::<false>(
-                                        parent, columns, limits, mask,
+                                        parent,
+                                        columns,
+                                        limits,
+                                        mask,
+                                        1 << lane,
                                     )
                                     .0[lane]
                                 }
@@ -284,7 +288,13 @@ impl WideBvh {
                             // SAFETY: `across` is made only where `simd::avx512()`, which
                             // holds only where the CPU has AVX-512F.
                             unsafe {
-                                across_rays::rays_by_lane::<ORDERED>(node, columns, limits, mask)
+                                across_rays::rays_by_lane::<ORDERED>(
+                                    node,
+                                    columns,
+                                    limits,
+                                    mask,
+                                    u32::MAX,
+                                )
                             }
                         }
                         _ => {
@@ -456,7 +466,10 @@ mod across_rays {
     /// `RayBoxes::slabs` computes `(origin - plane) * -inverse`, the same numbers (its
     /// entry distances can differ only in the sign of a zero, which the masks and the
     /// nearest distance's uses do not see).
-    /// Lanes without a child get no rays (the walk skips them either way). With `NEAREST`,
+    /// Only the lanes in `lanes` (bit `lane`) are tested; the others get no rays (a popped
+    /// leaf's box is tested again as one lane of its parent, and testing all eight cost it
+    /// eight times the work). Lanes without a child get no rays (the walk skips them either
+    /// way). With `NEAREST`,
     /// also per lane the least entry distance of those rays (+infinity where none enters),
     /// else +infinity.
     ///
@@ -468,6 +481,7 @@ mod across_rays {
         columns: &RayColumns,
         limits: &[f32; PACKET],
         rays: u64,
+        lanes: u32,
     ) -> ([u64; WIDTH], Lanes) {
         let mut by_lane = [0u64; WIDTH];
         let mut nearest = [_mm512_set1_ps(f32::INFINITY); WIDTH];
@@ -487,7 +501,7 @@ mod across_rays {
                 inverse.map(|i| _mm512_cmp_ps_mask::<_CMP_LT_OQ>(i, _mm512_setzero_ps()));
             let limit = column(limits);
             for (lane, (by, nearest)) in by_lane.iter_mut().zip(&mut nearest).enumerate() {
-                if node.child[lane] == EMPTY {
+                if node.child[lane] == EMPTY || lanes & (1 << lane) == 0 {
                     continue;
                 }
                 let mut near = _mm512_set1_ps(0.0);
@@ -686,12 +700,28 @@ mod tests {
             };
             let columns = RayColumns::of(&rays);
             // SAFETY: the CPU has AVX-512F (checked above).
-            let (across, nearest) =
-                unsafe { across_rays::rays_by_lane::<true>(&node, &columns, &limits, mask) };
-            let (unordered, no_nearest) =
-                unsafe { across_rays::rays_by_lane::<false>(&node, &columns, &limits, mask) };
+            let (across, nearest) = unsafe {
+                across_rays::rays_by_lane::<true>(&node, &columns, &limits, mask, u32::MAX)
+            };
+            let (unordered, no_nearest) = unsafe {
+                across_rays::rays_by_lane::<false>(&node, &columns, &limits, mask, u32::MAX)
+            };
             assert_eq!(unordered, across);
             assert_eq!(no_nearest.0, [f32::INFINITY; WIDTH]);
+            // Asked about some lanes only: those lanes' rays and distances, none elsewhere.
+            let some = (next() & 0xff) as u32;
+            // SAFETY: as above.
+            let (only, only_nearest) =
+                unsafe { across_rays::rays_by_lane::<true>(&node, &columns, &limits, mask, some) };
+            for lane in 0..WIDTH {
+                if some & (1 << lane) != 0 {
+                    assert_eq!(only[lane], across[lane], "round {round}, lane {lane}");
+                    assert_eq!(only_nearest.0[lane], nearest.0[lane], "round {round}");
+                } else {
+                    assert_eq!(only[lane], 0, "round {round}, lane {lane} not asked about");
+                    assert_eq!(only_nearest.0[lane], f32::INFINITY, "round {round}");
+                }
+            }
             for avx in [false, true] {
                 let mut lanes_of = [0u8; PACKET];
                 let mut expected_nearest = [f32::INFINITY; WIDTH];
