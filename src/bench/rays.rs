@@ -20,7 +20,7 @@ use crate::accel::PACKET;
 use crate::export::rays::{MISS, RayRecord, read_ray_file};
 use crate::frame::Renderer;
 use crate::percentiles::Percentiles;
-use crate::render::film::{TILE, tile_pixels};
+use crate::render::film::{TILE, film_position, tile_pixels};
 use crate::render::memory::check_frame_memory;
 use crate::render::{RayClass, SceneBvh, shadow_ray_toward};
 
@@ -416,16 +416,16 @@ pub struct RayFileRate {
 /// How one class of a ray file's rays is traced.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 enum FileKernel {
-    /// Closest hits in packets of up to [`PACKET`] consecutive rays (primary rays, as the
+    /// Closest hits in the film's packets ([`FilmPackets`]; primary rays, as the
     /// film traces them).
     ClosestPackets,
     ClosestSingle,
-    /// Closest hits in packets of up to [`PACKET`] consecutive rays from any origins (a
+    /// Closest hits in the film's packets of rays from any origins (a
     /// bounce's reflected and refracted rays, as a tile traces them).
     ClosestScattered,
     /// Any hit in `[t min, t max)`.
     Occlusion,
-    /// Any hit, in packets of up to [`PACKET`] consecutive rays (shadow rays, as a tile
+    /// Any hit, in the film's packets (shadow rays, as a tile
     /// traces them: grouped by light, in the order its hits asked for them).
     OcclusionPackets,
 }
@@ -488,14 +488,14 @@ pub fn run_ray_file_bench(
                 continue;
             }
             let mut seconds = vec![vec![0.0f64; repeats]; threads.len()];
-            let mut answers = answer_buffer(rays.len());
-            let limits = packet_limits(&rays);
+            let packets = FilmPackets::of(&rays, prepared.camera.width);
+            let mut answers = answer_buffer(packets.ranges.len() * PACKET);
             let mut mismatches = 0;
             for repeat in 0..repeats {
                 for k in 0..threads.len() {
                     let c = (k + repeat) % threads.len();
                     let ((), s) = timed_in(&pools[c], min_sample, || {
-                        trace_records(kernel, &bvh, &rays, &limits, &mut answers);
+                        trace_records(kernel, &bvh, &rays, &packets, &mut answers);
                     });
                     seconds[c][repeat] += s;
                     // The first sample's answers are checked (outside its clock; later
@@ -503,15 +503,17 @@ pub fn run_ray_file_bench(
                     // sample would add its instructions to every repeat, and an instruction
                     // count takes one pass as the difference between repeats.
                     if repeat == 0 && k == 0 {
-                        mismatches = rays
-                            .iter()
-                            .zip(&answers)
-                            .filter(|(r, a)| !answer_matches(r, **a, &face_of_slot))
+                        mismatches = packets
+                            .answered(&rays, &answers)
+                            .filter(|(r, a)| !answer_matches(r, *a, &face_of_slot))
                             .count();
                     }
                 }
             }
-            let hits = answers.iter().filter(|a| a.is_some()).count();
+            let hits = packets
+                .answered(&rays, &answers)
+                .filter(|(_, a)| a.is_some())
+                .count();
             for (c, &t) in threads.iter().enumerate() {
                 rates.push(RayFileRate {
                     class,
@@ -580,78 +582,137 @@ fn answer_buffer(n: usize) -> Vec<Answer> {
     answers
 }
 
-/// How many rays [`trace_records`] hands a thread at a time: whole packets.
-const CHUNK: usize = 16 * PACKET;
+/// How many packets [`trace_records`] hands a thread at a time.
+const GROUP: usize = 16;
 
-/// Per packet of `rays` ([`PACKET`] consecutive rays, as the packet kernels take them), the
-/// search distance its rays share: the largest of their `t max`.
+/// The packets a class's records are traced in: the packets the film traced them in, as
+/// far as the records tell, each with the search distance its rays share.
 ///
-/// Made before the clock starts, as Embree's anchor lays out its packets before timing
-/// them, and as the renderer knows its packets' limit (infinity) without a pass over its
-/// rays: folded inside the timed pass with `f32::max` (a NaN test a step, 64 dependent
-/// steps a packet) it took 5% of the samples of the primary rays' passes.
-fn packet_limits(rays: &[&RayRecord]) -> Vec<f32> {
-    rays.chunks(PACKET)
-        .map(|packet| packet.iter().fold(0.0f32, |m, r| m.max(r.t_max)))
-        .collect()
+/// The film traces a tile's rays bounce by bounce, a bounce's shadow rays light by light,
+/// each batch in packets of up to [`PACKET`] in the order the tile's pixels come (Morton
+/// order); a packet never holds rays of two tiles, two bounces or two lights. The records
+/// follow that order, so a batch ends where the tile changes or the next record's pixel
+/// comes earlier in the tile's order than the last one's (the next bounce or light starts
+/// over): there a packet ends even if it is not full. (A batch whose first pixel comes
+/// after the last pixel of the batch before it joins that batch's last packet: a small
+/// batch, which the film would have traced alone.) Cut every [`PACKET`] records instead,
+/// packets held rays of two batches, which the film never traces together and whose rays
+/// share less (a shadow packet of two bounces has no one point its rays converge on): in
+/// BART Kitchen frame 400's file, 2,053 batch ends fell inside the 16,302 runs of 64
+/// shadow records, 1,666 inside the 13,414 of mirror records.
+struct FilmPackets {
+    /// Each packet's records, in order and together every record once.
+    ranges: Vec<std::ops::Range<usize>>,
+    /// Each packet's shared search distance: the largest `t max` of its records. Made
+    /// before the clock starts, as Embree's anchor lays out its packets before timing
+    /// them, and as the renderer knows its packets' limit (infinity) without a pass over
+    /// their rays: folded inside the timed pass with `f32::max` (a NaN test a step, 64
+    /// dependent steps a packet) it took 5% of the samples of the primary rays' passes.
+    limits: Vec<f32>,
 }
 
-/// Every answer of `kernel` for `rays`, in their order, into `answers` (as long as `rays`;
-/// chunks of rays side by side); `limits` are the packets' shared search distances
-/// ([`packet_limits`]).
+impl FilmPackets {
+    /// The packets of `rays` (one class's records, in the file's order) from an image
+    /// `width` pixels wide.
+    fn of(rays: &[&RayRecord], width: u32) -> FilmPackets {
+        let width = width.max(1);
+        let position = |r: &RayRecord| film_position(r.pixel % width, r.pixel / width, width);
+        let mut ranges = Vec::new();
+        let mut start = 0;
+        for i in 1..=rays.len() {
+            let ends = i == rays.len() || i - start == PACKET || {
+                let (before, next) = (position(rays[i - 1]), position(rays[i]));
+                next.0 != before.0 || next.1 < before.1
+            };
+            if ends {
+                ranges.push(start..i);
+                start = i;
+            }
+        }
+        let limits = ranges
+            .iter()
+            .map(|range| {
+                rays[range.clone()]
+                    .iter()
+                    .fold(0.0f32, |m, r| m.max(r.t_max))
+            })
+            .collect();
+        FilmPackets { ranges, limits }
+    }
+
+    /// Each record with its answer, from `answers` as [`trace_records`] lays them out
+    /// (packet `p`'s from `p * PACKET` on).
+    fn answered<'a>(
+        &'a self,
+        rays: &'a [&'a RayRecord],
+        answers: &'a [Answer],
+    ) -> impl Iterator<Item = (&'a RayRecord, Answer)> + 'a {
+        self.ranges
+            .iter()
+            .zip(answers.chunks(PACKET))
+            .flat_map(move |(range, out)| {
+                rays[range.clone()].iter().zip(out).map(|(r, &a)| (*r, a))
+            })
+    }
+}
+
+/// Every answer of `kernel` for `rays`, packet by packet, into `answers` (packet `p`'s from
+/// `p * PACKET` on; groups of packets side by side).
 fn trace_records(
     kernel: FileKernel,
     bvh: &SceneBvh,
     rays: &[&RayRecord],
-    limits: &[f32],
+    packets: &FilmPackets,
     answers: &mut [Answer],
 ) {
-    // Answers are written in place, chunk by chunk: with a list collected per packet and
-    // the lists flattened, shadow packets measured 13% fewer rays a second, the harness's
-    // cost and not the tracer's (Embree's anchor writes its answers in place too).
-    debug_assert_eq!(answers.len(), rays.len());
-    debug_assert_eq!(limits.len(), rays.len().div_ceil(PACKET));
+    // Answers are written in place: with a list collected per packet and the lists
+    // flattened, shadow packets measured 13% fewer rays a second, the harness's cost and
+    // not the tracer's (Embree's anchor writes its answers in place too).
+    debug_assert_eq!(answers.len(), packets.ranges.len() * PACKET);
     answers
-        .par_chunks_mut(CHUNK)
-        .zip(rays.par_chunks(CHUNK))
-        .zip(limits.par_chunks(CHUNK / PACKET))
-        .for_each(|((out, chunk), limits)| trace_chunk(kernel, bvh, chunk, limits, out));
+        .par_chunks_mut(GROUP * PACKET)
+        .zip(packets.ranges.par_chunks(GROUP))
+        .zip(packets.limits.par_chunks(GROUP))
+        .for_each(|((out, ranges), limits)| {
+            for ((out, range), &limit) in out.chunks_mut(PACKET).zip(ranges).zip(limits) {
+                let packet = &rays[range.clone()];
+                trace_packet(kernel, bvh, packet, limit, &mut out[..packet.len()]);
+            }
+        });
 }
 
-/// [`trace_records`] of one chunk of rays, into `out` (as long as `rays`), `limits` its
-/// packets' search distances.
-fn trace_chunk(
+/// [`trace_records`] of one packet of rays, into `out` (as long as `packet`), `limit` its
+/// shared search distance.
+fn trace_packet(
     kernel: FileKernel,
     bvh: &SceneBvh,
-    rays: &[&RayRecord],
-    limits: &[f32],
+    packet: &[&RayRecord],
+    limit: f32,
     out: &mut [Answer],
 ) {
     match kernel {
-        FileKernel::ClosestPackets => closest_in_packets(bvh, rays, limits, false, out),
-        FileKernel::ClosestScattered => closest_in_packets(bvh, rays, limits, true, out),
+        FileKernel::ClosestPackets => closest_in_packet(bvh, packet, limit, false, out),
+        FileKernel::ClosestScattered => closest_in_packet(bvh, packet, limit, true, out),
         FileKernel::ClosestSingle => {
-            for (answer, r) in out.iter_mut().zip(rays) {
+            for (answer, r) in out.iter_mut().zip(packet) {
                 let (origin, direction) = r.origin_direction();
                 *answer = closest_answer(bvh.closest_hit(origin, direction, r.t_max));
             }
         }
         FileKernel::OcclusionPackets => {
-            for (out, packet) in out.chunks_mut(PACKET).zip(rays.chunks(PACKET)) {
-                let pairs = packet_rays(packet);
-                let mut limits = [0.0f32; PACKET];
-                for (limit, r) in limits.iter_mut().zip(packet) {
-                    *limit = r.t_max;
-                }
-                let n = packet.len();
-                let stopped = bvh.visit_hits_packet(&pairs[..n], &limits[..n], |_, _, _, _| false);
-                for (k, answer) in out.iter_mut().enumerate() {
-                    *answer = (stopped & (1 << k) != 0).then_some((0, f32::NAN));
-                }
+            let pairs = packet_rays(packet);
+            let mut limits = [0.0f32; PACKET];
+            for (limit, r) in limits.iter_mut().zip(packet) {
+                *limit = r.t_max;
+            }
+            let n = packet.len();
+            let stopped = bvh.visit_hits_packet(&pairs[..n], &limits[..n], |_, _, _, _| false);
+            for (k, answer) in out.iter_mut().enumerate() {
+                *answer = (stopped & (1 << k) != 0).then_some((0, f32::NAN));
             }
         }
         FileKernel::Occlusion => {
-            for (answer, r) in out.iter_mut().zip(rays) {
+            for (answer, r) in out.iter_mut().zip(packet) {
                 let (origin, direction) = r.origin_direction();
                 let clear = bvh.visit_hits(origin, direction, r.t_max, |_, _, _| false);
                 *answer = (!clear).then_some((0, f32::NAN));
@@ -660,34 +721,31 @@ fn trace_chunk(
     }
 }
 
-/// Closest hits of `rays` in packets of up to [`PACKET`] consecutive rays, into `out` (as
-/// long as `rays`): from one origin with interval bounds (primary rays), or with
+/// Closest hits of the rays of `packet` (at most [`PACKET`]) as one packet, into `out` (as
+/// long as `packet`): from one origin with interval bounds (primary rays), or with
 /// `scattered` from any origins by the masked walk (a bounce's rays).
 ///
-/// A packet shares one search distance (`limits`, one a packet: the largest of its rays'
-/// `t max`, infinity in files `export --rays` writes); a ray whose closest hit lies at or
-/// past its own `t max` then has none below it either, so dropping that hit gives the
-/// answer a search cut at its own `t max` gives.
-fn closest_in_packets(
+/// The packet shares one search distance (`t_max`: the largest of its rays' `t max`,
+/// infinity in files `export --rays` writes); a ray whose closest hit lies at or past its
+/// own `t max` then has none below it either, so dropping that hit gives the answer a
+/// search cut at its own `t max` gives.
+fn closest_in_packet(
     bvh: &SceneBvh,
-    rays: &[&RayRecord],
-    limits: &[f32],
+    packet: &[&RayRecord],
+    t_max: f32,
     scattered: bool,
     out: &mut [Answer],
 ) {
-    let packets = out.chunks_mut(PACKET).zip(rays.chunks(PACKET)).zip(limits);
-    for ((out, packet), &t_max) in packets {
-        let pairs = packet_rays(packet);
-        let mut hits = [None; PACKET];
-        let n = packet.len();
-        if scattered {
-            bvh.closest_hits_scattered(&pairs[..n], t_max, &mut hits[..n]);
-        } else {
-            bvh.closest_hits(&pairs[..n], t_max, &mut hits[..n]);
-        }
-        for ((answer, &hit), r) in out.iter_mut().zip(&hits[..n]).zip(packet) {
-            *answer = closest_answer(hit.filter(|h| h.t < r.t_max));
-        }
+    let pairs = packet_rays(packet);
+    let mut hits = [None; PACKET];
+    let n = packet.len();
+    if scattered {
+        bvh.closest_hits_scattered(&pairs[..n], t_max, &mut hits[..n]);
+    } else {
+        bvh.closest_hits(&pairs[..n], t_max, &mut hits[..n]);
+    }
+    for ((answer, &hit), r) in out.iter_mut().zip(&hits[..n]).zip(packet) {
+        *answer = closest_answer(hit.filter(|h| h.t < r.t_max));
     }
 }
 
@@ -771,6 +829,67 @@ pub fn ray_table(rates: &[RayRate]) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A shadow record of pixel `(x, y)` of an 80-pixel-wide image searched to `t_max`.
+    fn record(x: u32, y: u32, t_max: f32) -> RayRecord {
+        RayRecord {
+            origin: glam::Vec3::ZERO,
+            direction: glam::Vec3::Y,
+            t_min: 0.0,
+            t_max,
+            class: RayClass::Shadow,
+            pixel: y * 80 + x,
+            result: 0,
+            t: f32::NAN,
+        }
+    }
+
+    /// The bench's packets end where the film's do: at a full packet, at a new tile, and
+    /// where the next record's pixel comes earlier in the tile's order (a new bounce or
+    /// light); each packet's limit is its rays' largest.
+    #[test]
+    fn film_packets_end_where_the_film_s_batches_end() {
+        let mut records = Vec::new();
+        // Tile 0, first batch: 100 pixels in the film's order (two packets, 64 and 36).
+        let first: Vec<(u32, u32)> = tile_pixels((0, 0), 80, 64).take(100).collect();
+        for (i, &(x, y)) in first.iter().enumerate() {
+            records.push(record(x, y, i as f32));
+        }
+        // Tile 0 again, a later bounce: starts over near the tile's corner.
+        for &(x, y) in first.iter().skip(3).step_by(7) {
+            records.push(record(x, y, 1.0));
+        }
+        // Tile 1: a new tile, even though its first pixel comes at a later place than the
+        // last record's in its own tile.
+        for (x, y) in tile_pixels((TILE, 0), 80, 64).skip(100).take(10) {
+            records.push(record(x, y, f32::INFINITY));
+        }
+        let rays: Vec<&RayRecord> = records.iter().collect();
+        let packets = FilmPackets::of(&rays, 80);
+        let second = first.iter().skip(3).step_by(7).count();
+        assert_eq!(
+            packets.ranges,
+            vec![
+                0..64,
+                64..100,
+                100..100 + second,
+                100 + second..110 + second
+            ]
+        );
+        assert_eq!(packets.limits[..2], [63.0, 99.0]);
+        assert_eq!(packets.limits[2..], [1.0, f32::INFINITY]);
+        // Cut every 64 records instead, the second packet would have mixed the batches.
+        let answers: Vec<Answer> = (0..packets.ranges.len() * PACKET)
+            .map(|i| Some((i as u32, 0.0)))
+            .collect();
+        let answered: Vec<(u32, u32)> = packets
+            .answered(&rays, &answers)
+            .map(|(r, a)| (r.pixel, a.unwrap().0))
+            .collect();
+        assert_eq!(answered.len(), records.len());
+        assert_eq!(answered[64], (records[64].pixel, PACKET as u32));
+        assert_eq!(answered[100], (records[100].pixel, 2 * PACKET as u32));
+    }
 
     #[test]
     fn kinds_select_what_they_name() {

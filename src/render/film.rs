@@ -70,6 +70,20 @@ pub fn tile_pixels(
         .map(move |(x, y)| (x0 + x, y0 + y))
 }
 
+/// Where pixel `(x, y)` of a `width`-pixel-wide image comes in the film's order: its tile
+/// (row-major tiles) and its place in the tile's Morton order ([`tile_pixels`] lists a
+/// tile's pixels by increasing place).
+#[inline]
+pub fn film_position(x: u32, y: u32, width: u32) -> (u32, u32) {
+    // Saturating: a pixel of the image (`y * width + x` a u32) never reaches the limit.
+    let tile = (y / TILE)
+        .saturating_mul(width.div_ceil(TILE))
+        .saturating_add(x / TILE);
+    // The inverse of `deinterleave`: x's bits in the even places, y's in the odd ones.
+    let spread = |v: u32| (0..8).fold(0, |code, bit| code | ((v >> bit) & 1) << (2 * bit));
+    (tile, spread(x % TILE) | spread(y % TILE) << 1)
+}
+
 /// A rendered frame in linear RGB, row-major, row 0 at the top.
 #[derive(Debug, Clone, PartialEq)]
 pub struct LinearImage {
@@ -260,6 +274,25 @@ mod tests {
         let mut empty: Vec<Vec3> = Vec::new();
         assert!(tile_rows(&mut empty, 0, 5).is_empty());
         assert!(tile_rows(&mut empty, 5, 0).is_empty());
+    }
+
+    /// Walking the tiles and each tile's pixels in the film's order, a pixel's position
+    /// names its tile and rises at every step (images of whole and cut tiles).
+    #[test]
+    fn a_pixel_s_film_position_is_its_place_in_the_film_s_order() {
+        for (width, height) in [(800u32, 600u32), (32, 32), (33, 70), (1, 1)] {
+            let tiles_x = width.div_ceil(TILE);
+            let mut last = None;
+            for tile in 0..tiles_x * height.div_ceil(TILE) {
+                let corner = ((tile % tiles_x) * TILE, (tile / tiles_x) * TILE);
+                for (x, y) in tile_pixels(corner, width, height) {
+                    let position = film_position(x, y, width);
+                    assert_eq!(position.0, tile, "({x}, {y}) in {width}x{height}");
+                    assert!(last < Some(position), "({x}, {y}) in {width}x{height}");
+                    last = Some(position);
+                }
+            }
+        }
     }
 
     /// Every pixel of a whole or partial tile comes exactly once; in a whole tile every run
