@@ -16,7 +16,7 @@
 //! (`color += weight * child`, the glass terms summed from zero before they are added), so
 //! the image does not depend on the order in which rays are traced.
 
-use glam::{Vec2, Vec3A};
+use glam::{Vec2, Vec3, Vec3A};
 
 use crate::accel::Hit;
 use crate::geometry::HitTriangle;
@@ -219,44 +219,69 @@ pub(super) struct ShadowRequest {
 /// How one path vertex's radiance is made from its children's: `radiance` starts as the
 /// hit's own light and each step adds `weight * child` (a grouped run of steps is first
 /// summed from zero, then added, as the glass term is).
+///
+/// One cache line: a tile keeps a vertex for each of its rays but shadow rays (a few
+/// thousand), written as each hit is finished and read back when the tile combines them,
+/// after its walks have evicted most of them. So the vectors are kept as three floats (the
+/// arithmetic is `Vec3A`'s, on the same three lanes: the same bits).
 #[derive(Clone, Copy, Debug)]
+#[repr(C, align(64))]
 pub(super) struct Combine {
-    pub(super) radiance: Vec3A,
-    steps: [Step; 3],
+    radiance: Vec3,
     count: u8,
     /// Index of the first grouped step (`count` when none is), and whether a group exists
     /// (a glass term whose two branches were both below the weight limit still adds zero).
     group_from: u8,
     has_group: bool,
+    steps: [Step; 3],
 }
+
+const _: () = assert!(std::mem::size_of::<Combine>() == 64, "a vertex in one line");
 
 #[derive(Clone, Copy, Debug, Default)]
 struct Step {
-    weight: Vec3A,
+    weight: Vec3,
     child: u32,
 }
 
 impl Combine {
     /// A vertex with no radiance yet (a child's place before its hit is finished).
-    pub(super) const EMPTY: Combine = Combine::leaf(Vec3A::ZERO);
+    pub(super) const EMPTY: Combine = Combine {
+        radiance: Vec3::ZERO,
+        count: 0,
+        group_from: 0,
+        has_group: false,
+        steps: [Step {
+            weight: Vec3::ZERO,
+            child: 0,
+        }; 3],
+    };
 
     /// A vertex whose radiance is `radiance` alone (a miss: the background).
-    pub(super) const fn leaf(radiance: Vec3A) -> Combine {
-        const NO_STEP: Step = Step {
-            weight: Vec3A::ZERO,
-            child: 0,
-        };
+    #[inline]
+    pub(super) fn leaf(radiance: Vec3A) -> Combine {
         Combine {
-            radiance,
-            steps: [NO_STEP; 3],
-            count: 0,
-            group_from: 0,
-            has_group: false,
+            radiance: radiance.into(),
+            ..Combine::EMPTY
         }
     }
 
+    /// The vertex's radiance: its own light until [`Combine::evaluate`]'s sum is stored.
+    #[inline]
+    pub(super) fn radiance(&self) -> Vec3A {
+        self.radiance.into()
+    }
+
+    #[inline]
+    pub(super) fn set_radiance(&mut self, radiance: Vec3A) {
+        self.radiance = radiance.into();
+    }
+
     fn add(&mut self, weight: Vec3A, child: u32) {
-        self.steps[self.count as usize] = Step { weight, child };
+        self.steps[self.count as usize] = Step {
+            weight: weight.into(),
+            child,
+        };
         self.count += 1;
     }
 
@@ -269,19 +294,19 @@ impl Combine {
     /// grouping of the depth-first recursion.
     #[inline]
     pub(super) fn evaluate(&self, radiance_of: impl Fn(u32) -> Vec3A) -> Vec3A {
-        let mut color = self.radiance;
+        let mut color = self.radiance();
         let group_from = if self.has_group {
             self.group_from
         } else {
             self.count
         };
         for step in &self.steps[..group_from as usize] {
-            color += step.weight * radiance_of(step.child);
+            color += Vec3A::from(step.weight) * radiance_of(step.child);
         }
         if self.has_group {
             let mut group = Vec3A::ZERO;
             for step in &self.steps[group_from as usize..self.count as usize] {
-                group += step.weight * radiance_of(step.child);
+                group += Vec3A::from(step.weight) * radiance_of(step.child);
             }
             color += group;
         }

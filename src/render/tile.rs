@@ -36,11 +36,11 @@ use crate::render::integrator::{
 use crate::render::ray_log::RayClass;
 use crate::simd::Kernel;
 
-/// A hit waiting for its shadow rays: its vertex, the sample's pixel, and its requests
-/// (`requests[first..end]`).
+/// A hit waiting for its shadow rays: the sample's pixel and its requests
+/// (`requests[first..end]`). Its vertex is its ray's: the bounce's hits wait in their rays'
+/// order.
 struct Waiting<L: RayLod> {
     arrival: Arrival<L>,
-    vertex: u32,
     pixel: u32,
     first: usize,
     end: usize,
@@ -176,24 +176,20 @@ fn trace_tile<L: RayLod, const AVX2: bool>(
     );
     debug_assert_eq!(samples.len(), ((x1 - x0) * (y1 - y0) * spp) as usize);
     vertices.clear();
-    vertices.resize(samples.len(), Combine::EMPTY);
     primary_bounce::<L>(
         scene, camera, spp, samples, counters, rays, hits, triangles, levels,
     );
-    // The bounce's rays are vertices `first_vertex..` in order, each `depth` bounces deep.
+    // The bounce's rays are vertices `first_vertex..` in order, each `depth` bounces deep;
+    // the vertices before them are made (`vertices.len() == first_vertex`).
     let (mut first_vertex, mut depth) = (0u32, 0u32);
     while !rays.is_empty() {
-        // Arrive at every hit; a miss is the background.
+        debug_assert_eq!(vertices.len(), first_vertex as usize);
+        // Arrive at every hit (a miss waits for nothing).
         waiting.clear();
         requests.clear();
         let mut hit_triangles = triangles.iter();
-        for (i, ((vertex, ray), &hit)) in (first_vertex..)
-            .zip(rays.iter())
-            .zip(hits.iter())
-            .enumerate()
-        {
+        for (i, (ray, &hit)) in rays.iter().zip(hits.iter()).enumerate() {
             let Some(hit) = hit else {
-                vertices[vertex as usize] = Combine::leaf(scene.background);
                 continue;
             };
             let triangle = hit_triangles.next().expect("a triangle per hit");
@@ -206,7 +202,6 @@ fn trace_tile<L: RayLod, const AVX2: bool>(
             // Made in place (see `Arrival::unmade`).
             waiting.push(Waiting {
                 arrival: Arrival::unmade(triangle, hit, ray.origin, ray.direction, ray.lod, depth),
-                vertex,
                 pixel: ray.pixel,
                 first,
                 end: first,
@@ -216,40 +211,58 @@ fn trace_tile<L: RayLod, const AVX2: bool>(
             w.end = requests.len();
         }
         trace_shadows(scene, waiting, requests, counters, of_light, pixel_of);
-        // Finish every hit and spawn the next bounce, whose rays are numbered on from the
+        // Make the bounce's vertices in their rays' order: a miss is the background, a hit
+        // is finished, which spawns the next bounce's rays, numbered on from the bounce's
         // last vertex in the order they are spawned.
         next_rays.clear();
-        let next_first = vertices.len() as u32;
-        for w in waiting.iter() {
-            // Written in place: a combine made on the stack and then copied stalled on
-            // reading its small fields' fresh stores back as 16-byte loads.
+        let next_first = first_vertex + rays.len() as u32;
+        // Checked, not assumed: `set_len` below relies on it.
+        assert_eq!(hits.len(), rays.len(), "a hit entry per ray");
+        vertices.reserve(rays.len());
+        let mut finishing = waiting.iter();
+        // Each vertex is written once, where its hit is finished, into the list's spare
+        // room: setting the bounce's vertices empty beforehand (a resize) stored to lines
+        // the tile's walks had evicted in a tight loop that waited on them (1% of a Kitchen
+        // frame), and pushing them one by one cost a length update each.
+        for (slot, hit) in vertices.spare_capacity_mut()[..rays.len()]
+            .iter_mut()
+            .zip(hits.iter())
+        {
+            if hit.is_none() {
+                slot.write(Combine::leaf(scene.background));
+                continue;
+            }
+            let w = finishing.next().expect("a waiting hit per hit");
+            // In place: a combine made on the stack and then copied stalled on reading its
+            // small fields' fresh stores back as 16-byte loads.
+            let vertex = slot.write(Combine::EMPTY);
             scene.finish::<L, AVX2>(
                 &w.arrival,
                 &requests[w.first..w.end],
                 next_first + next_rays.len() as u32,
                 w.pixel,
                 next_rays,
-                &mut vertices[w.vertex as usize],
+                vertex,
             );
         }
-        // The children's vertices, filled when their hits are finished: one resize a
-        // bounce (a push per child rebuilt the empty combine on the stack around the push's
-        // possible growth and copied it; a resize per hit cost a capacity test each).
-        vertices.resize(next_first as usize + next_rays.len(), Combine::EMPTY);
+        // SAFETY: the loop above wrote every one of the `rays.len()` slots after the
+        // vertices made so far (it zips them with `hits`, as long as `rays` by the assert),
+        // all within the room reserved; had `finish` panicked, the length would be unchanged.
+        unsafe { vertices.set_len(next_first as usize) };
         (first_vertex, depth) = (next_first, depth + 1);
         std::mem::swap(rays, next_rays);
         trace_bounce(scene, rays, counters, hits, triangles, levels);
     }
     // Last vertex first: children are numbered after their parents.
     for v in (0..vertices.len()).rev() {
-        let radiance = vertices[v].evaluate(|child| vertices[child as usize].radiance);
-        vertices[v].radiance = radiance;
+        let radiance = vertices[v].evaluate(|child| vertices[child as usize].radiance());
+        vertices[v].set_radiance(radiance);
     }
     debug_assert!(rows.len() == (y1 - y0) as usize);
     debug_assert!(rows.iter().all(|row| row.len() == (x1 - x0) as usize));
     let mut sum = Vec3A::ZERO;
     for (k, vertex) in vertices[..samples.len()].iter().enumerate() {
-        let radiance = vertex.radiance;
+        let radiance = vertex.radiance();
         if radiance.is_finite() {
             sum += radiance.max(Vec3A::ZERO);
         } else {
