@@ -867,6 +867,7 @@ mod tests {
         let rays: Vec<&RayRecord> = records.iter().collect();
         let packets = FilmPackets::of(&rays, 80);
         let second = first.iter().skip(3).step_by(7).count();
+        // Cut every 64 records instead, the second packet would have mixed the batches.
         assert_eq!(
             packets.ranges,
             vec![
@@ -878,7 +879,8 @@ mod tests {
         );
         assert_eq!(packets.limits[..2], [63.0, 99.0]);
         assert_eq!(packets.limits[2..], [1.0, f32::INFINITY]);
-        // Cut every 64 records instead, the second packet would have mixed the batches.
+        // Each packet's answers start at `p * PACKET`, and `answered` pairs every record
+        // with its own.
         let answers: Vec<Answer> = (0..packets.ranges.len() * PACKET)
             .map(|i| Some((i as u32, 0.0)))
             .collect();
