@@ -122,15 +122,6 @@ impl BilinearTaps {
                 fy: frac[lane + 1],
             };
             if let (Some(sa), Some(sb)) = (a.block_row_stride(), b.block_row_stride()) {
-                #[cfg(target_arch = "x86_64")]
-                let [ta, tb] = if AVX2 {
-                    // SAFETY: `AVX2` is true only in the copy `simd::dispatch` runs where
-                    // the CPU has AVX2 (and in tests that check the CPU first).
-                    unsafe { blocked_pair_texels_avx2(i0, i1, [sa, sb]) }
-                } else {
-                    blocked_pair_texels(i0, i1, [sa, sb])
-                };
-                #[cfg(not(target_arch = "x86_64"))]
                 let [ta, tb] = blocked_pair_texels(i0, i1, [sa, sb]);
                 return [taps(ta, 0), taps(tb, 2)];
             }
@@ -441,51 +432,6 @@ fn blocked_pair_texels(i0: [i32; 4], i1: [i32; 4], strides: [u32; 2]) -> [[u32; 
         );
         texels
     }
-}
-
-/// [`blocked_pair_texels`] in AVX2's eight integer lanes: the same indices (the same
-/// integer operations on the same values), with each axis's row start and column offset
-/// made once in the lanes of `[i0, i1]` and moved into the taps' order by two lane
-/// permutations, where SSE2 makes them in two halves and assembles them with unpacks and
-/// shuffles. AVX2 also multiplies 32-bit lanes in place (`vpmulld`), so the rows need no
-/// move into even lanes first.
-///
-/// Why: on BART Kitchen's `paper` frames the SSE2 form took 46 instructions of a blended
-/// lookup's plan, this one 21 (callgrind's counts by line, `tools/profile/counts.py`).
-///
-/// # Safety
-/// The CPU must have AVX2.
-#[cfg(target_arch = "x86_64")]
-#[inline]
-#[target_feature(enable = "avx2")]
-unsafe fn blocked_pair_texels_avx2(i0: [i32; 4], i1: [i32; 4], strides: [u32; 2]) -> [[u32; 4]; 2] {
-    use std::arch::x86_64::*;
-    // Lanes: x0 y0 of the first level, x0 y0 of the second, then x1 y1 of each.
-    // SAFETY: unaligned loads of four lanes from local arrays of four.
-    let v = unsafe {
-        _mm256_setr_m128i(
-            _mm_loadu_si128(i0.as_ptr().cast()),
-            _mm_loadu_si128(i1.as_ptr().cast()),
-        )
-    };
-    let blocks = _mm256_srli_epi32::<2>(v);
-    let within = _mm256_and_si256(v, _mm256_set1_epi32(3));
-    // Only the y lanes' rows and the x lanes' columns are used; each lane gets its
-    // level's stride.
-    let (sa, sb) = (strides[0] as i32, strides[1] as i32);
-    let stride = _mm256_setr_epi32(sa, sa, sb, sb, sa, sa, sb, sb);
-    let rows = _mm256_add_epi32(
-        _mm256_mullo_epi32(blocks, stride),
-        _mm256_slli_epi32::<2>(within),
-    );
-    let columns = _mm256_add_epi32(_mm256_slli_epi32::<4>(blocks), within);
-    // The taps' order in each level: (x0, y0), (x1, y0), (x0, y1), (x1, y1).
-    let y = _mm256_permutevar8x32_epi32(rows, _mm256_setr_epi32(1, 1, 5, 5, 3, 3, 7, 7));
-    let x = _mm256_permutevar8x32_epi32(columns, _mm256_setr_epi32(0, 4, 0, 4, 2, 6, 2, 6));
-    let mut texels = [[0u32; 4]; 2];
-    // SAFETY: an unaligned store of eight lanes into a local array of eight.
-    unsafe { _mm256_storeu_si256(texels.as_mut_ptr().cast(), _mm256_add_epi32(y, x)) };
-    texels
 }
 
 /// [`blocked_pair_texels`] where there is no SSE2 (never reached: [`four_axes`] gives
@@ -853,61 +799,6 @@ mod tests {
             assert!(f64_at_once > 10_000, "{f64_at_once} of {compared}");
         } else {
             println!("no AVX2 on this CPU: the AVX2 copy's pair taps were not compared");
-        }
-    }
-
-    /// The AVX2 copy's storage indices are the SSE2 form's (and the plain formula's) for
-    /// texel indices and strides up to the largest level (`MAX_SIZE` a side).
-    #[cfg(target_arch = "x86_64")]
-    #[test]
-    fn both_forms_of_a_pairs_blocked_indices_agree() {
-        if !crate::simd::Isa::cpu_has_avx2() {
-            println!("no AVX2 on this CPU: the AVX2 form of the blocked indices was not run");
-            return;
-        }
-        use crate::texture::MAX_SIZE;
-        let plain = |i0: [i32; 4], i1: [i32; 4], strides: [u32; 2]| {
-            let row = |y: i32, stride: u32| (y as u32 >> 2) * stride + (y as u32 & 3) * 4;
-            let column = |x: i32| (x as u32 >> 2) * 16 + (x as u32 & 3);
-            [0, 1].map(|level| {
-                let (x, y, stride) = (2 * level, 2 * level + 1, strides[level]);
-                let (r0, r1) = (row(i0[y], stride), row(i1[y], stride));
-                let (c0, c1) = (column(i0[x]), column(i1[x]));
-                [r0 + c0, r0 + c1, r1 + c0, r1 + c1]
-            })
-        };
-        let mut seed = 0x51f1_5eed_u64;
-        let mut next = |n: u32| {
-            seed = seed
-                .wrapping_mul(6_364_136_223_846_793_005)
-                .wrapping_add(1_442_695_040_888_963_407);
-            ((seed >> 33) % u64::from(n)) as u32
-        };
-        for round in 0..20_000 {
-            // Level sides: the largest, the smallest, and random ones.
-            let side = |next: &mut dyn FnMut(u32) -> u32| match round % 4 {
-                0 => MAX_SIZE,
-                1 => 1 + next(4),
-                _ => 1 + next(MAX_SIZE),
-            };
-            let (wa, ha) = (side(&mut next), side(&mut next));
-            let (wb, hb) = ((wa / 2).max(1), (ha / 2).max(1));
-            let strides = [wa, wb].map(|w| w.div_ceil(4) * 16);
-            let at = |n: u32, next: &mut dyn FnMut(u32) -> u32| match next(3) {
-                0 => 0,
-                1 => n - 1,
-                _ => next(n),
-            } as i32;
-            let (x0a, y0a) = (at(wa, &mut next), at(ha, &mut next));
-            let (x0b, y0b) = (at(wb, &mut next), at(hb, &mut next));
-            let (x1a, y1a) = (at(wa, &mut next), at(ha, &mut next));
-            let (x1b, y1b) = (at(wb, &mut next), at(hb, &mut next));
-            let (i0, i1) = ([x0a, y0a, x0b, y0b], [x1a, y1a, x1b, y1b]);
-            let want = plain(i0, i1, strides);
-            assert_eq!(blocked_pair_texels(i0, i1, strides), want, "{i0:?} {i1:?}");
-            // SAFETY: the CPU has AVX2 (checked above).
-            let avx2 = unsafe { blocked_pair_texels_avx2(i0, i1, strides) };
-            assert_eq!(avx2, want, "{i0:?} {i1:?} {strides:?}");
         }
     }
 
