@@ -1165,8 +1165,9 @@ fn a_scene_with_instances_exports_every_triangle_and_its_rays_agree() {
 /// `bench --rays FILE` cuts each ray at its own `t max`, though a packet's rays share one
 /// search distance: hits of the default animation's closest-hit rays are moved just past
 /// or exactly onto their `t max` (a search up to `t max` excludes it: the hit becomes a
-/// miss), and no answer differs. A `t min` the kernels do not trace and a file recorded on
-/// another scene are refused with the file's name.
+/// miss), and no answer differs. A `t min` the kernels do not trace, a file recorded on
+/// another scene or at another size, and a file of no rays are refused with the file's
+/// name.
 #[test]
 fn bench_on_a_ray_file_cuts_each_ray_at_its_own_t_max_and_refuses_what_it_cannot_trace() {
     use mipray::export::rays::{MISS, read_ray_file, write_records};
@@ -1230,4 +1231,12 @@ fn bench_on_a_ray_file_cuts_each_ray_at_its_own_t_max_and_refuses_what_it_cannot
         .unwrap();
     hit.result = 1_000_000_000;
     refused(&write("other.bin", &other_scene), "names face 1000000000");
+    // Recorded at another size: a pixel one past the frame's last.
+    let mut other_size = records.clone();
+    other_size[2].pixel = 48 * 27;
+    refused(
+        &write("size.bin", &other_size),
+        "record 2 names pixel 1296 but a 48x27 frame has 1296",
+    );
+    refused(&write("empty.bin", &[]), "holds no rays");
 }

@@ -468,7 +468,8 @@ pub fn run_ray_file_bench(
         .collect::<Result<Vec<_>, _>>()?;
     let prepared = renderer.prepare(frame, clock.time(frame))?;
     let face_of_slot = crate::export::face_of_slot(renderer);
-    check_records_fit(path, &records, face_of_slot.len())?;
+    let (width, height) = (prepared.camera.width, prepared.camera.height);
+    check_records_fit(path, &records, face_of_slot.len(), (width, height))?;
     let bvh = renderer.frame_scene(&prepared).bvh;
     let mut rates = Vec::new();
     for class in RayClass::ALL {
@@ -537,17 +538,41 @@ pub fn run_ray_file_bench(
 }
 
 /// Checks that mipray's kernels can trace `records` as recorded on a frame of `faces`
-/// faces: every `t min` is 0 (the kernels start every ray at its origin; a later start
-/// would need a moved origin, whose rounding would change the answers), and no closest
-/// hit names a face past the frame's last (a file recorded on another scene or frame).
-fn check_records_fit(path: &std::path::Path, records: &[RayRecord], faces: usize) -> Result<()> {
+/// faces and `size` pixels: there is at least one record (nothing to time otherwise),
+/// every `t min` is 0 (the kernels start every ray at its origin; a later start would need
+/// a moved origin, whose rounding would change the answers), every pixel index lies in the
+/// frame (the film's packets are cut by pixel, so a file recorded at another size would be
+/// timed in other packets), and no closest hit names a face past the frame's last (a file
+/// recorded on another scene or frame).
+fn check_records_fit(
+    path: &std::path::Path,
+    records: &[RayRecord],
+    faces: usize,
+    size: (u32, u32),
+) -> Result<()> {
     let path = path.display();
+    if records.is_empty() {
+        anyhow::bail!("{path}: the file holds no rays (its header says 0): nothing to time");
+    }
     if let Some((i, r)) = records.iter().enumerate().find(|(_, r)| r.t_min != 0.0) {
         anyhow::bail!(
             "{path}: record {i} has t min {}: mipray's kernels trace every ray from its \
              origin, so a ray file for `bench --rays` needs t min 0 (as `export --rays` \
              writes it)",
             r.t_min
+        );
+    }
+    let (width, height) = size;
+    let pixels = u64::from(width) * u64::from(height);
+    if let Some((i, r)) = records
+        .iter()
+        .enumerate()
+        .find(|(_, r)| u64::from(r.pixel) >= pixels)
+    {
+        anyhow::bail!(
+            "{path}: record {i} names pixel {} but a {width}x{height} frame has {pixels}: was \
+             the file recorded at this size (`--size`)?",
+            r.pixel
         );
     }
     let names_a_face = |r: &&RayRecord| r.class != RayClass::Shadow && r.result != MISS;
