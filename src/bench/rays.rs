@@ -462,14 +462,21 @@ pub fn run_ray_file_bench(
     min_sample: Duration,
 ) -> Result<Vec<RayFileRate>> {
     let records = read_ray_file(path)?;
+    if records.is_empty() {
+        // Known from the header: refused before the frame is prepared.
+        anyhow::bail!(
+            "{}: the file holds no rays (its header says 0): nothing to time",
+            path.display()
+        );
+    }
     let pools = threads
         .iter()
         .map(|&t| rayon::ThreadPoolBuilder::new().num_threads(t).build())
         .collect::<Result<Vec<_>, _>>()?;
     let prepared = renderer.prepare(frame, clock.time(frame))?;
     let face_of_slot = crate::export::face_of_slot(renderer);
-    let (width, height) = (prepared.camera.width, prepared.camera.height);
-    check_records_fit(path, &records, face_of_slot.len(), (width, height))?;
+    let size = (prepared.camera.width, prepared.camera.height);
+    check_records_fit(path, &records, face_of_slot.len(), size)?;
     let bvh = renderer.frame_scene(&prepared).bvh;
     let mut rates = Vec::new();
     for class in RayClass::ALL {
@@ -538,8 +545,7 @@ pub fn run_ray_file_bench(
 }
 
 /// Checks that mipray's kernels can trace `records` as recorded on a frame of `faces`
-/// faces and `size` pixels: there is at least one record (nothing to time otherwise),
-/// every `t min` is 0 (the kernels start every ray at its origin; a later start would need
+/// faces and `size` pixels: every `t min` is 0 (the kernels start every ray at its origin; a later start would need
 /// a moved origin, whose rounding would change the answers), every pixel index lies in the
 /// frame (the film's packets are cut by pixel, so a file recorded at another size would be
 /// timed in other packets), and no closest hit names a face past the frame's last (a file
@@ -551,9 +557,6 @@ fn check_records_fit(
     size: (u32, u32),
 ) -> Result<()> {
     let path = path.display();
-    if records.is_empty() {
-        anyhow::bail!("{path}: the file holds no rays (its header says 0): nothing to time");
-    }
     if let Some((i, r)) = records.iter().enumerate().find(|(_, r)| r.t_min != 0.0) {
         anyhow::bail!(
             "{path}: record {i} has t min {}: mipray's kernels trace every ray from its \
